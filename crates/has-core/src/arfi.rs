@@ -1,0 +1,325 @@
+//! The MR-ARFI forward model after the pressure field: radiation force, slab average over the
+//! slice, Gaussian broadening (paper Eq. 2–3), area average onto MR pixels, amplitude, noise.
+//!
+//! Radiation force density (paper Eq. 1) with the plane-wave intensity `I = |p|² / (2·rho·c)`:
+//! `F = 2·alpha·I / c = alpha·|p|² / (rho·c²)` (N/m³). Everything after `|p|²` is linear, so the
+//! map from `|p|²` samples to the image is one fixed operator, [`MrSampler`].
+
+use crate::error::{require_non_negative, require_positive, HasError, Result};
+use crate::grid::Grid;
+use crate::has::Window;
+use crate::medium::Medium;
+use ndarray::Array2;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+/// Orientation of the MR slice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MrPlane {
+    /// Perpendicular to the beam: image axes (x, y), slice along z.
+    Xy,
+    /// Containing the beam axis: image axes (x, z), slice along y.
+    Xz,
+    /// Containing the beam axis: image axes (y, z), slice along x.
+    Yz,
+}
+
+impl MrPlane {
+    /// Parses `"xy"`, `"xz"` or `"yz"`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "xy" => Ok(MrPlane::Xy),
+            "xz" => Ok(MrPlane::Xz),
+            "yz" => Ok(MrPlane::Yz),
+            _ => Err(HasError::invalid("mr.plane", format!("must be \"xy\", \"xz\" or \"yz\", got \"{s}\""))),
+        }
+    }
+    /// The name used in scenario files.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MrPlane::Xy => "xy",
+            MrPlane::Xz => "xz",
+            MrPlane::Yz => "yz",
+        }
+    }
+    /// Frame axes (0 = x, 1 = y, 2 = z) of image axis u, image axis v and the slice normal.
+    pub fn axes(&self) -> [usize; 3] {
+        match self {
+            MrPlane::Xy => [0, 1, 2],
+            MrPlane::Xz => [0, 2, 1],
+            MrPlane::Yz => [1, 2, 0],
+        }
+    }
+}
+
+/// The MR image geometry (metres). Pixel `(i, j)` is centred at
+/// `center + (-fov/2 + (i + 0.5)·fov_u/n_u, -fov/2 + (j + 0.5)·fov_v/n_v)` along the image axes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MrGeometry {
+    pub plane: MrPlane,
+    pub center: [f64; 3],
+    pub fov: [f64; 2],
+    pub matrix: [usize; 2],
+    pub slice_thickness: f64,
+}
+
+impl MrGeometry {
+    /// Checks sizes.
+    pub fn validate(&self) -> Result<()> {
+        require_positive("mr.fov_mm[0]", self.fov[0])?;
+        require_positive("mr.fov_mm[1]", self.fov[1])?;
+        require_positive("mr.slice_thickness_mm", self.slice_thickness)?;
+        if self.matrix[0] == 0 || self.matrix[1] == 0 || self.matrix[0] * self.matrix[1] > 4096 * 4096 {
+            return Err(HasError::invalid("mr.matrix", format!("must be positive and at most 4096 x 4096, got {:?}", self.matrix)));
+        }
+        if !self.center.iter().all(|c| c.is_finite()) {
+            return Err(HasError::invalid("mr.center_mm", "must be finite"));
+        }
+        Ok(())
+    }
+
+    /// Pixel size along u and v (m).
+    pub fn pixel_size(&self) -> [f64; 2] {
+        [self.fov[0] / self.matrix[0] as f64, self.fov[1] / self.matrix[1] as f64]
+    }
+
+    /// Centre of pixel `i` along image axis `a` (0 = u, 1 = v), metres.
+    pub fn pixel_center(&self, a: usize, i: usize) -> f64 {
+        let ax = self.plane.axes()[a];
+        self.center[ax] - 0.5 * self.fov[a] + (i as f64 + 0.5) * self.pixel_size()[a]
+    }
+
+    /// Shape of the 3-D NIfTI volume `(nx, ny, nz)`: the image with a singleton along the normal.
+    pub fn volume_shape(&self) -> [usize; 3] {
+        let mut s = [1; 3];
+        let ax = self.plane.axes();
+        s[ax[0]] = self.matrix[0];
+        s[ax[1]] = self.matrix[1];
+        s
+    }
+
+    /// The 4 x 4 affine mapping NIfTI voxel indices of [`MrGeometry::volume_shape`] to the
+    /// transducer frame in millimetres.
+    pub fn affine_mm(&self) -> [[f64; 4]; 4] {
+        let ax = self.plane.axes();
+        let px = self.pixel_size();
+        let mut a = [[0.0; 4]; 4];
+        a[3][3] = 1.0;
+        for (k, &f) in ax.iter().enumerate() {
+            let (step, start) = if k < 2 {
+                (px[k], self.pixel_center(k, 0))
+            } else {
+                (self.slice_thickness, self.center[f])
+            };
+            a[f][f] = step * 1e3;
+            a[f][3] = start * 1e3;
+        }
+        a
+    }
+}
+
+/// The broadening and scale from force to ARFI phase.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Broadening {
+    /// Width W (m) of the Gaussian `exp(-(x² + y²) / (2·W²))` (normalised to unit integral); 0 = none.
+    pub width: f64,
+}
+
+/// The linear map from `|p|²` samples in a grid window to MR pixels, without the amplitude:
+/// `image[u, v] = Σ_s w_s · Σ_{a,b} M_u[u, a] · M_v[v, b] · coef · |p|²`, where `coef = alpha / (rho·c²)`.
+#[derive(Debug, Clone)]
+pub struct MrSampler {
+    pub geometry: MrGeometry,
+    pub broadening: Broadening,
+    /// The grid window to record.
+    pub window: Window,
+    /// Force coefficient `alpha / (rho·c²)` per window sample (plane, row, column).
+    force_coefficient: Vec<f64>,
+    /// Slice-profile weights along the slice normal (sums to the covered fraction of the slice).
+    slab_weights: Vec<f64>,
+    /// `M_u` (n_u x len a), `M_v` (n_v x len b), row-major.
+    m_u: Array2<f64>,
+    m_v: Array2<f64>,
+}
+
+impl MrSampler {
+    /// Builds the window and operators for `geometry` on `grid` (broadening `width` in metres).
+    pub fn new(grid: &Grid, medium: &Medium, frequency: f64, geometry: &MrGeometry, broadening: Broadening) -> Result<Self> {
+        geometry.validate()?;
+        require_non_negative("arfi.broadening_width_mm", broadening.width)?;
+        let ax = geometry.plane.axes();
+        // Sample coordinates of the grid along frame axes x, y, z.
+        let coords = |axis: usize| -> (Vec<f64>, f64) {
+            match axis {
+                0 => ((0..grid.nx).map(|i| grid.x(i)).collect(), grid.dx),
+                1 => ((0..grid.ny).map(|j| grid.y(j)).collect(), grid.dy),
+                _ => ((0..grid.nz).map(|n| grid.z(n)).collect(), grid.dz),
+            }
+        };
+        let reach = 4.0 * broadening.width;
+        let mut ranges = [0..0, 0..0, 0..0];
+        let mut ops = Vec::new();
+        for (k, &a) in ax.iter().enumerate() {
+            let (c, d) = coords(a);
+            let (lo, hi) = if k < 2 {
+                let half = 0.5 * geometry.fov[k];
+                (geometry.center[a] - half - reach - d, geometry.center[a] + half + reach + d)
+            } else {
+                let half = 0.5 * geometry.slice_thickness;
+                (geometry.center[a] - half - d, geometry.center[a] + half + d)
+            };
+            let range = index_range(&c, lo, hi);
+            if range.is_empty() {
+                return Err(HasError::invalid("mr", "the MR slice lies outside the simulation grid"));
+            }
+            let local = &c[range.clone()];
+            if k < 2 {
+                let px = geometry.pixel_size()[k];
+                let centres: Vec<f64> = (0..geometry.matrix[k]).map(|i| geometry.pixel_center(k, i)).collect();
+                ops.push(pixel_average(&centres, px, local, d).dot(&gaussian(local, d, broadening.width)));
+            } else {
+                let t = geometry.slice_thickness;
+                let lo = geometry.center[a] - 0.5 * t;
+                let w: Vec<f64> = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
+                ops.push(Array2::from_shape_vec((1, w.len()), w).map_err(|e| HasError::invalid("mr", e.to_string()))?);
+            }
+            ranges[a] = range;
+        }
+        let window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
+        let mut force_coefficient = Vec::with_capacity(window.len());
+        for n in window.planes.clone() {
+            for j in window.rows.clone() {
+                for i in window.cols.clone() {
+                    let p = medium.properties_at(grid.x(i), grid.y(j), grid.z(n), frequency);
+                    force_coefficient.push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
+                }
+            }
+        }
+        let slab_weights = ops[2].row(0).to_vec();
+        let (m_u, m_v) = (ops[0].clone(), ops[1].clone());
+        Ok(MrSampler { geometry: geometry.clone(), broadening, window, force_coefficient, slab_weights, m_u, m_v })
+    }
+
+    /// The image `(n_u, n_v)` of force density (N/m³), broadened and pixel-averaged, from the
+    /// recorded window of the complex pressure.
+    pub fn force_image(&self, window_field: &[num_complex::Complex64]) -> Result<Array2<f64>> {
+        let power: Vec<f64> = window_field.iter().map(|p| p.norm_sqr()).collect();
+        self.apply(&power)
+    }
+
+    /// The linear operator applied to any real per-sample quantity `q` (|p|², or one part of a
+    /// cross product p_g·conj(p_h)): returns `Σ w · M_u · M_v · coef · q` on the MR pixels.
+    pub fn apply(&self, q: &[f64]) -> Result<Array2<f64>> {
+        let w = &self.window;
+        if q.len() != w.len() {
+            return Err(HasError::invalid("window", format!("has {} samples, expected {}", q.len(), w.len())));
+        }
+        let ax = self.geometry.plane.axes();
+        // Collapse the slice-normal axis into a 2-D map indexed [b][a] (v-axis, u-axis samples).
+        let dims = [w.cols.len(), w.rows.len(), w.planes.len()]; // sizes along x, y, z
+        let (na, nb) = (dims[ax[0]], dims[ax[1]]);
+        let mut map = Array2::<f64>::zeros((nb, na));
+        for n in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let s = (n * dims[1] + j) * dims[0] + i;
+                    let idx = [i, j, n];
+                    let val = q[s] * self.force_coefficient[s] * self.slab_weights[idx[ax[2]]];
+                    map[[idx[ax[1]], idx[ax[0]]]] += val;
+                }
+            }
+        }
+        // image[u, v] = Σ_a Σ_b M_u[u, a] · map[b, a] · M_v[v, b]
+        Ok(self.m_u.dot(&map.t()).dot(&self.m_v.t()))
+    }
+}
+
+/// Indices of the sorted coordinates `c` that lie within `[lo, hi]`.
+fn index_range(c: &[f64], lo: f64, hi: f64) -> std::ops::Range<usize> {
+    let start = c.iter().position(|&v| v >= lo).unwrap_or(c.len());
+    let end = c.iter().rposition(|&v| v <= hi).map_or(start, |e| e + 1).max(start);
+    start..end
+}
+
+/// Length of `[s - d/2, s + d/2] ∩ [lo, hi]` divided by `d`.
+fn overlap(s: f64, d: f64, lo: f64, hi: f64) -> f64 {
+    ((s + 0.5 * d).min(hi) - (s - 0.5 * d).max(lo)).max(0.0) / d
+}
+
+/// `P[p, i]`: the fraction of pixel `p` (width `px`) covered by sample cell `i` (width `d`), so
+/// that `P · f` is the area average of the piecewise-constant samples over each pixel.
+fn pixel_average(centres: &[f64], px: f64, samples: &[f64], d: f64) -> Array2<f64> {
+    Array2::from_shape_fn((centres.len(), samples.len()), |(p, i)| {
+        let (lo, hi) = (centres[p] - 0.5 * px, centres[p] + 0.5 * px);
+        overlap(samples[i], d, lo, hi) * d / px
+    })
+}
+
+/// Discrete convolution with the unit-integral Gaussian of width `w` on uniform samples spaced
+/// `d`: `G[i, j] = g(i - j) / Σ_m g(m)`, `g(m) = exp(-(m·d)² / (2·w²))`; identity when `w = 0`.
+fn gaussian(samples: &[f64], d: f64, w: f64) -> Array2<f64> {
+    let n = samples.len();
+    if w <= 0.0 {
+        return Array2::eye(n);
+    }
+    let half = (4.0 * w / d).ceil() as i64;
+    let g: Vec<f64> = (-half..=half).map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp()).collect();
+    let sum: f64 = g.iter().sum();
+    Array2::from_shape_fn((n, n), |(i, j)| {
+        let m = j as i64 - i as i64;
+        if m.abs() <= half {
+            g[(m + half) as usize] / sum
+        } else {
+            0.0
+        }
+    })
+}
+
+/// Adds seeded Gaussian noise of standard deviation `sigma` (rad) to an image (ChaCha8 stream).
+pub fn add_noise(image: &mut Array2<f64>, sigma: f64, seed: u64) -> Result<()> {
+    require_non_negative("noise_rad", sigma)?;
+    if sigma == 0.0 {
+        return Ok(());
+    }
+    let normal = Normal::new(0.0, sigma).map_err(|e| HasError::invalid("noise_rad", e.to_string()))?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    image.iter_mut().for_each(|v| *v += normal.sample(&mut rng));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_average_and_gaussian_preserve_a_constant() {
+        let s: Vec<f64> = (0..200).map(|i| i as f64 * 0.5e-3).collect();
+        let centres: Vec<f64> = (0..30).map(|p| 20e-3 + p as f64 * 1.4e-3).collect();
+        let m = pixel_average(&centres, 1.4e-3, &s, 0.5e-3).dot(&gaussian(&s, 0.5e-3, 2.7e-3));
+        for r in m.rows() {
+            assert!((r.sum() - 1.0).abs() < 1e-12, "{}", r.sum());
+        }
+    }
+
+    #[test]
+    fn affine_maps_pixel_centres() {
+        let g = MrGeometry { plane: MrPlane::Xy, center: [0.0, 0.0, 0.085], fov: [0.18, 0.135], matrix: [128, 96], slice_thickness: 3e-3 };
+        let a = g.affine_mm();
+        assert!((a[0][3] - (-90.0 + 0.703125)).abs() < 1e-9);
+        assert!((a[0][0] - 1.40625).abs() < 1e-12 && (a[2][2] - 3.0).abs() < 1e-12 && (a[2][3] - 85.0).abs() < 1e-9);
+        assert_eq!(g.volume_shape(), [128, 96, 1]);
+        let g = MrGeometry { plane: MrPlane::Yz, ..g };
+        assert_eq!(g.volume_shape(), [1, 128, 96]);
+    }
+
+    #[test]
+    fn noise_is_seeded() {
+        let mut a = Array2::zeros((4, 4));
+        let mut b = Array2::zeros((4, 4));
+        add_noise(&mut a, 0.02, 7).unwrap();
+        add_noise(&mut b, 0.02, 7).unwrap();
+        assert_eq!(a, b);
+        assert!(a.iter().any(|v| *v != 0.0));
+    }
+}

@@ -1,0 +1,161 @@
+//! 2-D FFTs of lateral slices: row FFTs, a blocked transpose, row FFTs again.
+//!
+//! Planned once ([`Fft2::new`]); every transform takes a caller-owned [`FftWorkspace`], so the
+//! propagation loop does not allocate. No normalisation is applied: a forward then an inverse
+//! transform multiplies by `nx·ny`. Frequencies are in FFT order (see [`crate::grid::Grid::wavenumber`]).
+
+use num_complex::Complex64 as C64;
+use rayon::prelude::*;
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
+
+/// Row-major `(ny, nx)` 2-D FFT plans; the spectrum is left transposed, `(nx, ny)`.
+#[derive(Clone)]
+pub struct Fft2 {
+    pub nx: usize,
+    pub ny: usize,
+    fwd_x: Arc<dyn Fft<f64>>,
+    inv_x: Arc<dyn Fft<f64>>,
+    fwd_y: Arc<dyn Fft<f64>>,
+    inv_y: Arc<dyn Fft<f64>>,
+    scratch_len: usize,
+}
+
+/// Buffers for one field's transforms: the transposed spectrum and per-chunk FFT scratch.
+pub struct FftWorkspace {
+    /// The spectrum in transposed layout `(nx, ny)` after [`Fft2::forward`].
+    pub spectrum: Vec<C64>,
+    scratch: Vec<Vec<C64>>,
+    parallel: bool,
+}
+
+impl Fft2 {
+    /// Plans the four 1-D transforms.
+    pub fn new(nx: usize, ny: usize) -> Self {
+        let mut planner = FftPlanner::new();
+        let fwd_x = planner.plan_fft_forward(nx);
+        let inv_x = planner.plan_fft_inverse(nx);
+        let fwd_y = planner.plan_fft_forward(ny);
+        let inv_y = planner.plan_fft_inverse(ny);
+        let scratch_len = [&fwd_x, &inv_x, &fwd_y, &inv_y].iter().map(|f| f.get_inplace_scratch_len()).max().unwrap_or(0);
+        Fft2 { nx, ny, fwd_x, inv_x, fwd_y, inv_y, scratch_len }
+    }
+
+    /// A workspace; `parallel` spreads rows over the rayon pool (use for a single field, not inside
+    /// an already parallel batch).
+    pub fn workspace(&self, parallel: bool) -> FftWorkspace {
+        let chunks = if parallel { (2 * rayon::current_num_threads()).clamp(1, self.nx.min(self.ny)) } else { 1 };
+        FftWorkspace {
+            spectrum: vec![C64::new(0.0, 0.0); self.nx * self.ny],
+            scratch: vec![vec![C64::new(0.0, 0.0); self.scratch_len]; chunks],
+            parallel,
+        }
+    }
+
+    /// `field` (ny, nx) → `ws.spectrum` (nx, ny), unnormalised. `field` is overwritten.
+    pub fn forward(&self, field: &mut [C64], ws: &mut FftWorkspace) {
+        rows(&*self.fwd_x, field, self.nx, &mut ws.scratch, ws.parallel);
+        transpose(field, &mut ws.spectrum, self.ny, self.nx, ws.parallel);
+        rows(&*self.fwd_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
+    }
+
+    /// `ws.spectrum` (nx, ny) → `field` (ny, nx), unnormalised. The spectrum is overwritten.
+    pub fn inverse(&self, ws: &mut FftWorkspace, field: &mut [C64]) {
+        rows(&*self.inv_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
+        transpose(&ws.spectrum, field, self.nx, self.ny, ws.parallel);
+        rows(&*self.inv_x, field, self.nx, &mut ws.scratch, ws.parallel);
+    }
+}
+
+/// In-place FFT of every length-`len` row of `data`.
+fn rows(fft: &dyn Fft<f64>, data: &mut [C64], len: usize, scratch: &mut [Vec<C64>], parallel: bool) {
+    if parallel && scratch.len() > 1 {
+        let n_rows = data.len() / len;
+        let per = n_rows.div_ceil(scratch.len()) * len;
+        data.par_chunks_mut(per).zip(scratch.par_iter_mut()).for_each(|(d, s)| fft.process_with_scratch(d, s));
+    } else {
+        fft.process_with_scratch(data, &mut scratch[0]);
+    }
+}
+
+/// `dst[c·rows + r] = src[r·cols + c]`, in 32 x 32 blocks.
+pub fn transpose(src: &[C64], dst: &mut [C64], rows: usize, cols: usize, parallel: bool) {
+    const B: usize = 32;
+    let block = |(cb, out): (usize, &mut [C64])| {
+        let c0 = cb * B;
+        let nc = out.len() / rows;
+        for r0 in (0..rows).step_by(B) {
+            for r in r0..(r0 + B).min(rows) {
+                let s = &src[r * cols + c0..r * cols + c0 + nc];
+                for (c, v) in s.iter().enumerate() {
+                    out[c * rows + r] = *v;
+                }
+            }
+        }
+    };
+    if parallel {
+        dst.par_chunks_mut(B * rows).enumerate().for_each(block);
+    } else {
+        dst.chunks_mut(B * rows).enumerate().for_each(block);
+    }
+}
+
+/// `a[i] *= b[i]`.
+pub fn multiply<T: Copy + Send + Sync>(a: &mut [C64], b: &[T], parallel: bool)
+where
+    C64: std::ops::MulAssign<T>,
+{
+    const CHUNK: usize = 8192;
+    if parallel {
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y));
+    } else {
+        a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Direct O(N²) DFT, the slow obvious reference.
+    fn dft2(x: &[C64], nx: usize, ny: usize) -> Vec<C64> {
+        let mut out = vec![C64::new(0.0, 0.0); nx * ny];
+        for ky in 0..ny {
+            for kx in 0..nx {
+                let mut acc = C64::new(0.0, 0.0);
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let ph = -2.0 * std::f64::consts::PI * ((kx * i) as f64 / nx as f64 + (ky * j) as f64 / ny as f64);
+                        acc += x[j * nx + i] * C64::from_polar(1.0, ph);
+                    }
+                }
+                out[kx * ny + ky] = acc; // transposed layout
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn matches_direct_dft_and_round_trips() {
+        let (nx, ny) = (12, 10);
+        // Fixed pseudo-random input (LCG) so the test is deterministic.
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let x: Vec<C64> = (0..nx * ny).map(|_| C64::new(rnd(), rnd())).collect();
+        let reference = dft2(&x, nx, ny);
+        for parallel in [false, true] {
+            let f = Fft2::new(nx, ny);
+            let mut ws = f.workspace(parallel);
+            let mut field = x.clone();
+            f.forward(&mut field, &mut ws);
+            let err = ws.spectrum.iter().zip(&reference).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+            assert!(err < 1e-11, "forward error {err}");
+            f.inverse(&mut ws, &mut field);
+            let err = field.iter().zip(&x).map(|(a, b)| (a / (nx * ny) as f64 - b).norm()).fold(0.0, f64::max);
+            assert!(err < 1e-14, "round trip error {err}");
+        }
+    }
+}

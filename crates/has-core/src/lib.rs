@@ -1,0 +1,30 @@
+//! # has-core
+//!
+//! Hybrid Angular Spectrum (HAS) beam propagation and the MR-ARFI forward model used for
+//! hybrid simulation–MR-ARFI phase aberration correction of focused-ultrasound beams
+//! (Vyas, Kaye & Butts Pauly, Med Phys 41(3), 2014). Pure Rust; no Python.
+//!
+//! Conventions: SI units; the transducer frame (beam along +z, planar array in z = 0); time
+//! dependence `exp(-i·omega·t)`, so a phase `phi` on an element delays its emission by
+//! `phi / (2·pi·f)` and multiplies its complex drive by `exp(+i·phi)`.
+//!
+//! ```no_run
+//! use has_core::{scenario::Scenario, simulation::Simulation};
+//! let sim = Simulation::new(&Scenario::default()).unwrap();
+//! let image = sim.arfi_image(&[]).unwrap(); // ideal MR-ARFI image, rad
+//! ```
+
+pub mod arfi;
+pub mod error;
+pub mod fft;
+pub mod grid;
+pub mod has;
+pub mod medium;
+pub mod scenario;
+pub mod simulation;
+pub mod source;
+pub mod steering;
+pub mod transducer;
+
+pub use error::{HasError, Result};
+pub use num_complex::Complex64;

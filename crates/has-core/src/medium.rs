@@ -1,0 +1,344 @@
+//! Acoustic media: materials, regions (cylinder, slab) and voxel maps.
+
+use crate::error::{require_non_negative, require_positive, HasError, Result};
+use crate::grid::Grid;
+
+/// Nepers per decibel: 1 dB = ln(10)/20 Np.
+pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
+
+/// A homogeneous material. Attenuation follows `a(f) = a0 · (f / 1 MHz)^y` in dB/cm and is taken to
+/// be all absorption (it drives the radiation force).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Sound speed c (m/s).
+    pub sound_speed: f64,
+    /// Density rho (kg/m³).
+    pub density: f64,
+    /// a0 (dB/cm/MHz^y).
+    pub attenuation_db_cm_mhz: f64,
+    /// Frequency exponent y of the power law (1 = linear).
+    pub attenuation_power: f64,
+}
+
+impl Material {
+    /// Validates the acoustic parameters.
+    pub fn new(name: &str, sound_speed: f64, density: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
+        let m = Material {
+            name: name.to_string(),
+            sound_speed,
+            density,
+            attenuation_db_cm_mhz,
+            attenuation_power: 1.0,
+        };
+        m.validate()?;
+        Ok(m)
+    }
+
+    /// Checks every field, naming the material in the error.
+    pub fn validate(&self) -> Result<()> {
+        let p = |k: &str| format!("material '{}'.{k}", self.name);
+        require_positive(&p("sound_speed_m_s"), self.sound_speed)?;
+        require_positive(&p("density_kg_m3"), self.density)?;
+        require_non_negative(&p("attenuation_db_cm_mhz"), self.attenuation_db_cm_mhz)?;
+        require_non_negative(&p("attenuation_power"), self.attenuation_power)?;
+        Ok(())
+    }
+
+    /// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz).
+    pub fn attenuation_np_m(&self, frequency: f64) -> f64 {
+        self.attenuation_db_cm_mhz * (frequency / 1e6).powf(self.attenuation_power) * 100.0 * NP_PER_DB
+    }
+
+    /// Local properties at `frequency`.
+    pub fn properties(&self, frequency: f64) -> Properties {
+        Properties {
+            sound_speed: self.sound_speed,
+            density: self.density,
+            attenuation: self.attenuation_np_m(frequency),
+        }
+    }
+}
+
+/// Acoustic properties at a point, SI: c (m/s), rho (kg/m³), alpha (Np/m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Properties {
+    pub sound_speed: f64,
+    pub density: f64,
+    pub attenuation: f64,
+}
+
+impl Properties {
+    /// Characteristic impedance Z = rho·c (Rayl).
+    pub fn impedance(&self) -> f64 {
+        self.density * self.sound_speed
+    }
+}
+
+/// The geometry of a region (metres, transducer frame).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    /// `(x-cx)² + (y-cy)² <= r²` and `z_min <= z <= z_max`.
+    Cylinder { radius: f64, z_min: f64, z_max: f64, center: [f64; 2] },
+    /// `z_min <= z <= z_max`, all x, y.
+    Slab { z_min: f64, z_max: f64 },
+}
+
+impl Shape {
+    /// Whether the point lies inside.
+    pub fn contains(&self, x: f64, y: f64, z: f64) -> bool {
+        match *self {
+            Shape::Cylinder { radius, z_min, z_max, center } => {
+                let (dx, dy) = (x - center[0], y - center[1]);
+                z >= z_min && z <= z_max && dx * dx + dy * dy <= radius * radius
+            }
+            Shape::Slab { z_min, z_max } => z >= z_min && z <= z_max,
+        }
+    }
+
+    fn validate(&self, name: &str) -> Result<()> {
+        let (z_min, z_max) = match *self {
+            Shape::Cylinder { radius, z_min, z_max, center } => {
+                require_positive(&format!("{name}.radius_mm"), radius)?;
+                if !center.iter().all(|c| c.is_finite()) {
+                    return Err(HasError::invalid(format!("{name}.center_mm"), "must be finite"));
+                }
+                (z_min, z_max)
+            }
+            Shape::Slab { z_min, z_max } => (z_min, z_max),
+        };
+        if !(z_min.is_finite() && z_max.is_finite() && z_max > z_min) {
+            return Err(HasError::invalid(
+                format!("{name}.z_min_mm/z_max_mm"),
+                format!("need finite z_min < z_max, got {z_min} and {z_max}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A region of one material; later regions override earlier ones where they overlap.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Region {
+    /// Index into [`Medium::materials`].
+    pub material: usize,
+    pub shape: Shape,
+}
+
+/// Properties given voxel by voxel on a box (nearest-neighbour lookup); outside the box the
+/// region/background description applies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VoxelMap {
+    /// Centre of voxel (0, 0, 0), metres, order (x, y, z).
+    pub origin: [f64; 3],
+    /// Voxel spacing (m), order (x, y, z).
+    pub spacing: [f64; 3],
+    /// Shape (nz, ny, nx).
+    pub shape: [usize; 3],
+    /// Row-major (z, y, x) maps: sound speed (m/s), density (kg/m³), attenuation (dB/cm/MHz^y).
+    pub sound_speed: Vec<f64>,
+    pub density: Vec<f64>,
+    pub attenuation_db_cm_mhz: Vec<f64>,
+    pub attenuation_power: f64,
+}
+
+impl VoxelMap {
+    /// Validates shapes and values.
+    pub fn validate(&self) -> Result<()> {
+        let n: usize = self.shape.iter().product();
+        if n == 0 {
+            return Err(HasError::invalid("voxels.shape", "must not be empty"));
+        }
+        for (name, v) in [
+            ("voxels.sound_speed", &self.sound_speed),
+            ("voxels.density", &self.density),
+            ("voxels.attenuation", &self.attenuation_db_cm_mhz),
+        ] {
+            if v.len() != n {
+                return Err(HasError::invalid(name, format!("has {} values, shape needs {n}", v.len())));
+            }
+        }
+        for (i, s) in self.spacing.iter().enumerate() {
+            require_positive(&format!("voxels.spacing[{i}]"), *s)?;
+        }
+        let bad = |v: &[f64], strict: bool| v.iter().position(|x| !x.is_finite() || (strict && *x <= 0.0) || *x < 0.0);
+        if let Some(i) = bad(&self.sound_speed, true) {
+            return Err(HasError::invalid("voxels.sound_speed", format!("voxel {i} is {} (need > 0)", self.sound_speed[i])));
+        }
+        if let Some(i) = bad(&self.density, true) {
+            return Err(HasError::invalid("voxels.density", format!("voxel {i} is {} (need > 0)", self.density[i])));
+        }
+        if let Some(i) = bad(&self.attenuation_db_cm_mhz, false) {
+            return Err(HasError::invalid("voxels.attenuation", format!("voxel {i} is {} (need >= 0)", self.attenuation_db_cm_mhz[i])));
+        }
+        Ok(())
+    }
+
+    /// Whether the box spans height `z`.
+    fn covers_z(&self, z: f64) -> bool {
+        let k = ((z - self.origin[2]) / self.spacing[2]).round();
+        k >= 0.0 && k < self.shape[0] as f64
+    }
+
+    fn index(&self, x: f64, y: f64, z: f64) -> Option<usize> {
+        let [nz, ny, nx] = self.shape;
+        let idx = |v: f64, o: f64, d: f64, n: usize| {
+            let i = ((v - o) / d).round();
+            (i >= 0.0 && i < n as f64).then_some(i as usize)
+        };
+        let i = idx(x, self.origin[0], self.spacing[0], nx)?;
+        let j = idx(y, self.origin[1], self.spacing[1], ny)?;
+        let k = idx(z, self.origin[2], self.spacing[2], nz)?;
+        Some((k * ny + j) * nx + i)
+    }
+}
+
+/// The medium: materials, a background, regions and optional voxel maps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Medium {
+    pub materials: Vec<Material>,
+    /// Index of the background material.
+    pub background: usize,
+    pub regions: Vec<Region>,
+    pub voxels: Option<VoxelMap>,
+}
+
+impl Medium {
+    /// A single homogeneous material.
+    pub fn homogeneous(material: Material) -> Self {
+        Medium { materials: vec![material], background: 0, regions: vec![], voxels: None }
+    }
+
+    /// Checks materials, indices and shapes.
+    pub fn validate(&self) -> Result<()> {
+        if self.materials.is_empty() {
+            return Err(HasError::invalid("material", "no material given"));
+        }
+        for m in &self.materials {
+            m.validate()?;
+        }
+        if self.background >= self.materials.len() {
+            return Err(HasError::invalid("medium.background", "names no material"));
+        }
+        for (i, r) in self.regions.iter().enumerate() {
+            if r.material >= self.materials.len() {
+                return Err(HasError::invalid(format!("region[{i}].material"), "names no material"));
+            }
+            r.shape.validate(&format!("region[{i}]"))?;
+        }
+        if let Some(v) = &self.voxels {
+            v.validate()?;
+        }
+        Ok(())
+    }
+
+    /// Index of the material at a point (last region containing it, else the background).
+    pub fn material_at(&self, x: f64, y: f64, z: f64) -> usize {
+        self.regions
+            .iter()
+            .rev()
+            .find(|r| r.shape.contains(x, y, z))
+            .map_or(self.background, |r| r.material)
+    }
+
+    /// Properties at a point for `frequency` (Hz).
+    pub fn properties_at(&self, x: f64, y: f64, z: f64, frequency: f64) -> Properties {
+        if let Some(v) = &self.voxels {
+            if let Some(i) = v.index(x, y, z) {
+                let a = v.attenuation_db_cm_mhz[i] * (frequency / 1e6).powf(v.attenuation_power) * 100.0 * NP_PER_DB;
+                return Properties { sound_speed: v.sound_speed[i], density: v.density[i], attenuation: a };
+            }
+        }
+        self.materials[self.material_at(x, y, z)].properties(frequency)
+    }
+
+    /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).
+    pub fn min_sound_speed(&self) -> f64 {
+        let m = self.materials.iter().map(|m| m.sound_speed).fold(f64::INFINITY, f64::min);
+        match &self.voxels {
+            Some(v) => v.sound_speed.iter().copied().fold(m, f64::min),
+            None => m,
+        }
+    }
+
+    /// Properties on the lateral grid at height `z`: row-major `(ny, nx)`.
+    pub fn slice(&self, grid: &Grid, z: f64, frequency: f64) -> SliceProperties {
+        let n = grid.lateral_len();
+        let per_material: Vec<Properties> = self.materials.iter().map(|m| m.properties(frequency)).collect();
+        let mut s = SliceProperties {
+            sound_speed: Vec::with_capacity(n),
+            density: Vec::with_capacity(n),
+            attenuation: Vec::with_capacity(n),
+        };
+        let voxels_here = self.voxels.as_ref().is_some_and(|v| v.covers_z(z));
+        for j in 0..grid.ny {
+            for i in 0..grid.nx {
+                let (x, y) = (grid.x(i), grid.y(j));
+                let p = if voxels_here { self.properties_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] };
+                s.sound_speed.push(p.sound_speed);
+                s.density.push(p.density);
+                s.attenuation.push(p.attenuation);
+            }
+        }
+        s
+    }
+
+    /// Which regions' z-ranges contain `z`; two heights with equal keys have identical slices.
+    /// `None` where a voxel map covers `z` (every slice may differ there).
+    pub fn slice_key(&self, z: f64) -> Option<Vec<bool>> {
+        if self.voxels.as_ref().is_some_and(|v| v.covers_z(z)) {
+            return None;
+        }
+        Some(
+            self.regions
+                .iter()
+                .map(|r| match r.shape {
+                    Shape::Cylinder { z_min, z_max, .. } | Shape::Slab { z_min, z_max } => z >= z_min && z <= z_max,
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Property maps of one lateral slice, row-major `(ny, nx)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SliceProperties {
+    pub sound_speed: Vec<f64>,
+    pub density: Vec<f64>,
+    pub attenuation: Vec<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn attenuation_converts_db_cm_mhz_to_np_m() {
+        // 0.46 dB/cm/MHz at 0.55 MHz: 0.253 dB/cm = 25.3 dB/m = 2.9128 Np/m.
+        let m = Material::new("phantom", 1533.0, 1040.0, 0.46).unwrap();
+        assert!((m.attenuation_np_m(550e3) - 25.3 / 8.685_889_638).abs() < 1e-9);
+    }
+
+    #[test]
+    fn later_regions_override_earlier_ones() {
+        let water = Material::new("water", 1500.0, 1000.0, 0.0).unwrap();
+        let a = Material::new("a", 1600.0, 1000.0, 0.0).unwrap();
+        let b = Material::new("b", 1700.0, 1000.0, 0.0).unwrap();
+        let mut m = Medium::homogeneous(water);
+        m.materials.extend([a, b]);
+        m.regions.push(Region { material: 1, shape: Shape::Slab { z_min: 0.01, z_max: 0.05 } });
+        m.regions.push(Region {
+            material: 2,
+            shape: Shape::Cylinder { radius: 0.01, z_min: 0.02, z_max: 0.03, center: [0.0, 0.0] },
+        });
+        assert_eq!(m.properties_at(0.0, 0.0, 0.005, 1e6).sound_speed, 1500.0);
+        assert_eq!(m.properties_at(0.02, 0.0, 0.025, 1e6).sound_speed, 1600.0);
+        assert_eq!(m.properties_at(0.0, 0.0, 0.025, 1e6).sound_speed, 1700.0);
+    }
+
+    #[test]
+    fn negative_sound_speed_is_rejected_by_name() {
+        let e = Material::new("skull", -1.0, 1900.0, 0.0).unwrap_err();
+        assert!(e.to_string().contains("skull"), "{e}");
+    }
+}

@@ -1,0 +1,220 @@
+//! A scenario made ready to simulate: grid, steered source, HAS plan and MR sampler.
+
+use crate::arfi::{add_noise, Broadening, MrSampler};
+use crate::error::{HasError, Result};
+use crate::grid::{fft_friendly, Grid};
+use crate::has::{HasOptions, HasPlan, RecordSpec, Recording};
+use crate::medium::Medium;
+use crate::scenario::{Resolved, Scenario};
+use crate::source::{source_plane_z, SourceModel};
+use crate::steering::steering_phases;
+use crate::transducer::Transducer;
+use ndarray::Array2;
+use num_complex::Complex64 as C64;
+
+/// Memory a simulation may plan to use before it refuses (bytes).
+pub const MEMORY_LIMIT: u64 = 8 << 30;
+
+/// Everything needed to simulate fields and MR-ARFI images of one scenario.
+pub struct Simulation {
+    pub name: String,
+    pub frequency: f64,
+    pub grid: Grid,
+    pub medium: Medium,
+    pub transducer: Transducer,
+    pub focus: [f64; 3],
+    /// Steering phases per element (rad), SPEC §2 sign.
+    pub steering: Vec<f64>,
+    /// Element → group (default: 16 groups of contiguous elements).
+    pub groups: Vec<usize>,
+    pub n_groups: usize,
+    pub source: SourceModel,
+    pub plan: HasPlan,
+    pub sampler: MrSampler,
+    /// Scale from broadened force density (N/m³) to ARFI phase (rad).
+    pub amplitude: f64,
+    pub mask_fraction: f64,
+    pub noise: f64,
+}
+
+/// A pressure field on one plane and along the beam axis.
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// Complex pressure amplitude (Pa), `(ny, nx)`.
+    pub pressure: Array2<C64>,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    /// z of the plane (m).
+    pub z: f64,
+    pub axis_pressure: Vec<C64>,
+    pub axis_z: Vec<f64>,
+    /// Pressure amplitude on every element face (Pa).
+    pub surface_pressure: f64,
+}
+
+impl Simulation {
+    /// Resolves the scenario, chooses the grid, steers to the focus and builds the HAS plan (one
+    /// march of the steered beam) and the MR sampler.
+    pub fn new(scenario: &Scenario) -> Result<Self> {
+        let r = scenario.resolve()?;
+        let grid = choose_grid(&r)?;
+        let steering = steering_phases(&r.transducer, &r.medium, r.frequency, r.focus)?;
+        let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
+        let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
+        // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
+        let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
+        let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
+        let options = HasOptions { sponge_width: r.grid.sponge_width_mm.map_or(10e-3, |w| w * 1e-3), ..HasOptions::default() };
+        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width })?;
+        let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
+        let reference = source.field(&drive)?;
+        let spec = RecordSpec { window: Some(sampler.window.clone()), ..RecordSpec::default() };
+        let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
+        let amplitude = match r.amplitude {
+            Some(a) => a,
+            None => {
+                let peak = sampler.force_image(&ideal.window)?.iter().copied().fold(0.0, f64::max);
+                if !(peak > 0.0) {
+                    return Err(HasError::invalid(
+                        "mr",
+                        "the ideal beam exerts no radiation force in the MR slice (no attenuating material there?)",
+                    ));
+                }
+                r.ideal_focal_phase / peak
+            }
+        };
+        let groups = r.transducer.default_groups();
+        let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+        Ok(Simulation {
+            name: r.name,
+            frequency: r.frequency,
+            grid,
+            medium: r.medium,
+            transducer: r.transducer,
+            focus: r.focus,
+            steering,
+            groups,
+            n_groups,
+            source,
+            plan,
+            sampler,
+            amplitude,
+            mask_fraction: r.mask_fraction,
+            noise: r.noise,
+        })
+    }
+
+    /// Number of elements.
+    pub fn n_elements(&self) -> usize {
+        self.steering.len()
+    }
+
+    /// Expands added phases (rad), one per element or one per group, to one per element.
+    pub fn element_phases(&self, phases: &[f64]) -> Result<Vec<f64>> {
+        crate::error::require_finite("phases", phases)?;
+        if phases.len() == self.n_elements() {
+            Ok(phases.to_vec())
+        } else if phases.len() == self.n_groups {
+            Ok(self.groups.iter().map(|&g| phases[g]).collect())
+        } else {
+            Err(HasError::invalid(
+                "phases",
+                format!("has {} values; expected {} (one per element) or {} (one per group)", phases.len(), self.n_elements(), self.n_groups),
+            ))
+        }
+    }
+
+    /// Source plane for the steering plus `added` phases (per element or per group; empty = none).
+    pub fn source_field(&self, added: &[f64]) -> Result<Vec<C64>> {
+        let extra = if added.is_empty() { vec![0.0; self.n_elements()] } else { self.element_phases(added)? };
+        let drive: Vec<C64> = self.steering.iter().zip(&extra).map(|(s, a)| C64::from_polar(1.0, s + a)).collect();
+        self.source.field(&drive)
+    }
+
+    /// The field on the plane nearest `z` (default: the focus) and along the axis.
+    pub fn field(&self, added: &[f64], z: Option<f64>) -> Result<Field> {
+        let g = &self.grid;
+        let z = z.unwrap_or(self.focus[2]);
+        if !z.is_finite() || z < g.z0 || z > g.z(g.nz - 1) {
+            return Err(HasError::invalid(
+                "z_mm",
+                format!("must lie within the grid, {:.1} to {:.1} mm", g.z0 * 1e3, g.z(g.nz - 1) * 1e3),
+            ));
+        }
+        let plane = g.plane_index(z);
+        let spec = RecordSpec { planes: vec![plane], axis: true, ..RecordSpec::default() };
+        let mut rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
+        let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
+        Ok(Field {
+            pressure,
+            x: (0..g.nx).map(|i| g.x(i)).collect(),
+            y: (0..g.ny).map(|j| g.y(j)).collect(),
+            z: g.z(plane),
+            axis_z: (0..rec.axis.len()).map(|n| g.z(n)).collect(),
+            axis_pressure: rec.axis,
+            surface_pressure: self.source.face_pressure,
+        })
+    }
+
+    /// The noise-free MR-ARFI phase image (rad), `(n_u, n_v)`, for added phases.
+    pub fn arfi_image(&self, added: &[f64]) -> Result<Array2<f64>> {
+        let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
+        Ok(self.sampler.force_image(&rec.window)? * self.amplitude)
+    }
+
+    /// An MR-ARFI image with seeded Gaussian noise of `noise` rad added.
+    pub fn noisy_arfi_image(&self, added: &[f64], noise: f64, seed: u64) -> Result<Array2<f64>> {
+        let mut img = self.arfi_image(added)?;
+        add_noise(&mut img, noise, seed)?;
+        Ok(img)
+    }
+
+    /// Marches several sources in one batch, keeping the MR window.
+    pub fn record_window(&self, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
+        let spec = RecordSpec { window: Some(self.sampler.window.clone()), ..RecordSpec::default() };
+        self.plan.propagate_batch(sources, &spec)
+    }
+}
+
+/// The grid for a scenario: spacing λ_min/4 unless given (refused above λ_min/2), a square
+/// lateral extent covering the aperture (and an off-axis focus) with 20 mm margins, planes from
+/// the source plane to 1.5 x the focal depth and the MR field of view.
+pub fn choose_grid(r: &Resolved) -> Result<Grid> {
+    let wavelength = r.medium.min_sound_speed() / r.frequency;
+    let dx = match r.grid.spacing_mm {
+        Some(s) => {
+            let s = s * 1e-3;
+            if s > 0.5 * wavelength {
+                return Err(HasError::invalid(
+                    "grid.spacing_mm",
+                    format!(
+                        "{:.3} mm is too coarse for {:.0} kHz (shortest wavelength {:.3} mm): use at most {:.3} mm (λ/2); {:.3} mm (λ/4) is recommended",
+                        s * 1e3, r.frequency / 1e3, wavelength * 1e3, 0.5 * wavelength * 1e3, 0.25 * wavelength * 1e3
+                    ),
+                ));
+            }
+            s
+        }
+        None => 0.25 * wavelength,
+    };
+    let dz = r.grid.step_mm.map_or(dx, |s| s * 1e-3);
+    if dz > wavelength {
+        return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)));
+    }
+    let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
+    let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
+    let n = fft_friendly((size / dx).ceil() as usize);
+    let z0 = source_plane_z(&r.transducer, wavelength, dz);
+    let ax = r.mr.plane.axes();
+    let mr_z_end = if ax[1] == 2 { r.mr.center[2] + 0.5 * r.mr.fov[1] } else { r.mr.center[2] + r.mr.slice_thickness };
+    let z_end = r.grid.z_max_mm.map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);
+    if z_end <= z0 + dz {
+        return Err(HasError::invalid("grid.z_max_mm", format!("must lie beyond the source plane at {:.1} mm", z0 * 1e3)));
+    }
+    let nz = ((z_end - z0) / dz).ceil() as usize + 1;
+    let bytes = (n * n) as u64 * 16 * 8;
+    if bytes > MEMORY_LIMIT || nz > 100_000 {
+        return Err(HasError::TooLarge { what: format!("a {n} x {n} x {nz} grid"), bytes, limit: MEMORY_LIMIT });
+    }
+    Grid::new(n, n, dx, dx, nz, dz, z0)
+}
