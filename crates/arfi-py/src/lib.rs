@@ -36,6 +36,15 @@ fn normalize_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyRes
     s.to_toml().map_err(to_py)
 }
 
+/// Parses and validates a scenario, returning it as complete JSON (for `Scenario.to_dict`).
+#[pyfunction]
+#[pyo3(signature = (text, format="toml", base_dir=None))]
+fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
+    let s = parse_scenario(text, format, base_dir)?;
+    s.resolve().map_err(to_py)?;
+    s.to_json().map_err(to_py)
+}
+
 /// Reads a scenario file and returns it as complete TOML (FileNotFoundError / ValueError).
 #[pyfunction]
 fn load_scenario(path: &str) -> PyResult<String> {
@@ -186,5 +195,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(load_scenario, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     Ok(())
 }

@@ -178,7 +178,7 @@ impl Simulation {
 
 /// The grid for a scenario: spacing λ_min/4 unless given (refused above λ_min/2), a square
 /// lateral extent covering the aperture (and an off-axis focus) with 20 mm margins, planes from
-/// the source plane to 1.5 x the focal depth and the MR field of view.
+/// the source plane to 1.5 x the focal depth and the MR field of view, one of them on the focus.
 pub fn choose_grid(r: &Resolved) -> Result<Grid> {
     let wavelength = r.medium.min_sound_speed() / r.frequency;
     let dx = match r.grid.spacing_mm {
@@ -197,14 +197,20 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
         }
         None => 0.25 * wavelength,
     };
-    let dz = r.grid.step_mm.map_or(dx, |s| s * 1e-3);
-    if dz > wavelength {
-        return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)));
-    }
+    let z0 = source_plane_z(&r.transducer, wavelength, dx);
+    let dz = match r.grid.step_mm {
+        Some(s) if s * 1e-3 > wavelength => {
+            return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)))
+        }
+        Some(s) => s * 1e-3,
+        // At most the lateral spacing, and a whole number of steps to the focal depth, so that a
+        // plane lies exactly on the focus.
+        None if r.focus[2] > z0 + dx => (r.focus[2] - z0) / ((r.focus[2] - z0) / dx).ceil(),
+        None => dx,
+    };
     let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
     let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
     let n = fft_friendly((size / dx).ceil() as usize);
-    let z0 = source_plane_z(&r.transducer, wavelength, dz);
     let ax = r.mr.plane.axes();
     let mr_z_end = if ax[1] == 2 { r.mr.center[2] + 0.5 * r.mr.fov[1] } else { r.mr.center[2] + r.mr.slice_thickness };
     let z_end = r.grid.z_max_mm.map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);

@@ -1,0 +1,26 @@
+"""arfi: hybrid simulation–MR-ARFI phase aberration correction for focused ultrasound.
+
+The beam is simulated with the Hybrid Angular Spectrum method (Rust core, ``has-core``), turned
+into radiation force ``F = 2·alpha·I/c``, averaged over the MR slice, broadened with a Gaussian
+and sampled onto MR pixels (Vyas, Kaye & Butts Pauly, Med Phys 41(3):032901, 2014).
+
+Quick start::
+
+    import arfi
+    sim = arfi.Simulation()              # the paper's phantom experiment (SPEC §3)
+    image = sim.arfi_image()             # ideal MR-ARFI phase image, rad, shape (128, 96)
+    field = sim.field()                  # complex pressure (Pa) on the focal plane and the axis
+"""
+
+from arfi.scenario import Scenario
+from arfi.simulation import Field, Simulation
+from arfi.io import read_arfi_image, read_phases, write_arfi_image
+
+__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases"]
+
+try:
+    from importlib.metadata import version as _version
+
+    __version__ = _version("arfi")
+except Exception:  # pragma: no cover - running from a source tree without metadata
+    __version__ = "0.0.0"

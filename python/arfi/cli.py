@@ -1,0 +1,192 @@
+"""The ``arfi`` command line (SPEC §5).
+
+Every verb takes ``--scenario FILE`` (default: the embedded scenario) and ``--json FILE`` for
+machine-readable results. Bad input ends with one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from arfi.io import read_phases, write_arfi_image, write_json, write_npz
+from arfi.scenario import Scenario
+from arfi.simulation import Simulation
+
+
+class UsageError(Exception):
+    """Bad command-line input: reported as one line, exit 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse prints usage too)
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def _scenario(args: argparse.Namespace) -> Scenario:
+    return Scenario.load(args.scenario) if args.scenario else Scenario.default()
+
+
+def _phases(path: str | None, name: str) -> np.ndarray | None:
+    return None if path is None else read_phases(path, name)
+
+
+def _finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
+    if args.json:
+        write_json(args.json, result)
+
+
+def cmd_scenario(args: argparse.Namespace) -> int:
+    sys.stdout.write(_scenario(args).to_toml())
+    return 0
+
+
+def cmd_field(args: argparse.Namespace) -> int:
+    if not args.out.endswith(".npz"):
+        raise UsageError(f"arfi field: --out must end in .npz, got {args.out}")
+    t = time.perf_counter()
+    sim = Simulation(_scenario(args))
+    f = sim.field(_phases(args.phases, "--phases"), args.z_mm)
+    write_npz(
+        args.out,
+        {
+            "pressure": f.pressure,
+            "x_mm": f.x_mm,
+            "y_mm": f.y_mm,
+            "z_mm": np.float64(f.z_mm),
+            "axis_pressure": f.axis_pressure,
+            "axis_z_mm": f.axis_z_mm,
+            "surface_pressure_pa": np.float64(f.surface_pressure_pa),
+        },
+    )
+    focus = f.focus()
+    print(
+        f"field: plane z = {f.z_mm:.2f} mm, peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
+        f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm; axis peak "
+        f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {args.out}"
+    )
+    _finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
+                   "seconds": time.perf_counter() - t})
+    return 0
+
+
+def image_peak(sim: Simulation, image: np.ndarray) -> tuple[float, list[float]]:
+    """Maximum of an ARFI image and its pixel centre (mm, transducer frame)."""
+    idx = np.unravel_index(int(np.argmax(image)), image.shape)
+    vox = np.zeros(3)
+    shape = sim.mr_volume_shape
+    axes = [a for a in range(3) if shape[a] != 1]
+    for a, i in zip(axes, idx):
+        vox[a] = i
+    pos = sim.mr_affine_mm @ np.append(vox, 1.0)
+    return float(image[idx]), [float(v) for v in pos[:3]]
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    out = args.out
+    if not (out.endswith(".nii") or out.endswith(".nii.gz")):
+        raise UsageError(f"arfi simulate: --out must end in .nii or .nii.gz, got {out}")
+    t = time.perf_counter()
+    sim = Simulation(_scenario(args))
+    aberration = _phases(args.phases, "--phases")
+    known = _phases(args.known_phases, "--known-phases")
+    total = None
+    for p in (aberration, known):
+        if p is not None:
+            full = _expand(sim, p, "--phases" if p is aberration else "--known-phases")
+            total = full if total is None else total + full
+    noise = sim.noise_rad if args.noise_rad is None else args.noise_rad
+    image = sim.arfi_image(total, noise, args.seed)
+    sidecar: dict[str, Any] = {"arfi_simulated": {"scenario": sim.scenario.name, "noise_rad": noise, "seed": args.seed}}
+    if known is not None:
+        sidecar["applied_phases_rad"] = known
+    write_arfi_image(out, image, sim.mr_affine_mm, sim.mr_volume_shape, sidecar)
+    peak, pos = image_peak(sim, image)
+    print(
+        f"simulate: {image.shape[0]} x {image.shape[1]} MR-ARFI image, focal ARFI phase {peak:.3f} rad at "
+        f"({pos[0]:.1f}, {pos[1]:.1f}, {pos[2]:.1f}) mm, noise {noise:g} rad -> {out}"
+    )
+    _finish(args, {"out": out, "focal_arfi_rad": peak, "focal_position_mm": pos, "noise_rad": noise,
+                   "seed": args.seed, "amplitude": sim.amplitude, "seconds": time.perf_counter() - t})
+    return 0
+
+
+def _expand(sim: Simulation, phases: np.ndarray, name: str) -> np.ndarray:
+    """Per-group or per-element phases → per-element."""
+    if phases.size == sim.n_elements:
+        return phases
+    if phases.size == sim.n_groups:
+        return phases[sim.groups]
+    raise ValueError(f"{name}: has {phases.size} values; expected {sim.n_elements} (one per element) or {sim.n_groups} (one per group)")
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the embedded phantom experiment)")
+    p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="arfi",
+        description="Hybrid simulation–MR-ARFI phase aberration correction for focused ultrasound.",
+    )
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("scenario", help="print a scenario as TOML with every default written out",
+                       description="Print the scenario (default: the embedded one) as complete TOML.",
+                       epilog="example: arfi scenario --default > phantom.toml")
+    _add_common(p)
+    p.add_argument("--default", action="store_true", help="print the embedded default scenario")
+    p.set_defaults(run=cmd_scenario)
+
+    p = sub.add_parser("field", help="complex pressure on a plane and the beam axis (.npz)",
+                       description="Simulate the beam (HAS) and write the complex pressure amplitude (Pa) on the "
+                       "plane z = Z and along the beam axis.",
+                       epilog="example: arfi field --z-mm 85 --out focus.npz")
+    _add_common(p)
+    p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
+    p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
+    p.add_argument("--out", required=True, metavar="F.npz")
+    p.set_defaults(run=cmd_field)
+
+    p = sub.add_parser("simulate", help="simulated MR-ARFI image (NIfTI)",
+                       description="Simulate an MR-ARFI phase image (rad) for phases added to the steering and "
+                       "write it as NIfTI with a JSON sidecar.",
+                       epilog="example: arfi simulate --phases aberration.npy --noise-rad 0.02 --seed 1 --out aberrated.nii.gz")
+    _add_common(p)
+    p.add_argument("--phases", metavar="P", help="unknown aberration (rad) added to the steering (not recorded in the sidecar)")
+    p.add_argument("--known-phases", metavar="P", dest="known_phases",
+                   help="known diversity phases (rad) added to the steering and recorded as applied_phases_rad in the sidecar")
+    p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--out", required=True, metavar="M.nii.gz")
+    p.set_defaults(run=cmd_simulate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: returns the exit status (0 ok, 2 bad input)."""
+    try:
+        args = build_parser().parse_args(argv)
+        if getattr(args, "seed", 0) is not None and not 0 <= getattr(args, "seed", 0) < 2**64:
+            raise UsageError("--seed: must be an integer in [0, 2**64)")
+        if getattr(args, "noise_rad", None) is not None and not (np.isfinite(args.noise_rad) and args.noise_rad >= 0):
+            raise UsageError(f"--noise-rad: must be a finite number >= 0, got {args.noise_rad}")
+        run: Callable[[argparse.Namespace], int] = args.run
+        return run(args)
+    except (UsageError, ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as e:
+        print(f"arfi: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("arfi: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

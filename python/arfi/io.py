@@ -1,0 +1,158 @@
+"""Files: MR-ARFI images (NIfTI + JSON sidecar, SPEC §4), phase vectors, field archives.
+
+Every writer goes through a temporary file in the target folder and an atomic rename, so a
+failed or interrupted run leaves no partial file and never clobbers a good one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yields a temporary path beside ``path`` (same suffixes); renamed onto ``path`` on success,
+    removed on failure."""
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{target}: folder {folder} does not exist")
+    suffix = "".join(target.suffixes) or ".tmp"
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, target)
+    except BaseException:
+        tmp_path.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
+    """Writes text atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def write_json(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
+    """Writes JSON atomically (NumPy scalars and arrays converted)."""
+
+    def convert(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+    atomic_write_text(path, json.dumps(data, indent=2, default=convert, allow_nan=False) + "\n")
+
+
+def sidecar_path(image_path: str | os.PathLike[str]) -> Path:
+    """The BIDS-style sidecar of an image: same stem, ``.json``."""
+    p = Path(image_path)
+    name = p.name
+    for ext in (".nii.gz", ".nii"):
+        if name.endswith(ext):
+            return p.with_name(name[: -len(ext)] + ".json")
+    return p.with_suffix(".json")
+
+
+def write_arfi_image(
+    path: str | os.PathLike[str],
+    image: ArrayLike,
+    affine_mm: ArrayLike,
+    volume_shape: tuple[int, int, int],
+    sidecar: dict[str, Any] | None = None,
+) -> None:
+    """Writes an MR-ARFI phase image (rad) as NIfTI with its affine (mm, transducer frame), and
+    the sidecar JSON when given."""
+    import nibabel as nib
+
+    p = Path(path)
+    if not (p.name.endswith(".nii") or p.name.endswith(".nii.gz")):
+        raise ValueError(f"out: {p}: an MR-ARFI image must be written as .nii or .nii.gz")
+    data = np.asarray(image, dtype=np.float32).reshape(volume_shape)
+    img = nib.Nifti1Image(data, np.asarray(affine_mm, dtype=np.float64))
+    img.set_qform(img.affine, code=1)
+    img.set_sform(img.affine, code=1)
+    img.header.set_xyzt_units(xyz="mm")
+    img.header["descrip"] = b"arfi: MR-ARFI displacement phase (rad)"
+    with atomic_path(p) as tmp:
+        nib.save(img, str(tmp))
+    if sidecar is not None:
+        write_json(sidecar_path(p), sidecar)
+
+
+def read_arfi_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, Any]]:
+    """Reads an MR-ARFI image: (image as 2-D float64 with the singleton axis removed, 4x4 affine
+    in mm, sidecar dict or {}). Raises FileNotFoundError or ValueError naming the file."""
+    import nibabel as nib
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"image: {p}: no such file")
+    try:
+        img = nib.load(str(p))
+        data = np.asarray(img.get_fdata(dtype=np.float64))
+    except Exception as e:  # nibabel raises many types for corrupt files
+        raise ValueError(f"image: {p}: not a readable NIfTI file ({e})") from None
+    squeezed = data.reshape([n for n in data.shape if n != 1]) if data.ndim > 2 else data
+    if squeezed.ndim != 2:
+        raise ValueError(f"image: {p}: must hold one 2-D slice, got shape {data.shape}")
+    if not np.all(np.isfinite(squeezed)):
+        raise ValueError(f"image: {p}: contains NaN or infinite pixels")
+    side: dict[str, Any] = {}
+    sp = sidecar_path(p)
+    if sp.is_file():
+        try:
+            side = json.loads(sp.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as e:
+            raise ValueError(f"sidecar: {sp}: not valid JSON ({e})") from None
+        if not isinstance(side, dict):
+            raise ValueError(f"sidecar: {sp}: must hold a JSON object")
+    return squeezed, np.asarray(img.affine, dtype=np.float64), side
+
+
+def read_phases(path: str | os.PathLike[str], name: str = "phases") -> NDArray[np.float64]:
+    """Reads a phase vector (rad): ``.npy``, or text with one value per line."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{name}: {p}: no such file")
+    try:
+        if p.suffix == ".npy":
+            a = np.load(p, allow_pickle=False)
+        else:
+            lines = [ln.strip() for ln in p.read_text(encoding="utf-8").splitlines()]
+            a = np.array([float(ln) for ln in lines if ln and not ln.startswith("#")], dtype=np.float64)
+    except (ValueError, UnicodeDecodeError, OSError) as e:
+        raise ValueError(f"{name}: {p}: not a phase vector ({e})") from None
+    a = np.asarray(a)
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{name}: {p}: must hold real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64).ravel() if a.ndim <= 1 else a
+    if a.ndim != 1 or a.size == 0:
+        raise ValueError(f"{name}: {p}: must hold a non-empty 1-D vector, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: {p}: contains NaN or infinite values")
+    return a
+
+
+def write_npz(path: str | os.PathLike[str], arrays: dict[str, Any]) -> None:
+    """Writes a compressed ``.npz`` atomically."""
+    p = Path(path)
+    if p.suffix != ".npz":
+        raise ValueError(f"out: {p}: a field archive must be written as .npz")
+    with atomic_path(p) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+
+

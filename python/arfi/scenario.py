@@ -1,0 +1,92 @@
+"""Scenario files (SPEC §4): TOML with the paper's phantom experiment as defaults."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from arfi import _core
+from arfi.io import atomic_write_text
+
+
+class Scenario:
+    """A validated scenario. Values are kept in file units (mm, Hz, dB/cm/MHz).
+
+    Build one with :meth:`default`, :meth:`load`, :meth:`from_toml` or :meth:`from_dict`;
+    unknown keys and invalid values raise ``ValueError`` naming the key.
+    """
+
+    def __init__(self, toml_text: str, base_dir: str | os.PathLike[str] | None = None):
+        self._base_dir = None if base_dir is None else str(base_dir)
+        self._toml = _core.normalize_scenario(toml_text, "toml", self._base_dir)
+
+    @classmethod
+    def default(cls) -> "Scenario":
+        """The embedded default: the paper's phantom experiment (SPEC §3)."""
+        return cls(_core.default_scenario_toml())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "Scenario":
+        """Reads a TOML scenario file; relative paths inside resolve against its folder."""
+        p = Path(path)
+        if not p.is_file():
+            raise FileNotFoundError(f"scenario: {p}: no such file")
+        try:
+            text = p.read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise ValueError(f"scenario: {p}: not UTF-8 text ({e.reason})") from None
+        try:
+            return cls(text, p.resolve().parent)
+        except ValueError as e:
+            raise ValueError(f"scenario file {p}: {e}") from None
+
+    @classmethod
+    def from_toml(cls, text: str, base_dir: str | os.PathLike[str] | None = None) -> "Scenario":
+        """Parses TOML text."""
+        return cls(text, base_dir)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] | None = None) -> "Scenario":
+        """Builds a scenario from a dict with the file's keys (e.g. from :meth:`to_dict`)."""
+        try:
+            text = json.dumps(data, allow_nan=False)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"scenario: cannot be written as JSON: {e}") from None
+        s = cls.__new__(cls)
+        s._base_dir = None if base_dir is None else str(base_dir)
+        s._toml = _core.normalize_scenario(text, "json", s._base_dir)
+        return s
+
+    def to_toml(self) -> str:
+        """The scenario as TOML with every default written out."""
+        return self._toml
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scenario as a dict with every default written out."""
+        return json.loads(_core.scenario_json(self._toml, "toml", self._base_dir))
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Writes the TOML (atomically: a failed write leaves no partial file)."""
+        atomic_write_text(Path(path), self._toml)
+
+    @property
+    def name(self) -> str:
+        return str(self.to_dict()["name"])
+
+    @property
+    def base_dir(self) -> str | None:
+        return self._base_dir
+
+    def simulation(self) -> "Simulation":
+        """A :class:`arfi.Simulation` of this scenario."""
+        from arfi.simulation import Simulation
+
+        return Simulation(self)
+
+    def __repr__(self) -> str:
+        return f"Scenario(name={self.name!r})"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Scenario) and self._toml == other._toml

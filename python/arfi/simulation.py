@@ -1,0 +1,136 @@
+"""Simulation of fields and MR-ARFI images for one scenario."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from arfi import _core
+from arfi.scenario import Scenario
+
+
+def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.float64] | None:
+    """Phases (rad) as a 1-D float64 array, or None. Raises ValueError naming `name`."""
+    if phases is None:
+        return None
+    try:
+        a = np.asarray(phases, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name}: not numeric ({e})") from None
+    if a.ndim != 1:
+        raise ValueError(f"{name}: must be one-dimensional, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return np.ascontiguousarray(a)
+
+
+@dataclass(frozen=True)
+class Field:
+    """Complex pressure amplitude (Pa) on one plane and along the beam axis (SPEC §5 `field`)."""
+
+    pressure: NDArray[np.complex128]
+    """Shape (ny, nx)."""
+    x_mm: NDArray[np.float64]
+    y_mm: NDArray[np.float64]
+    z_mm: float
+    axis_pressure: NDArray[np.complex128]
+    axis_z_mm: NDArray[np.float64]
+    surface_pressure_pa: float
+
+    def focus(self) -> dict[str, float]:
+        """Peak |p| on the plane and on the axis, with their positions (mm, Pa)."""
+        mag = np.abs(self.pressure)
+        j, i = np.unravel_index(int(np.argmax(mag)), mag.shape)
+        k = int(np.argmax(np.abs(self.axis_pressure)))
+        return {
+            "plane_peak_pa": float(mag[j, i]),
+            "plane_peak_x_mm": float(self.x_mm[i]),
+            "plane_peak_y_mm": float(self.y_mm[j]),
+            "axis_peak_pa": float(abs(self.axis_pressure[k])),
+            "axis_peak_z_mm": float(self.axis_z_mm[k]),
+        }
+
+
+class Simulation:
+    """A scenario made ready to simulate: grid chosen, beam steered to the focus, HAS plan built.
+
+    Phases passed to the methods are *added* to the steering, one per element or one per group
+    (rad; a positive phase delays that element's emission, SPEC §2).
+    """
+
+    def __init__(self, scenario: Scenario | None = None):
+        self.scenario = scenario if scenario is not None else Scenario.default()
+        self._core = _core.CoreSimulation(self.scenario.to_toml(), "toml", self.scenario.base_dir)
+
+    @property
+    def n_elements(self) -> int:
+        return int(self._core.n_elements)
+
+    @property
+    def n_groups(self) -> int:
+        return int(self._core.n_groups)
+
+    @property
+    def groups(self) -> NDArray[np.int64]:
+        """Element → group index."""
+        return self._core.groups
+
+    @property
+    def steering_phases_rad(self) -> NDArray[np.float64]:
+        return self._core.steering_phases_rad
+
+    @property
+    def element_positions_mm(self) -> NDArray[np.float64]:
+        """Element centres (mm), shape (n_elements, 3)."""
+        return self._core.element_positions_mm
+
+    @property
+    def focus_mm(self) -> NDArray[np.float64]:
+        return self._core.focus_mm
+
+    @property
+    def amplitude(self) -> float:
+        """Scale from broadened force density (N/m³) to ARFI phase (rad)."""
+        return float(self._core.amplitude)
+
+    @property
+    def noise_rad(self) -> float:
+        return float(self._core.noise_rad)
+
+    @property
+    def grid(self) -> dict[str, Any]:
+        """nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm."""
+        return dict(self._core.grid)
+
+    @property
+    def mr_affine_mm(self) -> NDArray[np.float64]:
+        """4x4 affine from NIfTI voxel indices to the transducer frame (mm)."""
+        return self._core.mr_affine_mm
+
+    @property
+    def mr_volume_shape(self) -> tuple[int, int, int]:
+        return tuple(self._core.mr_volume_shape)
+
+    def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
+        """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
+        if z_mm is not None and not np.isfinite(z_mm):
+            raise ValueError("z_mm: must be finite")
+        d = self._core.field(as_phases(phases), None if z_mm is None else float(z_mm))
+        return Field(**d)
+
+    def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
+        """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).
+
+        ``noise_rad`` adds seeded Gaussian noise (same seed, same noise)."""
+        if not (np.isfinite(noise_rad) and noise_rad >= 0):
+            raise ValueError(f"noise_rad: must be a finite number >= 0, got {noise_rad}")
+        if not (isinstance(seed, (int, np.integer)) and 0 <= int(seed) < 2**64):
+            raise ValueError(f"seed: must be an integer in [0, 2**64), got {seed!r}")
+        return self._core.arfi_image(as_phases(phases), float(noise_rad), int(seed))
+
+    def source_field(self, phases: ArrayLike | None = None) -> NDArray[np.complex128]:
+        """Pressure (Pa) on the source plane, shape (ny, nx)."""
+        return self._core.source_field(as_phases(phases))

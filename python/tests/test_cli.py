@@ -1,0 +1,75 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import arfi
+from arfi.cli import main
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "arfi", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_scenario_default_prints_complete_toml():
+    r = run("scenario", "--default")
+    assert r.returncode == 0
+    assert arfi.Scenario.from_toml(r.stdout) == arfi.Scenario.default()
+
+
+def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):
+    known = tmp_path / "known.txt"
+    known.write_text("\n".join(str(v) for v in np.linspace(-1, 1, 16)))
+    out = tmp_path / "m.nii.gz"
+    js = tmp_path / "r.json"
+    assert main(["simulate", "--known-phases", str(known), "--noise-rad", "0", "--out", str(out), "--json", str(js)]) == 0
+    image, affine, side = arfi.read_arfi_image(out)
+    assert image.shape == (128, 96)
+    np.testing.assert_allclose(affine[:3, :3], np.diag([1.40625, 1.40625, 3.0]))
+    np.testing.assert_allclose(affine[:3, 3], [-89.296875, -66.796875, 85.0])
+    np.testing.assert_allclose(side["applied_phases_rad"], np.linspace(-1, 1, 16))
+    result = json.loads(js.read_text())
+    assert result["focal_arfi_rad"] == pytest.approx(image.max(), rel=1e-6)
+    sim = arfi.Simulation()
+    np.testing.assert_allclose(image, sim.arfi_image(np.linspace(-1, 1, 16)), atol=1e-6)
+
+
+def test_field_writes_the_npz_keys_of_the_spec(tmp_path):
+    out = tmp_path / "f.npz"
+    assert main(["field", "--z-mm", "60", "--out", str(out)]) == 0
+    with np.load(out) as z:
+        for key in ("pressure", "x_mm", "y_mm", "z_mm", "axis_pressure", "axis_z_mm", "surface_pressure_pa"):
+            assert key in z.files
+        assert z["pressure"].dtype == np.complex128
+        assert z["pressure"].shape == (len(z["y_mm"]), len(z["x_mm"]))
+        assert float(z["z_mm"]) == pytest.approx(60.0, abs=0.4)
+
+
+@pytest.mark.parametrize(
+    "make, args, match",
+    [
+        (None, ["simulate", "--out", "{d}/x.nii.gz", "--scenario", "{d}/missing.toml"], "missing.toml"),
+        ("frequncy = 1\n", ["simulate", "--out", "{d}/x.nii.gz", "--scenario", "{d}/s.toml"], "frequncy"),
+        ("[grid]\nspacing_mm = 3.0\n", ["field", "--out", "{d}/x.npz", "--scenario", "{d}/s.toml"], "too coarse"),
+        ("[[material]]\nname='w'\nsound_speed_m_s=-5\ndensity_kg_m3=1\n", ["simulate", "--out", "{d}/x.nii.gz", "--scenario", "{d}/s.toml"], "sound_speed"),
+        ("1\n2\n3\n", ["simulate", "--phases", "{d}/s.toml", "--out", "{d}/x.nii.gz"], "--phases: has 3 values"),
+        ("nan\n" * 16, ["simulate", "--phases", "{d}/s.toml", "--out", "{d}/x.nii.gz"], "NaN"),
+        (None, ["simulate", "--noise-rad", "-1", "--out", "{d}/x.nii.gz"], "--noise-rad"),
+        (None, ["simulate", "--out", "{d}/x.png"], ".nii"),
+        (None, ["field", "--z-mm", "900", "--out", "{d}/x.npz"], "z_mm"),
+        (None, ["estimat"], "invalid choice"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, make, args, match):
+    if make is not None:
+        (tmp_path / "s.toml").write_text(make)
+    args = [a.format(d=tmp_path) for a in args]
+    r = run(*args)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("arfi: error:"), r.stderr
+    assert match in lines[0]
+    assert "Traceback" not in r.stderr and "panicked" not in r.stderr
+    assert not any(p.name.startswith("x") or p.name.startswith(".x") for p in tmp_path.iterdir())

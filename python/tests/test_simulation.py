@@ -1,0 +1,90 @@
+import numpy as np
+import pytest
+
+import arfi
+
+
+def test_ideal_image_has_the_scenario_focal_phase_and_shape(sim, ideal):
+    # The amplitude is defined so that the ideal focal ARFI phase is 0.6 rad (SPEC §3).
+    assert ideal.shape == (128, 96)
+    assert ideal.max() == pytest.approx(0.6, rel=1e-9)
+    assert sim.mr_volume_shape == (128, 96, 1)
+
+
+def test_ideal_image_is_symmetric_about_the_focus(ideal):
+    # The array and the default medium are symmetric under x -> -x and y -> -y; the MR pixel
+    # grid is centred on the focus. The simulation grid has one extra sample at its -x/-y edge
+    # (inside the absorbing layer), so allow 1e-3 of the peak.
+    assert np.max(np.abs(ideal - ideal[::-1, :])) < 1e-3 * ideal.max()
+    assert np.max(np.abs(ideal - ideal[:, ::-1])) < 1e-3 * ideal.max()
+
+
+def test_focal_peak_sits_at_the_focus(sim, ideal):
+    i, j = np.unravel_index(np.argmax(ideal), ideal.shape)
+    pos = sim.mr_affine_mm @ np.array([i, j, 0, 1.0])
+    # Pixels are 1.406 mm; the even matrix puts the focus on a pixel corner.
+    assert abs(pos[0]) < 1.41 and abs(pos[1]) < 1.41 and pos[2] == pytest.approx(85.0)
+
+
+def test_group_phases_equal_their_per_element_expansion(sim):
+    rng = np.random.default_rng(3)
+    g = rng.uniform(-np.pi, np.pi, sim.n_groups)
+    a = sim.arfi_image(g)
+    b = sim.arfi_image(g[sim.groups])
+    np.testing.assert_array_equal(a, b)
+
+
+def test_aberration_lowers_the_focus_and_a_common_phase_does_not(sim, ideal):
+    rng = np.random.default_rng(0)
+    aberrated = sim.arfi_image(rng.uniform(-np.pi, np.pi, sim.n_groups))
+    assert aberrated.max() < 0.8 * ideal.max()
+    shifted = sim.arfi_image(np.full(sim.n_elements, 1.234))
+    np.testing.assert_allclose(shifted, ideal, atol=1e-12 * ideal.max())
+
+
+def test_noise_is_seeded(sim, ideal):
+    a = sim.arfi_image(noise_rad=0.02, seed=5)
+    b = sim.arfi_image(noise_rad=0.02, seed=5)
+    c = sim.arfi_image(noise_rad=0.02, seed=6)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    # The noise has the requested standard deviation (12288 pixels: sampling error ~0.6 %).
+    assert np.std(a - ideal) == pytest.approx(0.02, rel=0.03)
+
+
+def test_field_on_the_focal_plane(sim):
+    f = sim.field()
+    assert f.pressure.shape == (len(f.y_mm), len(f.x_mm))
+    assert f.z_mm == pytest.approx(85.0, abs=sim.grid["dz_mm"] / 2)
+    focus = f.focus()
+    assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
+    # Focal gain of a 81 mm aperture at 85 mm: between 10 and 25 times the face pressure.
+    assert 10 < focus["plane_peak_pa"] / f.surface_pressure_pa < 25
+
+
+def test_face_pressure_delivers_the_acoustic_power(sim):
+    # P = p_face² · A / (2·rho·c) with A = 1024 · (2.3 mm)², rho·c of water.
+    p = sim.field().surface_pressure_pa
+    area = 1024 * 2.3e-3**2
+    assert p**2 * area / (2 * 1000 * 1500) == pytest.approx(70.0, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "phases, match",
+    [
+        (np.zeros(15), "phases: has 15 values"),
+        (np.array([np.nan] * 16), "phases"),
+        (np.zeros((4, 4)), "phases: must be one-dimensional"),
+        (["a"] * 16, "phases: not numeric"),
+    ],
+)
+def test_bad_phases_raise_value_error(sim, phases, match):
+    with pytest.raises(ValueError, match=match):
+        sim.arfi_image(phases)
+
+
+def test_bad_noise_and_plane_raise_value_error(sim):
+    with pytest.raises(ValueError, match="noise_rad"):
+        sim.arfi_image(noise_rad=-1)
+    with pytest.raises(ValueError, match="z_mm"):
+        sim.field(z_mm=1e4)
