@@ -1,1 +1,140 @@
-fn main(){}
+//! Criterion benchmarks of the HAS core on the embedded default scenario (SPEC §3: 180 x 180 x 188
+//! grid, 1024 elements in 16 groups, MR window around the focal slab).
+//!
+//! Run with `cargo bench -p has-core` (a few minutes on 2 cores); filter with
+//! `cargo bench -p has-core -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal
+//! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s.
+//!
+//! Besides the targets, a few breakdown benches (`breakdown/*`) split a run into its parts
+//! (source rasterisation, one 2-D FFT pair with and without the rayon pool, a single-field march
+//! to the last plane) so a regression can be located without a profiler.
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use has_core::fft::{multiply, Fft2};
+use has_core::has::RecordSpec;
+use has_core::scenario::Scenario;
+use has_core::simulation::Simulation;
+use has_core::Complex64 as C64;
+use std::hint::black_box;
+use std::time::Duration;
+
+/// Per-group source planes: steering phasors on the elements of group `g`, zero elsewhere.
+fn group_sources(sim: &Simulation) -> Vec<Vec<C64>> {
+    (0..sim.n_groups)
+        .map(|g| {
+            let drive: Vec<C64> = sim
+                .steering
+                .iter()
+                .zip(&sim.groups)
+                .map(|(&s, &grp)| if grp == g { C64::from_polar(1.0, s) } else { C64::new(0.0, 0.0) })
+                .collect();
+            sim.source.field(&drive).expect("group source")
+        })
+        .collect()
+}
+
+fn pseudo_random_field(n: usize) -> Vec<C64> {
+    let mut s = 0x2545_f491_4f6c_dd1du64;
+    let mut rnd = || {
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    (0..n).map(|_| C64::new(rnd(), rnd())).collect()
+}
+
+fn bench_build(c: &mut Criterion) {
+    let scenario = Scenario::default();
+    let mut g = c.benchmark_group("build");
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
+    // Resolve, choose the grid, steer, rasterise the source, build the MR sampler and march the
+    // reference beam once to fix every slab's mean wavenumber.
+    g.bench_function("simulation_new_default", |b| b.iter(|| Simulation::new(black_box(&scenario)).unwrap()));
+    g.finish();
+}
+
+fn bench_single_run(c: &mut Criterion) {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    let source = sim.source_field(&[]).unwrap();
+    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), ..Default::default() };
+    let mut g = c.benchmark_group("single_run");
+    g.sample_size(20).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
+    // Target: ≤ 0.5 s. Source plane + march to the end of the MR slab + force image.
+    g.bench_function("arfi_image_default", |b| b.iter(|| sim.arfi_image(black_box(&[])).unwrap()));
+    // The march alone (source already on plane 0).
+    g.bench_function("propagate_to_focal_slab", |b| b.iter(|| sim.plan.propagate(black_box(&source), &spec).unwrap()));
+    // The same march started on a rayon worker: the parallel operations of each step (8 per step)
+    // are then pushed to the worker's own deque instead of the pool's global queue, with no
+    // cross-thread wake-up of the caller.
+    g.bench_function("propagate_to_focal_slab_in_pool", |b| {
+        b.iter(|| rayon::scope(|_| sim.plan.propagate(black_box(&source), &spec).unwrap()))
+    });
+    g.finish();
+}
+
+fn bench_group_fields(c: &mut Criterion) {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    let mut g = c.benchmark_group("group_fields");
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(10));
+    // Target: ≤ 3 s. 16 per-group source planes plus one batch march (one field per rayon task).
+    g.bench_function("16_groups_sources_and_batch", |b| {
+        b.iter(|| {
+            let sources = group_sources(&sim);
+            sim.record_window(black_box(&sources)).unwrap()
+        })
+    });
+    let sources = group_sources(&sim);
+    assert_eq!(sources.len(), 16);
+    g.bench_function("16_groups_batch_only", |b| b.iter(|| sim.record_window(black_box(&sources)).unwrap()));
+    g.finish();
+}
+
+fn bench_fft(c: &mut Criterion) {
+    let (nx, ny) = (180, 180);
+    let fft = Fft2::new(nx, ny);
+    let input = pseudo_random_field(nx * ny);
+    let mut g = c.benchmark_group("fft2_180x180");
+    g.sample_size(50).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+    for parallel in [false, true] {
+        let mut ws = fft.workspace(parallel);
+        let name = if parallel { "forward_inverse_parallel" } else { "forward_inverse_serial" };
+        g.bench_function(name, |b| {
+            b.iter_batched_ref(
+                || input.clone(),
+                |field| {
+                    fft.forward(field, &mut ws);
+                    fft.inverse(&mut ws, field);
+                },
+                BatchSize::SmallInput,
+            )
+        });
+    }
+    g.finish();
+}
+
+fn bench_breakdown(c: &mut Criterion) {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    let drive: Vec<C64> = sim.steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
+    let source = sim.source_field(&[]).unwrap();
+    let mut g = c.benchmark_group("breakdown");
+    g.sample_size(20).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+    // Rasterised source plane of all 1024 elements.
+    g.bench_function("source_field_all_elements", |b| b.iter(|| sim.source.field(black_box(&drive)).unwrap()));
+    // Window samples → MR image (force, slab average, broadening, pixel sampling).
+    let rec = sim.record_window(&[source.clone()]).unwrap().remove(0);
+    g.bench_function("force_image", |b| b.iter(|| sim.sampler.force_image(black_box(&rec.window)).unwrap()));
+    // Whole-grid march (all nz planes, on-axis samples only) for the per-step cost.
+    let to_end = RecordSpec { axis: true, ..Default::default() };
+    g.bench_function("propagate_all_planes", |b| b.iter(|| sim.plan.propagate(black_box(&source), &to_end).unwrap()));
+    // One element-wise complex multiply of a slice (one of the three per step).
+    let screen = pseudo_random_field(sim.grid.lateral_len());
+    for parallel in [false, true] {
+        let name = if parallel { "multiply_parallel" } else { "multiply_serial" };
+        g.bench_function(name, |b| {
+            b.iter_batched_ref(|| source.clone(), |f| multiply(f, black_box(&screen), parallel), BatchSize::SmallInput)
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench_build, bench_single_run, bench_group_fields, bench_fft, bench_breakdown);
+criterion_main!(benches);

@@ -10,6 +10,7 @@ use crate::grid::Grid;
 use crate::has::Window;
 use crate::medium::Medium;
 use ndarray::Array2;
+use std::ops::Range;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -127,20 +128,26 @@ pub struct Broadening {
 }
 
 /// The linear map from `|p|²` samples in a grid window to MR pixels, without the amplitude:
-/// `image[u, v] = Σ_s w_s · Σ_{a,b} M_u[u, a] · M_v[v, b] · coef · |p|²`, where `coef = alpha / (rho·c²)`.
+/// `image[u, v] = Σ_s w_s · Σ_{a,b} M_u[u, a] · M_v[v, b] · coef · |p|²`, where `coef = alpha / (rho·c²)`,
+/// `w_s` the slice profile, and `M = P·G` pixel averaging after Gaussian broadening along each
+/// image axis. A sampler may cover only a box of pixels ([`MrSampler::restrict`]).
 #[derive(Debug, Clone)]
 pub struct MrSampler {
     pub geometry: MrGeometry,
     pub broadening: Broadening,
     /// The grid window to record.
     pub window: Window,
+    /// The pixels produced: ranges along u and v.
+    pub pixels: [Range<usize>; 2],
     /// Force coefficient `alpha / (rho·c²)` per window sample (plane, row, column).
     force_coefficient: Vec<f64>,
     /// Slice-profile weights along the slice normal (sums to the covered fraction of the slice).
     slab_weights: Vec<f64>,
-    /// `M_u` (n_u x len a), `M_v` (n_v x len b), row-major.
-    m_u: Array2<f64>,
-    m_v: Array2<f64>,
+    /// Window sample coordinates along u and v (m) and their spacings.
+    samples: [Vec<f64>; 2],
+    spacing: [f64; 2],
+    /// `M_u` (pixels u x samples u), `M_v` (pixels v x samples v).
+    m: [Array2<f64>; 2],
 }
 
 impl MrSampler {
@@ -159,7 +166,9 @@ impl MrSampler {
         };
         let reach = 4.0 * broadening.width;
         let mut ranges = [0..0, 0..0, 0..0];
-        let mut ops = Vec::new();
+        let mut samples: [Vec<f64>; 2] = [vec![], vec![]];
+        let mut spacing = [0.0; 2];
+        let mut slab_weights = vec![];
         for (k, &a) in ax.iter().enumerate() {
             let (c, d) = coords(a);
             let (lo, hi) = if k < 2 {
@@ -173,16 +182,14 @@ impl MrSampler {
             if range.is_empty() {
                 return Err(HasError::invalid("mr", "the MR slice lies outside the simulation grid"));
             }
-            let local = &c[range.clone()];
+            let local = c[range.clone()].to_vec();
             if k < 2 {
-                let px = geometry.pixel_size()[k];
-                let centres: Vec<f64> = (0..geometry.matrix[k]).map(|i| geometry.pixel_center(k, i)).collect();
-                ops.push(pixel_average(&centres, px, local, d).dot(&gaussian(local, d, broadening.width)));
+                samples[k] = local;
+                spacing[k] = d;
             } else {
                 let t = geometry.slice_thickness;
                 let lo = geometry.center[a] - 0.5 * t;
-                let w: Vec<f64> = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
-                ops.push(Array2::from_shape_vec((1, w.len()), w).map_err(|e| HasError::invalid("mr", e.to_string()))?);
+                slab_weights = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
             }
             ranges[a] = range;
         }
@@ -196,9 +203,55 @@ impl MrSampler {
                 }
             }
         }
-        let slab_weights = ops[2].row(0).to_vec();
-        let (m_u, m_v) = (ops[0].clone(), ops[1].clone());
-        Ok(MrSampler { geometry: geometry.clone(), broadening, window, force_coefficient, slab_weights, m_u, m_v })
+        let pixels = [0..geometry.matrix[0], 0..geometry.matrix[1]];
+        let m = [
+            axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width),
+            axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width),
+        ];
+        Ok(MrSampler { geometry: geometry.clone(), broadening, window, pixels, force_coefficient, slab_weights, samples, spacing, m })
+    }
+
+    /// The same sampler with another broadening width (m), on the same window.
+    pub fn with_broadening(&self, width: f64) -> Result<Self> {
+        require_non_negative("broadening_width_mm", width)?;
+        let mut s = self.clone();
+        s.broadening = Broadening { width };
+        for k in 0..2 {
+            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width);
+        }
+        Ok(s)
+    }
+
+    /// A sampler producing only pixels `u x v` (ranges within [`MrSampler::pixels`]), reading only
+    /// the part of the window they depend on.
+    pub fn restrict(&self, u: Range<usize>, v: Range<usize>) -> Result<Self> {
+        let wanted = [u, v];
+        let ax = self.geometry.plane.axes();
+        let mut s = self.clone();
+        let mut cut = [0..0, 0..0];
+        for k in 0..2 {
+            let r = &wanted[k];
+            if r.is_empty() || r.start < self.pixels[k].start || r.end > self.pixels[k].end {
+                return Err(HasError::invalid("pixels", format!("box {r:?} lies outside {:?}", self.pixels[k])));
+            }
+            let rows = (r.start - self.pixels[k].start)..(r.end - self.pixels[k].start);
+            let m = self.m[k].slice(ndarray::s![rows, ..]);
+            let nz: Vec<usize> = (0..m.ncols()).filter(|&j| m.column(j).iter().any(|&x| x != 0.0)).collect();
+            let (a0, a1) = (nz.first().copied().unwrap_or(0), nz.last().map_or(0, |l| l + 1));
+            s.m[k] = m.slice(ndarray::s![.., a0..a1]).to_owned();
+            s.samples[k] = self.samples[k][a0..a1].to_vec();
+            cut[k] = a0..a1;
+            s.pixels[k] = r.clone();
+        }
+        // Window ranges along frame axes (x = cols, y = rows, z = planes).
+        let mut ranges = [self.window.cols.clone(), self.window.rows.clone(), self.window.planes.clone()];
+        for k in 0..2 {
+            let base = ranges[ax[k]].start;
+            ranges[ax[k]] = base + cut[k].start..base + cut[k].end;
+        }
+        s.window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
+        s.force_coefficient = self.window.extract(&self.force_coefficient, &s.window);
+        Ok(s)
     }
 
     /// The image `(n_u, n_v)` of force density (N/m³), broadened and pixel-averaged, from the
@@ -209,7 +262,7 @@ impl MrSampler {
     }
 
     /// The linear operator applied to any real per-sample quantity `q` (|p|², or one part of a
-    /// cross product p_g·conj(p_h)): returns `Σ w · M_u · M_v · coef · q` on the MR pixels.
+    /// cross product p_g·conj(p_h)): returns `Σ w · M_u · M_v · coef · q` on the sampler's pixels.
     pub fn apply(&self, q: &[f64]) -> Result<Array2<f64>> {
         let w = &self.window;
         if q.len() != w.len() {
@@ -231,8 +284,16 @@ impl MrSampler {
             }
         }
         // image[u, v] = Σ_a Σ_b M_u[u, a] · map[b, a] · M_v[v, b]
-        Ok(self.m_u.dot(&map.t()).dot(&self.m_v.t()))
+        Ok(self.m[0].dot(&map.t()).dot(&self.m[1].t()))
     }
+}
+
+/// `M = P·G` along image axis `k`: Gaussian broadening on the samples, then the area average over
+/// the pixels in `pixels`.
+fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64], d: f64, width: f64) -> Array2<f64> {
+    let px = g.pixel_size()[k];
+    let centres: Vec<f64> = pixels.map(|i| g.pixel_center(k, i)).collect();
+    pixel_average(&centres, px, samples, d).dot(&gaussian(samples, d, width))
 }
 
 /// Indices of the sorted coordinates `c` that lie within `[lo, hi]`.
@@ -321,5 +382,35 @@ mod tests {
         add_noise(&mut b, 0.02, 7).unwrap();
         assert_eq!(a, b);
         assert!(a.iter().any(|v| *v != 0.0));
+    }
+}
+
+/// The noise level (rad) of an ARFI image from its background: `1.4826 · MAD` (the standard
+/// deviation for Gaussian noise) over the pixels outside `exclude` (u and v ranges around the
+/// focus), or over every pixel below `threshold` when too few remain.
+pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2], threshold: f64) -> f64 {
+    let mut bg: Vec<f64> = image
+        .indexed_iter()
+        .filter(|((i, j), _)| !(exclude[0].contains(i) && exclude[1].contains(j)))
+        .map(|(_, v)| *v)
+        .collect();
+    if bg.len() < 50 {
+        bg = image.iter().copied().filter(|v| *v < threshold).collect();
+    }
+    if bg.is_empty() {
+        return 0.0;
+    }
+    let med = median(&mut bg);
+    let mut dev: Vec<f64> = bg.iter().map(|v| (v - med).abs()).collect();
+    1.4826 * median(&mut dev)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
     }
 }

@@ -44,6 +44,7 @@ impl Default for HasOptions {
     }
 }
 
+#[derive(Clone)]
 struct Step {
     /// Index into `HasPlan::slabs` of the slab between plane n and n + 1.
     slab: usize,
@@ -54,7 +55,9 @@ struct Step {
     mean_wavenumber: f64,
 }
 
-/// A propagation plan: grid, FFT plans and per-step operators for one medium and frequency.
+/// A propagation plan: grid, FFT plans and per-step operators for one medium and frequency
+/// (cloning shares the operators).
+#[derive(Clone)]
 pub struct HasPlan {
     pub grid: Grid,
     pub frequency: f64,
@@ -92,6 +95,19 @@ impl Window {
     /// Whether the box is empty.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// The samples of `sub` (a box inside this one) out of `data` recorded on this box.
+    pub fn extract<T: Copy>(&self, data: &[T], sub: &Window) -> Vec<T> {
+        let (nr, nc) = (self.rows.len(), self.cols.len());
+        let mut out = Vec::with_capacity(sub.len());
+        for n in sub.planes.clone() {
+            for r in sub.rows.clone() {
+                let base = ((n - self.planes.start) * nr + (r - self.rows.start)) * nc;
+                out.extend_from_slice(&data[base + sub.cols.start - self.cols.start..base + sub.cols.end - self.cols.start]);
+            }
+        }
+        out
     }
 }
 

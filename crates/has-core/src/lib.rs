@@ -14,8 +14,12 @@
 //! let image = sim.arfi_image(&[]).unwrap(); // ideal MR-ARFI image, rad
 //! ```
 
+pub mod aberration;
 pub mod arfi;
+pub mod calibrate;
+pub mod cost;
 pub mod error;
+pub mod estimate;
 pub mod fft;
 pub mod grid;
 pub mod has;

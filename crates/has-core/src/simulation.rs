@@ -15,7 +15,9 @@ use num_complex::Complex64 as C64;
 /// Memory a simulation may plan to use before it refuses (bytes).
 pub const MEMORY_LIMIT: u64 = 8 << 30;
 
-/// Everything needed to simulate fields and MR-ARFI images of one scenario.
+/// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
+/// HAS operators).
+#[derive(Clone)]
 pub struct Simulation {
     pub name: String,
     pub frequency: f64,
@@ -102,6 +104,32 @@ impl Simulation {
             mask_fraction: r.mask_fraction,
             noise: r.noise,
         })
+    }
+
+    /// The same simulation with another broadening width W (m) and amplitude (rad·m³/N), e.g.
+    /// from a calibration; the HAS plan is shared.
+    pub fn with_calibration(&self, broadening_width: f64, amplitude: f64) -> Result<Self> {
+        crate::error::require_positive("amplitude", amplitude)?;
+        let mut s = self.clone();
+        s.sampler = self.sampler.with_broadening(broadening_width)?;
+        s.amplitude = amplitude;
+        Ok(s)
+    }
+
+    /// Replaces the element → group map (every group from 0 to G-1 must have an element).
+    pub fn set_groups(&mut self, groups: Vec<usize>) -> Result<()> {
+        if groups.len() != self.n_elements() {
+            return Err(HasError::invalid("groups", format!("has {} entries for {} elements", groups.len(), self.n_elements())));
+        }
+        let n_groups = groups.iter().max().map_or(0, |m| m + 1);
+        let mut used = vec![false; n_groups];
+        groups.iter().for_each(|&g| used[g] = true);
+        if let Some(g) = used.iter().position(|u| !u) {
+            return Err(HasError::invalid("groups", format!("group {g} has no element")));
+        }
+        self.groups = groups;
+        self.n_groups = n_groups;
+        Ok(())
     }
 
     /// Number of elements.

@@ -1,25 +1,35 @@
 //! Physics checks of the HAS propagation against references that are not the code itself:
-//! O'Neil's analytic bowl axis, a direct Rayleigh–Sommerfeld sum, energy conservation, plane-wave
-//! absorption, Snell's-law refraction, and linearity in the source.
+//! O'Neil's analytic bowl axis, a direct Rayleigh–Sommerfeld sum, energy conservation (with an
+//! independent Parseval reference), plane-wave absorption and transmission, Snell's-law
+//! refraction, and linearity in the source.
 //!
 //! Run with `cargo test --release -p has-core --test physics -- --nocapture` to see the measured
-//! numbers. Each tolerance is stated next to its assertion with the reason for it.
+//! numbers. Every tolerance is stated next to its assertion with the reason for it.
+//!
+//! Conventions: time `exp(-i·omega·t)`, a wave to +z is `exp(+i·k·z)`; SI units.
 
 use has_core::grid::Grid;
 use has_core::has::{HasOptions, HasPlan, RecordSpec};
 use has_core::medium::{Material, Medium, Region, Shape};
 use has_core::scenario::Scenario;
-use has_core::simulation::Simulation;
+use has_core::simulation::{choose_grid, Simulation};
+use has_core::source::SourceModel;
 use has_core::transducer::Surface;
 use has_core::Complex64 as C64;
 use std::f64::consts::PI;
+use std::time::Instant;
 
 const F: f64 = 550e3;
 const C_WATER: f64 = 1500.0;
 const RHO_WATER: f64 = 1000.0;
 
-/// A scenario in lossless water only (a water-only medium needs an explicit ARFI amplitude: there
-/// is no radiation force to calibrate it on). `transducer` and `grid` are TOML table bodies.
+fn k_water() -> f64 {
+    2.0 * PI * F / C_WATER
+}
+
+/// A scenario in lossless water only, focused at (0, 0, 85) mm. A water-only medium needs an
+/// explicit ARFI amplitude (there is no radiation force to calibrate it on). `transducer` and
+/// `grid` are bodies of the TOML tables.
 fn water_scenario(transducer: &str, grid: &str) -> Scenario {
     let text = format!(
         "name = \"water\"\nfrequency_hz = {F}\n\
@@ -32,7 +42,9 @@ fn water_scenario(transducer: &str, grid: &str) -> Scenario {
     Scenario::from_toml(&text, None).unwrap()
 }
 
-/// Sub-sample peak of equally spaced samples `y` by a parabola through the largest sample and its
+const PLANAR: &str = "kind = \"planar-quadrants\"";
+
+/// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
 /// neighbours: (fractional index, value).
 fn parabolic_peak(y: &[f64]) -> (f64, f64) {
     let n = (0..y.len()).fold(0, |b, i| if y[i] > y[b] { i } else { b });
@@ -45,6 +57,7 @@ fn parabolic_peak(y: &[f64]) -> (f64, f64) {
     (n as f64 + off, b - 0.25 * (a - c) * off)
 }
 
+/// Pearson correlation coefficient.
 fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;
     let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
@@ -57,13 +70,17 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
     sab / (saa * sbb).sqrt()
 }
 
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0, |m, x| m.max(x.abs()))
+}
+
 // ---------------------------------------------------------------------------------------------
 // 1. O'Neil's spherical bowl
 // ---------------------------------------------------------------------------------------------
 
-/// O'Neil (JASA 21, 1949) on-axis pressure of a spherical cap with uniform normal velocity, relative
-/// to the face pressure rho·c·u0: `|p/p0| = |2/(1 - z/R) · sin(k/2·(sqrt((z-h)² + a²) - z))|`, z from
-/// the apex, h the cap depth, a the aperture radius; `k·h` at z = R.
+/// O'Neil (JASA 21:516, 1949): on-axis pressure of a spherical cap vibrating with uniform normal
+/// velocity u0, relative to p0 = rho·c·u0: `|p/p0| = |2/(1 - z/R) · sin(k/2·(sqrt((z-h)² + a²) - z))|`,
+/// z from the apex, h the cap depth, a the aperture radius; the limit at z = R is `k·h`.
 fn oneil(z: f64, k: f64, r: f64, a: f64) -> f64 {
     let h = r - (r * r - a * a).sqrt();
     if (z - r).abs() < 1e-9 * r {
@@ -72,34 +89,39 @@ fn oneil(z: f64, k: f64, r: f64, a: f64) -> f64 {
     (2.0 / (1.0 - z / r) * (0.5 * k * (((z - h).powi(2) + a * a).sqrt() - z)).sin()).abs()
 }
 
+/// Bowl R = 85 mm, aperture 80 mm, 550 kHz, lossless water, through the scenario path (grid,
+/// source-plane position and Rayleigh projection exactly as `Simulation::new` chooses them).
 #[test]
 fn bowl_axis_matches_oneil() {
     let (r, aperture) = (85e-3, 80e-3);
     let a = 0.5 * aperture;
-    let k = 2.0 * PI * F / C_WATER;
+    let k = k_water();
     let scenario = water_scenario("kind = \"bowl\"\nradius_of_curvature_mm = 85.0\naperture_diameter_mm = 80.0", "");
-    let t = std::time::Instant::now();
-    let sim = Simulation::new(&scenario).unwrap();
-    let built = t.elapsed().as_secs_f64();
-    let field = sim.field(&[], None).unwrap();
-    let g = &sim.grid;
-    let p0 = field.surface_pressure;
-    let has: Vec<f64> = field.axis_pressure.iter().map(|p| p.norm() / p0).collect();
+    let resolved = scenario.resolve().unwrap();
+    let g = choose_grid(&resolved).unwrap();
+    // Marched once with the axis recorded (`Simulation::new` + `Simulation::field` would run the
+    // Rayleigh projection, the expensive part, twice).
+    let p0 = 1e5;
+    let t = Instant::now();
+    let source = SourceModel::new(&resolved.transducer, &g, p0, k, 0.0).unwrap();
+    let plane = source.field(&[C64::new(1.0, 0.0)]).unwrap();
+    let projected = t.elapsed().as_secs_f64();
+    let spec = RecordSpec { axis: true, power: true, ..RecordSpec::default() };
+    let (_, rec) = HasPlan::build(&g, &resolved.medium, F, &plane, &HasOptions::default(), &spec).unwrap();
+    let has: Vec<f64> = rec.axis.iter().map(|p| p.norm() / p0).collect();
 
-    // Analytic peak by a fine scan (1 µm) around the centre of curvature.
+    // Analytic peak by a 1 µm scan (the peak lies a little before the centre of curvature).
     let (mut z_ref, mut p_ref) = (0.0, 0.0);
-    let mut z = 0.6 * r;
-    while z < 1.2 * r {
+    for i in 0..=(0.6 * r / 1e-6) as usize {
+        let z = 0.6 * r + i as f64 * 1e-6;
         let v = oneil(z, k, r, a);
         if v > p_ref {
             (z_ref, p_ref) = (z, v);
         }
-        z += 1e-6;
     }
     let (n_peak, p_has) = parabolic_peak(&has);
     let z_has = g.z0 + n_peak * g.dz;
-    let mut profile_err: f64 = 0.0;
-    let mut z_worst = 0.0;
+    let (mut profile_err, mut z_worst) = (0.0, 0.0);
     for (n, v) in has.iter().enumerate() {
         let z = g.z(n);
         if (0.5 * r..=1.3 * r).contains(&z) {
@@ -109,18 +131,429 @@ fn bowl_axis_matches_oneil() {
             }
         }
     }
+    let h = r - (r * r - a * a).sqrt();
     eprintln!(
-        "[oneil] grid {}x{}x{} dx {:.3} mm z0 {:.2} mm (built in {built:.1} s); analytic peak |p/p0| {p_ref:.3} at {:.3} mm \
-         (k·h = {:.3}); HAS peak {p_has:.3} at {:.3} mm: pressure error {:+.2} %, position error {:+.3} mm; \
-         axis profile 0.5R–1.3R max error {:.2} % of peak (at {:.1} mm)",
-        g.nx, g.ny, g.nz, g.dx * 1e3, g.z0 * 1e3,
-        z_ref * 1e3, k * (r - (r * r - a * a).sqrt()), z_has * 1e3,
+        "[oneil] grid {}x{}x{}, dx {:.3} mm, dz {:.3} mm, source plane z0 = {:.2} mm (Rayleigh projection {projected:.1} s)\n\
+         [oneil] analytic peak |p/p0| = {p_ref:.3} at z = {:.3} mm (k·h = {:.3} at R); HAS peak {p_has:.3} at {:.3} mm\n\
+         [oneil] focal pressure error {:+.3} % (tol 3 %), focal position error {:+.3} mm (tol 0.5 mm), \
+         axis 0.5R–1.3R max error {:.3} % of peak at z = {:.1} mm (tol 5 %)",
+        g.nx, g.ny, g.nz, g.dx * 1e3, g.dz * 1e3, g.z0 * 1e3,
+        z_ref * 1e3, k * h, z_has * 1e3,
         100.0 * (p_has / p_ref - 1.0), (z_has - z_ref) * 1e3, 100.0 * profile_err, z_worst * 1e3
     );
-    // Tolerances from the issue: 3 % on the focal pressure (quadrature of the Rayleigh projection
-    // at λ/8 and the λ/4 sampling of the source plane), 0.5 mm on the focal position (a fraction of
-    // the λ/4 step, after parabolic interpolation), 5 % of the peak along the axis.
-    assert!((p_has / p_ref - 1.0).abs() < 0.03);
-    assert!((z_has - z_ref).abs() < 0.5e-3);
-    assert!(profile_err < 0.05);
+    // O'Neil's formula is the on-axis value of the same Rayleigh integral the source projection
+    // evaluates, so the remaining errors are numerical: midpoint quadrature of the cap at λ/8, the
+    // λ/4 sampling of the source plane, and the finite grid with its absorbing layer. Tolerances
+    // from the issue: 3 % on the focal pressure, 0.5 mm on the focal position (below one λ/4 step,
+    // so the HAS peak is located by a parabola through the three largest samples), and 5 % of the
+    // peak along the axis from 0.5R to 1.3R.
+    assert!((p_has / p_ref - 1.0).abs() < 0.03, "focal pressure off by {:.2} %", 100.0 * (p_has / p_ref - 1.0));
+    assert!((z_has - z_ref).abs() < 0.5e-3, "focal position off by {:.3} mm", (z_has - z_ref) * 1e3);
+    assert!(profile_err < 0.05, "axis profile off by {:.2} % of the peak", 100.0 * profile_err);
+
+    // Reported, not asserted (see `power_is_conserved_in_lossless_water`): the bowl's rim radiates
+    // edge waves at all angles, and those reaching the absorbing layer leave the grid. Measured
+    // from 16 mm to 127 mm at λ/2 spacing: 3.3 % lost on a 120 mm grid, 2.3 % on 200 mm, 1.9 % on
+    // 280 mm (a broad angular distribution, not a leak of the march).
+    let pw = |z: f64| rec.power[g.plane_index(z)];
+    eprintln!(
+        "[oneil] power through planes (default grid, 10 mm layer): {:.3} W at z0 + 5 mm, {:.3} W at R, {:.3} W at 1.5R ({:+.2} %)",
+        pw(g.z0 + 5e-3), pw(r), pw(1.5 * r - g.dz), 100.0 * (pw(1.5 * r - g.dz) / pw(g.z0 + 5e-3) - 1.0)
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// 2. Direct Rayleigh–Sommerfeld sum for the planar quadrant array
+// ---------------------------------------------------------------------------------------------
+
+/// First Rayleigh–Sommerfeld (Dirichlet) integral of the element face pressures, summed directly
+/// over `m x m` midpoint sub-cells of every element (`r` is the distance, `z` the height above
+/// the source plane): `p(r) = (1/2π) Σ_e p_e Σ_cells (z/R)(1/R - i·k) e^{ikR}/R dS`.
+fn rayleigh_sommerfeld(sim: &Simulation, m: usize, targets: &[[f64; 3]]) -> Vec<C64> {
+    let k = k_water();
+    let mut cells: Vec<([f64; 2], C64)> = Vec::new();
+    for (e, phi) in sim.transducer.elements.iter().zip(&sim.steering) {
+        let Surface::Flat { center, size, .. } = *e else { panic!("a planar array was expected") };
+        let h = size / m as f64;
+        // Element drive: face pressure · exp(+i·phi) (SPEC §2: a phase delays the emission).
+        let w = C64::from_polar(sim.source.face_pressure * h * h / (2.0 * PI), *phi);
+        for a in 0..m {
+            for b in 0..m {
+                let x = center[0] - 0.5 * size + (a as f64 + 0.5) * h;
+                let y = center[1] - 0.5 * size + (b as f64 + 0.5) * h;
+                cells.push(([x, y], w));
+            }
+        }
+    }
+    let at = |t: &[f64; 3]| {
+        let mut acc = C64::new(0.0, 0.0);
+        for ([x, y], w) in &cells {
+            let (dx, dy) = (t[0] - x, t[1] - y);
+            let r = (dx * dx + dy * dy + t[2] * t[2]).sqrt();
+            acc += w * C64::new(1.0 / r, -k) * C64::from_polar(t[2] / (r * r), k * r);
+        }
+        acc
+    };
+    // Two threads (the test machine has two cores; the HAS code's rayon pool is idle meanwhile).
+    let half = targets.len() / 2;
+    std::thread::scope(|s| {
+        let first = s.spawn(|| targets[..half].iter().map(at).collect::<Vec<_>>());
+        let second: Vec<C64> = targets[half..].iter().map(at).collect();
+        let mut out = first.join().unwrap();
+        out.extend(second);
+        out
+    })
+}
+
+/// SPEC §3 array (1024 elements) steered to (0, 0, 85) mm in water: the HAS focal plane against the
+/// direct Rayleigh–Sommerfeld sum on a ±10 mm square of grid samples.
+#[test]
+fn planar_array_focal_plane_matches_rayleigh_sommerfeld() {
+    // Reference: 10 x 10 cells per element. Its own quadrature error, from runs with 5, 8, 12 and
+    // 16 cells (error ∝ 1/m²), is about +0.13 % on the peak: small against the 2 % tolerance.
+    let m = 10;
+    let lambda = C_WATER / F;
+    // λ/4 (the default spacing) on a 180 mm grid (the default is 123 mm; both agree to 0.02 %), and
+    // λ/8 to show that the remaining difference is the discretisation of the source plane.
+    let runs = [
+        ("λ/4", "lateral_size_mm = 180.0\nz_max_mm = 90.0".to_string()),
+        ("λ/8", format!("spacing_mm = {}\nz_max_mm = 90.0", lambda / 8.0 * 1e3)),
+    ];
+    let mut reference: Option<(Vec<[f64; 3]>, Vec<C64>)> = None;
+    let mut peak_errors = Vec::new();
+    for (label, grid) in runs {
+        let sim = Simulation::new(&water_scenario(PLANAR, &grid)).unwrap();
+        let g = &sim.grid;
+        let n = g.plane_index(sim.focus[2]);
+        let z = g.z(n);
+        let spec = RecordSpec { planes: vec![n], ..RecordSpec::default() };
+        let has = sim.plan.propagate(&sim.source_field(&[]).unwrap(), &spec).unwrap().planes.remove(0);
+        // Targets: the λ/4 samples within ±10 mm of the axis (every other sample of the λ/8 grid).
+        let stride = (lambda / 4.0 / g.dx).round() as usize;
+        let half = (10e-3 / (lambda / 4.0)).round() as usize * stride;
+        let mut targets = Vec::new();
+        let mut p_has = Vec::new();
+        for j in (g.ny / 2 - half..=g.ny / 2 + half).step_by(stride) {
+            for i in (g.nx / 2 - half..=g.nx / 2 + half).step_by(stride) {
+                targets.push([g.x(i), g.y(j), z]);
+                p_has.push(has[j * g.nx + i]);
+            }
+        }
+        let t = Instant::now();
+        let (tg, p_rs) = reference.get_or_insert_with(|| {
+            let p = rayleigh_sommerfeld(&sim, m, &targets);
+            (targets.clone(), p)
+        });
+        let rs_time = t.elapsed().as_secs_f64();
+        for (a, b) in tg.iter().zip(&targets) {
+            assert!((0..3).all(|i| (a[i] - b[i]).abs() < 1e-12), "target grids differ");
+        }
+        let (ah, ar): (Vec<f64>, Vec<f64>) = p_has.iter().zip(p_rs.iter()).map(|(h, r)| (h.norm(), r.norm())).unzip();
+        let corr = pearson(&ah, &ar);
+        let (peak_has, peak_rs) = (max_abs(&ah), max_abs(&ar));
+        let dot: C64 = p_has.iter().zip(p_rs.iter()).map(|(h, r)| h * r.conj()).sum();
+        let norm = |v: &[C64]| v.iter().map(|h| h.norm_sqr()).sum::<f64>().sqrt();
+        let peak_err = peak_has / peak_rs - 1.0;
+        let complex_corr = dot.norm() / (norm(&p_has) * norm(p_rs));
+        eprintln!(
+            "[rayleigh-sommerfeld] HAS at {label} ({}x{} grid, {:.0} mm wide), plane z = {:.3} mm, {} targets within ±{:.1} mm \
+             (RS sum {m}x{m} cells/element, {rs_time:.1} s):\n[rayleigh-sommerfeld]   |p| correlation {corr:.6} (tol >= 0.99), \
+             peak HAS {:.4} MPa vs RS {:.4} MPa: {:+.2} % (tol 2 %); complex correlation {:.6}, mean phase difference {:+.4} rad",
+            g.nx, g.ny, g.nx as f64 * g.dx * 1e3, z * 1e3, targets.len(), half as f64 * g.dx * 1e3,
+            peak_has / 1e6, peak_rs / 1e6, 100.0 * peak_err, complex_corr, dot.arg()
+        );
+        // Tolerances from the issue. The difference is the source discretisation: exact-coverage
+        // rasterisation convolves each element with the pixel, which scales a plane-wave
+        // component by sinc(kx·dx/2)·sinc(ky·dy/2); for the directions that reach the focus
+        // (up to ~35° off axis) that costs about 1.4 % of the peak at λ/4 and a quarter of it
+        // at λ/8.
+        assert!(corr >= 0.99, "{label}: |p| correlation {corr}");
+        assert!(peak_err.abs() <= 0.02, "{label}: peak off by {:.2} %", 100.0 * peak_err);
+        // Not in the issue: the complex fields must agree too (phase sign conventions of the
+        // steering and of the propagator), |<p_HAS, p_RS>| / (|p_HAS|·|p_RS|) >= 0.99.
+        assert!(complex_corr >= 0.99, "{label}: complex correlation {complex_corr}");
+        peak_errors.push(peak_err.abs());
+    }
+    // Halving the spacing must reduce the peak error markedly (it is second order in dx: 1/4 in
+    // theory; asserted at 1/2 to leave room for the reference's own 0.1 % quadrature error).
+    assert!(peak_errors[1] < 0.5 * peak_errors[0], "no convergence with the grid: {peak_errors:?}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// 3. Power conservation in lossless water
+// ---------------------------------------------------------------------------------------------
+
+/// 2-D DFT by two passes of direct 1-D sums (independent of the crate's FFT): row-major (ny, nx) in,
+/// spectrum row-major (ny, nx) out, unnormalised, FFT frequency order.
+fn dft2(field: &[C64], nx: usize, ny: usize) -> Vec<C64> {
+    let tw = |n: usize| (0..n).map(|i| C64::from_polar(1.0, -2.0 * PI * i as f64 / n as f64)).collect::<Vec<_>>();
+    let (tx, ty) = (tw(nx), tw(ny));
+    let mut rows = vec![C64::new(0.0, 0.0); nx * ny];
+    for j in 0..ny {
+        for u in 0..nx {
+            rows[j * nx + u] = (0..nx).map(|i| field[j * nx + i] * tx[(u * i) % nx]).sum();
+        }
+    }
+    let mut out = vec![C64::new(0.0, 0.0); nx * ny];
+    for v in 0..ny {
+        for u in 0..nx {
+            out[v * nx + u] = (0..ny).map(|j| rows[j * nx + u] * ty[(v * j) % ny]).sum();
+        }
+    }
+    out
+}
+
+/// The power `∫|p|²/(2Z) dA` carried by the propagating part (`kx² + ky² <= k²`) of a plane, by
+/// Parseval on its spectrum: the value the power must settle at once the evanescent part has died.
+fn propagating_power(field: &[C64], g: &Grid, k: f64, z: f64) -> f64 {
+    let spec = dft2(field, g.nx, g.ny);
+    let mut s = 0.0;
+    for v in 0..g.ny {
+        let ky = Grid::wavenumber(v, g.ny, g.dy);
+        for u in 0..g.nx {
+            let kx = Grid::wavenumber(u, g.nx, g.dx);
+            if kx * kx + ky * ky <= k * k {
+                s += spec[v * g.nx + u].norm_sqr();
+            }
+        }
+    }
+    s / g.lateral_len() as f64 * g.dx * g.dy / (2.0 * z)
+}
+
+#[test]
+fn power_is_conserved_in_lossless_water() {
+    let z_water = RHO_WATER * C_WATER;
+    let k = k_water();
+    let z_skip = 5e-3;
+
+    // (a) The SPEC array, steered to 85 mm, on a periodic grid (no absorbing layer), 0 to 127.5 mm.
+    // Its pitch (2.5 mm = 0.92 λ) gives grating lobes at 40–90° off axis that leave any grid of
+    // practical width (measured: 20 % of the power has reached the layer of a 250 mm grid by
+    // z = 127 mm), so "nothing hits the layer" is obtained by having no layer: the lateral
+    // boundaries are periodic and power can only be lost by the propagation itself.
+    let sim = Simulation::new(&water_scenario(PLANAR, "sponge_width_mm = 0.0\nz_max_mm = 127.5")).unwrap();
+    let g = &sim.grid;
+    let src = sim.source_field(&[]).unwrap();
+    let p = sim.plan.propagate(&src, &RecordSpec { power: true, ..RecordSpec::default() }).unwrap().power;
+    let n0 = g.plane_index(z_skip);
+    let dev = max_abs(&p[n0..].iter().map(|v| v / p[n0] - 1.0).collect::<Vec<_>>());
+    // Independent references: the plane-wave power of the source, ∫|p|²/(2Z) over the rasterised
+    // plane, and its propagating part by Parseval (a direct DFT, not the crate's FFT).
+    let direct: f64 = src.iter().map(|v| v.norm_sqr()).sum::<f64>() * g.dx * g.dy / (2.0 * z_water);
+    let propagating = propagating_power(&src, g, k, z_water);
+    let last = *p.last().unwrap();
+    eprintln!(
+        "[power] SPEC array, periodic {}x{} grid: P(0) = {:.4} W (direct sum {:.4} W; nominal 70 W over the element area), \
+         P({:.0} mm) = {:.4} W, P({:.1} mm) = {last:.4} W\n[power]   max |P(z)/P(5 mm) - 1| over 5–127.5 mm: {:.2e} (tol 1 %); \
+         propagating part of the source plane (Parseval): {propagating:.4} W, P(end) / that - 1 = {:+.2e} (tol 1 %)",
+        g.nx, g.ny, p[0], direct, z_skip * 1e3, p[n0], g.z(g.nz - 1) * 1e3, dev, last / propagating - 1.0
+    );
+    // The angular-spectrum step is unitary on propagating components and the water screen has unit
+    // modulus, so only evanescent components (decayed by > e^-5 beyond 5 mm except a thin shell
+    // next to k) may change the power. 1 % is the issue's tolerance; the measured change is far below.
+    assert!(dev < 0.01, "power changed by {:.3} % beyond 5 mm", 100.0 * dev);
+    assert!((p[0] / direct - 1.0).abs() < 1e-9, "recorded source power differs from the direct sum");
+    assert!((last / propagating - 1.0).abs() < 0.01, "power at depth is not the propagating part of the source");
+
+    // (b) With the default absorbing layer (10 mm) on the default grid, a beam that stays clear of
+    // it: a Gaussian-apodised (w = 15 mm) spherical wave converging to 85 mm. The layer must not
+    // absorb anything in the interior of the grid.
+    let (w, focus) = (15e-3, 85e-3);
+    let beam: Vec<C64> = (0..g.lateral_len())
+        .map(|i| {
+            let (x, y) = (g.x(i % g.nx), g.y(i / g.nx));
+            let rho2 = x * x + y * y;
+            C64::from_polar(1e5 * (-rho2 / (w * w)).exp(), -k * (rho2 + focus * focus).sqrt())
+        })
+        .collect();
+    let spec = RecordSpec { power: true, ..RecordSpec::default() };
+    let (_, rec) = HasPlan::build(g, &sim.medium, F, &beam, &HasOptions::default(), &spec).unwrap();
+    let dev_b = max_abs(&rec.power.iter().map(|v| v / rec.power[0] - 1.0).collect::<Vec<_>>());
+    eprintln!("[power] Gaussian focused beam, 10 mm absorbing layer: max |P(z)/P(0) - 1| = {dev_b:.2e} (tol 1 %)");
+    assert!(dev_b < 0.01, "power of a beam clear of the layer changed by {:.3} %", 100.0 * dev_b);
+
+    // (c) Reported: the SPEC array with the default layer on the default grid, i.e. what the layer
+    // removes (grating lobes and near-grazing components) by the focus and by the end.
+    let (_, rec) = HasPlan::build(g, &sim.medium, F, &src, &HasOptions::default(), &spec).unwrap();
+    let at = |z: f64| rec.power[g.plane_index(z)];
+    eprintln!(
+        "[power] SPEC array with the default 10 mm layer on the default {:.0} mm grid: P(5 mm) = {:.3} W, P(85 mm) = {:.3} W ({:+.1} %), \
+         P(127 mm) = {:.3} W ({:+.1} %)",
+        g.nx as f64 * g.dx * 1e3, at(5e-3), at(85e-3), 100.0 * (at(85e-3) / at(5e-3) - 1.0), at(127e-3), 100.0 * (at(127e-3) / at(5e-3) - 1.0)
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// 4. Plane wave in an absorbing medium
+// ---------------------------------------------------------------------------------------------
+
+/// Amplitude attenuation (Np/m) of `a0` dB/cm/MHz at 550 kHz, from the definitions
+/// (1 Np = 20/ln 10 dB), not from the crate.
+fn np_per_m(a0_db_cm_mhz: f64) -> f64 {
+    a0_db_cm_mhz * (F / 1e6) * 100.0 / (20.0 / std::f64::consts::LN_10)
+}
+
+#[test]
+fn plane_wave_decays_as_exp_minus_alpha_d() {
+    // 16 x 16 periodic grid (no absorbing layer) filled with a uniform source: an exact plane wave.
+    let lambda = C_WATER / F;
+    let (dx, dz) = (lambda / 4.0, 0.5e-3);
+    let g = Grid::new(16, 16, dx, dx, 201, dz, 0.0).unwrap();
+    let options = HasOptions { sponge_width: 0.0, ..HasOptions::default() };
+    let source = vec![C64::new(1.0, 0.0); g.lateral_len()];
+    let spec = RecordSpec { axis: true, ..RecordSpec::default() };
+    let mut worst: f64 = 0.0;
+    for (c, a0) in [(1533.0, 0.46), (1600.0, 5.0), (2800.0, 20.0)] {
+        let medium = Medium::homogeneous(Material::new("m", c, 1040.0, a0).unwrap());
+        let (_, rec) = HasPlan::build(&g, &medium, F, &source, &options, &spec).unwrap();
+        let (alpha, k) = (np_per_m(a0), 2.0 * PI * F / c);
+        let (mut amp_err, mut phase_err): (f64, f64) = (0.0, 0.0);
+        for (n, p) in rec.axis.iter().enumerate() {
+            let d = g.z(n);
+            amp_err = amp_err.max((p.norm() / (-alpha * d).exp() - 1.0).abs());
+            phase_err = phase_err.max((p / C64::from_polar(1.0, k * d)).arg().abs());
+        }
+        let d = g.z(g.nz - 1);
+        eprintln!(
+            "[absorption] c {c} m/s, {a0} dB/cm/MHz (alpha {alpha:.3} Np/m): |p| at {:.0} mm = {:.6} vs exp(-alpha·d) = {:.6}; \
+             max relative amplitude error {amp_err:.2e} (tol 1 %), max phase error {phase_err:.2e} rad",
+            d * 1e3, rec.axis[g.nz - 1].norm(), (-alpha * d).exp()
+        );
+        worst = worst.max(amp_err);
+        // Tolerance 1 % (from the issue); for a plane wave the angular-spectrum step is exact and the
+        // screen applies exp(-alpha·dz) per step, so any error here would be a bug, not discretisation.
+        assert!(amp_err < 0.01);
+        assert!(phase_err < 1e-6);
+    }
+
+    // Water, then a lossy slab from 30 mm: pressure transmission T = 2·Z2/(Z1 + Z2) at the interface
+    // (no reflected wave in the one-way model), then exp(-alpha·(z - 30 mm)).
+    let mut medium = Medium::homogeneous(Material::new("water", C_WATER, RHO_WATER, 0.0).unwrap());
+    medium.materials.push(Material::new("phantom", 1533.0, 1040.0, 0.46).unwrap());
+    medium.regions.push(Region { material: 1, shape: Shape::Slab { z_min: 30e-3, z_max: 1.0 } });
+    let (_, rec) = HasPlan::build(&g, &medium, F, &source, &options, &spec).unwrap();
+    let (z1, z2) = (RHO_WATER * C_WATER, 1040.0 * 1533.0);
+    let t = 2.0 * z2 / (z1 + z2);
+    let alpha = np_per_m(0.46);
+    let mut err: f64 = 0.0;
+    for (n, p) in rec.axis.iter().enumerate() {
+        let z = g.z(n);
+        let expected = if z <= 30e-3 + 1e-9 { 1.0 } else { t * (-alpha * (z - 30e-3)).exp() };
+        err = err.max((p.norm() / expected - 1.0).abs());
+    }
+    eprintln!("[absorption] water -> phantom at 30 mm: T = {t:.5}, max relative amplitude error {err:.2e} (tol 1 %)");
+    assert!(err < 0.01);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 5. Refraction at the water/phantom interface
+// ---------------------------------------------------------------------------------------------
+
+/// Ray prediction of the axial focus when a beam steered in water to (0, 0, f) meets a plane
+/// interface at z = zi into sound speed `c2`: each element's ray (centre → geometric focus) refracts
+/// by Snell's law and crosses the axis at `zi + rho_i / tan(theta2)`. Returns the mean crossing over
+/// the elements (equal areas, so area-weighted) and the paraxial one `zi + (f - zi)·c1/c2`.
+fn snell_focus(sim: &Simulation, zi: f64, f: f64, c2: f64) -> (f64, f64) {
+    let ratio = c2 / C_WATER;
+    let crossings: Vec<f64> = sim
+        .transducer
+        .elements
+        .iter()
+        .map(|e| {
+            let c = e.reference_point();
+            let rho = (c[0] * c[0] + c[1] * c[1]).sqrt();
+            let theta1 = (rho / (f - c[2])).atan();
+            let rho_i = rho * (f - zi) / (f - c[2]);
+            let theta2 = (ratio * theta1.sin()).asin();
+            zi + rho_i / theta2.tan()
+        })
+        .collect();
+    (crossings.iter().sum::<f64>() / crossings.len() as f64, zi + (f - zi) / ratio)
+}
+
+/// The default scenario's geometry (water below 40 mm, phantom cylinder above), steered as if all
+/// were water, phantom attenuation set to 0 to isolate refraction: the axial intensity peak must
+/// move by the ray (Snell) prediction within one grid step.
+#[test]
+fn refraction_moves_the_focus_as_snell_predicts() {
+    // Steering, source plane and grid from the all-water scenario (straight-line water steering).
+    let sim = Simulation::new(&water_scenario(PLANAR, "")).unwrap();
+    let g = &sim.grid;
+    let src = sim.source_field(&[]).unwrap();
+    let spec = RecordSpec { axis: true, ..RecordSpec::default() };
+    let (zi, f) = (40e-3, sim.focus[2]);
+    let axial_peak = |medium: &Medium| {
+        let (_, rec) = HasPlan::build(g, medium, F, &src, &HasOptions::default(), &spec).unwrap();
+        // Intensity |p|²/(2Z); Z is constant beyond the interface, where both peaks lie.
+        let i: Vec<f64> = rec.axis.iter().map(|p| p.norm_sqr()).collect();
+        g.z0 + parabolic_peak(&i).0 * g.dz
+    };
+    let z_water = axial_peak(&sim.medium);
+    for c2 in [1533.0, 1600.0, 1700.0] {
+        let mut medium = sim.medium.clone();
+        medium.materials.push(Material::new("phantom", c2, 1040.0, 0.0).unwrap());
+        medium.regions.push(Region { material: 1, shape: Shape::Cylinder { radius: 60e-3, z_min: zi, z_max: 160e-3, center: [0.0, 0.0] } });
+        let z_phantom = axial_peak(&medium);
+        let shift_has = z_phantom - z_water;
+        let (z_snell, z_paraxial) = snell_focus(&sim, zi, f, c2);
+        let shift_snell = z_snell - f;
+        eprintln!(
+            "[refraction] phantom c = {c2} m/s: axial intensity peak {:.3} mm (all water {:.3} mm): shift {:+.3} mm; \
+             Snell (area-weighted rays) {:+.3} mm, paraxial {:+.3} mm; |HAS - Snell| = {:.3} mm (tol dz = {:.3} mm)",
+            z_phantom * 1e3, z_water * 1e3, shift_has * 1e3, shift_snell * 1e3, (z_paraxial - f) * 1e3,
+            (shift_has - shift_snell).abs() * 1e3, g.dz * 1e3
+        );
+        // Tolerance from the issue: one grid step. The ray estimate ignores diffraction (which
+        // moves a focus of this Fresnel number towards the source by ~2 mm in both media and
+        // changes a little with the wavelength in the phantom) and locates the focus of an
+        // aberrated beam at the mean ray crossing (the best focus for pure spherical aberration).
+        assert!((shift_has - shift_snell).abs() <= g.dz, "c2 = {c2}: HAS shift {shift_has}, Snell {shift_snell}");
+        assert!(shift_has < 0.0, "a faster second medium must pull the focus towards the source");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Linearity: group fields add up to the field of the whole array
+// ---------------------------------------------------------------------------------------------
+
+/// The default scenario (phantom with attenuation): the 16 default groups, each driven alone with
+/// the steering plus an aberration, propagated with `propagate_batch`, must add up to the whole
+/// array's field. Holds because each slab's mean wavenumber is fixed by the reference beam.
+#[test]
+fn group_fields_add_up_to_the_array_field() {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    let g = &sim.grid;
+    let aberration: Vec<f64> = (0..sim.n_groups).map(|i| (1.7 * i as f64).sin() * 2.5).collect();
+    let phases = sim.element_phases(&aberration).unwrap();
+    let drive = |gr: Option<usize>| -> Vec<C64> {
+        (0..sim.n_elements())
+            .map(|e| match gr {
+                Some(x) if sim.groups[e] != x => C64::new(0.0, 0.0),
+                _ => C64::from_polar(1.0, sim.steering[e] + phases[e]),
+            })
+            .collect()
+    };
+    let sources: Vec<Vec<C64>> = (0..sim.n_groups).map(|x| sim.source.field(&drive(Some(x))).unwrap()).collect();
+    let spec = RecordSpec { planes: vec![g.plane_index(sim.focus[2]), g.nz - 1], axis: true, ..RecordSpec::default() };
+    let t = Instant::now();
+    let parts = sim.plan.propagate_batch(&sources, &spec).unwrap();
+    let batch_time = t.elapsed().as_secs_f64();
+    let whole = sim.plan.propagate(&sim.source.field(&drive(None)).unwrap(), &spec).unwrap();
+    let mut worst: f64 = 0.0;
+    let cmp = |sum: &dyn Fn(usize) -> C64, reference: &[C64]| {
+        let scale = reference.iter().fold(0.0, |m: f64, v| m.max(v.norm()));
+        (0..reference.len()).fold(0.0, |m: f64, i| m.max((sum(i) - reference[i]).norm() / scale))
+    };
+    for (k, plane) in whole.planes.iter().enumerate() {
+        worst = worst.max(cmp(&|i| parts.iter().map(|r| r.planes[k][i]).sum(), plane));
+    }
+    worst = worst.max(cmp(&|i| parts.iter().map(|r| r.axis[i]).sum(), &whole.axis));
+    eprintln!(
+        "[linearity] {} groups in one batch ({batch_time:.2} s): max |Σ groups - whole| / max |whole| = {worst:.2e} (tol 1e-9) \
+         over the focal plane, the last plane and the axis",
+        sim.n_groups
+    );
+    // Only floating-point rounding separates the two (the sum of 16 fields has ~1e-16 relative
+    // error per operation over ~190 steps); 1e-9 is the design requirement.
+    assert!(worst < 1e-9);
 }

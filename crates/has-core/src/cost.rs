@@ -1,0 +1,420 @@
+//! The hybrid cost (paper Eq. 4) on a precomputed quadratic model of the image.
+//!
+//! The forward model after the pressure field is linear in `|p|²`, and the field is linear in the
+//! group drives `v_g = exp(i·phi_g)`. So each pixel of the image is a Hermitian form
+//! `d_i(phi) = v^H K_i v` with `K_i[g, h] = A · S_i(conj(W_g)·W_h)`, where `W_g` is the field of
+//! group `g` in the MR window and `S_i` the MR sampling of pixel `i` (SPEC §8). An evaluation costs
+//! `O(P·G²)` for `P` pixels, and the gradient is analytic:
+//! `∂d_i/∂phi_g = 2·Im(conj(v_g)·(K_i v)_g)`.
+
+use crate::arfi::MrSampler;
+use crate::error::{HasError, Result};
+use crate::simulation::Simulation;
+use ndarray::Array2;
+use num_complex::Complex64 as C64;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Per-pixel Hermitian kernels over a box of MR pixels: the image for any group phases.
+#[derive(Debug, Clone)]
+pub struct ArfiKernel {
+    pub n_groups: usize,
+    /// The pixel box (ranges along u and v of the full image).
+    pub pixels: [Range<usize>; 2],
+    /// Real diagonals, `(n_pixels, G)`.
+    diag: Vec<f64>,
+    /// Strict upper triangles `K[g, h]`, `g < h`, row by row, `(n_pixels, G(G-1)/2)`.
+    upper: Vec<C64>,
+}
+
+impl ArfiKernel {
+    /// Marches the `G` group fields (steering plus `known` element phases, rad; empty = none) and
+    /// builds the kernels of the pixels in the box `u x v`.
+    pub fn build(sim: &Simulation, groups: &[usize], known: &[f64], u: Range<usize>, v: Range<usize>) -> Result<Self> {
+        let n = sim.n_elements();
+        if groups.len() != n {
+            return Err(HasError::invalid("groups", format!("has {} entries for {n} elements", groups.len())));
+        }
+        let g_count = groups.iter().max().map_or(0, |m| m + 1);
+        if g_count < 2 {
+            return Err(HasError::invalid("groups", "need at least two groups"));
+        }
+        let known = if known.is_empty() { vec![0.0; n] } else { sim.element_phases(known)? };
+        let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
+        let sources = (0..g_count)
+            .map(|g| {
+                let drive: Vec<C64> = (0..n)
+                    .map(|e| if groups[e] == g { C64::from_polar(1.0, sim.steering[e] + known[e]) } else { C64::new(0.0, 0.0) })
+                    .collect();
+                sim.source.field(&drive)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let recordings = sim.record_window(&sources)?;
+        let fields: Vec<Vec<C64>> = recordings.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
+        Self::from_fields(&sampler, &fields, sim.amplitude, [u, v])
+    }
+
+    /// Kernels from group fields already recorded on `sampler.window`.
+    pub fn from_fields(sampler: &MrSampler, fields: &[Vec<C64>], amplitude: f64, pixels: [Range<usize>; 2]) -> Result<Self> {
+        let g = fields.len();
+        let pairs: Vec<(usize, usize)> = (0..g).flat_map(|a| (a..g).map(move |b| (a, b))).collect();
+        let maps: Vec<(Array2<f64>, Array2<f64>)> = pairs
+            .par_iter()
+            .map(|&(a, b)| {
+                let q: Vec<C64> = fields[a].iter().zip(&fields[b]).map(|(x, y)| x.conj() * y).collect();
+                let re: Vec<f64> = q.iter().map(|c| c.re).collect();
+                let im: Vec<f64> = q.iter().map(|c| c.im).collect();
+                Ok((sampler.apply(&re)? * amplitude, if a == b { Array2::zeros((0, 0)) } else { sampler.apply(&im)? * amplitude }))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let n_pix = pixels[0].len() * pixels[1].len();
+        let n_up = g * (g - 1) / 2;
+        let mut diag = vec![0.0; n_pix * g];
+        let mut upper = vec![C64::new(0.0, 0.0); n_pix * n_up];
+        for ((a, b), (re, im)) in pairs.iter().zip(&maps) {
+            for (p, (i, j)) in pixel_order(&pixels).enumerate() {
+                if a == b {
+                    diag[p * g + a] = re[[i, j]];
+                } else {
+                    upper[p * n_up + upper_index(g, *a, *b)] = C64::new(re[[i, j]], im[[i, j]]);
+                }
+            }
+        }
+        Ok(ArfiKernel { n_groups: g, pixels, diag, upper })
+    }
+
+    /// Number of pixels in the box.
+    pub fn n_pixels(&self) -> usize {
+        self.pixels[0].len() * self.pixels[1].len()
+    }
+
+    /// Index into the box of full-image pixel `(i, j)`, if inside.
+    pub fn pixel_index(&self, i: usize, j: usize) -> Option<usize> {
+        (self.pixels[0].contains(&i) && self.pixels[1].contains(&j))
+            .then(|| (i - self.pixels[0].start) * self.pixels[1].len() + (j - self.pixels[1].start))
+    }
+
+    /// `conj(v_g)·v_h` for `g < h`, the pair weights shared by every pixel.
+    fn pair_weights(&self, v: &[C64]) -> Vec<C64> {
+        let g = self.n_groups;
+        let mut w = Vec::with_capacity(g * (g - 1) / 2);
+        for a in 0..g {
+            for b in a + 1..g {
+                w.push(v[a].conj() * v[b]);
+            }
+        }
+        w
+    }
+
+    /// Image values `v^H K_i v` at the box pixels `which` (indices into the box) for drives `v`.
+    pub fn image_at(&self, v: &[C64], which: &[usize], out: &mut Vec<f64>) {
+        let g = self.n_groups;
+        let n_up = g * (g - 1) / 2;
+        let w = self.pair_weights(v);
+        out.clear();
+        out.extend(which.iter().map(|&p| {
+            let d: f64 = self.diag[p * g..(p + 1) * g].iter().sum();
+            let u = &self.upper[p * n_up..(p + 1) * n_up];
+            let cross: f64 = u.iter().zip(&w).map(|(k, x)| k.re * x.re - k.im * x.im).sum();
+            d + 2.0 * cross
+        }));
+    }
+
+    /// The image on the whole box for group phases (rad), shape `(len u, len v)`.
+    pub fn image(&self, phases: &[f64]) -> Result<Array2<f64>> {
+        if phases.len() != self.n_groups {
+            return Err(HasError::invalid("phases", format!("has {} values for {} groups", phases.len(), self.n_groups)));
+        }
+        let v: Vec<C64> = phases.iter().map(|&p| C64::from_polar(1.0, p)).collect();
+        let all: Vec<usize> = (0..self.n_pixels()).collect();
+        let mut out = Vec::new();
+        self.image_at(&v, &all, &mut out);
+        Array2::from_shape_vec((self.pixels[0].len(), self.pixels[1].len()), out).map_err(|e| HasError::invalid("kernel", e.to_string()))
+    }
+
+    /// Adds `Σ_i r_i · K_i` over the pixels `which` into the dense Hermitian `acc` (G x G,
+    /// row-major; only the diagonal and upper triangle are written).
+    fn weighted_sum(&self, which: &[usize], r: &[f64], acc: &mut [C64]) {
+        let g = self.n_groups;
+        let n_up = g * (g - 1) / 2;
+        for (&p, &ri) in which.iter().zip(r) {
+            for a in 0..g {
+                acc[a * g + a].re += ri * self.diag[p * g + a];
+            }
+            let u = &self.upper[p * n_up..(p + 1) * n_up];
+            let mut k = 0;
+            for a in 0..g {
+                for b in a + 1..g {
+                    acc[a * g + b] += u[k] * ri;
+                    k += 1;
+                }
+            }
+        }
+    }
+}
+
+/// Pixels of a box in row-major (u, v) order.
+fn pixel_order(p: &[Range<usize>; 2]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    let nv = p[1].len();
+    (0..p[0].len() * nv).map(move |k| (k / nv, k % nv))
+}
+
+/// Position of pair `(a, b)`, `a < b`, in the row-by-row strict upper triangle of a `g x g` matrix.
+fn upper_index(g: usize, a: usize, b: usize) -> usize {
+    a * (2 * g - a - 1) / 2 + (b - a - 1)
+}
+
+/// One measured image as the cost sees it: a kernel, the measured values on the masked pixels,
+/// and the known group phase offsets added for this acquisition.
+#[derive(Debug, Clone)]
+pub struct Term {
+    pub kernel: std::sync::Arc<ArfiKernel>,
+    /// Box indices of the masked pixels (measured > mask_fraction · max).
+    pub mask: Vec<usize>,
+    /// Measured ARFI phase at the masked pixels (rad).
+    pub measured: Vec<f64>,
+    /// Known per-group phases added to the estimate for this image (rad).
+    pub offset: Vec<f64>,
+}
+
+/// The joint cost `J(phi) = Σ_k Σ_{i in mask_k} (s·d_k,i(phi + offset_k) - m_k,i)²` over images.
+/// `s = 1`, or, with `fit_scale`, the least-squares scale `s = <d, m> / <d, d>` for each `phi`
+/// (one for all images): a free amplitude that absorbs a uniform loss of focal intensity the
+/// phases cannot explain (e.g. element-level aberration within groups).
+#[derive(Debug, Clone)]
+pub struct HybridCost {
+    pub terms: Vec<Term>,
+    pub n_groups: usize,
+    pub fit_scale: bool,
+}
+
+impl HybridCost {
+    /// Checks that every term has the same number of groups.
+    pub fn new(terms: Vec<Term>) -> Result<Self> {
+        let n_groups = terms.first().map(|t| t.kernel.n_groups).ok_or_else(|| HasError::invalid("images", "need at least one image"))?;
+        for (k, t) in terms.iter().enumerate() {
+            if t.kernel.n_groups != n_groups || t.offset.len() != n_groups {
+                return Err(HasError::invalid(format!("image[{k}]"), "group count differs from the first image"));
+            }
+            if t.mask.is_empty() || t.mask.len() != t.measured.len() {
+                return Err(HasError::invalid(format!("image[{k}]"), "empty mask"));
+            }
+        }
+        Ok(HybridCost { terms, n_groups, fit_scale: false })
+    }
+
+    /// Number of masked pixels over all images.
+    pub fn n_pixels(&self) -> usize {
+        self.terms.iter().map(|t| t.mask.len()).sum()
+    }
+
+    /// Model images at the masked pixels of every term.
+    fn images(&self, phases: &[f64]) -> Vec<Vec<f64>> {
+        self.terms
+            .iter()
+            .map(|t| {
+                let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
+                let mut img = Vec::new();
+                t.kernel.image_at(&v, &t.mask, &mut img);
+                img
+            })
+            .collect()
+    }
+
+    /// The scale applied to the model images for these images (1 unless `fit_scale`).
+    fn scale_for(&self, images: &[Vec<f64>]) -> f64 {
+        if !self.fit_scale {
+            return 1.0;
+        }
+        let (mut dm, mut dd) = (0.0, 0.0);
+        for (img, t) in images.iter().zip(&self.terms) {
+            for (d, m) in img.iter().zip(&t.measured) {
+                dm += d * m;
+                dd += d * d;
+            }
+        }
+        if dd > 0.0 {
+            dm / dd
+        } else {
+            1.0
+        }
+    }
+
+    /// The amplitude scale at `phases` (1 unless `fit_scale`).
+    pub fn scale(&self, phases: &[f64]) -> f64 {
+        self.scale_for(&self.images(phases))
+    }
+
+    /// `J` for group phases (rad).
+    pub fn cost(&self, phases: &[f64]) -> f64 {
+        let images = self.images(phases);
+        let s = self.scale_for(&images);
+        images.iter().zip(&self.terms).map(|(img, t)| img.iter().zip(&t.measured).map(|(d, m)| (s * d - m).powi(2)).sum::<f64>()).sum()
+    }
+
+    /// `J` and `∂J/∂phi_g = 4·s·Σ_k Im(conj(v_g)·(R_k v)_g)`, `R_k = Σ_i r_i·K_i`, `r = s·d - m`
+    /// (with a fitted scale the envelope theorem makes `∂s/∂phi` drop out).
+    pub fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
+        let g = self.n_groups;
+        let images = self.images(phases);
+        let s = self.scale_for(&images);
+        let mut grad = vec![0.0; g];
+        let mut total = 0.0;
+        let mut r_mat = vec![C64::new(0.0, 0.0); g * g];
+        for (t, img) in self.terms.iter().zip(&images) {
+            let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
+            let r: Vec<f64> = img.iter().zip(&t.measured).map(|(d, m)| s * d - m).collect();
+            total += r.iter().map(|x| x * x).sum::<f64>();
+            r_mat.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
+            t.kernel.weighted_sum(&t.mask, &r, &mut r_mat);
+            // (R v)_a with R Hermitian from its upper triangle.
+            for a in 0..g {
+                let mut rv = r_mat[a * g + a] * v[a];
+                for b in 0..g {
+                    if b > a {
+                        rv += r_mat[a * g + b] * v[b];
+                    } else if b < a {
+                        rv += r_mat[b * g + a].conj() * v[b];
+                    }
+                }
+                grad[a] += 4.0 * s * (v[a].conj() * rv).im;
+            }
+        }
+        (total, grad)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upper_index_enumerates_pairs_in_order() {
+        let g = 5;
+        let mut k = 0;
+        for a in 0..g {
+            for b in a + 1..g {
+                assert_eq!(upper_index(g, a, b), k);
+                k += 1;
+            }
+        }
+    }
+}
+
+/// One measured MR-ARFI image and the known phases (rad; one per element or per group, empty =
+/// none) that were added to the steering for it.
+#[derive(Debug, Clone)]
+pub struct Measurement {
+    pub image: Array2<f64>,
+    pub known: Vec<f64>,
+}
+
+/// The cost assembled from measurements, with the kernel of the plain steering (for predictions)
+/// and the noise level estimated from the images' backgrounds.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub cost: HybridCost,
+    pub base: std::sync::Arc<ArfiKernel>,
+    /// Noise standard deviation (rad), RMS over the images.
+    pub noise: f64,
+}
+
+/// Checks a measured image against the scenario's MR geometry.
+pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
+    let m = sim.sampler.geometry.matrix;
+    if image.dim() != (m[0], m[1]) {
+        return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
+    }
+    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
+        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v}")));
+    }
+    if !(image.iter().copied().fold(f64::MIN, f64::max) > 0.0) {
+        return Err(HasError::invalid(name, "has no positive pixel (all-zero or inverted image?)"));
+    }
+    Ok(())
+}
+
+/// The focal zone (paper Eq. 4): the pixels above `fraction` of the image maximum that are
+/// connected (4-neighbours) to the maximum. Isolated noise spikes elsewhere are left out.
+pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
+    let (nu, nv) = image.dim();
+    let Some((peak, &max)) = image.indexed_iter().max_by(|a, b| a.1.total_cmp(b.1)) else { return vec![] };
+    let level = fraction * max;
+    let mut seen = Array2::from_elem((nu, nv), false);
+    let mut stack = vec![peak];
+    seen[peak] = true;
+    let mut out = Vec::new();
+    while let Some((i, j)) = stack.pop() {
+        out.push((i, j));
+        let neighbours = [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)];
+        for (a, b) in neighbours {
+            if a < nu && b < nv && !seen[[a, b]] && image[[a, b]] > level {
+                seen[[a, b]] = true;
+                stack.push((a, b));
+            }
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// Builds the joint cost of `measurements` for the simulation's groups: masks at `mask_fraction`
+/// of each image's maximum, one pixel box around all masks (plus `margin` pixels), kernels from
+/// one batched march per distinct known-phase pattern (patterns constant within groups reuse the
+/// plain kernel with a phase offset).
+pub fn build_model(sim: &Simulation, measurements: &[Measurement], mask_fraction: f64, margin: usize) -> Result<Model> {
+    if measurements.is_empty() {
+        return Err(HasError::invalid("images", "need at least one image"));
+    }
+    let g = sim.n_groups;
+    if g > 128 {
+        return Err(HasError::invalid("groups", format!("{g} groups: the per-pixel kernels are limited to 128 groups")));
+    }
+    let m = sim.sampler.geometry.matrix;
+    let masks: Vec<Vec<(usize, usize)>> = measurements
+        .iter()
+        .enumerate()
+        .map(|(k, meas)| {
+            check_image(sim, &meas.image, &format!("image[{k}]"))?;
+            Ok(mask_pixels(&meas.image, mask_fraction))
+        })
+        .collect::<Result<_>>()?;
+    let all = masks.iter().flatten();
+    let lo_u = all.clone().map(|p| p.0).min().unwrap_or(0).saturating_sub(margin);
+    let hi_u = (all.clone().map(|p| p.0).max().unwrap_or(0) + margin + 1).min(m[0]);
+    let lo_v = all.clone().map(|p| p.1).min().unwrap_or(0).saturating_sub(margin);
+    let hi_v = (all.map(|p| p.1).max().unwrap_or(0) + margin + 1).min(m[1]);
+    let (u, v) = (lo_u..hi_u, lo_v..hi_v);
+    let base = std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &[], u.clone(), v.clone())?);
+    let mut terms = Vec::with_capacity(measurements.len());
+    let mut noise2 = 0.0;
+    for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
+        let (kernel, offset) = if meas.known.is_empty() {
+            (base.clone(), vec![0.0; g])
+        } else {
+            let per_element = sim.element_phases(&meas.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
+            match group_constant(&per_element, &sim.groups, g) {
+                Some(offset) => (base.clone(), offset),
+                None => (std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &per_element, u.clone(), v.clone())?), vec![0.0; g]),
+            }
+        };
+        let idx: Vec<usize> = mask.iter().filter_map(|&(i, j)| kernel.pixel_index(i, j)).collect();
+        let measured: Vec<f64> = mask.iter().map(|&ij| meas.image[ij]).collect();
+        noise2 += crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()], mask_fraction * meas.image.iter().copied().fold(f64::MIN, f64::max)).powi(2);
+        terms.push(Term { kernel, mask: idx, measured, offset });
+    }
+    Ok(Model { cost: HybridCost::new(terms)?, base, noise: (noise2 / measurements.len() as f64).sqrt() })
+}
+
+/// The per-group value of element phases that are constant within every group, if they are.
+fn group_constant(per_element: &[f64], groups: &[usize], g: usize) -> Option<Vec<f64>> {
+    let mut value = vec![None; g];
+    for (&p, &k) in per_element.iter().zip(groups) {
+        match value[k] {
+            None => value[k] = Some(p),
+            Some(q) if (crate::estimate::wrap(p - q)).abs() < 1e-12 => {}
+            Some(_) => return None,
+        }
+    }
+    value.into_iter().collect()
+}

@@ -1,0 +1,591 @@
+//! Hybrid estimation of the phase aberration (paper loop 1, and its multi-image extension).
+//!
+//! Estimators are values configured with validated `with_*` builders and run through argmin on
+//! the [`HybridCost`]: Nelder–Mead (the paper's), particle swarm, and multi-start L-BFGS with
+//! the analytic gradient. The common phase is unobservable, so group 0 is held at zero during
+//! the search; reported phases have zero circular mean. Every run has an evaluation limit and an
+//! optional time limit; a non-finite cost is replaced by a large finite penalty.
+
+use crate::cost::HybridCost;
+use crate::error::{HasError, Result};
+use argmin::core::{CostFunction, Executor, Gradient};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::neldermead::NelderMead;
+use argmin::solver::particleswarm::ParticleSwarm;
+use argmin::solver::quasinewton::LBFGS;
+use num_complex::Complex64 as C64;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// Cost returned in place of a non-finite one.
+const PENALTY: f64 = 1e300;
+
+/// Why a run stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stop {
+    Converged,
+    EvaluationLimit,
+    TimeLimit,
+    Interrupted,
+}
+
+impl Stop {
+    /// A short name for reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Stop::Converged => "converged",
+            Stop::EvaluationLimit => "evaluation limit",
+            Stop::TimeLimit => "time limit",
+            Stop::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// The search method and its settings.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Method {
+    /// Nelder–Mead from `start` (default zero) with an initial simplex of `step` rad along each
+    /// axis; stops when the standard deviation of the simplex costs falls below `tolerance`.
+    NelderMead { step: f64, tolerance: f64 },
+    /// Particle swarm in `[-pi, pi]` per phase with `particles` particles, seeded.
+    ParticleSwarm { particles: usize },
+    /// L-BFGS with the analytic gradient from zero and `starts - 1` seeded random starts.
+    Lbfgs { starts: usize, memory: usize },
+}
+
+/// An estimator: a method, limits and a seed.
+#[derive(Debug, Clone)]
+pub struct Estimator {
+    pub method: Method,
+    pub max_evaluations: usize,
+    pub time_limit: Option<Duration>,
+    pub seed: u64,
+    pub start: Option<Vec<f64>>,
+    /// Point-reflection pairing of groups ([`point_reflection`]): L-BFGS also starts from the
+    /// twins of its best minima.
+    pub twins: Option<Vec<usize>>,
+}
+
+impl Estimator {
+    /// The paper's settings: Nelder–Mead from zero, at most 8000 evaluations, stop when the cost
+    /// changes by less than 1e-8; the initial simplex spans 1 rad per phase (MATLAB's default of
+    /// 5 % of a zero start, 0.00025 rad, barely leaves the start).
+    pub fn nelder_mead() -> Self {
+        Estimator {
+            method: Method::NelderMead { step: 1.0, tolerance: 1e-8 },
+            max_evaluations: 8000,
+            time_limit: None,
+            seed: 0,
+            start: None,
+            twins: None,
+        }
+    }
+
+    /// Particle swarm: 40 particles, 8000 evaluations.
+    pub fn particle_swarm() -> Self {
+        Estimator { method: Method::ParticleSwarm { particles: 40 }, max_evaluations: 8000, ..Self::nelder_mead() }
+    }
+
+    /// L-BFGS: 20 random starts then 20 from twins and perturbations of the best, memory 10,
+    /// 40000 evaluations over all starts.
+    pub fn lbfgs() -> Self {
+        Estimator { method: Method::Lbfgs { starts: 20, memory: 10 }, max_evaluations: 40000, ..Self::nelder_mead() }
+    }
+
+    /// At most this many cost evaluations (> 0).
+    pub fn with_max_evaluations(mut self, n: usize) -> Result<Self> {
+        if n == 0 {
+            return Err(HasError::invalid("max_evaluations", "must be > 0"));
+        }
+        self.max_evaluations = n;
+        Ok(self)
+    }
+
+    /// Stop after this many seconds (> 0).
+    pub fn with_time_limit(mut self, seconds: f64) -> Result<Self> {
+        if !(seconds.is_finite() && seconds > 0.0) {
+            return Err(HasError::invalid("time_limit_s", format!("must be a finite number > 0, got {seconds}")));
+        }
+        self.time_limit = Some(Duration::from_secs_f64(seconds));
+        Ok(self)
+    }
+
+    /// Seed of the random starts and swarm.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Number of L-BFGS starts (>= 1).
+    pub fn with_starts(mut self, starts: usize) -> Result<Self> {
+        match &mut self.method {
+            Method::Lbfgs { starts: s, .. } if starts >= 1 => *s = starts,
+            Method::Lbfgs { .. } => return Err(HasError::invalid("starts", "must be >= 1")),
+            _ => return Err(HasError::invalid("starts", "applies to L-BFGS only")),
+        }
+        Ok(self)
+    }
+
+    /// Group pairing for twin starts (see [`point_reflection`]).
+    pub fn with_twins(mut self, sigma: Option<Vec<usize>>) -> Self {
+        self.twins = sigma;
+        self
+    }
+
+    /// Start of the search (group phases, rad); default zero.
+    pub fn with_start(mut self, start: Vec<f64>) -> Result<Self> {
+        crate::error::require_finite("start", &start)?;
+        self.start = Some(start);
+        Ok(self)
+    }
+
+    /// Runs the search on `cost`. `cancel`, when set by another thread, stops it promptly.
+    pub fn run(&self, cost: &HybridCost, cancel: Option<&AtomicBool>) -> Result<Estimate> {
+        let g = cost.n_groups;
+        let t0 = Instant::now();
+        let deadline = self.time_limit.map(|d| t0 + d);
+        let start = match &self.start {
+            Some(s) if s.len() != g => return Err(HasError::invalid("start", format!("has {} values for {g} groups", s.len()))),
+            Some(s) => reduced(s),
+            None => vec![0.0; g - 1],
+        };
+        let runs: Vec<Run> = match &self.method {
+            Method::NelderMead { step, tolerance } => {
+                // Restarted Nelder–Mead: a simplex that has collapsed (cost spread < tolerance) is
+                // rebuilt around the best point, a quarter the size each time, while restarts
+                // still lower the cost and evaluations remain.
+                let p = Problem::new(cost, self.max_evaluations, deadline, cancel);
+                let mut x = start.clone();
+                let mut last = f64::INFINITY;
+                let mut outcome = Ok(());
+                let mut size = *step;
+                loop {
+                    let mut simplex = vec![x.clone()];
+                    for i in 0..g - 1 {
+                        let mut y = x.clone();
+                        y[i] += size;
+                        simplex.push(y);
+                    }
+                    // Dimension-adaptive coefficients (Gao & Han, Comput Optim Appl 51, 2012):
+                    // the classic ones stall in 15+ dimensions (argmin caps the contraction at 0.5).
+                    let n = (g - 1) as f64;
+                    let solver = NelderMead::new(simplex)
+                        .with_sd_tolerance(*tolerance)
+                        .and_then(|s| s.with_alpha(1.0))
+                        .and_then(|s| s.with_gamma(1.0 + 2.0 / n))
+                        .and_then(|s| s.with_rho(0.5))
+                        .and_then(|s| s.with_sigma(1.0 - 1.0 / n))
+                        .map_err(argmin_error)?;
+                    outcome = Executor::new(&p, solver).configure(|s| s.max_iters(self.max_evaluations as u64)).run().map(|_| ());
+                    let (best, params) = p.best();
+                    if outcome.is_err() || best >= last {
+                        break;
+                    }
+                    last = best;
+                    x = params;
+                    // Each restart probes a smaller neighbourhood of the best point.
+                    size = (0.25 * size).max(1e-3);
+                }
+                vec![p.finish(outcome)]
+            }
+            Method::ParticleSwarm { particles } => {
+                let p = Problem::new(cost, self.max_evaluations, deadline, cancel);
+                let bounds = (vec![-PI; g - 1], vec![PI; g - 1]);
+                let solver = ParticleSwarm::new(bounds, *particles).with_rng_generator(ChaCha8Rng::seed_from_u64(self.seed));
+                let iters = (self.max_evaluations / particles.max(&1)).max(1) as u64;
+                let outcome = Executor::new(&p, solver).configure(|s| s.max_iters(iters)).run().map(|_| ());
+                vec![p.finish(outcome)]
+            }
+            Method::Lbfgs { starts, memory } => {
+                let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+                let mut inits = vec![start.clone()];
+                for _ in 1..*starts {
+                    inits.push((0..g - 1).map(|_| rng.random_range(-PI..PI)).collect());
+                }
+                let per_start = (self.max_evaluations / (2 * starts)).max(1);
+                let run_all = |inits: &[Vec<f64>]| {
+                    inits.par_iter().map(|x0| lbfgs_run(cost, x0.clone(), *memory, per_start, deadline, cancel)).collect::<Result<Vec<_>>>()
+                };
+                let mut runs = run_all(&inits)?;
+                // Second round: the twins of the best distinct minima, and perturbations of the best.
+                runs.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+                let mut second: Vec<Vec<f64>> = Vec::new();
+                let mut distinct: Vec<Vec<f64>> = Vec::new();
+                for r in &runs {
+                    let p = full(&r.params);
+                    if distinct.len() < 4 && distinct.iter().all(|d| phase_error(d, &p) > 0.1) {
+                        distinct.push(p);
+                    }
+                }
+                if let Some(sigma) = &self.twins {
+                    second.extend(distinct.iter().map(|d| reduced(&twin(d, sigma))));
+                }
+                let best = runs[0].params.clone();
+                while second.len() < *starts {
+                    second.push(best.iter().map(|b| wrap(b + rng.random_range(-1.0..1.0))).collect());
+                }
+                runs.extend(run_all(&second)?);
+                runs
+            }
+        };
+        let evaluations = runs.iter().map(|r| r.evaluations).sum();
+        let stop = runs.iter().map(|r| r.stop).find(|s| *s != Stop::Converged).unwrap_or(Stop::Converged);
+        // Best over all runs; ties go to the earliest start (deterministic).
+        let best = runs.iter().enumerate().min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0))).map(|(i, _)| i).unwrap_or(0);
+        let minima: Vec<Minimum> = runs.iter().map(|r| Minimum { phases: centred(&full(&r.params)), cost: r.cost }).collect();
+        let b = &runs[best];
+        Ok(Estimate {
+            phases: centred(&full(&b.params)),
+            cost: b.cost,
+            evaluations,
+            seconds: t0.elapsed().as_secs_f64(),
+            history: b.history.clone(),
+            stop,
+            minima,
+        })
+    }
+}
+
+/// A local minimum found by one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Minimum {
+    pub phases: Vec<f64>,
+    pub cost: f64,
+}
+
+/// The result of an estimation.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    /// Group phases (rad) in (-pi, pi], zero circular mean: subtract them to correct.
+    pub phases: Vec<f64>,
+    pub cost: f64,
+    pub evaluations: usize,
+    pub seconds: f64,
+    /// Best cost after each evaluation of the winning run.
+    pub history: Vec<f64>,
+    pub stop: Stop,
+    /// The end point of every run (one per start).
+    pub minima: Vec<Minimum>,
+}
+
+struct Run {
+    params: Vec<f64>,
+    cost: f64,
+    evaluations: usize,
+    history: Vec<f64>,
+    stop: Stop,
+}
+
+/// The argmin problem: counts evaluations, keeps the best point, enforces the limits.
+struct Problem<'a> {
+    cost: &'a HybridCost,
+    budget: usize,
+    deadline: Option<Instant>,
+    cancel: Option<&'a AtomicBool>,
+    evaluations: AtomicUsize,
+    best: Mutex<(f64, Vec<f64>, Vec<f64>)>,
+}
+
+/// Raised inside the cost to end a run early.
+#[derive(Debug)]
+struct EarlyStop(Stop);
+
+impl std::fmt::Display for EarlyStop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.0.name())
+    }
+}
+
+impl std::error::Error for EarlyStop {}
+
+impl<'a> Problem<'a> {
+    fn new(cost: &'a HybridCost, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
+        Problem { cost, budget, deadline, cancel, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, vec![], vec![])) }
+    }
+
+    fn check(&self) -> std::result::Result<(), EarlyStop> {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            return Err(EarlyStop(Stop::Interrupted));
+        }
+        if self.deadline.is_some_and(|d| Instant::now() > d) {
+            return Err(EarlyStop(Stop::TimeLimit));
+        }
+        if self.evaluations.fetch_add(1, Ordering::Relaxed) >= self.budget {
+            return Err(EarlyStop(Stop::EvaluationLimit));
+        }
+        Ok(())
+    }
+
+    fn record(&self, x: &[f64], c: f64) {
+        if let Ok(mut b) = self.best.lock() {
+            if c < b.0 {
+                b.0 = c;
+                b.1 = x.to_vec();
+            }
+            let best = b.0;
+            b.2.push(best);
+        }
+    }
+
+    /// The best cost and point so far.
+    fn best(&self) -> (f64, Vec<f64>) {
+        self.best.lock().map(|b| (b.0, b.1.clone())).unwrap_or((f64::INFINITY, vec![]))
+    }
+
+    fn finish(self, outcome: std::result::Result<(), argmin::core::Error>) -> Run {
+        let stop = match outcome {
+            Ok(()) => Stop::Converged,
+            Err(e) => e.downcast_ref::<EarlyStop>().map_or(Stop::Converged, |s| s.0),
+        };
+        let evaluations = self.evaluations.load(Ordering::Relaxed).min(self.budget);
+        let (cost, params, history) = self.best.into_inner().unwrap_or_else(|p| p.into_inner());
+        Run { params, cost, evaluations, history, stop }
+    }
+}
+
+impl CostFunction for &Problem<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, x: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
+        self.check()?;
+        let c = self.cost.cost(&full(x));
+        let c = if c.is_finite() { c } else { PENALTY };
+        self.record(x, c);
+        Ok(c)
+    }
+}
+
+impl Gradient for &Problem<'_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+
+    fn gradient(&self, x: &Vec<f64>) -> std::result::Result<Vec<f64>, argmin::core::Error> {
+        self.check()?;
+        let (c, g) = self.cost.cost_and_gradient(&full(x));
+        self.record(x, if c.is_finite() { c } else { PENALTY });
+        Ok(g[1..].iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect())
+    }
+}
+
+fn lbfgs_run(
+    cost: &HybridCost,
+    x0: Vec<f64>,
+    memory: usize,
+    budget: usize,
+    deadline: Option<Instant>,
+    cancel: Option<&AtomicBool>,
+) -> Result<Run> {
+    let p = Problem::new(cost, budget, deadline, cancel);
+    let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory)
+        .with_tolerance_grad(1e-12)
+        .and_then(|s| s.with_tolerance_cost(1e-14))
+        .map_err(argmin_error)?;
+    let outcome = Executor::new(&p, solver).configure(|s| s.param(x0).max_iters(budget as u64)).run().map(|_| ());
+    Ok(p.finish(outcome))
+}
+
+fn argmin_error(e: argmin::core::Error) -> HasError {
+    HasError::invalid("estimator", e.to_string())
+}
+
+/// `[0, x...]`: group 0 carries the (fixed) common phase.
+fn full(x: &[f64]) -> Vec<f64> {
+    std::iter::once(0.0).chain(x.iter().copied()).collect()
+}
+
+/// Phases relative to group 0.
+fn reduced(phases: &[f64]) -> Vec<f64> {
+    phases[1..].iter().map(|p| wrap(p - phases[0])).collect()
+}
+
+/// Wraps to (-pi, pi].
+pub fn wrap(p: f64) -> f64 {
+    let w = (p + PI).rem_euclid(2.0 * PI) - PI;
+    if w == -PI {
+        PI
+    } else {
+        w
+    }
+}
+
+/// Phases minus their circular mean (angle of the mean phasor), wrapped.
+pub fn centred(phases: &[f64]) -> Vec<f64> {
+    let m: C64 = phases.iter().map(|&p| C64::from_polar(1.0, p)).sum();
+    let offset = if m.norm() > 1e-12 { m.arg() } else { 0.0 };
+    phases.iter().map(|p| wrap(p - offset)).collect()
+}
+
+/// RMS of the wrapped difference `a - b` after removing the best common offset (SPEC §6).
+pub fn phase_error(a: &[f64], b: &[f64]) -> f64 {
+    let m: C64 = a.iter().zip(b).map(|(x, y)| C64::from_polar(1.0, x - y)).sum();
+    let offset = m.arg();
+    (a.iter().zip(b).map(|(x, y)| wrap(x - y - offset).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+/// Condenses per-element phases to per-group ones by the circular mean over each group (SPEC §2).
+pub fn condense(element_phases: &[f64], groups: &[usize]) -> Result<Vec<f64>> {
+    if element_phases.len() != groups.len() {
+        return Err(HasError::invalid("phases", format!("has {} values for {} elements", element_phases.len(), groups.len())));
+    }
+    let g = groups.iter().max().map_or(0, |m| m + 1);
+    let mut sums = vec![C64::new(0.0, 0.0); g];
+    for (&p, &k) in element_phases.iter().zip(groups) {
+        sums[k] += C64::from_polar(1.0, p);
+    }
+    Ok(sums.iter().map(|s| s.arg()).collect())
+}
+
+/// A solution that fits the data about as well as the best one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    pub phases: Vec<f64>,
+    pub cost: f64,
+    /// Focal ARFI of the beam corrected with the best estimate if this candidate were the truth,
+    /// relative to the ideal focus (the model's prediction).
+    pub predicted_recovery: f64,
+}
+
+/// Whether the data decide between clearly different solutions.
+#[derive(Debug, Clone)]
+pub struct Assessment {
+    /// True when some solution within the noise margin would leave less than `threshold` of
+    /// the ideal focus after the best estimate's correction.
+    pub ambiguous: bool,
+    /// Cost margin: `sigma² · chi²_0.95(G - 1)`.
+    pub margin: f64,
+    pub candidates: Vec<Candidate>,
+    pub worst_recovery: f64,
+    /// Known group phases (rad) to add for one more acquisition that best separates the
+    /// candidates, and that separation (squared image difference in units of sigma²).
+    pub suggested_phases: Vec<f64>,
+    pub suggested_separation: f64,
+}
+
+/// Upper 95 % point of chi² with `k` degrees of freedom (Wilson–Hilferty, within 1 % for k ≥ 3).
+pub fn chi2_95(k: usize) -> f64 {
+    let k = k.max(1) as f64;
+    let z = 1.644_853_626_951_472_2;
+    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
+}
+
+/// The point-reflection pairing of groups (group centroid `c` ↔ the group nearest `-c`), when
+/// it is a permutation: for a symmetric aperture, one in-focus intensity image hardly tells
+/// `phi_g` from its twin `-phi_{sigma(g)}` (SPEC §8).
+pub fn point_reflection(positions: &[[f64; 3]], groups: &[usize]) -> Option<Vec<usize>> {
+    let g = groups.iter().max()? + 1;
+    let mut c = vec![[0.0; 2]; g];
+    let mut n = vec![0usize; g];
+    for (p, &k) in positions.iter().zip(groups) {
+        c[k][0] += p[0];
+        c[k][1] += p[1];
+        n[k] += 1;
+    }
+    c.iter_mut().zip(&n).for_each(|(c, &n)| c.iter_mut().for_each(|v| *v /= n.max(1) as f64));
+    let d = |a: [f64; 2], b: [f64; 2]| (a[0] + b[0]).hypot(a[1] + b[1]);
+    let sigma: Vec<usize> = (0..g)
+        .map(|a| (0..g).min_by(|&x, &y| d(c[a], c[x]).total_cmp(&d(c[a], c[y]))).unwrap_or(a))
+        .collect();
+    let scale = c.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
+    let is_perm = (0..g).all(|a| sigma[sigma[a]] == a);
+    let close = (0..g).all(|a| d(c[a], c[sigma[a]]) <= 0.05 * scale.max(1e-9));
+    (is_perm && close).then_some(sigma)
+}
+
+/// The twin of group phases under a point reflection: `psi_g = -phi_{sigma(g)}`.
+pub fn twin(phases: &[f64], sigma: &[usize]) -> Vec<f64> {
+    centred(&sigma.iter().map(|&s| -phases[s]).collect::<Vec<_>>())
+}
+
+impl Estimate {
+    /// Looks for clearly different solutions that fit within the noise: the end points of every
+    /// start plus the refined twin of the best; each within the chi² margin of the best cost is
+    /// a candidate, scored by the focus its truth would leave after the best correction.
+    pub fn assess(&self, model: &crate::cost::Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
+        let g = model.cost.n_groups;
+        let margin = model.noise.powi(2) * chi2_95(g - 1);
+        let mut points: Vec<Minimum> = self.minima.clone();
+        points.push(Minimum { phases: self.phases.clone(), cost: self.cost });
+        if let Some(sig) = sigma {
+            let t = twin(&self.phases, sig);
+            let run = lbfgs_run(&model.cost, reduced(&t), 10, 3000, None, None)?;
+            points.push(Minimum { phases: centred(&full(&run.params)), cost: run.cost });
+        }
+        let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
+        let ideal = focal(&model.base, &vec![0.0; g])?;
+        let mut candidates: Vec<Candidate> = Vec::new();
+        for p in points.iter().filter(|p| p.cost <= best + margin) {
+            if candidates.iter().any(|c| phase_error(&c.phases, &p.phases) < 0.05) {
+                continue;
+            }
+            let residual: Vec<f64> = p.phases.iter().zip(&self.phases).map(|(t, e)| t - e).collect();
+            let predicted_recovery = focal(&model.base, &residual)? / ideal;
+            candidates.push(Candidate { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
+        }
+        let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+        let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
+        Ok(Assessment { ambiguous: worst_recovery < threshold, margin, candidates, worst_recovery, suggested_phases, suggested_separation })
+    }
+}
+
+/// The largest value of the kernel's image (the focal ARFI) for group phases.
+fn focal(kernel: &crate::cost::ArfiKernel, phases: &[f64]) -> Result<f64> {
+    Ok(kernel.image(phases)?.iter().copied().fold(f64::MIN, f64::max))
+}
+
+/// Among `tries` seeded random group-phase patterns (and a quadratic defocus-like pattern when
+/// there is one candidate), the one whose added image best separates the candidates: it
+/// maximises the smallest `Σ (d_a - d_b)² / sigma²` over candidate pairs.
+pub fn propose_diversity(model: &crate::cost::Model, candidates: &[Candidate], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
+    let g = model.cost.n_groups;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_d17e);
+    let sigma2 = model.noise.powi(2).max(1e-30);
+    let mut best = (vec![0.0; g], f64::NEG_INFINITY);
+    for _ in 0..tries.max(1) {
+        let d: Vec<f64> = (0..g).map(|_| rng.random_range(-PI..PI)).collect();
+        let images = candidates
+            .iter()
+            .map(|c| model.base.image(&c.phases.iter().zip(&d).map(|(p, q)| p + q).collect::<Vec<_>>()))
+            .collect::<Result<Vec<_>>>()?;
+        let mut sep = f64::INFINITY;
+        for a in 0..images.len() {
+            for b in a + 1..images.len() {
+                sep = sep.min((&images[a] - &images[b]).iter().map(|x| x * x).sum::<f64>() / sigma2);
+            }
+        }
+        if images.len() < 2 {
+            sep = 0.0;
+        }
+        if sep > best.1 {
+            best = (d, sep);
+        }
+    }
+    Ok((centred(&best.0), best.1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_and_phase_error() {
+        assert!((wrap(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap(-0.5) + 0.5).abs() < 1e-12);
+        let a = [0.1, 0.2, 3.1];
+        let b: Vec<f64> = a.iter().map(|x| x + 1.0).collect();
+        assert!(phase_error(&a, &b) < 1e-12);
+        assert!((phase_error(&[0.0, 0.0], &[0.5, -0.5]) - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn condense_takes_the_circular_mean() {
+        let c = condense(&[PI - 0.1, -PI + 0.1, 0.0, 0.2], &[0, 0, 1, 1]).unwrap();
+        assert!((c[0].abs() - PI).abs() < 1e-12);
+        assert!((c[1] - 0.1).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,216 @@
+//! Hybrid estimation on synthetic data from the default scenario (issue 3 acceptance).
+//! Every check is against the known applied aberration; tolerances are stated where used.
+
+use has_core::aberration::SkullScreen;
+use has_core::calibrate::calibrate;
+use has_core::cost::{build_model, ArfiKernel, Measurement};
+use has_core::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::scenario::Scenario;
+use has_core::simulation::Simulation;
+use ndarray::Array2;
+use std::sync::OnceLock;
+
+fn sim() -> &'static Simulation {
+    static SIM: OnceLock<Simulation> = OnceLock::new();
+    SIM.get_or_init(|| Simulation::new(&Scenario::default()).expect("default scenario"))
+}
+
+fn positions(s: &Simulation) -> Vec<[f64; 3]> {
+    s.transducer.elements.iter().map(|e| e.reference_point()).collect()
+}
+
+fn peak(img: &Array2<f64>) -> f64 {
+    img.iter().copied().fold(f64::MIN, f64::max)
+}
+
+/// Skull-like 16-group aberration (SPEC §3) for a seed.
+fn group_truth(seed: u64) -> Vec<f64> {
+    let s = sim();
+    condense(&SkullScreen::default().phases(&positions(s), seed).unwrap(), &s.groups).unwrap()
+}
+
+/// Recovered fraction: focal ARFI after subtracting the estimate, over the ideal (SPEC §6).
+fn recovered(truth: &[f64], estimate: &[f64]) -> f64 {
+    let s = sim();
+    let corrected: Vec<f64> = if truth.len() == estimate.len() {
+        truth.iter().zip(estimate).map(|(t, e)| t - e).collect()
+    } else {
+        truth.iter().zip(&s.groups).map(|(t, &g)| t - estimate[g]).collect()
+    };
+    peak(&s.arfi_image(&corrected).unwrap()) / peak(&s.arfi_image(&[]).unwrap())
+}
+
+/// Random known group phases for diversity image `k`.
+fn diversity(seed: u64, k: u64) -> Vec<f64> {
+    SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 1.5 }.phases(&vec![[0.0; 3]; 16], 7919 * seed + k).unwrap()
+}
+
+fn measurements(truth: &[f64], noise: f64, images: u64, seed: u64) -> Vec<Measurement> {
+    let s = sim();
+    let mut m = vec![Measurement { image: s.noisy_arfi_image(truth, noise, seed).unwrap(), known: vec![] }];
+    for k in 1..images {
+        let d = diversity(seed, k);
+        let total: Vec<f64> = if truth.len() == 16 {
+            truth.iter().zip(&d).map(|(t, x)| t + x).collect()
+        } else {
+            truth.iter().zip(&s.groups).map(|(t, &g)| t + d[g]).collect()
+        };
+        m.push(Measurement { image: s.noisy_arfi_image(&total, noise, 1000 * seed + k).unwrap(), known: d });
+    }
+    m
+}
+
+fn lbfgs() -> Estimator {
+    Estimator::lbfgs().with_twins(point_reflection(&positions(sim()), &sim().groups))
+}
+
+#[test]
+fn kernel_image_equals_the_direct_simulation() {
+    // Same field, same operators, different order of summation: equal to rounding (1e-9 of peak).
+    let s = sim();
+    let truth = group_truth(11);
+    let k = ArfiKernel::build(s, &s.groups, &[], 50..78, 35..61).unwrap();
+    let direct = s.arfi_image(&truth).unwrap();
+    let fast = k.image(&truth).unwrap();
+    let scale = peak(&direct);
+    for ((i, j), v) in fast.indexed_iter() {
+        assert!((v - direct[[50 + i, 35 + j]]).abs() < 1e-9 * scale, "pixel ({i}, {j})");
+    }
+}
+
+#[test]
+fn gradient_matches_finite_differences() {
+    let s = sim();
+    let truth = group_truth(12);
+    let model = build_model(s, &measurements(&truth, 0.02, 2, 12), 0.05, 3).unwrap();
+    let x: Vec<f64> = (0..16).map(|g| 0.3 * (g as f64).sin()).collect();
+    let (_, grad) = model.cost.cost_and_gradient(&x);
+    let h = 1e-6;
+    for g in 0..16 {
+        let mut a = x.clone();
+        let mut b = x.clone();
+        a[g] += h;
+        b[g] -= h;
+        let fd = (model.cost.cost(&a) - model.cost.cost(&b)) / (2.0 * h);
+        // Central differences are accurate to O(h²) ≈ 1e-12 relative plus rounding ~1e-10/h.
+        assert!((fd - grad[g]).abs() <= 1e-5 * grad.iter().map(|v| v.abs()).fold(0.0, f64::max), "group {g}: {fd} vs {}", grad[g]);
+    }
+}
+
+#[test]
+fn noise_free_single_image_recovers_the_focus() {
+    let mut fractions = Vec::new();
+    for seed in 1..=5 {
+        let truth = group_truth(seed);
+        let model = build_model(sim(), &measurements(&truth, 0.0, 1, seed), 0.05, 3).unwrap();
+        let e = lbfgs().run(&model.cost, None).unwrap();
+        fractions.push(recovered(&truth, &e.phases));
+    }
+    let mean = fractions.iter().sum::<f64>() / fractions.len() as f64;
+    eprintln!("noise-free single image: recovered {fractions:.3?}, mean {mean:.3}");
+    assert!(mean >= 0.95, "{fractions:?}");
+}
+
+#[test]
+fn four_diversity_images_at_0_02_rad_recover_the_focus() {
+    let mut fractions = Vec::new();
+    for seed in 1..=5 {
+        let truth = group_truth(seed);
+        let model = build_model(sim(), &measurements(&truth, 0.02, 4, seed), 0.05, 3).unwrap();
+        let e = lbfgs().run(&model.cost, None).unwrap();
+        fractions.push(recovered(&truth, &e.phases));
+    }
+    let mean = fractions.iter().sum::<f64>() / fractions.len() as f64;
+    eprintln!("4 images at 0.02 rad: recovered {fractions:.3?}, mean {mean:.3}");
+    assert!(mean >= 0.90, "{fractions:?}");
+}
+
+#[test]
+fn single_noisy_image_never_gives_a_silent_bad_answer() {
+    // Every estimate recovering < 0.8 must be flagged; unflagged ones must recover >= 0.9.
+    let s = sim();
+    let sigma = point_reflection(&positions(s), &s.groups);
+    for noise in [0.005, 0.02] {
+        for seed in 1..=5 {
+            let truth = group_truth(seed);
+            let model = build_model(s, &measurements(&truth, noise, 1, seed), 0.05, 3).unwrap();
+            let e = lbfgs().run(&model.cost, None).unwrap();
+            let a = e.assess(&model, sigma.as_deref(), 0.9, seed).unwrap();
+            let r = recovered(&truth, &e.phases);
+            eprintln!("noise {noise} seed {seed}: recovered {r:.3}, ambiguous {} (worst {:.3}, {} candidates)", a.ambiguous, a.worst_recovery, a.candidates.len());
+            if r < 0.8 {
+                assert!(a.ambiguous, "noise {noise} seed {seed}: recovered {r:.3} without a flag");
+                assert!(a.suggested_phases.len() == 16 && a.suggested_separation > 0.0);
+            }
+            if !a.ambiguous {
+                assert!(r >= 0.9, "noise {noise} seed {seed}: unflagged estimate recovered {r:.3}");
+            }
+        }
+    }
+}
+
+#[test]
+fn nelder_mead_from_zero_refocuses_and_lbfgs_recovers_the_applied_phases_noise_free() {
+    // The paper's Figure 3 setting: a moderate random aberration, noise-free image, zero start.
+    // Nelder–Mead with the paper's limits refocuses the beam but stops in a shallow local minimum
+    // (phase error ~0.3 rad, cost 1e-5 against 0 at the truth); L-BFGS with the analytic gradient
+    // recovers the applied phases themselves, up to the common phase.
+    let s = sim();
+    let truth = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 0.4 }.phases(&vec![[0.0; 3]; 16], 3).unwrap();
+    let model = build_model(s, &measurements(&truth, 0.0, 1, 3), 0.05, 3).unwrap();
+    let nm = Estimator::nelder_mead().run(&model.cost, None).unwrap();
+    let r = recovered(&truth, &nm.phases);
+    let aberrated = recovered(&truth, &[0.0; 16]);
+    eprintln!("Nelder-Mead noise-free: aberrated {aberrated:.4}, recovered {r:.4}, phase error {:.4} rad, {} evaluations", phase_error(&nm.phases, &truth), nm.evaluations);
+    assert!(nm.evaluations <= 8000);
+    // Measured 0.935 from 0.920 aberrated (2026-11-23); from a 1 rad aberration it ends worse
+    // than it started (0.42 from 0.58), so the paper-faithful default is not the recommended one.
+    assert!(r >= 0.9 && r > aberrated, "recovered {r} from {aberrated}");
+    let lb = lbfgs().run(&model.cost, None).unwrap();
+    let err = phase_error(&lb.phases, &truth);
+    eprintln!("L-BFGS noise-free: phase error {err:.2e} rad");
+    assert!(err < 0.01, "phase error {err}");
+}
+
+#[test]
+fn calibration_recovers_width_and_amplitude() {
+    // A no-aberration image with W = 2.7 mm, the scenario amplitude and 0.02 rad noise.
+    let s = sim();
+    for seed in [1, 2, 3] {
+        let image = s.noisy_arfi_image(&[], 0.02, seed).unwrap();
+        let c = calibrate(s, &image, &[], 0.05, 10e-3).unwrap();
+        eprintln!("calibration seed {seed}: W {:.3} mm, amplitude ratio {:.4}, noise {:.4}", c.broadening_width * 1e3, c.amplitude / s.amplitude, c.noise);
+        assert!((c.broadening_width - 2.7e-3).abs() < 0.1e-3);
+        assert!((c.amplitude / s.amplitude - 1.0).abs() < 0.02);
+        assert!((c.noise - 0.02).abs() < 0.002);
+    }
+}
+
+#[test]
+fn evaluation_and_time_limits_are_honoured() {
+    let s = sim();
+    let truth = group_truth(4);
+    let model = build_model(s, &measurements(&truth, 0.02, 1, 4), 0.05, 3).unwrap();
+    let e = Estimator::nelder_mead().with_max_evaluations(100).unwrap().run(&model.cost, None).unwrap();
+    assert_eq!(e.evaluations, 100);
+    assert_eq!(e.stop.name(), "evaluation limit");
+    let e = Estimator::lbfgs().with_time_limit(0.05).unwrap().run(&model.cost, None).unwrap();
+    assert!(e.seconds < 1.0, "{}", e.seconds);
+    let cancel = std::sync::atomic::AtomicBool::new(true);
+    let e = Estimator::particle_swarm().run(&model.cost, Some(&cancel)).unwrap();
+    assert_eq!(e.stop.name(), "interrupted");
+}
+
+#[test]
+fn estimation_is_deterministic() {
+    let s = sim();
+    let truth = group_truth(5);
+    let model = build_model(s, &measurements(&truth, 0.02, 1, 5), 0.05, 3).unwrap();
+    for est in [Estimator::nelder_mead(), Estimator::particle_swarm().with_seed(9), lbfgs().with_seed(9)] {
+        let a = est.run(&model.cost, None).unwrap();
+        let b = est.run(&model.cost, None).unwrap();
+        assert_eq!(a.phases, b.phases);
+        assert_eq!(a.cost, b.cost);
+    }
+}
+
