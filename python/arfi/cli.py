@@ -14,7 +14,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from arfi.io import read_phases, write_arfi_image, write_json, write_npz
+import json
+
+from arfi.io import read_arfi_image, read_phases, write_arfi_image, write_json, write_npz
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -125,6 +127,90 @@ def _expand(sim: Simulation, phases: np.ndarray, name: str) -> np.ndarray:
     raise ValueError(f"{name}: has {phases.size} values; expected {sim.n_elements} (one per element) or {sim.n_groups} (one per group)")
 
 
+def _read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """An MR-ARFI image checked against the scenario's MR geometry, and its known phases."""
+    image, affine, side = read_arfi_image(path)
+    if image.shape != tuple(n for n in sim.mr_volume_shape if n != 1):
+        raise ValueError(f"image: {path}: shape {image.shape} does not match the scenario's MR matrix "
+                         f"{tuple(n for n in sim.mr_volume_shape if n != 1)}")
+    if not np.allclose(affine[:3], sim.mr_affine_mm[:3], atol=1e-3):
+        raise ValueError(f"image: {path}: its affine does not match the scenario's MR geometry "
+                         f"(plane, centre_mm, fov_mm, slice_thickness_mm)")
+    known = side.get("applied_phases_rad")
+    if known is not None:
+        try:
+            known = np.asarray(known, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers") from None
+        if known.ndim != 1 or known.size not in (sim.n_elements, sim.n_groups) or not np.all(np.isfinite(known)):
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must hold {sim.n_elements} or {sim.n_groups} "
+                             f"finite values, got shape {known.shape}")
+    return image, known
+
+
+def _calibrated(args: argparse.Namespace) -> Simulation:
+    """The scenario's simulation, with the calibration file applied when given."""
+    sim = Simulation(_scenario(args), groups=getattr(args, "groups", None))
+    if getattr(args, "calibration", None):
+        path = Path(args.calibration)
+        if not path.is_file():
+            raise FileNotFoundError(f"--calibration: {path}: no such file")
+        try:
+            cal = json.loads(path.read_text(encoding="utf-8"))
+            width, amplitude = float(cal["broadening_width_mm"]), float(cal["amplitude"])
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"--calibration: {path}: not a calibration file ({e})") from None
+        if cal.get("scenario") not in (None, sim.scenario.name) or cal.get("frequency_hz") not in (None, sim.scenario.to_dict()["frequency_hz"]):
+            raise ValueError(f"--calibration: {path}: made for scenario {cal.get('scenario')!r} at {cal.get('frequency_hz')} Hz, "
+                             f"not {sim.scenario.name!r}")
+        sim = sim.with_calibration(width, amplitude)
+    return sim
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    t = time.perf_counter()
+    sim = Simulation(_scenario(args))
+    image, known = _read_image(sim, args.image)
+    c = sim.calibrate(image, known, args.max_width_mm)
+    print(f"calibrate: broadening width W = {c.broadening_width_mm:.3f} mm, amplitude {c.amplitude:.4e} rad·m³/N "
+          f"({c.n_pixels} pixels, noise {c.noise_rad:.4f} rad)")
+    _finish(args, {**c.to_dict(), "scenario": sim.scenario.name, "frequency_hz": sim.scenario.to_dict()["frequency_hz"],
+                   "image": args.image, "seconds": time.perf_counter() - t})
+    return 0
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    t = time.perf_counter()
+    sim = _calibrated(args)
+    pairs = [_read_image(sim, p) for p in args.image]
+    e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
+                     time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude)
+    total = time.perf_counter() - t
+    print(f"estimate: {len(e.phases_rad)} group phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
+          f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})")
+    if e.ambiguous:
+        print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
+              f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
+              f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
+    if args.out_phases:
+        with_atomic_npy(args.out_phases, e.phases_rad)
+    if args.suggest:
+        with_atomic_npy(args.suggest, e.suggested_phases_rad)
+    _finish(args, {**e.to_dict(), "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
+    return 0
+
+
+def with_atomic_npy(path: str, array: np.ndarray) -> None:
+    """Writes a .npy file atomically."""
+    from arfi.io import atomic_path
+
+    if not path.endswith(".npy"):
+        raise UsageError(f"{path}: phase vectors are written as .npy")
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the embedded phantom experiment)")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
@@ -167,6 +253,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--out", required=True, metavar="M.nii.gz")
     p.set_defaults(run=cmd_simulate)
+
+    p = sub.add_parser("calibrate", help="fit the broadening width and amplitude to a no-aberration image",
+                       description="Fit the Gaussian broadening width W and the force-to-phase amplitude (paper Eq. 2) "
+                       "to an MR-ARFI image taken with no aberration (known phases from its sidecar are honoured).",
+                       epilog="example: arfi calibrate --image calibration.nii.gz --json cal.json")
+    _add_common(p)
+    p.add_argument("--image", required=True, metavar="C.nii.gz")
+    p.add_argument("--max-width-mm", type=float, default=10.0, dest="max_width_mm", help="largest W searched (default 10)")
+    p.set_defaults(run=cmd_calibrate)
+
+    p = sub.add_parser("estimate", help="hybrid estimation of the phase aberration",
+                       description="Estimate the per-group phase aberration whose simulated MR-ARFI image(s) match the "
+                       "measured one(s). Several --image options make a joint fit; each image's sidecar may hold the known "
+                       "phases added for it (applied_phases_rad). Subtract the estimate to correct.",
+                       epilog="example: arfi estimate --image aberrated.nii.gz --calibration cal.json --groups 16 "
+                       "--method lbfgs --json estimate.json")
+    _add_common(p)
+    p.add_argument("--image", required=True, action="append", metavar="M.nii.gz")
+    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    p.add_argument("--groups", type=int, default=16, help="number of contiguous element groups (default 16)")
+    p.add_argument("--method", choices=["nelder-mead", "pso", "lbfgs"], default="lbfgs",
+                   help="nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-evaluations", type=int, dest="max_evaluations")
+    p.add_argument("--time-limit-s", type=float, dest="time_limit_s")
+    p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
+    p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
+                   help="fit a free amplitude scale too (absorbs a uniform focal loss)")
+    p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
+    p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
+    p.set_defaults(run=cmd_estimate)
     return parser
 
 
@@ -176,6 +293,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if getattr(args, "seed", 0) is not None and not 0 <= getattr(args, "seed", 0) < 2**64:
             raise UsageError("--seed: must be an integer in [0, 2**64)")
+        for name in ("max_width_mm", "time_limit_s"):
+            v = getattr(args, name, None)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise UsageError(f"--{name.replace('_', '-')}: must be a finite number > 0, got {v}")
+        for name in ("max_evaluations", "starts"):
+            v = getattr(args, name, None)
+            if v is not None and v <= 0:
+                raise UsageError(f"--{name.replace('_', '-')}: must be > 0, got {v}")
         if getattr(args, "noise_rad", None) is not None and not (np.isfinite(args.noise_rad) and args.noise_rad >= 0):
             raise UsageError(f"--noise-rad: must be a finite number >= 0, got {args.noise_rad}")
         run: Callable[[argparse.Namespace], int] = args.run

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
 
 
@@ -25,6 +26,29 @@ def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.floa
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or infinite values")
     return np.ascontiguousarray(a)
+
+
+def _as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
+    try:
+        a = np.asarray(image, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name}: not numeric ({e})") from None
+    if a.ndim != 2:
+        raise ValueError(f"{name}: must be a 2-D image, got shape {a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
+    """``G`` → contiguous groups ``e * G // n``; an array → itself (validated in the core)."""
+    if isinstance(groups, (int, np.integer)):
+        g = int(groups)
+        if not 1 <= g <= n_elements:
+            raise ValueError(f"groups: must be between 1 and {n_elements}, got {g}")
+        return (np.arange(n_elements) * g // n_elements).astype(np.int64)
+    a = np.asarray(groups)
+    if a.ndim != 1 or a.dtype.kind not in "iu":
+        raise ValueError("groups: must be an integer count or a 1-D integer array (element -> group)")
+    return a.astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -61,9 +85,27 @@ class Simulation:
     (rad; a positive phase delays that element's emission, SPEC §2).
     """
 
-    def __init__(self, scenario: Scenario | None = None):
+    def __init__(self, scenario: Scenario | None = None, groups: int | ArrayLike | None = None):
         self.scenario = scenario if scenario is not None else Scenario.default()
         self._core = _core.CoreSimulation(self.scenario.to_toml(), "toml", self.scenario.base_dir)
+        if groups is not None:
+            self._core = self._core.with_groups(_group_map(groups, self.n_elements))
+
+    @classmethod
+    def _wrap(cls, scenario: Scenario, core: Any) -> "Simulation":
+        s = cls.__new__(cls)
+        s.scenario = scenario
+        s._core = core
+        return s
+
+    def with_calibration(self, broadening_width_mm: float, amplitude: float) -> "Simulation":
+        """The same simulation with a fitted broadening width (mm) and amplitude; the HAS plan
+        is shared, so this is cheap."""
+        return self._wrap(self.scenario, self._core.with_calibration(float(broadening_width_mm), float(amplitude)))
+
+    def with_groups(self, groups: int | ArrayLike) -> "Simulation":
+        """The same simulation with ``groups`` contiguous groups (or an element → group array)."""
+        return self._wrap(self.scenario, self._core.with_groups(_group_map(groups, self.n_elements)))
 
     @property
     def n_elements(self) -> int:
@@ -130,6 +172,50 @@ class Simulation:
         if not (isinstance(seed, (int, np.integer)) and 0 <= int(seed) < 2**64):
             raise ValueError(f"seed: must be an integer in [0, 2**64), got {seed!r}")
         return self._core.arfi_image(as_phases(phases), float(noise_rad), int(seed))
+
+    def skull_phases(self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0,
+                     jitter_rad: float = 0.5) -> NDArray[np.float64]:
+        """Seeded skull-like per-element aberration (rad): a smooth random screen over the
+        aperture plus per-element jitter (SPEC §3)."""
+        return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
+
+    def condense(self, element_phases: ArrayLike) -> NDArray[np.float64]:
+        """Per-group circular means of per-element phases (SPEC §2)."""
+        return self._core.condense(as_phases(element_phases, "element_phases"))
+
+    def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
+        """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
+        return Calibration(**self._core.calibrate(_as_image(image, "image"), as_phases(known, "known"), None, float(max_width_mm)))
+
+    def estimate(
+        self,
+        images: ArrayLike | list[ArrayLike],
+        known: list[ArrayLike | None] | None = None,
+        method: str = "lbfgs",
+        max_evaluations: int | None = None,
+        time_limit_s: float | None = None,
+        seed: int = 0,
+        starts: int | None = None,
+        fit_amplitude: bool = False,
+    ) -> Estimate:
+        """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
+        taken with ``known`` phases (per element or per group) added to the steering.
+
+        ``method``: ``"nelder-mead"`` (the paper's: zero start, <= 8000 evaluations), ``"pso"``
+        or ``"lbfgs"`` (analytic gradient, seeded multi-start; the default). The result flags
+        ``ambiguous`` when clearly different solutions fit within the noise."""
+        imgs = [images] if isinstance(images, np.ndarray) and np.ndim(images) == 2 else list(images)  # type: ignore[arg-type]
+        if not imgs:
+            raise ValueError("images: need at least one image")
+        arrays = [_as_image(im, f"images[{k}]") for k, im in enumerate(imgs)]
+        kn = [None] * len(arrays) if known is None else list(known)
+        if len(kn) != len(arrays):
+            raise ValueError(f"known: has {len(kn)} entries for {len(arrays)} images")
+        kn_arrays = [as_phases(k, f"known[{i}]") for i, k in enumerate(kn)]
+        if max_evaluations is not None and int(max_evaluations) <= 0:
+            raise ValueError("max_evaluations: must be > 0")
+        d = self._core.estimate(arrays, kn_arrays, method, max_evaluations, time_limit_s, int(seed), starts, bool(fit_amplitude))
+        return Estimate(**d)
 
     def source_field(self, phases: ArrayLike | None = None) -> NDArray[np.complex128]:
         """Pressure (Pa) on the source plane, shape (ny, nx)."""

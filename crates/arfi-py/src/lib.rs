@@ -3,10 +3,15 @@
 mod error;
 
 use error::to_py;
+use has_core::aberration::SkullScreen;
+use has_core::calibrate::calibrate;
+use has_core::cost::{build_model, Measurement};
+use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use std::sync::atomic::{AtomicBool, Ordering};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
@@ -178,6 +183,141 @@ impl CoreSimulation {
         Ok(img.into_pyarray(py))
     }
 
+    /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
+    fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
+        let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;
+        Ok(CoreSimulation { inner })
+    }
+
+    /// The same simulation with another element → group map.
+    fn with_groups(&self, groups: PyReadonlyArray1<'_, i64>) -> PyResult<Self> {
+        let g = groups.as_array();
+        if let Some(v) = g.iter().find(|v| **v < 0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!("groups: negative group index {v}")));
+        }
+        let mut inner = self.inner.clone();
+        inner.set_groups(g.iter().map(|&v| v as usize).collect()).map_err(to_py)?;
+        Ok(CoreSimulation { inner })
+    }
+
+    /// Skull-like per-element phases (rad), seeded (SPEC §3).
+    #[pyo3(signature = (seed, correlation_length_mm=12.0, peak_to_peak_rad=6.0, jitter_rad=0.5))]
+    fn skull_phases<'py>(
+        &self,
+        py: Python<'py>,
+        seed: u64,
+        correlation_length_mm: f64,
+        peak_to_peak_rad: f64,
+        jitter_rad: f64,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let screen = SkullScreen { correlation_length: correlation_length_mm * 1e-3, peak_to_peak: peak_to_peak_rad, jitter: jitter_rad };
+        let pos: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
+    }
+
+    /// Per-group circular means of per-element phases.
+    fn condense<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups).map_err(to_py)?.into_pyarray(py))
+    }
+
+    /// Fits broadening width and amplitude to a no-aberration image.
+    #[pyo3(signature = (image, known=None, mask_fraction=None, max_width_mm=10.0))]
+    fn calibrate<'py>(
+        &self,
+        py: Python<'py>,
+        image: PyReadonlyArray2<'py, f64>,
+        known: Option<PyReadonlyArray1<'py, f64>>,
+        mask_fraction: Option<f64>,
+        max_width_mm: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let image = image.as_array().to_owned();
+        let known = phases_vec(known);
+        let frac = mask_fraction.unwrap_or(self.inner.mask_fraction);
+        if !(max_width_mm.is_finite() && max_width_mm > 0.0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!("max_width_mm: must be > 0, got {max_width_mm}")));
+        }
+        let c = py.detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3)).map_err(to_py)?;
+        let d = PyDict::new(py);
+        d.set_item("broadening_width_mm", c.broadening_width * 1e3)?;
+        d.set_item("amplitude", c.amplitude)?;
+        d.set_item("cost", c.cost)?;
+        d.set_item("n_pixels", c.n_pixels)?;
+        d.set_item("noise_rad", c.noise)?;
+        Ok(d)
+    }
+
+    /// Hybrid estimation from one or more images, each with its known added phases.
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9))]
+    #[allow(clippy::too_many_arguments)]
+    fn estimate<'py>(
+        &self,
+        py: Python<'py>,
+        images: Vec<PyReadonlyArray2<'py, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
+        method: &str,
+        max_evaluations: Option<usize>,
+        time_limit_s: Option<f64>,
+        seed: u64,
+        starts: Option<usize>,
+        fit_scale: bool,
+        threshold: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if images.len() != known.len() {
+            return Err(pyo3::exceptions::PyValueError::new_err("known: need one entry (or None) per image"));
+        }
+        let measurements: Vec<Measurement> =
+            images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect();
+        let positions: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        let sigma = point_reflection(&positions, &self.inner.groups);
+        let mut est = match method {
+            "nelder-mead" => Estimator::nelder_mead(),
+            "pso" => Estimator::particle_swarm(),
+            "lbfgs" => Estimator::lbfgs().with_twins(sigma.clone()),
+            m => return Err(pyo3::exceptions::PyValueError::new_err(format!("method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'"))),
+        }
+        .with_seed(seed);
+        if let Some(n) = max_evaluations {
+            est = est.with_max_evaluations(n).map_err(to_py)?;
+        }
+        if let Some(t) = time_limit_s {
+            est = est.with_time_limit(t).map_err(to_py)?;
+        }
+        if let Some(n) = starts {
+            est = est.with_starts(n).map_err(to_py)?;
+        }
+        let sim = &self.inner;
+        let cancel = AtomicBool::new(false);
+        let outcome = run_interruptible(py, &cancel, || {
+            let mut model = build_model(sim, &measurements, sim.mask_fraction, 3)?;
+            model.cost.fit_scale = fit_scale;
+            let e = est.run(&model.cost, Some(&cancel))?;
+            let a = e.assess(&model, sigma.as_deref(), threshold, seed)?;
+            Ok((model, e, a))
+        })?;
+        let (model, e, a) = outcome.map_err(to_py)?;
+        let d = PyDict::new(py);
+        d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
+        d.set_item("cost", e.cost)?;
+        d.set_item("evaluations", e.evaluations)?;
+        d.set_item("seconds", e.seconds)?;
+        d.set_item("ambiguous", a.ambiguous)?;
+        d.set_item("stop", e.stop.name())?;
+        d.set_item("method", method)?;
+        d.set_item("noise_floor", model.noise)?;
+        d.set_item("n_pixels", model.cost.n_pixels())?;
+        d.set_item("scale", model.cost.scale(&e.phases))?;
+        d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
+        d.set_item("margin", a.margin)?;
+        d.set_item("worst_recovery", a.worst_recovery)?;
+        let cands: Vec<Vec<f64>> = a.candidates.iter().map(|c| c.phases.clone()).collect();
+        d.set_item("candidate_phases_rad", cands)?;
+        d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
+        d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
+        d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
+        d.set_item("suggested_separation", a.suggested_separation)?;
+        Ok(d)
+    }
+
     /// The source-plane pressure (Pa), shape (ny, nx), for added phases.
     #[pyo3(signature = (phases=None))]
     fn source_field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>) -> PyResult<Bound<'py, PyArray2<C64>>> {
@@ -187,6 +327,31 @@ impl CoreSimulation {
         let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
         Ok(a.into_pyarray(py))
     }
+}
+
+/// Runs `work` on a worker thread with the GIL released, checking for Ctrl-C (Python signals)
+/// every 50 ms; a signal sets `cancel` (which the work polls) and is raised once it returns.
+fn run_interruptible<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl FnOnce() -> T + Send) -> PyResult<T> {
+    let mut signal: Option<PyErr> = None;
+    let out = py.detach(|| {
+        std::thread::scope(|scope| {
+            let worker = scope.spawn(work);
+            while !worker.is_finished() {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+                if signal.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        cancel.store(true, Ordering::Relaxed);
+                        signal = Some(e);
+                    }
+                }
+            }
+            worker.join()
+        })
+    });
+    if let Some(e) = signal {
+        return Err(e);
+    }
+    out.map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("the computation failed unexpectedly (worker thread panicked)"))
 }
 
 #[pymodule]

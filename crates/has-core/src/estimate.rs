@@ -162,9 +162,8 @@ impl Estimator {
                 let p = Problem::new(cost, self.max_evaluations, deadline, cancel);
                 let mut x = start.clone();
                 let mut last = f64::INFINITY;
-                let mut outcome = Ok(());
                 let mut size = *step;
-                loop {
+                let outcome = loop {
                     let mut simplex = vec![x.clone()];
                     for i in 0..g - 1 {
                         let mut y = x.clone();
@@ -181,16 +180,16 @@ impl Estimator {
                         .and_then(|s| s.with_rho(0.5))
                         .and_then(|s| s.with_sigma(1.0 - 1.0 / n))
                         .map_err(argmin_error)?;
-                    outcome = Executor::new(&p, solver).configure(|s| s.max_iters(self.max_evaluations as u64)).run().map(|_| ());
+                    let outcome = Executor::new(&p, solver).configure(|s| s.max_iters(self.max_evaluations as u64)).run().map(|_| ());
                     let (best, params) = p.best();
                     if outcome.is_err() || best >= last {
-                        break;
+                        break outcome;
                     }
                     last = best;
                     x = params;
                     // Each restart probes a smaller neighbourhood of the best point.
                     size = (0.25 * size).max(1e-3);
-                }
+                };
                 vec![p.finish(outcome)]
             }
             Method::ParticleSwarm { particles } => {

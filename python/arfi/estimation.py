@@ -1,0 +1,80 @@
+"""Results of calibration and hybrid estimation (SPEC §5–§6)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Broadening filter fitted to a no-aberration image (paper Eq. 2)."""
+
+    broadening_width_mm: float
+    amplitude: float
+    """Scale from broadened force density (N/m³) to ARFI phase (rad)."""
+    cost: float
+    n_pixels: int
+    noise_rad: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A hybrid estimate of the per-group aberration. Subtract ``phases_rad`` to correct."""
+
+    phases_rad: NDArray[np.float64]
+    cost: float
+    evaluations: int
+    seconds: float
+    ambiguous: bool
+    """True when clearly different solutions fit within the noise (see ``suggested_phases_rad``)."""
+    method: str
+    stop: str
+    noise_floor: float
+    n_pixels: int
+    scale: float
+    margin: float
+    worst_recovery: float
+    candidate_phases_rad: list[list[float]]
+    candidate_costs: list[float]
+    candidate_recoveries: list[float]
+    suggested_phases_rad: NDArray[np.float64]
+    """Known group phases to add for one more acquisition that would best separate the candidates."""
+    suggested_separation: float
+    cost_history: NDArray[np.float64] = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        for k, v in d.items():
+            if isinstance(v, np.ndarray):
+                d[k] = v.tolist()
+        return d
+
+
+def recovered_fraction(focal_corrected: float, focal_ideal: float) -> float:
+    """Focal ARFI of the corrected beam over that of the ideal beam (SPEC §6)."""
+    return float(focal_corrected / focal_ideal)
+
+
+def gain(focal_corrected: float, focal_aberrated: float) -> float:
+    """Corrected over aberrated focal ARFI, minus one (SPEC §6)."""
+    return float(focal_corrected / focal_aberrated - 1.0)
+
+
+def wrap(p: ArrayLike) -> NDArray[np.float64]:
+    """Wraps phases to (-pi, pi]."""
+    w = np.mod(np.asarray(p, dtype=np.float64) + np.pi, 2 * np.pi) - np.pi
+    return np.where(w == -np.pi, np.pi, w)
+
+
+def phase_error(estimate: ArrayLike, truth: ArrayLike) -> float:
+    """RMS of the wrapped difference after removing the best common offset (SPEC §6)."""
+    d = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
+    offset = np.angle(np.sum(np.exp(1j * d)))
+    return float(np.sqrt(np.mean(wrap(d - offset) ** 2)))
