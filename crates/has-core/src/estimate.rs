@@ -503,13 +503,23 @@ pub fn twin(phases: &[f64], sigma: &[usize]) -> Vec<f64> {
 
 impl Estimate {
     /// Looks for clearly different solutions that fit within the noise: the end points of every
-    /// start plus the refined twin of the best; each within the chi² margin of the best cost is
-    /// a candidate, scored by the focus its truth would leave after the best correction.
+    /// start, a 24-start L-BFGS exploration of its own (from the estimate, random points and
+    /// twins) and the refined twin of the estimate; each within the chi² margin of the best cost
+    /// is a candidate, scored by the focus its truth would leave after the estimate's correction.
     pub fn assess(&self, model: &crate::cost::Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
         let g = model.cost.n_groups;
         let margin = model.noise.powi(2) * chi2_95(g - 1);
         let mut points: Vec<Minimum> = self.minima.clone();
         points.push(Minimum { phases: self.phases.clone(), cost: self.cost });
+        // An exploration of its own, whatever method produced the estimate: L-BFGS from the
+        // estimate, its twin and seeded random starts.
+        let explore = Estimator::lbfgs()
+            .with_starts(12)?
+            .with_twins(sigma.map(<[usize]>::to_vec))
+            .with_seed(seed)
+            .with_start(self.phases.clone())?
+            .run(&model.cost, None)?;
+        points.extend(explore.minima);
         if let Some(sig) = sigma {
             let t = twin(&self.phases, sig);
             let run = lbfgs_run(&model.cost, reduced(&t), 10, 3000, None, None)?;
