@@ -2,7 +2,7 @@
 """Timings of the arfi core on the embedded default scenario (SPEC §3), in one Python process.
 
 Times ``arfi.Simulation()`` (resolve + grid + steering + one HAS march to build the plan),
-``sim.field()`` (one march to the focal plane, whole plane and axis kept) and
+``sim.field()`` (one march over all planes; the focal plane and the axis are kept) and
 ``sim.arfi_image()`` (one HAS run to the focal slab + the MR forward model), and reports the
 peak resident memory of the process (``resource.getrusage(...).ru_maxrss``). The 16 group
 fields in one batch have no Python binding: they are timed by the Rust example
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     gs = groups["median_s"] if groups else None
     rows = [
         ("`arfi.Simulation()` (plan build, one HAS march)", f"{med(build):.3f} s (first {build[0]:.3f} s)", "—", "—"),
-        ("`sim.field()` (march to the focal plane + axis)", f"{med(field):.3f} s", "—", "—"),
+        ("`sim.field()` (march of all planes, keeping the focal plane + axis)", f"{med(field):.3f} s", "—", "—"),
         ("`sim.arfi_image()` (one HAS run to the focal slab)", f"{med(image_t):.3f} s", f"≤ {TARGET_RUN_S} s", ratio(med(image_t), TARGET_RUN_S)),
         (
             "16 group fields in one batch (Rust)",
