@@ -3,13 +3,18 @@
 //!
 //! Run with `cargo bench -p has-core` (a few minutes on 2 cores); filter with
 //! `cargo bench -p has-core -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal
-//! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s.
+//! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s; estimation (issue 3): one cost evaluation
+//! for 16 groups ≤ 20 µs, `build_model` + Nelder–Mead (≤ 8000 evaluations) ≤ 5 s, 20-start
+//! L-BFGS ≤ 5 s.
 //!
 //! Besides the targets, a few breakdown benches (`breakdown/*`) split a run into its parts
 //! (source rasterisation, one 2-D FFT pair with and without the rayon pool, a single-field march
 //! to the last plane) so a regression can be located without a profiler.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use has_core::aberration::SkullScreen;
+use has_core::cost::{build_model, Measurement, Model};
+use has_core::estimate::{condense, Estimator};
 use has_core::fft::{multiply, Fft2};
 use has_core::has::RecordSpec;
 use has_core::scenario::Scenario;
@@ -138,5 +143,46 @@ fn bench_breakdown(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_build, bench_single_run, bench_group_fields, bench_fft, bench_breakdown);
+/// The estimation workload of issue 3: one noisy (0.02 rad) MR-ARFI image of the default scenario
+/// with a skull-like aberration (`SkullScreen::default()`, seed 1) condensed to the 16 groups.
+fn aberrated_measurement(sim: &Simulation) -> Vec<Measurement> {
+    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let truth = condense(&SkullScreen::default().phases(&positions, 1).unwrap(), &sim.groups).unwrap();
+    vec![Measurement { image: sim.noisy_arfi_image(&truth, 0.02, 1).unwrap(), known: vec![] }]
+}
+
+/// The cost model as `arfi estimate` builds it (scenario mask fraction, 3-pixel margin).
+fn model(sim: &Simulation, measurements: &[Measurement]) -> Model {
+    build_model(sim, measurements, sim.mask_fraction, 3).unwrap()
+}
+
+fn bench_estimation(c: &mut Criterion) {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    assert_eq!(sim.n_groups, 16);
+    let meas = aberrated_measurement(&sim);
+    let m = model(&sim, &meas);
+    let x: Vec<f64> = (0..16).map(|g| 0.3 * (g as f64).sin()).collect();
+
+    let mut g = c.benchmark_group("estimation");
+    g.sample_size(100).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+    // Target: ≤ 20 µs. One evaluation of the hybrid cost (paper Eq. 4) for 16 groups: a Hermitian
+    // form per masked pixel of the precomputed kernels.
+    g.bench_function("cost_16_groups", |b| b.iter(|| m.cost.cost(black_box(&x))));
+    // The cost with its analytic gradient (what each L-BFGS step evaluates).
+    g.bench_function("cost_and_gradient_16_groups", |b| b.iter(|| m.cost.cost_and_gradient(black_box(&x))));
+
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(10));
+    // Basis precomputation: masks, 16 group source planes, one batched march of the 16 group
+    // fields to the MR slab, and the per-pixel kernels.
+    g.bench_function("build_model_16_groups", |b| b.iter(|| model(&sim, black_box(&meas))));
+    // Target (with build_model): ≤ 5 s. The paper's estimator: restarted Nelder–Mead from zero,
+    // at most 8000 evaluations.
+    g.bench_function("nelder_mead_run", |b| b.iter(|| Estimator::nelder_mead().run(black_box(&m.cost), None).unwrap()));
+    // Target: ≤ 5 s. Multi-start L-BFGS with the analytic gradient (20 starts + 20 second-round
+    // starts, at most 40000 evaluations).
+    g.bench_function("lbfgs_run", |b| b.iter(|| Estimator::lbfgs().run(black_box(&m.cost), None).unwrap()));
+    g.finish();
+}
+
+criterion_group!(benches, bench_build, bench_single_run, bench_group_fields, bench_fft, bench_breakdown, bench_estimation);
 criterion_main!(benches);

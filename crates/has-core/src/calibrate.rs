@@ -33,7 +33,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     if !(mask_fraction > 0.0 && mask_fraction < 1.0) {
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
-    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), ..RecordSpec::default() };
+    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
     let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal

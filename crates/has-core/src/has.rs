@@ -75,8 +75,12 @@ pub struct RecordSpec {
     pub axis: bool,
     /// Keep a box of samples: planes × rows × columns.
     pub window: Option<Window>,
-    /// Keep the power `∫ |p|² / (2·Z) dA` (W) through every plane.
+    /// Keep the power `∫ |p|² / (2·Z) dA` (W) through every plane (forward wave only).
     pub power: bool,
+    /// Add the waves reflected at changes of impedance (one backward pass, single reflections:
+    /// `R = (Z2 - Z1) / (Z1 + Z2)` at each interface, `2·Z1 / (Z1 + Z2)` back across it). The
+    /// forward march then runs to the last plane, so reflections from deeper interfaces count.
+    pub reflections: bool,
 }
 
 /// A box of the grid: plane indices, rows (y) and columns (x).
@@ -127,7 +131,7 @@ impl RecordSpec {
         if let Some(w) = &self.window {
             last = last.max(w.planes.end.saturating_sub(1));
         }
-        if self.axis || self.power {
+        if self.axis || self.power || self.reflections {
             last = nz - 1;
         }
         last
@@ -275,13 +279,77 @@ impl HasPlan {
             rec.window.reserve(w.len());
         }
         let mut ws = self.fft.workspace(parallel);
+        // Reflected fields generated at interface planes: (plane, (T - 1)·incident).
+        let mut reflected: Vec<(usize, Vec<C64>)> = Vec::new();
         for n in 0..=last {
             if n > 0 {
                 apply_step(&self.fft, &self.steps[n - 1], &mut field, &mut ws, parallel);
             }
             record_plane(g, self.slab_properties(n), n, &field, spec, &mut rec);
+            if spec.reflections {
+                if let Some(t) = self.steps.get(n).and_then(|s| s.transmission.as_ref()) {
+                    reflected.push((n, field.iter().zip(t.iter()).map(|(p, t)| p * (t - 1.0)).collect()));
+                }
+            }
+        }
+        if let Some(&(top, _)) = reflected.last() {
+            self.march_back(top, &mut reflected, spec, &mut rec, &mut ws, parallel);
         }
         rec
+    }
+
+    /// Marches the reflected waves from plane `top` back to plane 0 and adds them to `rec`.
+    fn march_back(
+        &self,
+        top: usize,
+        reflected: &mut Vec<(usize, Vec<C64>)>,
+        spec: &RecordSpec,
+        rec: &mut Recording,
+        ws: &mut FftWorkspace,
+        parallel: bool,
+    ) {
+        let g = &self.grid;
+        let mut back = vec![C64::new(0.0, 0.0); g.lateral_len()];
+        let planes: Vec<usize> = {
+            let mut p = spec.planes.clone();
+            p.sort_unstable();
+            p.dedup();
+            p
+        };
+        for m in (0..=top).rev() {
+            if let Some(t) = self.steps.get(m).and_then(|s| s.transmission.as_ref()) {
+                // Back across the interface at plane m: 2·Z1/(Z1+Z2) = 2 - T; then the new reflection.
+                let r = match reflected.last() {
+                    Some((n, _)) if *n == m => reflected.pop().map(|x| x.1),
+                    _ => None,
+                };
+                back.iter_mut().zip(t.iter()).for_each(|(b, t)| *b *= 2.0 - t);
+                if let Some(r) = r {
+                    back.iter_mut().zip(&r).for_each(|(b, r)| *b += r);
+                }
+            }
+            if let Ok(i) = planes.binary_search(&m) {
+                rec.planes[i].iter_mut().zip(&back).for_each(|(a, b)| *a += b);
+            }
+            if spec.axis {
+                rec.axis[m] += back[(g.ny / 2) * g.nx + g.nx / 2];
+            }
+            if let Some(w) = spec.window.as_ref().filter(|w| w.planes.contains(&m)) {
+                let (nr, nc) = (w.rows.len(), w.cols.len());
+                for (k, r) in w.rows.clone().enumerate() {
+                    let base = ((m - w.planes.start) * nr + k) * nc;
+                    rec.window[base..base + nc].iter_mut().zip(&back[r * g.nx + w.cols.start..r * g.nx + w.cols.end]).for_each(|(a, b)| *a += b);
+                }
+            }
+            if m > 0 {
+                // Through slab m - 1 towards -z: the same propagator and screen, no transmission.
+                let s = &self.steps[m - 1];
+                self.fft.forward(&mut back, ws);
+                multiply(&mut ws.spectrum, &s.propagator, parallel);
+                self.fft.inverse(ws, &mut back);
+                multiply(&mut back, &s.screen, parallel);
+            }
+        }
     }
 }
 

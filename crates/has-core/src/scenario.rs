@@ -155,6 +155,9 @@ pub struct GridSpec {
     /// Absorbing layer at the lateral edges (default 10 mm).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sponge_width_mm: Option<f64>,
+    /// Add the waves reflected at changes of impedance (a backward pass; default false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reflections: Option<bool>,
 }
 
 /// `[mr]`.

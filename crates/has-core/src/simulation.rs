@@ -37,6 +37,8 @@ pub struct Simulation {
     pub amplitude: f64,
     pub mask_fraction: f64,
     pub noise: f64,
+    /// Whether marches add the reflected waves (scenario `[grid] reflections`).
+    pub reflections: bool,
 }
 
 /// A pressure field on one plane and along the beam axis.
@@ -103,6 +105,7 @@ impl Simulation {
             amplitude,
             mask_fraction: r.mask_fraction,
             noise: r.noise,
+            reflections: r.grid.reflections.unwrap_or(false),
         })
     }
 
@@ -170,7 +173,7 @@ impl Simulation {
             ));
         }
         let plane = g.plane_index(z);
-        let spec = RecordSpec { planes: vec![plane], axis: true, ..RecordSpec::default() };
+        let spec = RecordSpec { planes: vec![plane], axis: true, reflections: self.reflections, ..RecordSpec::default() };
         let mut rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
@@ -199,7 +202,7 @@ impl Simulation {
 
     /// Marches several sources in one batch, keeping the MR window.
     pub fn record_window(&self, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
-        let spec = RecordSpec { window: Some(self.sampler.window.clone()), ..RecordSpec::default() };
+        let spec = RecordSpec { window: Some(self.sampler.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         self.plan.propagate_batch(sources, &spec)
     }
 }

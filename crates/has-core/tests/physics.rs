@@ -557,3 +557,95 @@ fn group_fields_add_up_to_the_array_field() {
     // error per operation over ~190 steps); 1e-9 is the design requirement.
     assert!(worst < 1e-9);
 }
+
+/// Reflections (backward pass): a plane wave at normal incidence on a flat interface from water
+/// (Z1) into a medium of Z2 = 2.5·Z1. Analytic field: `e^{ikz} + R·e^{ik(2·z_I - z)}` before the
+/// interface, `T·e^{ik1·z_I}·e^{ik2·(z - z_I)}` beyond, `R = (Z2 - Z1)/(Z1 + Z2)`,
+/// `T = 1 + R`. A uniform plane wave on a periodic grid is an exact eigenfunction of every step,
+/// so the only error is rounding (tolerance 1e-9).
+#[test]
+fn reflections_at_a_flat_interface_match_the_analytic_standing_wave() {
+    use has_core::grid::Grid;
+    use has_core::has::{HasOptions, HasPlan, RecordSpec};
+    use has_core::medium::{Material, Medium, Region, Shape};
+    use num_complex::Complex64 as C64;
+    let f = 1e6;
+    let dz = 0.25e-3;
+    let grid = Grid::new(16, 16, 0.3e-3, 0.3e-3, 161, dz, 0.0).unwrap();
+    let water = Material::new("water", 1500.0, 1000.0, 0.0).unwrap();
+    let dense = Material::new("dense", 2000.0, 1875.0, 0.0).unwrap(); // Z2 = 3.75e6 = 2.5·Z1
+    let mut medium = Medium::homogeneous(water);
+    medium.materials.push(dense);
+    let z_i = 80.0 * dz; // interface on plane 80 (slab 80 lies beyond it)
+    medium.regions.push(Region { material: 1, shape: Shape::Slab { z_min: z_i, z_max: 1.0 } });
+    let source = vec![C64::new(1.0, 0.0); grid.lateral_len()];
+    let options = HasOptions { sponge_width: 0.0, ..HasOptions::default() };
+    let spec = RecordSpec { axis: true, reflections: true, ..RecordSpec::default() };
+    let (plan, _) = HasPlan::build(&grid, &medium, f, &source, &options, &RecordSpec::default()).unwrap();
+    let rec = plan.propagate(&source, &spec).unwrap();
+    let (z1, z2) = (1.5e6, 3.75e6);
+    let r = (z2 - z1) / (z1 + z2);
+    let (k1, k2) = (2.0 * std::f64::consts::PI * f / 1500.0, 2.0 * std::f64::consts::PI * f / 2000.0);
+    let mut worst: f64 = 0.0;
+    for (n, p) in rec.axis.iter().enumerate() {
+        let z = grid.z(n);
+        let expected = if z < z_i - 1e-12 {
+            C64::from_polar(1.0, k1 * z) + C64::from_polar(r, k1 * (2.0 * z_i - z))
+        } else {
+            C64::from_polar(1.0 + r, k1 * z_i + k2 * (z - z_i))
+        };
+        worst = worst.max((p - expected).norm());
+    }
+    eprintln!("reflection R = {r:.4}: worst |p - analytic| = {worst:.2e}");
+    assert!(worst < 1e-9, "{worst}");
+}
+
+/// A voxel map that describes the default phantom cylinder on its own voxels gives the field of
+/// the region description (nearest-voxel lookup on the grid's own sample positions is exact;
+/// tolerance 1e-12 of the peak for rounding).
+#[test]
+fn voxel_map_reproduces_the_region_description() {
+    use has_core::medium::VoxelMap;
+    use has_core::scenario::Scenario;
+    use has_core::simulation::Simulation;
+    let regions = Simulation::new(&Scenario::default()).unwrap();
+    let g = regions.grid.clone();
+    let (nz, ny, nx) = (g.nz, g.ny, g.nx);
+    let mut c = Vec::with_capacity(nz * ny * nx);
+    let mut rho = Vec::with_capacity(nz * ny * nx);
+    let mut a = Vec::with_capacity(nz * ny * nx);
+    // Voxel k covers the slab midpoint z0 + (k + 1/2)·dz, where HAS samples the medium.
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let m = &regions.medium.materials[regions.medium.material_at(g.x(i), g.y(j), g.z(k) + 0.5 * g.dz)];
+                c.push(m.sound_speed);
+                rho.push(m.density);
+                a.push(m.attenuation_db_cm_mhz);
+            }
+        }
+    }
+    let mut voxel = regions.clone();
+    let mut medium = regions.medium.clone();
+    medium.voxels = Some(VoxelMap {
+        origin: [g.x(0), g.y(0), g.z0 + 0.5 * g.dz],
+        spacing: [g.dx, g.dy, g.dz],
+        shape: [nz, ny, nx],
+        sound_speed: c,
+        density: rho,
+        attenuation_db_cm_mhz: a,
+        attenuation_power: 1.0,
+    });
+    medium.validate().unwrap();
+    let drive: Vec<num_complex::Complex64> = regions.steering.iter().map(|&p| num_complex::Complex64::from_polar(1.0, p)).collect();
+    let reference = regions.source.field(&drive).unwrap();
+    let spec = has_core::has::RecordSpec { axis: true, ..Default::default() };
+    let (plan, _) = has_core::has::HasPlan::build(&g, &medium, regions.frequency, &reference, &Default::default(), &spec).unwrap();
+    voxel.plan = plan;
+    let a = regions.field(&[], None).unwrap();
+    let b = voxel.field(&[], None).unwrap();
+    let peak = a.axis_pressure.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    let worst = a.axis_pressure.iter().zip(&b.axis_pressure).map(|(x, y)| (x - y).norm()).fold(0.0, f64::max);
+    eprintln!("voxel map vs regions: worst axis difference {:.2e} of the peak", worst / peak);
+    assert!(worst < 1e-12 * peak, "{}", worst / peak);
+}
