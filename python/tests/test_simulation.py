@@ -101,7 +101,8 @@ def test_reflections_option_adds_the_backward_wave_before_the_phantom(sim):
     refl = arfi.Simulation(arfi.Scenario.from_dict(d))
     a, b = sim.field(), refl.field()
     z = a.axis_z_mm
-    ripple = np.abs(np.abs(b.axis_pressure) / np.abs(a.axis_pressure) - 1)
+    inside = z > 5  # the axis sample of plane 0 lies in the gap between quadrants: zero pressure
+    ripple = np.where(inside, np.abs(np.abs(b.axis_pressure) / np.where(inside, np.abs(a.axis_pressure), 1.0) - 1), 0.0)
     r = (1.040 * 1533 - 1500) / (1.040 * 1533 + 1500)
     for lo, hi in [(20, 24), (30, 34), (35, 39)]:
         sel = (z > lo) & (z < hi)
