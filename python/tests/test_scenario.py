@@ -69,3 +69,36 @@ def test_elements_csv_is_read_relative_to_the_scenario(tmp_path):
     sim = arfi.Simulation(arfi.Scenario.load(tmp_path / "s.toml"))
     assert sim.n_elements == 8
     assert sim.element_positions_mm[0, 0] == pytest.approx(-17.5)
+
+
+def test_bowl_of_elements_focuses_near_its_centre_of_curvature():
+    # 32 disc elements on a 50 mm bowl (aperture 40 mm) in water, projected onto the first plane
+    # with the Rayleigh integral. Fresnel number a²/(λR) ≈ 2.9: the intensity maximum sits a few
+    # mm before the centre of curvature (O'Neil), and on the axis.
+    text = """
+[transducer]
+kind = "bowl"
+radius_of_curvature_mm = 50.0
+aperture_diameter_mm = 40.0
+elements = 32
+[focus]
+position_mm = [0.0, 0.0, 50.0]
+[[material]]
+name = "water"
+sound_speed_m_s = 1500.0
+density_kg_m3 = 1000.0
+[grid]
+lateral_size_mm = 64.0
+z_max_mm = 70.0
+[mr]
+fov_mm = [30.0, 30.0]
+matrix = [20, 20]
+[arfi]
+amplitude_rad_m3_per_n = 1.0
+"""
+    sim = arfi.Simulation(arfi.Scenario.from_toml(text))
+    assert sim.n_elements == 32 and sim.grid["z0_mm"] > 4.0
+    f = sim.field()
+    focus = f.focus()
+    assert 43.0 < focus["axis_peak_z_mm"] < 50.0
+    assert abs(focus["plane_peak_x_mm"]) <= 1.0 and abs(focus["plane_peak_y_mm"]) <= 1.0

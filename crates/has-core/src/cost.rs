@@ -31,24 +31,12 @@ impl ArfiKernel {
     /// Marches the `G` group fields (steering plus `known` element phases, rad; empty = none) and
     /// builds the kernels of the pixels in the box `u x v`.
     pub fn build(sim: &Simulation, groups: &[usize], known: &[f64], u: Range<usize>, v: Range<usize>) -> Result<Self> {
-        let n = sim.n_elements();
-        if groups.len() != n {
-            return Err(HasError::invalid("groups", format!("has {} entries for {n} elements", groups.len())));
-        }
         let g_count = groups.iter().max().map_or(0, |m| m + 1);
         if g_count < 2 {
             return Err(HasError::invalid("groups", "need at least two groups"));
         }
-        let known = if known.is_empty() { vec![0.0; n] } else { sim.element_phases(known)? };
         let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
-        let sources = (0..g_count)
-            .map(|g| {
-                let drive: Vec<C64> = (0..n)
-                    .map(|e| if groups[e] == g { C64::from_polar(1.0, sim.steering[e] + known[e]) } else { C64::new(0.0, 0.0) })
-                    .collect();
-                sim.source.field(&drive)
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let sources = sim.group_sources(groups, known)?;
         let recordings = sim.record_window(&sources)?;
         let fields: Vec<Vec<C64>> = recordings.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
         Self::from_fields(&sampler, &fields, sim.amplitude, [u, v])

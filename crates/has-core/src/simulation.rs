@@ -162,6 +162,25 @@ impl Simulation {
         self.source.field(&drive)
     }
 
+    /// One source plane per group: steering plus `known` element phases (rad; empty = none) on
+    /// that group's elements, nothing elsewhere. They add up to the whole array's source.
+    pub fn group_sources(&self, groups: &[usize], known: &[f64]) -> Result<Vec<Vec<C64>>> {
+        let n = self.n_elements();
+        if groups.len() != n {
+            return Err(HasError::invalid("groups", format!("has {} entries for {n} elements", groups.len())));
+        }
+        let known = if known.is_empty() { vec![0.0; n] } else { self.element_phases(known)? };
+        let g_count = groups.iter().max().map_or(0, |m| m + 1);
+        (0..g_count)
+            .map(|g| {
+                let drive: Vec<C64> = (0..n)
+                    .map(|e| if groups[e] == g { C64::from_polar(1.0, self.steering[e] + known[e]) } else { C64::new(0.0, 0.0) })
+                    .collect();
+                self.source.field(&drive)
+            })
+            .collect()
+    }
+
     /// The field on the plane nearest `z` (default: the focus) and along the axis.
     pub fn field(&self, added: &[f64], z: Option<f64>) -> Result<Field> {
         let g = &self.grid;
