@@ -159,7 +159,7 @@ impl Estimator {
                 // Restarted Nelder–Mead: a simplex that has collapsed (cost spread < tolerance) is
                 // rebuilt around the best point, a quarter the size each time, while restarts
                 // still lower the cost and evaluations remain.
-                let p = Problem::new(cost, self.max_evaluations, deadline, cancel);
+                let p = Problem::new(cost, start.clone(), self.max_evaluations, deadline, cancel);
                 let mut x = start.clone();
                 let mut last = f64::INFINITY;
                 let mut size = *step;
@@ -193,7 +193,7 @@ impl Estimator {
                 vec![p.finish(outcome)]
             }
             Method::ParticleSwarm { particles } => {
-                let p = Problem::new(cost, self.max_evaluations, deadline, cancel);
+                let p = Problem::new(cost, start.clone(), self.max_evaluations, deadline, cancel);
                 let bounds = (vec![-PI; g - 1], vec![PI; g - 1]);
                 let solver = ParticleSwarm::new(bounds, *particles).with_rng_generator(ChaCha8Rng::seed_from_u64(self.seed));
                 let iters = (self.max_evaluations / particles.max(&1)).max(1) as u64;
@@ -303,8 +303,9 @@ impl std::fmt::Display for EarlyStop {
 impl std::error::Error for EarlyStop {}
 
 impl<'a> Problem<'a> {
-    fn new(cost: &'a HybridCost, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
-        Problem { cost, budget, deadline, cancel, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, vec![], vec![])) }
+    /// `start` is reported when the run ends before its first evaluation (a limit already hit).
+    fn new(cost: &'a HybridCost, start: Vec<f64>, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
+        Problem { cost, budget, deadline, cancel, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, start, vec![])) }
     }
 
     fn check(&self) -> std::result::Result<(), EarlyStop> {
@@ -380,7 +381,7 @@ fn lbfgs_run(
     deadline: Option<Instant>,
     cancel: Option<&AtomicBool>,
 ) -> Result<Run> {
-    let p = Problem::new(cost, budget, deadline, cancel);
+    let p = Problem::new(cost, x0.clone(), budget, deadline, cancel);
     let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory)
         .with_tolerance_grad(1e-12)
         .and_then(|s| s.with_tolerance_cost(1e-14))

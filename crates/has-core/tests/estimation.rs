@@ -196,9 +196,12 @@ fn evaluation_and_time_limits_are_honoured() {
     assert_eq!(e.stop.name(), "evaluation limit");
     let e = Estimator::lbfgs().with_time_limit(0.05).unwrap().run(&model.cost, None).unwrap();
     assert!(e.seconds < 1.0, "{}", e.seconds);
+    assert!(e.phases.len() == 16 && e.minima.iter().all(|m| m.phases.len() == 16));
+    // Cancelled before the first evaluation: the start (zero) comes back, flagged.
     let cancel = std::sync::atomic::AtomicBool::new(true);
     let e = Estimator::particle_swarm().run(&model.cost, Some(&cancel)).unwrap();
     assert_eq!(e.stop.name(), "interrupted");
+    assert_eq!(e.phases, vec![0.0; 16]);
 }
 
 #[test]
