@@ -65,19 +65,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mask = mask_pixels(&meas[0].image, sim.mask_fraction);
     let (mut sources_s, mut march_s, mut kernel_s) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..repeats {
-        let (t, sources) = secs(|| {
-            (0..sim.n_groups)
-                .map(|g| {
-                    let drive: Vec<C64> = sim
-                        .steering
-                        .iter()
-                        .zip(&sim.groups)
-                        .map(|(&s, &grp)| if grp == g { C64::from_polar(1.0, s) } else { C64::new(0.0, 0.0) })
-                        .collect();
-                    sim.source.field(&drive)
-                })
-                .collect::<Result<Vec<_>, _>>()
-        });
+        let (t, sources) = secs(|| sim.group_sources(&sim.groups, &[]));
         sources_s.push(t);
         let (t, recs) = secs(|| sim.record_window(&sources.expect("sources")));
         march_s.push(t);

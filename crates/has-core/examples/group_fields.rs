@@ -8,7 +8,6 @@
 
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
-use has_core::Complex64 as C64;
 use std::time::Instant;
 
 /// Peak resident set size of this process (bytes), from /proc (Linux); 0 elsewhere.
@@ -28,17 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut batch_s = Vec::new();
     for _ in 0..repeats {
         let t = Instant::now();
-        let sources: Vec<Vec<C64>> = (0..sim.n_groups)
-            .map(|g| {
-                let drive: Vec<C64> = sim
-                    .steering
-                    .iter()
-                    .zip(&sim.groups)
-                    .map(|(&s, &grp)| if grp == g { C64::from_polar(1.0, s) } else { C64::new(0.0, 0.0) })
-                    .collect();
-                sim.source.field(&drive)
-            })
-            .collect::<Result<_, _>>()?;
+        let sources = sim.group_sources(&sim.groups, &[])?;
         sources_s.push(t.elapsed().as_secs_f64());
         let t = Instant::now();
         let recs = sim.record_window(&sources)?;
