@@ -50,14 +50,6 @@ fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<S
     s.to_json().map_err(to_py)
 }
 
-/// Reads a scenario file and returns it as complete TOML (FileNotFoundError / ValueError).
-#[pyfunction]
-fn load_scenario(path: &str) -> PyResult<String> {
-    let s = Scenario::load(Path::new(path)).map_err(to_py)?;
-    s.resolve().map_err(to_py)?;
-    s.to_toml().map_err(to_py)
-}
-
 fn phases_vec(phases: Option<PyReadonlyArray1<'_, f64>>) -> Vec<f64> {
     phases.map(|p| p.as_array().to_vec()).unwrap_or_default()
 }
@@ -359,7 +351,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CoreSimulation>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
-    m.add_function(wrap_pyfunction!(load_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     Ok(())
 }
