@@ -100,7 +100,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     total = None
     for p in (aberration, known):
         if p is not None:
-            full = _expand(sim, p, "--phases" if p is aberration else "--known-phases")
+            full = sim.element_phases(p, "--phases" if p is aberration else "--known-phases")
             total = full if total is None else total + full
     noise = sim.noise_rad if args.noise_rad is None else args.noise_rad
     image = sim.arfi_image(total, noise, args.seed)
@@ -116,15 +116,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     _finish(args, {"out": out, "focal_arfi_rad": peak, "focal_position_mm": pos, "noise_rad": noise,
                    "seed": args.seed, "amplitude": sim.amplitude, "seconds": time.perf_counter() - t})
     return 0
-
-
-def _expand(sim: Simulation, phases: np.ndarray, name: str) -> np.ndarray:
-    """Per-group or per-element phases → per-element."""
-    if phases.size == sim.n_elements:
-        return phases
-    if phases.size == sim.n_groups:
-        return phases[sim.groups]
-    raise ValueError(f"{name}: has {phases.size} values; expected {sim.n_elements} (one per element) or {sim.n_groups} (one per group)")
 
 
 def _read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | None]:

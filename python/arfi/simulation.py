@@ -179,6 +179,15 @@ class Simulation:
         aperture plus per-element jitter (SPEC §3)."""
         return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
 
+    def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
+        """Added phases, one per element or one per group, as one per element. Errors name ``name``."""
+        a = as_phases(phases, name)
+        try:
+            return self._core.element_phases(a)
+        except ValueError as e:
+            msg = str(e)
+            raise ValueError(name + msg[len("phases"):] if msg.startswith("phases:") else msg) from None
+
     def condense(self, element_phases: ArrayLike) -> NDArray[np.float64]:
         """Per-group circular means of per-element phases (SPEC §2)."""
         return self._core.condense(as_phases(element_phases, "element_phases"))

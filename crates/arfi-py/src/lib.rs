@@ -207,6 +207,11 @@ impl CoreSimulation {
         Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
     }
 
+    /// Added phases, one per element or one per group, expanded to one per element.
+    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(to_py)?.into_pyarray(py))
+    }
+
     /// Per-group circular means of per-element phases.
     fn condense<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(condense(&phases.as_array().to_vec(), &self.inner.groups).map_err(to_py)?.into_pyarray(py))
