@@ -11,17 +11,21 @@ use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
-use std::sync::atomic::{AtomicBool, Ordering};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 fn parse_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Scenario> {
     let base = base_dir.map(Path::new);
     match format {
         "toml" => Scenario::from_toml(text, base),
         "json" => Scenario::from_json(text, base),
-        f => return Err(pyo3::exceptions::PyValueError::new_err(format!("format: must be 'toml' or 'json', got '{f}'"))),
+        f => {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "format: must be 'toml' or 'json', got '{f}'"
+            )))
+        }
     }
     .map_err(to_py)
 }
@@ -96,7 +100,12 @@ impl CoreSimulation {
     }
     #[getter]
     fn focus_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.inner.focus.iter().map(|v| v * 1e3).collect::<Vec<_>>().into_pyarray(py)
+        self.inner
+            .focus
+            .iter()
+            .map(|v| v * 1e3)
+            .collect::<Vec<_>>()
+            .into_pyarray(py)
     }
     #[getter]
     fn steering_phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
@@ -104,13 +113,23 @@ impl CoreSimulation {
     }
     #[getter]
     fn groups<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        self.inner.groups.iter().map(|&g| g as i64).collect::<Vec<_>>().into_pyarray(py)
+        self.inner
+            .groups
+            .iter()
+            .map(|&g| g as i64)
+            .collect::<Vec<_>>()
+            .into_pyarray(py)
     }
     /// Element centres (mm), shape (n_elements, 3).
     #[getter]
     fn element_positions_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> =
-            self.inner.transducer.elements.iter().map(|e| e.reference_point().iter().map(|v| v * 1e3).collect()).collect();
+        let rows: Vec<Vec<f64>> = self
+            .inner
+            .transducer
+            .elements
+            .iter()
+            .map(|e| e.reference_point().iter().map(|v| v * 1e3).collect())
+            .collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
     /// Grid: dict with nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm.
@@ -146,9 +165,16 @@ impl CoreSimulation {
 
     /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
     #[pyo3(signature = (phases=None, z_mm=None))]
-    fn field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>, z_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn field<'py>(
+        &self,
+        py: Python<'py>,
+        phases: Option<PyReadonlyArray1<'py, f64>>,
+        z_mm: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let phases = phases_vec(phases);
-        let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
+        let f = py
+            .detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3)))
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
         d.set_item("pressure", f.pressure.into_pyarray(py))?;
@@ -171,13 +197,18 @@ impl CoreSimulation {
         seed: u64,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let phases = phases_vec(phases);
-        let img = py.detach(|| self.inner.noisy_arfi_image(&phases, noise_rad, seed)).map_err(to_py)?;
+        let img = py
+            .detach(|| self.inner.noisy_arfi_image(&phases, noise_rad, seed))
+            .map_err(to_py)?;
         Ok(img.into_pyarray(py))
     }
 
     /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
     fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
-        let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;
+        let inner = self
+            .inner
+            .with_calibration(broadening_width_mm * 1e-3, amplitude)
+            .map_err(to_py)?;
         Ok(CoreSimulation { inner })
     }
 
@@ -185,10 +216,14 @@ impl CoreSimulation {
     fn with_groups(&self, groups: PyReadonlyArray1<'_, i64>) -> PyResult<Self> {
         let g = groups.as_array();
         if let Some(v) = g.iter().find(|v| **v < 0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!("groups: negative group index {v}")));
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "groups: negative group index {v}"
+            )));
         }
         let mut inner = self.inner.clone();
-        inner.set_groups(g.iter().map(|&v| v as usize).collect()).map_err(to_py)?;
+        inner
+            .set_groups(g.iter().map(|&v| v as usize).collect())
+            .map_err(to_py)?;
         Ok(CoreSimulation { inner })
     }
 
@@ -202,19 +237,43 @@ impl CoreSimulation {
         peak_to_peak_rad: f64,
         jitter_rad: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let screen = SkullScreen { correlation_length: correlation_length_mm * 1e-3, peak_to_peak: peak_to_peak_rad, jitter: jitter_rad };
-        let pos: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        let screen = SkullScreen {
+            correlation_length: correlation_length_mm * 1e-3,
+            peak_to_peak: peak_to_peak_rad,
+            jitter: jitter_rad,
+        };
+        let pos: Vec<[f64; 3]> = self
+            .inner
+            .transducer
+            .elements
+            .iter()
+            .map(|e| e.reference_point())
+            .collect();
         Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
     }
 
     /// Added phases, one per element or one per group, expanded to one per element.
-    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(to_py)?.into_pyarray(py))
+    fn element_phases<'py>(
+        &self,
+        py: Python<'py>,
+        phases: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self
+            .inner
+            .element_phases(&phases.as_array().to_vec())
+            .map_err(to_py)?
+            .into_pyarray(py))
     }
 
     /// Per-group circular means of per-element phases.
-    fn condense<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups).map_err(to_py)?.into_pyarray(py))
+    fn condense<'py>(
+        &self,
+        py: Python<'py>,
+        phases: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups)
+            .map_err(to_py)?
+            .into_pyarray(py))
     }
 
     /// Fits broadening width and amplitude to a no-aberration image.
@@ -231,9 +290,13 @@ impl CoreSimulation {
         let known = phases_vec(known);
         let frac = mask_fraction.unwrap_or(self.inner.mask_fraction);
         if !(max_width_mm.is_finite() && max_width_mm > 0.0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!("max_width_mm: must be > 0, got {max_width_mm}")));
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "max_width_mm: must be > 0, got {max_width_mm}"
+            )));
         }
-        let c = py.detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3)).map_err(to_py)?;
+        let c = py
+            .detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3))
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("broadening_width_mm", c.broadening_width * 1e3)?;
         d.set_item("amplitude", c.amplitude)?;
@@ -260,17 +323,35 @@ impl CoreSimulation {
         threshold: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
         if images.len() != known.len() {
-            return Err(pyo3::exceptions::PyValueError::new_err("known: need one entry (or None) per image"));
+            return Err(pyo3::exceptions::PyValueError::new_err(
+                "known: need one entry (or None) per image",
+            ));
         }
-        let measurements: Vec<Measurement> =
-            images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect();
-        let positions: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        let measurements: Vec<Measurement> = images
+            .iter()
+            .zip(known)
+            .map(|(i, k)| Measurement {
+                image: i.as_array().to_owned(),
+                known: phases_vec(k),
+            })
+            .collect();
+        let positions: Vec<[f64; 3]> = self
+            .inner
+            .transducer
+            .elements
+            .iter()
+            .map(|e| e.reference_point())
+            .collect();
         let sigma = point_reflection(&positions, &self.inner.groups);
         let mut est = match method {
             "nelder-mead" => Estimator::nelder_mead(),
             "pso" => Estimator::particle_swarm(),
             "lbfgs" => Estimator::lbfgs().with_twins(sigma.clone()),
-            m => return Err(pyo3::exceptions::PyValueError::new_err(format!("method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'"))),
+            m => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'"
+                )))
+            }
         }
         .with_seed(seed);
         if let Some(n) = max_evaluations {
@@ -308,27 +389,50 @@ impl CoreSimulation {
         d.set_item("worst_recovery", a.worst_recovery)?;
         let cands: Vec<Vec<f64>> = a.candidates.iter().map(|c| c.phases.clone()).collect();
         d.set_item("candidate_phases_rad", cands)?;
-        d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
-        d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
-        d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
+        d.set_item(
+            "candidate_costs",
+            a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "candidate_recoveries",
+            a.candidates
+                .iter()
+                .map(|c| c.predicted_recovery)
+                .collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "suggested_phases_rad",
+            a.suggested_phases.clone().into_pyarray(py),
+        )?;
         d.set_item("suggested_separation", a.suggested_separation)?;
         Ok(d)
     }
 
     /// The source-plane pressure (Pa), shape (ny, nx), for added phases.
     #[pyo3(signature = (phases=None))]
-    fn source_field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>) -> PyResult<Bound<'py, PyArray2<C64>>> {
+    fn source_field<'py>(
+        &self,
+        py: Python<'py>,
+        phases: Option<PyReadonlyArray1<'py, f64>>,
+    ) -> PyResult<Bound<'py, PyArray2<C64>>> {
         let phases = phases_vec(phases);
         let g = &self.inner.grid;
-        let f = py.detach(|| self.inner.source_field(&phases)).map_err(to_py)?;
-        let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+        let f = py
+            .detach(|| self.inner.source_field(&phases))
+            .map_err(to_py)?;
+        let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f)
+            .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
         Ok(a.into_pyarray(py))
     }
 }
 
 /// Runs `work` on a worker thread with the GIL released, checking for Ctrl-C (Python signals)
 /// every 50 ms; a signal sets `cancel` (which the work polls) and is raised once it returns.
-fn run_interruptible<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl FnOnce() -> T + Send) -> PyResult<T> {
+fn run_interruptible<T: Send>(
+    py: Python<'_>,
+    cancel: &AtomicBool,
+    work: impl FnOnce() -> T + Send,
+) -> PyResult<T> {
     let mut signal: Option<PyErr> = None;
     let out = py.detach(|| {
         std::thread::scope(|scope| {
@@ -348,7 +452,11 @@ fn run_interruptible<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl Fn
     if let Some(e) = signal {
         return Err(e);
     }
-    out.map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("the computation failed unexpectedly (worker thread panicked)"))
+    out.map_err(|_| {
+        pyo3::exceptions::PyRuntimeError::new_err(
+            "the computation failed unexpectedly (worker thread panicked)",
+        )
+    })
 }
 
 #[pymodule]

@@ -10,10 +10,10 @@ use crate::grid::Grid;
 use crate::has::Window;
 use crate::medium::Medium;
 use ndarray::Array2;
-use std::ops::Range;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+use std::ops::Range;
 
 /// Orientation of the MR slice.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,7 +33,10 @@ impl MrPlane {
             "xy" => Ok(MrPlane::Xy),
             "xz" => Ok(MrPlane::Xz),
             "yz" => Ok(MrPlane::Yz),
-            _ => Err(HasError::invalid("mr.plane", format!("must be \"xy\", \"xz\" or \"yz\", got \"{s}\""))),
+            _ => Err(HasError::invalid(
+                "mr.plane",
+                format!("must be \"xy\", \"xz\" or \"yz\", got \"{s}\""),
+            )),
         }
     }
     /// The name used in scenario files.
@@ -71,8 +74,17 @@ impl MrGeometry {
         require_positive("mr.fov_mm[0]", self.fov[0])?;
         require_positive("mr.fov_mm[1]", self.fov[1])?;
         require_positive("mr.slice_thickness_mm", self.slice_thickness)?;
-        if self.matrix[0] == 0 || self.matrix[1] == 0 || self.matrix[0] * self.matrix[1] > 4096 * 4096 {
-            return Err(HasError::invalid("mr.matrix", format!("must be positive and at most 4096 x 4096, got {:?}", self.matrix)));
+        if self.matrix[0] == 0
+            || self.matrix[1] == 0
+            || self.matrix[0] * self.matrix[1] > 4096 * 4096
+        {
+            return Err(HasError::invalid(
+                "mr.matrix",
+                format!(
+                    "must be positive and at most 4096 x 4096, got {:?}",
+                    self.matrix
+                ),
+            ));
         }
         if !self.center.iter().all(|c| c.is_finite()) {
             return Err(HasError::invalid("mr.center_mm", "must be finite"));
@@ -82,7 +94,10 @@ impl MrGeometry {
 
     /// Pixel size along u and v (m).
     pub fn pixel_size(&self) -> [f64; 2] {
-        [self.fov[0] / self.matrix[0] as f64, self.fov[1] / self.matrix[1] as f64]
+        [
+            self.fov[0] / self.matrix[0] as f64,
+            self.fov[1] / self.matrix[1] as f64,
+        ]
     }
 
     /// Centre of pixel `i` along image axis `a` (0 = u, 1 = v), metres.
@@ -152,7 +167,13 @@ pub struct MrSampler {
 
 impl MrSampler {
     /// Builds the window and operators for `geometry` on `grid` (broadening `width` in metres).
-    pub fn new(grid: &Grid, medium: &Medium, frequency: f64, geometry: &MrGeometry, broadening: Broadening) -> Result<Self> {
+    pub fn new(
+        grid: &Grid,
+        medium: &Medium,
+        frequency: f64,
+        geometry: &MrGeometry,
+        broadening: Broadening,
+    ) -> Result<Self> {
         geometry.validate()?;
         require_non_negative("arfi.broadening_width_mm", broadening.width)?;
         let ax = geometry.plane.axes();
@@ -173,14 +194,20 @@ impl MrSampler {
             let (c, d) = coords(a);
             let (lo, hi) = if k < 2 {
                 let half = 0.5 * geometry.fov[k];
-                (geometry.center[a] - half - reach - d, geometry.center[a] + half + reach + d)
+                (
+                    geometry.center[a] - half - reach - d,
+                    geometry.center[a] + half + reach + d,
+                )
             } else {
                 let half = 0.5 * geometry.slice_thickness;
                 (geometry.center[a] - half - d, geometry.center[a] + half + d)
             };
             let range = index_range(&c, lo, hi);
             if range.is_empty() {
-                return Err(HasError::invalid("mr", "the MR slice lies outside the simulation grid"));
+                return Err(HasError::invalid(
+                    "mr",
+                    "the MR slice lies outside the simulation grid",
+                ));
             }
             let local = c[range.clone()].to_vec();
             if k < 2 {
@@ -189,26 +216,58 @@ impl MrSampler {
             } else {
                 let t = geometry.slice_thickness;
                 let lo = geometry.center[a] - 0.5 * t;
-                slab_weights = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
+                slab_weights = local
+                    .iter()
+                    .map(|&s| overlap(s, d, lo, lo + t) / t)
+                    .collect();
             }
             ranges[a] = range;
         }
-        let window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
+        let window = Window {
+            planes: ranges[2].clone(),
+            rows: ranges[1].clone(),
+            cols: ranges[0].clone(),
+        };
         let mut force_coefficient = Vec::with_capacity(window.len());
         for n in window.planes.clone() {
             for j in window.rows.clone() {
                 for i in window.cols.clone() {
                     let p = medium.properties_at(grid.x(i), grid.y(j), grid.z(n), frequency);
-                    force_coefficient.push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
+                    force_coefficient
+                        .push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
                 }
             }
         }
         let pixels = [0..geometry.matrix[0], 0..geometry.matrix[1]];
         let m = [
-            axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width),
-            axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width),
+            axis_operator(
+                geometry,
+                0,
+                pixels[0].clone(),
+                &samples[0],
+                spacing[0],
+                broadening.width,
+            ),
+            axis_operator(
+                geometry,
+                1,
+                pixels[1].clone(),
+                &samples[1],
+                spacing[1],
+                broadening.width,
+            ),
         ];
-        Ok(MrSampler { geometry: geometry.clone(), broadening, window, pixels, force_coefficient, slab_weights, samples, spacing, m })
+        Ok(MrSampler {
+            geometry: geometry.clone(),
+            broadening,
+            window,
+            pixels,
+            force_coefficient,
+            slab_weights,
+            samples,
+            spacing,
+            m,
+        })
     }
 
     /// The same sampler with another broadening width (m), on the same window.
@@ -217,7 +276,14 @@ impl MrSampler {
         let mut s = self.clone();
         s.broadening = Broadening { width };
         for k in 0..2 {
-            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width);
+            s.m[k] = axis_operator(
+                &self.geometry,
+                k,
+                self.pixels[k].clone(),
+                &self.samples[k],
+                self.spacing[k],
+                width,
+            );
         }
         Ok(s)
     }
@@ -232,24 +298,40 @@ impl MrSampler {
         for k in 0..2 {
             let r = &wanted[k];
             if r.is_empty() || r.start < self.pixels[k].start || r.end > self.pixels[k].end {
-                return Err(HasError::invalid("pixels", format!("box {r:?} lies outside {:?}", self.pixels[k])));
+                return Err(HasError::invalid(
+                    "pixels",
+                    format!("box {r:?} lies outside {:?}", self.pixels[k]),
+                ));
             }
             let rows = (r.start - self.pixels[k].start)..(r.end - self.pixels[k].start);
             let m = self.m[k].slice(ndarray::s![rows, ..]);
-            let nz: Vec<usize> = (0..m.ncols()).filter(|&j| m.column(j).iter().any(|&x| x != 0.0)).collect();
-            let (a0, a1) = (nz.first().copied().unwrap_or(0), nz.last().map_or(0, |l| l + 1));
+            let nz: Vec<usize> = (0..m.ncols())
+                .filter(|&j| m.column(j).iter().any(|&x| x != 0.0))
+                .collect();
+            let (a0, a1) = (
+                nz.first().copied().unwrap_or(0),
+                nz.last().map_or(0, |l| l + 1),
+            );
             s.m[k] = m.slice(ndarray::s![.., a0..a1]).to_owned();
             s.samples[k] = self.samples[k][a0..a1].to_vec();
             cut[k] = a0..a1;
             s.pixels[k] = r.clone();
         }
         // Window ranges along frame axes (x = cols, y = rows, z = planes).
-        let mut ranges = [self.window.cols.clone(), self.window.rows.clone(), self.window.planes.clone()];
+        let mut ranges = [
+            self.window.cols.clone(),
+            self.window.rows.clone(),
+            self.window.planes.clone(),
+        ];
         for k in 0..2 {
             let base = ranges[ax[k]].start;
             ranges[ax[k]] = base + cut[k].start..base + cut[k].end;
         }
-        s.window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
+        s.window = Window {
+            planes: ranges[2].clone(),
+            rows: ranges[1].clone(),
+            cols: ranges[0].clone(),
+        };
         s.force_coefficient = self.window.extract(&self.force_coefficient, &s.window);
         Ok(s)
     }
@@ -266,7 +348,10 @@ impl MrSampler {
     pub fn apply(&self, q: &[f64]) -> Result<Array2<f64>> {
         let w = &self.window;
         if q.len() != w.len() {
-            return Err(HasError::invalid("window", format!("has {} samples, expected {}", q.len(), w.len())));
+            return Err(HasError::invalid(
+                "window",
+                format!("has {} samples, expected {}", q.len(), w.len()),
+            ));
         }
         let ax = self.geometry.plane.axes();
         // Collapse the slice-normal axis into a 2-D map indexed [b][a] (v-axis, u-axis samples).
@@ -286,11 +371,52 @@ impl MrSampler {
         // image[u, v] = Σ_a Σ_b M_u[u, a] · map[b, a] · M_v[v, b]
         Ok(self.m[0].dot(&map.t()).dot(&self.m[1].t()))
     }
+
+    /// The adjoint of [`MrSampler::apply`]: for an image-shaped `r` (pixels u x v), the
+    /// per-sample `q̄` with `<apply(q), r> = <q, q̄>` for every `q`; it maps `∂J/∂image` to
+    /// `∂J/∂|p|²`.
+    pub fn apply_adjoint(&self, r: &Array2<f64>) -> Result<Vec<f64>> {
+        if r.dim() != (self.pixels[0].len(), self.pixels[1].len()) {
+            return Err(HasError::invalid(
+                "image",
+                format!(
+                    "has shape {:?}, the sampler's pixel box is {:?}",
+                    r.dim(),
+                    self.pixels
+                ),
+            ));
+        }
+        // map̄[a, b] = Σ_u Σ_v M_u[u, a] · r[u, v] · M_v[v, b]
+        let map = self.m[0].t().dot(r).dot(&self.m[1]);
+        let w = &self.window;
+        let ax = self.geometry.plane.axes();
+        let dims = [w.cols.len(), w.rows.len(), w.planes.len()];
+        let mut q = vec![0.0; w.len()];
+        for n in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let s = (n * dims[1] + j) * dims[0] + i;
+                    let idx = [i, j, n];
+                    q[s] = map[[idx[ax[0]], idx[ax[1]]]]
+                        * self.force_coefficient[s]
+                        * self.slab_weights[idx[ax[2]]];
+                }
+            }
+        }
+        Ok(q)
+    }
 }
 
 /// `M = P·G` along image axis `k`: Gaussian broadening on the samples, then the area average over
 /// the pixels in `pixels`.
-fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64], d: f64, width: f64) -> Array2<f64> {
+fn axis_operator(
+    g: &MrGeometry,
+    k: usize,
+    pixels: Range<usize>,
+    samples: &[f64],
+    d: f64,
+    width: f64,
+) -> Array2<f64> {
     let px = g.pixel_size()[k];
     let centres: Vec<f64> = pixels.map(|i| g.pixel_center(k, i)).collect();
     pixel_average(&centres, px, samples, d).dot(&gaussian(samples, d, width))
@@ -299,7 +425,11 @@ fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64]
 /// Indices of the sorted coordinates `c` that lie within `[lo, hi]`.
 fn index_range(c: &[f64], lo: f64, hi: f64) -> std::ops::Range<usize> {
     let start = c.iter().position(|&v| v >= lo).unwrap_or(c.len());
-    let end = c.iter().rposition(|&v| v <= hi).map_or(start, |e| e + 1).max(start);
+    let end = c
+        .iter()
+        .rposition(|&v| v <= hi)
+        .map_or(start, |e| e + 1)
+        .max(start);
     start..end
 }
 
@@ -325,7 +455,9 @@ fn gaussian(samples: &[f64], d: f64, w: f64) -> Array2<f64> {
         return Array2::eye(n);
     }
     let half = (4.0 * w / d).ceil() as i64;
-    let g: Vec<f64> = (-half..=half).map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp()).collect();
+    let g: Vec<f64> = (-half..=half)
+        .map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp())
+        .collect();
     let sum: f64 = g.iter().sum();
     Array2::from_shape_fn((n, n), |(i, j)| {
         let m = j as i64 - i as i64;
@@ -343,7 +475,8 @@ pub fn add_noise(image: &mut Array2<f64>, sigma: f64, seed: u64) -> Result<()> {
     if sigma == 0.0 {
         return Ok(());
     }
-    let normal = Normal::new(0.0, sigma).map_err(|e| HasError::invalid("noise_rad", e.to_string()))?;
+    let normal =
+        Normal::new(0.0, sigma).map_err(|e| HasError::invalid("noise_rad", e.to_string()))?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     image.iter_mut().for_each(|v| *v += normal.sample(&mut rng));
     Ok(())
@@ -365,12 +498,25 @@ mod tests {
 
     #[test]
     fn affine_maps_pixel_centres() {
-        let g = MrGeometry { plane: MrPlane::Xy, center: [0.0, 0.0, 0.085], fov: [0.18, 0.135], matrix: [128, 96], slice_thickness: 3e-3 };
+        let g = MrGeometry {
+            plane: MrPlane::Xy,
+            center: [0.0, 0.0, 0.085],
+            fov: [0.18, 0.135],
+            matrix: [128, 96],
+            slice_thickness: 3e-3,
+        };
         let a = g.affine_mm();
         assert!((a[0][3] - (-90.0 + 0.703125)).abs() < 1e-9);
-        assert!((a[0][0] - 1.40625).abs() < 1e-12 && (a[2][2] - 3.0).abs() < 1e-12 && (a[2][3] - 85.0).abs() < 1e-9);
+        assert!(
+            (a[0][0] - 1.40625).abs() < 1e-12
+                && (a[2][2] - 3.0).abs() < 1e-12
+                && (a[2][3] - 85.0).abs() < 1e-9
+        );
         assert_eq!(g.volume_shape(), [128, 96, 1]);
-        let g = MrGeometry { plane: MrPlane::Yz, ..g };
+        let g = MrGeometry {
+            plane: MrPlane::Yz,
+            ..g
+        };
         assert_eq!(g.volume_shape(), [1, 128, 96]);
     }
 

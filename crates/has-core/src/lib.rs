@@ -16,6 +16,7 @@
 
 pub mod aberration;
 pub mod arfi;
+pub mod basis;
 pub mod calibrate;
 pub mod cost;
 pub mod error;

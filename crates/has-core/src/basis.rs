@@ -1,0 +1,422 @@
+//! The per-element field basis for estimation with many phases (SPEC §8, e.g. G = 1024).
+//!
+//! For G in the thousands the per-pixel G x G kernels of [`crate::cost::ArfiKernel`] are too
+//! large. Instead keep the field of every element on the window samples that the box of pixels
+//! depends on, `B` (S samples x G elements), and per image with drives `v_k`:
+//! `p = B·v_k`, `d = A·S(|p|²)` (the sampler's linear map `S`, amplitude `A`). The gradient is
+//! the adjoint: with `h = A·Sᵀ(∂J/∂d)`, `∂J/∂phi_e = -2·Im(v_e·(Bᵀ(h ∘ conj p))_e)`.
+//!
+//! `B` is stored in single precision as real and imaginary parts, so the products for all images
+//! at once are real matrix products over fixed blocks of samples (deterministic for any number
+//! of threads).
+
+use crate::arfi::MrSampler;
+use crate::cost::{masks_and_box, Measurement, Objective};
+use crate::error::{HasError, Result};
+use crate::simulation::{Simulation, MEMORY_LIMIT};
+use ndarray::{s, Array2};
+use num_complex::Complex64 as C64;
+use rayon::prelude::*;
+use std::ops::Range;
+use std::sync::Arc;
+
+/// Samples per block of the matrix products.
+const BLOCK: usize = 2048;
+/// Element fields marched per batch while building.
+const BATCH: usize = 32;
+
+/// Element fields on the window of a box of MR pixels.
+#[derive(Debug, Clone)]
+pub struct FieldBasis {
+    /// The sampler of the pixel box.
+    pub sampler: MrSampler,
+    /// Scale from force density to ARFI phase (rad·m³/N).
+    pub amplitude: f64,
+    /// Real and imaginary parts of `B`, samples x elements (Pa per unit drive).
+    re: Array2<f32>,
+    im: Array2<f32>,
+}
+
+impl FieldBasis {
+    /// Marches every element's field (steering phase, unit drive) in batches and keeps the
+    /// samples that pixels `u x v` depend on. `progress(done, total)` is called after each batch.
+    pub fn build(
+        sim: &Simulation,
+        u: Range<usize>,
+        v: Range<usize>,
+        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    ) -> Result<Self> {
+        let sampler = sim.sampler.restrict(u, v)?;
+        let n = sim.n_elements();
+        let s_len = sampler.window.len();
+        let bytes = (s_len * n) as u64 * 8;
+        if bytes > MEMORY_LIMIT {
+            return Err(HasError::TooLarge {
+                what: format!("a field basis of {s_len} samples x {n} elements"),
+                bytes,
+                limit: MEMORY_LIMIT,
+            });
+        }
+        let spec = crate::has::RecordSpec {
+            window: Some(sampler.window.clone()),
+            reflections: sim.reflections,
+            ..Default::default()
+        };
+        let mut re = Array2::<f32>::zeros((s_len, n));
+        let mut im = Array2::<f32>::zeros((s_len, n));
+        for start in (0..n).step_by(BATCH) {
+            let end = (start + BATCH).min(n);
+            let sources = (start..end)
+                .map(|e| {
+                    let mut drive = vec![C64::new(0.0, 0.0); n];
+                    drive[e] = C64::from_polar(1.0, sim.steering[e]);
+                    sim.source.field(&drive)
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let recordings = sim.plan.propagate_batch(&sources, &spec)?;
+            for (k, rec) in recordings.iter().enumerate() {
+                for (s, p) in rec.window.iter().enumerate() {
+                    re[[s, start + k]] = p.re as f32;
+                    im[[s, start + k]] = p.im as f32;
+                }
+            }
+            if let Some(f) = progress {
+                f(end, n);
+            }
+        }
+        Ok(FieldBasis {
+            sampler,
+            amplitude: sim.amplitude,
+            re,
+            im,
+        })
+    }
+
+    /// Number of elements (columns of `B`).
+    pub fn n_elements(&self) -> usize {
+        self.re.ncols()
+    }
+
+    /// Number of window samples (rows of `B`).
+    pub fn n_samples(&self) -> usize {
+        self.re.nrows()
+    }
+
+    /// Bytes held by the basis.
+    pub fn bytes(&self) -> usize {
+        2 * self.re.len() * std::mem::size_of::<f32>()
+    }
+
+    /// Index into the box of full-image pixel `(i, j)`, if inside.
+    pub fn pixel_index(&self, i: usize, j: usize) -> Option<usize> {
+        let p = &self.sampler.pixels;
+        (p[0].contains(&i) && p[1].contains(&j))
+            .then(|| (i - p[0].start) * p[1].len() + (j - p[1].start))
+    }
+
+    /// Fields `P = B·V` for drive columns `V` (elements x images): real and imaginary parts,
+    /// samples x images.
+    fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
+        let blocks: Vec<(Array2<f32>, Array2<f32>)> = (0..self.n_samples())
+            .step_by(BLOCK)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|a| {
+                let b = (a + BLOCK).min(self.n_samples());
+                let (br, bi) = (self.re.slice(s![a..b, ..]), self.im.slice(s![a..b, ..]));
+                (br.dot(vr) - bi.dot(vi), br.dot(vi) + bi.dot(vr))
+            })
+            .collect();
+        let k = vr.ncols();
+        let mut pr = Array2::zeros((self.n_samples(), k));
+        let mut pi = Array2::zeros((self.n_samples(), k));
+        for (n, (r, i)) in blocks.into_iter().enumerate() {
+            let a = n * BLOCK;
+            pr.slice_mut(s![a..a + r.nrows(), ..]).assign(&r);
+            pi.slice_mut(s![a..a + i.nrows(), ..]).assign(&i);
+        }
+        (pr, pi)
+    }
+
+    /// `C = Bᵀ·H` for sample columns `H` (samples x images), summed block by block in order.
+    fn back_project(&self, hr: &Array2<f32>, hi: &Array2<f32>) -> (Array2<f64>, Array2<f64>) {
+        let blocks: Vec<(Array2<f32>, Array2<f32>)> = (0..self.n_samples())
+            .step_by(BLOCK)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|a| {
+                let b = (a + BLOCK).min(self.n_samples());
+                let (br, bi) = (self.re.slice(s![a..b, ..]), self.im.slice(s![a..b, ..]));
+                let (h_r, h_i) = (hr.slice(s![a..b, ..]), hi.slice(s![a..b, ..]));
+                (
+                    br.t().dot(&h_r) - bi.t().dot(&h_i),
+                    br.t().dot(&h_i) + bi.t().dot(&h_r),
+                )
+            })
+            .collect();
+        let k = hr.ncols();
+        let mut cr = Array2::<f64>::zeros((self.n_elements(), k));
+        let mut ci = Array2::<f64>::zeros((self.n_elements(), k));
+        for (r, i) in blocks {
+            cr += &r.mapv(f64::from);
+            ci += &i.mapv(f64::from);
+        }
+        (cr, ci)
+    }
+
+    /// Drive columns `exp(i·(phases + offset_k))` for each offset.
+    fn drives(phases: &[f64], offsets: &[&[f64]]) -> (Array2<f32>, Array2<f32>) {
+        let (g, k) = (phases.len(), offsets.len());
+        let mut vr = Array2::zeros((g, k));
+        let mut vi = Array2::zeros((g, k));
+        for (c, off) in offsets.iter().enumerate() {
+            for e in 0..g {
+                let (s, co) = (phases[e] + off[e]).sin_cos();
+                vr[[e, c]] = co as f32;
+                vi[[e, c]] = s as f32;
+            }
+        }
+        (vr, vi)
+    }
+
+    /// The image on the box for per-element phases (rad) added to the steering.
+    pub fn image(&self, phases: &[f64]) -> Result<Array2<f64>> {
+        if phases.len() != self.n_elements() {
+            return Err(HasError::invalid(
+                "phases",
+                format!(
+                    "has {} values for {} elements",
+                    phases.len(),
+                    self.n_elements()
+                ),
+            ));
+        }
+        let zero = vec![0.0; phases.len()];
+        let (vr, vi) = Self::drives(phases, &[&zero]);
+        let (pr, pi) = self.fields(&vr, &vi);
+        let q: Vec<f64> = pr
+            .iter()
+            .zip(pi.iter())
+            .map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2))
+            .collect();
+        Ok(self.sampler.apply(&q)? * self.amplitude)
+    }
+}
+
+/// One image as the per-element cost sees it.
+#[derive(Debug, Clone)]
+pub struct ElementTerm {
+    /// Box indices of the masked pixels.
+    pub mask: Vec<usize>,
+    /// Measured ARFI phase at the masked pixels (rad).
+    pub measured: Vec<f64>,
+    /// Known per-element phases added for this image (rad).
+    pub offset: Vec<f64>,
+}
+
+/// The joint cost of paper Eq. 4 over images, on the per-element basis: the same `J` as
+/// [`crate::cost::HybridCost`] with one phase per element.
+#[derive(Debug, Clone)]
+pub struct ElementCost {
+    pub basis: Arc<FieldBasis>,
+    pub terms: Vec<ElementTerm>,
+    /// Fit one least-squares amplitude scale for all images (see `HybridCost::fit_scale`).
+    pub fit_scale: bool,
+}
+
+impl ElementCost {
+    /// Checks the terms against the basis.
+    pub fn new(basis: Arc<FieldBasis>, terms: Vec<ElementTerm>) -> Result<Self> {
+        if terms.is_empty() {
+            return Err(HasError::invalid("images", "need at least one image"));
+        }
+        let (g, n_box) = (
+            basis.n_elements(),
+            basis.sampler.pixels[0].len() * basis.sampler.pixels[1].len(),
+        );
+        for (k, t) in terms.iter().enumerate() {
+            if t.offset.len() != g {
+                return Err(HasError::invalid(
+                    format!("image[{k}]"),
+                    format!(
+                        "known phases have {} values for {g} elements",
+                        t.offset.len()
+                    ),
+                ));
+            }
+            if t.mask.is_empty()
+                || t.mask.len() != t.measured.len()
+                || t.mask.iter().any(|&p| p >= n_box)
+            {
+                return Err(HasError::invalid(
+                    format!("image[{k}]"),
+                    "mask is empty or outside the basis' pixel box",
+                ));
+            }
+        }
+        Ok(ElementCost {
+            basis,
+            terms,
+            fit_scale: false,
+        })
+    }
+
+    /// Model images on the box for every term, and the fields they came from.
+    fn evaluate(&self, phases: &[f64]) -> (Vec<Array2<f64>>, Array2<f32>, Array2<f32>) {
+        let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
+        let (vr, vi) = FieldBasis::drives(phases, &offsets);
+        let (pr, pi) = self.basis.fields(&vr, &vi);
+        let images = (0..self.terms.len())
+            .map(|k| {
+                let q: Vec<f64> = pr
+                    .column(k)
+                    .iter()
+                    .zip(pi.column(k).iter())
+                    .map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2))
+                    .collect();
+                self.basis
+                    .sampler
+                    .apply(&q)
+                    .map(|img| img * self.basis.amplitude)
+                    .unwrap_or_else(|_| Array2::from_elem((0, 0), f64::NAN))
+            })
+            .collect();
+        (images, pr, pi)
+    }
+
+    /// Masked model values per term.
+    fn masked(&self, images: &[Array2<f64>]) -> Vec<Vec<f64>> {
+        images
+            .iter()
+            .zip(&self.terms)
+            .map(|(img, t)| {
+                t.mask
+                    .iter()
+                    .map(|&p| img.as_slice().map_or(f64::NAN, |s| s[p]))
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn scale_for(&self, model: &[Vec<f64>]) -> f64 {
+        if !self.fit_scale {
+            return 1.0;
+        }
+        let (mut dm, mut dd) = (0.0, 0.0);
+        for (d, t) in model.iter().zip(&self.terms) {
+            for (x, m) in d.iter().zip(&t.measured) {
+                dm += x * m;
+                dd += x * x;
+            }
+        }
+        if dd > 0.0 {
+            dm / dd
+        } else {
+            1.0
+        }
+    }
+}
+
+impl Objective for ElementCost {
+    fn n_phases(&self) -> usize {
+        self.basis.n_elements()
+    }
+
+    fn cost(&self, phases: &[f64]) -> f64 {
+        let (images, _, _) = self.evaluate(phases);
+        let model = self.masked(&images);
+        let s = self.scale_for(&model);
+        model
+            .iter()
+            .zip(&self.terms)
+            .map(|(d, t)| {
+                d.iter()
+                    .zip(&t.measured)
+                    .map(|(x, m)| (s * x - m).powi(2))
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
+        let (images, pr, pi) = self.evaluate(phases);
+        let model = self.masked(&images);
+        let s = self.scale_for(&model);
+        let b = &self.basis;
+        let (nu, nv) = (b.sampler.pixels[0].len(), b.sampler.pixels[1].len());
+        let (n_s, k) = (b.n_samples(), self.terms.len());
+        let mut hr = Array2::<f32>::zeros((n_s, k));
+        let mut hi = Array2::<f32>::zeros((n_s, k));
+        let mut total = 0.0;
+        for (c, (d, t)) in model.iter().zip(&self.terms).enumerate() {
+            let mut r = Array2::<f64>::zeros((nu, nv));
+            for ((&p, x), m) in t.mask.iter().zip(d).zip(&t.measured) {
+                let res = s * x - m;
+                total += res * res;
+                r[[p / nv, p % nv]] = 2.0 * s * res * b.amplitude;
+            }
+            let Ok(h) = b.sampler.apply_adjoint(&r) else {
+                return (f64::NAN, vec![0.0; phases.len()]);
+            };
+            // H = h ∘ conj(p)
+            for (n, hv) in h.iter().enumerate() {
+                hr[[n, c]] = (hv * f64::from(pr[[n, c]])) as f32;
+                hi[[n, c]] = (-hv * f64::from(pi[[n, c]])) as f32;
+            }
+        }
+        let (cr, ci) = b.back_project(&hr, &hi);
+        let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
+        let grad = (0..phases.len())
+            .map(|e| {
+                (0..k)
+                    .map(|c| {
+                        let v = C64::from_polar(1.0, phases[e] + offsets[c][e]);
+                        -2.0 * (v * C64::new(cr[[e, c]], ci[[e, c]])).im
+                    })
+                    .sum()
+            })
+            .collect();
+        (total, grad)
+    }
+}
+
+/// The per-element cost of `measurements` and the background noise level (rad).
+#[derive(Debug, Clone)]
+pub struct ElementModel {
+    pub cost: ElementCost,
+    pub noise: f64,
+}
+
+/// Builds the per-element cost of `measurements` as [`crate::cost::build_model`] does for groups
+/// (same masks, pixel box and noise level), on one basis: the known phases of each image (per
+/// element or per group) only offset its drives, so no image needs a march of its own.
+pub fn build_element_model(
+    sim: &Simulation,
+    measurements: &[Measurement],
+    mask_fraction: f64,
+    margin: usize,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<ElementModel> {
+    let (masks, [u, v], noise) = masks_and_box(sim, measurements, mask_fraction, margin)?;
+    let mut terms = Vec::with_capacity(measurements.len());
+    for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
+        let offset = if meas.known.is_empty() {
+            vec![0.0; sim.n_elements()]
+        } else {
+            sim.element_phases(&meas.known).map_err(|e| {
+                HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string())
+            })?
+        };
+        let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
+        terms.push(ElementTerm {
+            mask: mask.iter().map(local).collect(),
+            measured: mask.iter().map(|&ij| meas.image[ij]).collect(),
+            offset,
+        });
+    }
+    let basis = Arc::new(FieldBasis::build(sim, u, v, progress)?);
+    Ok(ElementModel {
+        cost: ElementCost::new(basis, terms)?,
+        noise,
+    })
+}
