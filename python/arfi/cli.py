@@ -175,11 +175,16 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     sim = _calibrated(args)
     pairs = [_read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
-                     time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude)
+                     time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
+                     progress=sys.stderr.isatty())
     total = time.perf_counter() - t
-    print(f"estimate: {len(e.phases_rad)} group phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
+    kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
+    print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})")
-    if e.ambiguous:
+    if e.underdetermined:
+        print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
+              f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
+    elif e.ambiguous:
         print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
               f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
               f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
@@ -278,11 +283,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--image", required=True, action="append", metavar="M.nii.gz")
     p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
-    p.add_argument("--groups", type=int, default=16, help="number of contiguous element groups (default 16)")
+    p.add_argument("--groups", type=int, default=16,
+                   help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
+                   "phase per element on the element field basis (lbfgs only, about a minute of marching)")
     p.add_argument("--method", choices=["nelder-mead", "pso", "lbfgs"], default="lbfgs",
                    help="nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-evaluations", type=int, dest="max_evaluations")
+    p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
+                   help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 500)")
     p.add_argument("--time-limit-s", type=float, dest="time_limit_s")
     p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
     p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",

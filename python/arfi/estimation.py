@@ -26,7 +26,8 @@ class Calibration:
 
 @dataclass(frozen=True)
 class Estimate:
-    """A hybrid estimate of the per-group aberration. Subtract ``phases_rad`` to correct."""
+    """A hybrid estimate of the aberration, one phase per group (or per element with one group
+    per element). Subtract ``phases_rad`` to correct."""
 
     phases_rad: NDArray[np.float64]
     cost: float
@@ -48,6 +49,10 @@ class Estimate:
     """Known group phases to add for one more acquisition that would best separate the candidates."""
     suggested_separation: float
     cost_history: NDArray[np.float64] = field(repr=False)
+    group_phases_rad: NDArray[np.float64] | None = None
+    """Per-element estimation only: the default-group estimate that warm-started it."""
+    underdetermined: bool = False
+    """Per-element estimation only: fewer masked pixels than phases (then also ``ambiguous``)."""
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -73,3 +73,31 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, make, args, match):
     assert match in lines[0]
     assert "Traceback" not in r.stderr and "panicked" not in r.stderr
     assert not any(p.name.startswith("x") or p.name.startswith(".x") for p in tmp_path.iterdir())
+
+
+SMALL_ARRAY = "[transducer]\nelements_per_side = 8\n"
+
+
+def test_estimate_per_element_on_a_small_array(tmp_path):
+    """`--groups` = number of elements (256 here, 1024 on the default array) gives one phase per
+    element; one image has fewer masked pixels than phases, so it is flagged."""
+    scen = tmp_path / "small.toml"
+    scen.write_text(SMALL_ARRAY)
+    sim = arfi.Simulation(arfi.Scenario.load(scen))
+    np.save(tmp_path / "truth.npy", sim.skull_phases(1))
+    image = tmp_path / "ab.nii.gz"
+    assert main(["simulate", "--scenario", str(scen), "--phases", str(tmp_path / "truth.npy"), "--noise-rad", "0",
+                 "--out", str(image)]) == 0
+    js = tmp_path / "e.json"
+    r = run("estimate", "--scenario", str(scen), "--image", str(image), "--groups", "256", "--max-evaluations", "40",
+            "--json", str(js))
+    assert r.returncode == 0, r.stderr
+    d = json.loads(js.read_text())
+    assert len(d["phases_rad"]) == 256 and len(d["group_phases_rad"]) == 16
+    assert d["evaluations"] <= 40 and d["stop"] == "evaluation limit"
+    assert d["n_pixels"] < 256 and d["underdetermined"] and d["ambiguous"]
+    assert "underdetermined" in r.stdout
+    for bad, match in ((["--groups", "256", "--method", "nelder-mead"], "method: per-element"),
+                       (["--groups", "200"], "groups: 200 groups")):
+        r = run("estimate", "--scenario", str(scen), "--image", str(image), *bad)
+        assert r.returncode == 2 and match in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

@@ -4,6 +4,7 @@ mod error;
 
 use error::to_py;
 use has_core::aberration::SkullScreen;
+use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
 use has_core::cost::{build_model, Measurement};
 use has_core::estimate::{condense, point_reflection, Estimator};
@@ -307,7 +308,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -321,6 +322,7 @@ impl CoreSimulation {
         starts: Option<usize>,
         fit_scale: bool,
         threshold: f64,
+        progress: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         if images.len() != known.len() {
             return Err(pyo3::exceptions::PyValueError::new_err(
@@ -365,15 +367,96 @@ impl CoreSimulation {
         }
         let sim = &self.inner;
         let cancel = AtomicBool::new(false);
-        let outcome = run_interruptible(py, &cancel, || {
-            let mut model = build_model(sim, &measurements, sim.mask_fraction, 3)?;
-            model.cost.fit_scale = fit_scale;
-            let e = est.run(&model.cost, Some(&cancel))?;
-            let a = e.assess(&model, sigma.as_deref(), threshold, seed)?;
-            Ok((model, e, a))
-        })?;
-        let (model, e, a) = outcome.map_err(to_py)?;
+        let per_element =
+            sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g);
+        if sim.n_groups > 128 && !per_element {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "groups: {} groups; the group kernels take at most 128, or one group per element ({}) for per-element estimation",
+                sim.n_groups,
+                sim.n_elements()
+            )));
+        }
         let d = PyDict::new(py);
+        let (model, e, a) = if per_element {
+            if method != "lbfgs" {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "method: per-element estimation ({} phases) runs on the gradient: use 'lbfgs', not '{method}'",
+                    sim.n_elements()
+                )));
+            }
+            // The warm start: L-BFGS on the array's default groups, with their own twin pairing.
+            let sigma_groups = point_reflection(&positions, &sim.transducer.default_groups());
+            let mut group_estimator = Estimator::lbfgs()
+                .with_twins(sigma_groups.clone())
+                .with_seed(seed);
+            if let Some(t) = time_limit_s {
+                group_estimator = group_estimator.with_time_limit(t).map_err(to_py)?;
+            }
+            if let Some(n) = starts {
+                group_estimator = group_estimator.with_starts(n).map_err(to_py)?;
+            }
+            let budget = max_evaluations.unwrap_or(500);
+            let report = |done: usize, total: usize| {
+                if progress {
+                    eprint!(
+                        "\rarfi: element fields {done}/{total}{}",
+                        if done == total { "\n" } else { "" }
+                    );
+                }
+            };
+            let outcome = run_interruptible(py, &cancel, || {
+                let r = estimate_elements(
+                    sim,
+                    &measurements,
+                    &group_estimator,
+                    budget,
+                    fit_scale,
+                    Some(&cancel),
+                    Some(&report),
+                )?;
+                let a = r
+                    .group
+                    .assess(&r.group_model, sigma_groups.as_deref(), threshold, seed)?;
+                Ok::<_, has_core::HasError>((r, a))
+            })?;
+            let (r, a) = outcome.map_err(to_py)?;
+            // One image's masked pixels cannot determine more phases than they number.
+            let underdetermined = r
+                .model
+                .cost
+                .terms
+                .iter()
+                .map(|t| t.mask.len())
+                .sum::<usize>()
+                < sim.n_elements();
+            d.set_item(
+                "n_pixels",
+                r.model
+                    .cost
+                    .terms
+                    .iter()
+                    .map(|t| t.mask.len())
+                    .sum::<usize>(),
+            )?;
+            d.set_item("scale", 1.0)?;
+            d.set_item("group_phases_rad", r.group.phases.clone().into_pyarray(py))?;
+            d.set_item("underdetermined", underdetermined)?;
+            let mut a = a;
+            a.ambiguous |= underdetermined;
+            (r.group_model, r.elements, a)
+        } else {
+            let outcome = run_interruptible(py, &cancel, || {
+                let mut model = build_model(sim, &measurements, sim.mask_fraction, 3)?;
+                model.cost.fit_scale = fit_scale;
+                let e = est.run(&model.cost, Some(&cancel))?;
+                let a = e.assess(&model, sigma.as_deref(), threshold, seed)?;
+                Ok((model, e, a))
+            })?;
+            let (model, e, a) = outcome.map_err(to_py)?;
+            d.set_item("n_pixels", model.cost.n_pixels())?;
+            d.set_item("scale", model.cost.scale(&e.phases))?;
+            (model, e, a)
+        };
         d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
         d.set_item("cost", e.cost)?;
         d.set_item("evaluations", e.evaluations)?;
@@ -382,8 +465,6 @@ impl CoreSimulation {
         d.set_item("stop", e.stop.name())?;
         d.set_item("method", method)?;
         d.set_item("noise_floor", model.noise)?;
-        d.set_item("n_pixels", model.cost.n_pixels())?;
-        d.set_item("scale", model.cost.scale(&e.phases))?;
         d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
         d.set_item("margin", a.margin)?;
         d.set_item("worst_recovery", a.worst_recovery)?;

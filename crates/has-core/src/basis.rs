@@ -420,3 +420,48 @@ pub fn build_element_model(
         noise,
     })
 }
+
+/// The outcome of per-element estimation: the group estimate that warm-started it (with its
+/// model, for the ambiguity assessment) and the per-element estimate.
+#[derive(Debug, Clone)]
+pub struct ElementEstimate {
+    pub group_model: crate::cost::Model,
+    pub group: crate::estimate::Estimate,
+    pub model: ElementModel,
+    pub elements: crate::estimate::Estimate,
+}
+
+/// Per-element estimation (one phase per element, SPEC §5 `--groups 1024`): `group_estimator`
+/// fits the array's default groups, its estimate expanded to elements warm-starts L-BFGS on the
+/// element basis with at most `max_evaluations` evaluations. `fit_scale` and the estimator's time
+/// limit apply to each stage.
+pub fn estimate_elements(
+    sim: &Simulation,
+    measurements: &[Measurement],
+    group_estimator: &crate::estimate::Estimator,
+    max_evaluations: usize,
+    fit_scale: bool,
+    cancel: Option<&std::sync::atomic::AtomicBool>,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<ElementEstimate> {
+    let mut grouped = sim.clone();
+    grouped.set_groups(sim.transducer.default_groups())?;
+    let mut group_model = crate::cost::build_model(&grouped, measurements, sim.mask_fraction, 3)?;
+    group_model.cost.fit_scale = fit_scale;
+    let group = group_estimator.run(&group_model.cost, cancel)?;
+    let start = grouped.element_phases(&group.phases)?;
+    let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress)?;
+    model.cost.fit_scale = fit_scale;
+    let elements = crate::estimate::Estimator::lbfgs()
+        .with_starts(1)?
+        .with_max_evaluations(max_evaluations)?
+        .with_time_limit_opt(group_estimator.time_limit)
+        .with_start(start)?
+        .run(&model.cost, cancel)?;
+    Ok(ElementEstimate {
+        group_model,
+        group,
+        model,
+        elements,
+    })
+}

@@ -132,6 +132,12 @@ impl Estimator {
         Ok(self)
     }
 
+    /// The same with an optional time limit (none = unlimited).
+    pub fn with_time_limit_opt(mut self, limit: Option<Duration>) -> Self {
+        self.time_limit = limit;
+        self
+    }
+
     /// Seed of the random starts and swarm.
     pub fn with_seed(mut self, seed: u64) -> Self {
         self.seed = seed;
