@@ -15,8 +15,9 @@ Quick start::
 from arfi.scenario import Scenario
 from arfi.simulation import Field, Simulation
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
+from arfi.loop import LoopResult, loop2
 
-__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases"]
+__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult"]
 
 try:
     from importlib.metadata import version as _version

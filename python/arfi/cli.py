@@ -133,8 +133,9 @@ def _read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | No
             known = np.asarray(known, dtype=np.float64)
         except (TypeError, ValueError):
             raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers") from None
-        if known.ndim != 1 or known.size not in (sim.n_elements, sim.n_groups) or not np.all(np.isfinite(known)):
-            raise ValueError(f"sidecar of {path}: applied_phases_rad must hold {sim.n_elements} or {sim.n_groups} "
+        sizes = sorted({sim.n_elements, sim.n_groups} | ({sim.n_default_groups} if sim.n_groups == sim.n_elements else set()))
+        if known.ndim != 1 or known.size not in sizes or not np.all(np.isfinite(known)):
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must hold {' or '.join(map(str, sizes))} "
                              f"finite values, got shape {known.shape}")
     return image, known
 
@@ -213,7 +214,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.scenario:
         raise UsageError("arfi reproduce: runs on the embedded scenario (the paper's phantom); --scenario is not taken")
     s = run_study(args.case, args.repeats, Path(args.out), seed=args.seed, method=args.method, noise_rad=args.noise_rad,
-                  diversity=args.diversity)
+                  diversity=args.diversity, loop2_iterations=args.loop2)
     print(f"reproduce: {s['case']}-aberration, {s['repeats']} repeats ({s['method']}): recovered fraction "
           f"{s['mean_recovered_fraction']:.2f} (paper {s['paper']['recovered_fraction']}), gain {s['mean_gain']:+.0%} "
           f"(paper {s['paper']['gain']:+.0%}), phase error {s['mean_phase_error_rad']:.2f} rad "
@@ -314,6 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="ARFI noise (default: the scenario's, 0.02 rad)")
     p.add_argument("--diversity", type=int, default=0,
                    help="extra images per repeat with random known group phases (phase diversity; default 0, the paper's)")
+    p.add_argument("--loop2", type=int, default=0, metavar="N",
+                   help="the paper's loop 2: N more acquisitions per repeat, each with the current correction applied, fitted "
+                   "jointly; keeps the correction measured best, or none (default 0: loop 1 only, as in the paper)")
     p.set_defaults(run=cmd_reproduce)
     return parser
 
@@ -332,6 +336,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--repeats: must be between 1 and 100, got {args.repeats}")
         if not 0 <= getattr(args, "diversity", 0) <= 32:
             raise UsageError(f"--diversity: must be between 0 and 32, got {args.diversity}")
+        if not 0 <= getattr(args, "loop2", 0) <= 20:
+            raise UsageError(f"--loop2: must be between 0 and 20, got {args.loop2}")
         for name in ("max_evaluations", "starts"):
             v = getattr(args, name, None)
             if v is not None and v <= 0:

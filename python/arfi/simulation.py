@@ -116,6 +116,12 @@ class Simulation:
         return int(self._core.n_groups)
 
     @property
+    def n_default_groups(self) -> int:
+        """Number of the array's default groups (SPEC §2: 16); known phases may also be given per default group
+        to a per-element estimate."""
+        return int(self._core.n_default_groups)
+
+    @property
     def groups(self) -> NDArray[np.int64]:
         """Element → group index."""
         return self._core.groups

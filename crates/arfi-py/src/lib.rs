@@ -22,11 +22,7 @@ fn parse_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<
     match format {
         "toml" => Scenario::from_toml(text, base),
         "json" => Scenario::from_json(text, base),
-        f => {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "format: must be 'toml' or 'json', got '{f}'"
-            )))
-        }
+        f => return Err(pyo3::exceptions::PyValueError::new_err(format!("format: must be 'toml' or 'json', got '{f}'"))),
     }
     .map_err(to_py)
 }
@@ -83,6 +79,11 @@ impl CoreSimulation {
     fn n_groups(&self) -> usize {
         self.inner.n_groups
     }
+    /// Number of the array's default groups (SPEC §2: 16).
+    #[getter]
+    fn n_default_groups(&self) -> usize {
+        self.inner.transducer.default_groups().iter().max().map_or(0, |m| m + 1)
+    }
     #[getter]
     fn amplitude(&self) -> f64 {
         self.inner.amplitude
@@ -101,12 +102,7 @@ impl CoreSimulation {
     }
     #[getter]
     fn focus_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.inner
-            .focus
-            .iter()
-            .map(|v| v * 1e3)
-            .collect::<Vec<_>>()
-            .into_pyarray(py)
+        self.inner.focus.iter().map(|v| v * 1e3).collect::<Vec<_>>().into_pyarray(py)
     }
     #[getter]
     fn steering_phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
@@ -114,23 +110,13 @@ impl CoreSimulation {
     }
     #[getter]
     fn groups<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        self.inner
-            .groups
-            .iter()
-            .map(|&g| g as i64)
-            .collect::<Vec<_>>()
-            .into_pyarray(py)
+        self.inner.groups.iter().map(|&g| g as i64).collect::<Vec<_>>().into_pyarray(py)
     }
     /// Element centres (mm), shape (n_elements, 3).
     #[getter]
     fn element_positions_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self
-            .inner
-            .transducer
-            .elements
-            .iter()
-            .map(|e| e.reference_point().iter().map(|v| v * 1e3).collect())
-            .collect();
+        let rows: Vec<Vec<f64>> =
+            self.inner.transducer.elements.iter().map(|e| e.reference_point().iter().map(|v| v * 1e3).collect()).collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
     /// Grid: dict with nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm.
@@ -166,16 +152,9 @@ impl CoreSimulation {
 
     /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
     #[pyo3(signature = (phases=None, z_mm=None))]
-    fn field<'py>(
-        &self,
-        py: Python<'py>,
-        phases: Option<PyReadonlyArray1<'py, f64>>,
-        z_mm: Option<f64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    fn field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>, z_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
         let phases = phases_vec(phases);
-        let f = py
-            .detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3)))
-            .map_err(to_py)?;
+        let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
         let d = PyDict::new(py);
         let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
         d.set_item("pressure", f.pressure.into_pyarray(py))?;
@@ -198,18 +177,13 @@ impl CoreSimulation {
         seed: u64,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let phases = phases_vec(phases);
-        let img = py
-            .detach(|| self.inner.noisy_arfi_image(&phases, noise_rad, seed))
-            .map_err(to_py)?;
+        let img = py.detach(|| self.inner.noisy_arfi_image(&phases, noise_rad, seed)).map_err(to_py)?;
         Ok(img.into_pyarray(py))
     }
 
     /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
     fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
-        let inner = self
-            .inner
-            .with_calibration(broadening_width_mm * 1e-3, amplitude)
-            .map_err(to_py)?;
+        let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;
         Ok(CoreSimulation { inner })
     }
 
@@ -217,14 +191,10 @@ impl CoreSimulation {
     fn with_groups(&self, groups: PyReadonlyArray1<'_, i64>) -> PyResult<Self> {
         let g = groups.as_array();
         if let Some(v) = g.iter().find(|v| **v < 0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "groups: negative group index {v}"
-            )));
+            return Err(pyo3::exceptions::PyValueError::new_err(format!("groups: negative group index {v}")));
         }
         let mut inner = self.inner.clone();
-        inner
-            .set_groups(g.iter().map(|&v| v as usize).collect())
-            .map_err(to_py)?;
+        inner.set_groups(g.iter().map(|&v| v as usize).collect()).map_err(to_py)?;
         Ok(CoreSimulation { inner })
     }
 
@@ -238,43 +208,19 @@ impl CoreSimulation {
         peak_to_peak_rad: f64,
         jitter_rad: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let screen = SkullScreen {
-            correlation_length: correlation_length_mm * 1e-3,
-            peak_to_peak: peak_to_peak_rad,
-            jitter: jitter_rad,
-        };
-        let pos: Vec<[f64; 3]> = self
-            .inner
-            .transducer
-            .elements
-            .iter()
-            .map(|e| e.reference_point())
-            .collect();
+        let screen = SkullScreen { correlation_length: correlation_length_mm * 1e-3, peak_to_peak: peak_to_peak_rad, jitter: jitter_rad };
+        let pos: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
         Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
     }
 
     /// Added phases, one per element or one per group, expanded to one per element.
-    fn element_phases<'py>(
-        &self,
-        py: Python<'py>,
-        phases: PyReadonlyArray1<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self
-            .inner
-            .element_phases(&phases.as_array().to_vec())
-            .map_err(to_py)?
-            .into_pyarray(py))
+    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(to_py)?.into_pyarray(py))
     }
 
     /// Per-group circular means of per-element phases.
-    fn condense<'py>(
-        &self,
-        py: Python<'py>,
-        phases: PyReadonlyArray1<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups)
-            .map_err(to_py)?
-            .into_pyarray(py))
+    fn condense<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups).map_err(to_py)?.into_pyarray(py))
     }
 
     /// Fits broadening width and amplitude to a no-aberration image.
@@ -291,13 +237,9 @@ impl CoreSimulation {
         let known = phases_vec(known);
         let frac = mask_fraction.unwrap_or(self.inner.mask_fraction);
         if !(max_width_mm.is_finite() && max_width_mm > 0.0) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "max_width_mm: must be > 0, got {max_width_mm}"
-            )));
+            return Err(pyo3::exceptions::PyValueError::new_err(format!("max_width_mm: must be > 0, got {max_width_mm}")));
         }
-        let c = py
-            .detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3))
-            .map_err(to_py)?;
+        let c = py.detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3)).map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("broadening_width_mm", c.broadening_width * 1e3)?;
         d.set_item("amplitude", c.amplitude)?;
@@ -325,34 +267,18 @@ impl CoreSimulation {
         progress: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         if images.len() != known.len() {
-            return Err(pyo3::exceptions::PyValueError::new_err(
-                "known: need one entry (or None) per image",
-            ));
+            return Err(pyo3::exceptions::PyValueError::new_err("known: need one entry (or None) per image"));
         }
-        let measurements: Vec<Measurement> = images
-            .iter()
-            .zip(known)
-            .map(|(i, k)| Measurement {
-                image: i.as_array().to_owned(),
-                known: phases_vec(k),
-            })
-            .collect();
-        let positions: Vec<[f64; 3]> = self
-            .inner
-            .transducer
-            .elements
-            .iter()
-            .map(|e| e.reference_point())
-            .collect();
+        let measurements: Vec<Measurement> =
+            images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect();
+        let positions: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
         let sigma = point_reflection(&positions, &self.inner.groups);
         let mut est = match method {
             "nelder-mead" => Estimator::nelder_mead(),
             "pso" => Estimator::particle_swarm(),
             "lbfgs" => Estimator::lbfgs().with_twins(sigma.clone()),
             m => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'"
-                )))
+                return Err(pyo3::exceptions::PyValueError::new_err(format!("method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'")))
             }
         }
         .with_seed(seed);
@@ -367,8 +293,7 @@ impl CoreSimulation {
         }
         let sim = &self.inner;
         let cancel = AtomicBool::new(false);
-        let per_element =
-            sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g);
+        let per_element = sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g);
         if sim.n_groups > 128 && !per_element {
             return Err(pyo3::exceptions::PyValueError::new_err(format!(
                 "groups: {} groups; the group kernels take at most 128, or one group per element ({}) for per-element estimation",
@@ -386,9 +311,7 @@ impl CoreSimulation {
             }
             // The warm start: L-BFGS on the array's default groups, with their own twin pairing.
             let sigma_groups = point_reflection(&positions, &sim.transducer.default_groups());
-            let mut group_estimator = Estimator::lbfgs()
-                .with_twins(sigma_groups.clone())
-                .with_seed(seed);
+            let mut group_estimator = Estimator::lbfgs().with_twins(sigma_groups.clone()).with_seed(seed);
             if let Some(t) = time_limit_s {
                 group_estimator = group_estimator.with_time_limit(t).map_err(to_py)?;
             }
@@ -398,46 +321,18 @@ impl CoreSimulation {
             let budget = max_evaluations.unwrap_or(500);
             let report = |done: usize, total: usize| {
                 if progress {
-                    eprint!(
-                        "\rarfi: element fields {done}/{total}{}",
-                        if done == total { "\n" } else { "" }
-                    );
+                    eprint!("\rarfi: element fields {done}/{total}{}", if done == total { "\n" } else { "" });
                 }
             };
             let outcome = run_interruptible(py, &cancel, || {
-                let r = estimate_elements(
-                    sim,
-                    &measurements,
-                    &group_estimator,
-                    budget,
-                    fit_scale,
-                    Some(&cancel),
-                    Some(&report),
-                )?;
-                let a = r
-                    .group
-                    .assess(&r.group_model, sigma_groups.as_deref(), threshold, seed)?;
+                let r = estimate_elements(sim, &measurements, &group_estimator, budget, fit_scale, Some(&cancel), Some(&report))?;
+                let a = r.group.assess(&r.group_model, sigma_groups.as_deref(), threshold, seed)?;
                 Ok::<_, has_core::HasError>((r, a))
             })?;
             let (r, a) = outcome.map_err(to_py)?;
             // One image's masked pixels cannot determine more phases than they number.
-            let underdetermined = r
-                .model
-                .cost
-                .terms
-                .iter()
-                .map(|t| t.mask.len())
-                .sum::<usize>()
-                < sim.n_elements();
-            d.set_item(
-                "n_pixels",
-                r.model
-                    .cost
-                    .terms
-                    .iter()
-                    .map(|t| t.mask.len())
-                    .sum::<usize>(),
-            )?;
+            let underdetermined = r.model.cost.terms.iter().map(|t| t.mask.len()).sum::<usize>() < sim.n_elements();
+            d.set_item("n_pixels", r.model.cost.terms.iter().map(|t| t.mask.len()).sum::<usize>())?;
             d.set_item("scale", 1.0)?;
             d.set_item("group_phases_rad", r.group.phases.clone().into_pyarray(py))?;
             d.set_item("underdetermined", underdetermined)?;
@@ -470,50 +365,27 @@ impl CoreSimulation {
         d.set_item("worst_recovery", a.worst_recovery)?;
         let cands: Vec<Vec<f64>> = a.candidates.iter().map(|c| c.phases.clone()).collect();
         d.set_item("candidate_phases_rad", cands)?;
-        d.set_item(
-            "candidate_costs",
-            a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>(),
-        )?;
-        d.set_item(
-            "candidate_recoveries",
-            a.candidates
-                .iter()
-                .map(|c| c.predicted_recovery)
-                .collect::<Vec<_>>(),
-        )?;
-        d.set_item(
-            "suggested_phases_rad",
-            a.suggested_phases.clone().into_pyarray(py),
-        )?;
+        d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
+        d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
+        d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
         d.set_item("suggested_separation", a.suggested_separation)?;
         Ok(d)
     }
 
     /// The source-plane pressure (Pa), shape (ny, nx), for added phases.
     #[pyo3(signature = (phases=None))]
-    fn source_field<'py>(
-        &self,
-        py: Python<'py>,
-        phases: Option<PyReadonlyArray1<'py, f64>>,
-    ) -> PyResult<Bound<'py, PyArray2<C64>>> {
+    fn source_field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>) -> PyResult<Bound<'py, PyArray2<C64>>> {
         let phases = phases_vec(phases);
         let g = &self.inner.grid;
-        let f = py
-            .detach(|| self.inner.source_field(&phases))
-            .map_err(to_py)?;
-        let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f)
-            .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+        let f = py.detach(|| self.inner.source_field(&phases)).map_err(to_py)?;
+        let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
         Ok(a.into_pyarray(py))
     }
 }
 
 /// Runs `work` on a worker thread with the GIL released, checking for Ctrl-C (Python signals)
 /// every 50 ms; a signal sets `cancel` (which the work polls) and is raised once it returns.
-fn run_interruptible<T: Send>(
-    py: Python<'_>,
-    cancel: &AtomicBool,
-    work: impl FnOnce() -> T + Send,
-) -> PyResult<T> {
+fn run_interruptible<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl FnOnce() -> T + Send) -> PyResult<T> {
     let mut signal: Option<PyErr> = None;
     let out = py.detach(|| {
         std::thread::scope(|scope| {
@@ -533,11 +405,7 @@ fn run_interruptible<T: Send>(
     if let Some(e) = signal {
         return Err(e);
     }
-    out.map_err(|_| {
-        pyo3::exceptions::PyRuntimeError::new_err(
-            "the computation failed unexpectedly (worker thread panicked)",
-        )
-    })
+    out.map_err(|_| pyo3::exceptions::PyRuntimeError::new_err("the computation failed unexpectedly (worker thread panicked)"))
 }
 
 #[pymodule]

@@ -31,9 +31,7 @@ fn group_sources(sim: &Simulation) -> Vec<Vec<C64>> {
 fn pseudo_random_field(n: usize) -> Vec<C64> {
     let mut s = 0x2545_f491_4f6c_dd1du64;
     let mut rnd = || {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     };
     (0..n).map(|_| C64::new(rnd(), rnd())).collect()
@@ -42,36 +40,23 @@ fn pseudo_random_field(n: usize) -> Vec<C64> {
 fn bench_build(c: &mut Criterion) {
     let scenario = Scenario::default();
     let mut g = c.benchmark_group("build");
-    g.sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(5));
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
     // Resolve, choose the grid, steer, rasterise the source, build the MR sampler and march the
     // reference beam once to fix every slab's mean wavenumber.
-    g.bench_function("simulation_new_default", |b| {
-        b.iter(|| Simulation::new(black_box(&scenario)).unwrap())
-    });
+    g.bench_function("simulation_new_default", |b| b.iter(|| Simulation::new(black_box(&scenario)).unwrap()));
     g.finish();
 }
 
 fn bench_single_run(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     let source = sim.source_field(&[]).unwrap();
-    let spec = RecordSpec {
-        window: Some(sim.sampler.window.clone()),
-        ..Default::default()
-    };
+    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), ..Default::default() };
     let mut g = c.benchmark_group("single_run");
-    g.sample_size(20)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(5));
+    g.sample_size(20).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
     // Target: ≤ 0.5 s. Source plane + march to the end of the MR slab + force image.
-    g.bench_function("arfi_image_default", |b| {
-        b.iter(|| sim.arfi_image(black_box(&[])).unwrap())
-    });
+    g.bench_function("arfi_image_default", |b| b.iter(|| sim.arfi_image(black_box(&[])).unwrap()));
     // The march alone (source already on plane 0).
-    g.bench_function("propagate_to_focal_slab", |b| {
-        b.iter(|| sim.plan.propagate(black_box(&source), &spec).unwrap())
-    });
+    g.bench_function("propagate_to_focal_slab", |b| b.iter(|| sim.plan.propagate(black_box(&source), &spec).unwrap()));
     // The same march started on a rayon worker: the parallel operations of each step (8 per step)
     // are then pushed to the worker's own deque instead of the pool's global queue, with no
     // cross-thread wake-up of the caller.
@@ -84,9 +69,7 @@ fn bench_single_run(c: &mut Criterion) {
 fn bench_group_fields(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     let mut g = c.benchmark_group("group_fields");
-    g.sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(10));
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(10));
     // Target: ≤ 3 s. 16 per-group source planes plus one batch march (one field per rayon task).
     g.bench_function("16_groups_sources_and_batch", |b| {
         b.iter(|| {
@@ -96,9 +79,7 @@ fn bench_group_fields(c: &mut Criterion) {
     });
     let sources = group_sources(&sim);
     assert_eq!(sources.len(), 16);
-    g.bench_function("16_groups_batch_only", |b| {
-        b.iter(|| sim.record_window(black_box(&sources)).unwrap())
-    });
+    g.bench_function("16_groups_batch_only", |b| b.iter(|| sim.record_window(black_box(&sources)).unwrap()));
     g.finish();
 }
 
@@ -107,16 +88,10 @@ fn bench_fft(c: &mut Criterion) {
     let fft = Fft2::new(nx, ny);
     let input = pseudo_random_field(nx * ny);
     let mut g = c.benchmark_group("fft2_180x180");
-    g.sample_size(50)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(3));
+    g.sample_size(50).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
     for parallel in [false, true] {
         let mut ws = fft.workspace(parallel);
-        let name = if parallel {
-            "forward_inverse_parallel"
-        } else {
-            "forward_inverse_serial"
-        };
+        let name = if parallel { "forward_inverse_parallel" } else { "forward_inverse_serial" };
         // A fresh copy per iteration (PerIteration: the allocator hands back the block just freed,
         // so the data are as warm in cache as in the march, where one buffer is reused).
         g.bench_function(name, |b| {
@@ -135,50 +110,24 @@ fn bench_fft(c: &mut Criterion) {
 
 fn bench_breakdown(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
-    let drive: Vec<C64> = sim
-        .steering
-        .iter()
-        .map(|&p| C64::from_polar(1.0, p))
-        .collect();
+    let drive: Vec<C64> = sim.steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
     let source = sim.source_field(&[]).unwrap();
     let mut g = c.benchmark_group("breakdown");
-    g.sample_size(20)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(3));
+    g.sample_size(20).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
     // Rasterised source plane of all 1024 elements.
-    g.bench_function("source_field_all_elements", |b| {
-        b.iter(|| sim.source.field(black_box(&drive)).unwrap())
-    });
+    g.bench_function("source_field_all_elements", |b| b.iter(|| sim.source.field(black_box(&drive)).unwrap()));
     // Window samples → MR image (force, slab average, broadening, pixel sampling).
-    let rec = sim
-        .record_window(std::slice::from_ref(&source))
-        .unwrap()
-        .remove(0);
-    g.bench_function("force_image", |b| {
-        b.iter(|| sim.sampler.force_image(black_box(&rec.window)).unwrap())
-    });
+    let rec = sim.record_window(std::slice::from_ref(&source)).unwrap().remove(0);
+    g.bench_function("force_image", |b| b.iter(|| sim.sampler.force_image(black_box(&rec.window)).unwrap()));
     // Whole-grid march (all nz planes, on-axis samples only) for the per-step cost.
-    let to_end = RecordSpec {
-        axis: true,
-        ..Default::default()
-    };
-    g.bench_function("propagate_all_planes", |b| {
-        b.iter(|| sim.plan.propagate(black_box(&source), &to_end).unwrap())
-    });
+    let to_end = RecordSpec { axis: true, ..Default::default() };
+    g.bench_function("propagate_all_planes", |b| b.iter(|| sim.plan.propagate(black_box(&source), &to_end).unwrap()));
     // One element-wise complex multiply of a slice (one of the three per step).
     let screen = pseudo_random_field(sim.grid.lateral_len());
     for parallel in [false, true] {
-        let name = if parallel {
-            "multiply_parallel"
-        } else {
-            "multiply_serial"
-        };
+        let name = if parallel { "multiply_parallel" } else { "multiply_serial" };
         g.bench_function(name, |b| {
-            b.iter_batched_ref(
-                || source.clone(),
-                |f| multiply(f, black_box(&screen), parallel),
-                BatchSize::PerIteration,
-            )
+            b.iter_batched_ref(|| source.clone(), |f| multiply(f, black_box(&screen), parallel), BatchSize::PerIteration)
         });
     }
     g.finish();
@@ -187,21 +136,9 @@ fn bench_breakdown(c: &mut Criterion) {
 /// The estimation workload of issue 3: one noisy (0.02 rad) MR-ARFI image of the default scenario
 /// with a skull-like aberration (`SkullScreen::default()`, seed 1) condensed to the 16 groups.
 fn aberrated_measurement(sim: &Simulation) -> Vec<Measurement> {
-    let positions: Vec<[f64; 3]> = sim
-        .transducer
-        .elements
-        .iter()
-        .map(|e| e.reference_point())
-        .collect();
-    let truth = condense(
-        &SkullScreen::default().phases(&positions, 1).unwrap(),
-        &sim.groups,
-    )
-    .unwrap();
-    vec![Measurement {
-        image: sim.noisy_arfi_image(&truth, 0.02, 1).unwrap(),
-        known: vec![],
-    }]
+    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let truth = condense(&SkullScreen::default().phases(&positions, 1).unwrap(), &sim.groups).unwrap();
+    vec![Measurement { image: sim.noisy_arfi_image(&truth, 0.02, 1).unwrap(), known: vec![] }]
 }
 
 /// The cost model as `arfi estimate` builds it (scenario mask fraction, 3-pixel margin).
@@ -217,59 +154,31 @@ fn bench_estimation(c: &mut Criterion) {
     let x: Vec<f64> = (0..16).map(|g| 0.3 * (g as f64).sin()).collect();
 
     let mut g = c.benchmark_group("estimation");
-    g.sample_size(100)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(3));
+    g.sample_size(100).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
     // Target: ≤ 20 µs. One evaluation of the hybrid cost (paper Eq. 4) for 16 groups: a Hermitian
     // form per masked pixel of the precomputed kernels.
     g.bench_function("cost_16_groups", |b| b.iter(|| m.cost.cost(black_box(&x))));
     // The cost with its analytic gradient (what each L-BFGS step evaluates).
-    g.bench_function("cost_and_gradient_16_groups", |b| {
-        b.iter(|| m.cost.cost_and_gradient(black_box(&x)))
-    });
+    g.bench_function("cost_and_gradient_16_groups", |b| b.iter(|| m.cost.cost_and_gradient(black_box(&x))));
 
-    g.sample_size(10)
-        .warm_up_time(Duration::from_secs(1))
-        .measurement_time(Duration::from_secs(12));
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(12));
     // Basis precomputation: masks, 16 group source planes, one batched march of the 16 group
     // fields to the MR slab, and the per-pixel kernels.
-    g.bench_function("build_model_16_groups", |b| {
-        b.iter(|| model(&sim, black_box(&meas)))
-    });
+    g.bench_function("build_model_16_groups", |b| b.iter(|| model(&sim, black_box(&meas))));
     // Target: ≤ 5 s. The paper-scale estimation end to end: basis precomputation, then the
     // paper's estimator (restarted Nelder–Mead from zero, at most 8000 evaluations).
     g.measurement_time(Duration::from_secs(15));
     g.bench_function("nelder_mead_end_to_end", |b| {
-        b.iter(|| {
-            Estimator::nelder_mead()
-                .run(&model(&sim, black_box(&meas)).cost, None)
-                .unwrap()
-        })
+        b.iter(|| Estimator::nelder_mead().run(&model(&sim, black_box(&meas)).cost, None).unwrap())
     });
     g.measurement_time(Duration::from_secs(5));
     // The Nelder–Mead search alone on the prebuilt model.
-    g.bench_function("nelder_mead_run", |b| {
-        b.iter(|| {
-            Estimator::nelder_mead()
-                .run(black_box(&m.cost), None)
-                .unwrap()
-        })
-    });
+    g.bench_function("nelder_mead_run", |b| b.iter(|| Estimator::nelder_mead().run(black_box(&m.cost), None).unwrap()));
     // Target: ≤ 5 s. Multi-start L-BFGS with the analytic gradient (20 starts + 20 second-round
     // starts, at most 40000 evaluations).
-    g.bench_function("lbfgs_run", |b| {
-        b.iter(|| Estimator::lbfgs().run(black_box(&m.cost), None).unwrap())
-    });
+    g.bench_function("lbfgs_run", |b| b.iter(|| Estimator::lbfgs().run(black_box(&m.cost), None).unwrap()));
     g.finish();
 }
 
-criterion_group!(
-    benches,
-    bench_build,
-    bench_single_run,
-    bench_group_fields,
-    bench_fft,
-    bench_breakdown,
-    bench_estimation
-);
+criterion_group!(benches, bench_build, bench_single_run, bench_group_fields, bench_fft, bench_breakdown, bench_estimation);
 criterion_main!(benches);

@@ -16,39 +16,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let images: usize = std::env::args().nth(2).map_or(Ok(8), |s| s.parse())?;
     let per_side: usize = std::env::args().nth(3).map_or(Ok(16), |s| s.parse())?;
     let evals: usize = std::env::args().nth(4).map_or(Ok(500), |s| s.parse())?;
-    let sc = Scenario::from_toml(
-        &format!("[transducer]\nelements_per_side = {per_side}\n"),
-        None,
-    )?;
+    let sc = Scenario::from_toml(&format!("[transducer]\nelements_per_side = {per_side}\n"), None)?;
     let sim = Simulation::new(&sc)?;
     let n = sim.n_elements();
-    let positions: Vec<[f64; 3]> = sim
-        .transducer
-        .elements
-        .iter()
-        .map(|e| e.reference_point())
-        .collect();
+    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
     let truth = SkullScreen::default().phases(&positions, seed)?;
     let peak = |img: &ndarray::Array2<f64>| img.iter().copied().fold(f64::MIN, f64::max);
     let ideal = peak(&sim.arfi_image(&[])?);
-    let mut measurements = vec![Measurement {
-        image: sim.arfi_image(&truth)?,
-        known: vec![],
-    }];
+    let mut measurements = vec![Measurement { image: sim.arfi_image(&truth)?, known: vec![] }];
     for k in 1..images {
         // Known diversity: random group phases.
-        let dg = SkullScreen {
-            correlation_length: 1.0,
-            peak_to_peak: 0.0,
-            jitter: 1.5,
-        }
-        .phases(&vec![[0.0; 3]; sim.n_groups], 1000 + k as u64)?;
+        let dg = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 1.5 }
+            .phases(&vec![[0.0; 3]; sim.n_groups], 1000 + k as u64)?;
         let d = sim.element_phases(&dg)?;
         let total: Vec<f64> = truth.iter().zip(&d).map(|(t, x)| t + x).collect();
-        measurements.push(Measurement {
-            image: sim.arfi_image(&total)?,
-            known: d,
-        });
+        measurements.push(Measurement { image: sim.arfi_image(&total)?, known: d });
     }
     let t = Instant::now();
     let model = build_element_model(
@@ -78,11 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("basis image vs direct: max rel err {err:.2e}");
     let t = Instant::now();
     let (c0, g0) = model.cost.cost_and_gradient(&vec![0.0; n]);
-    println!(
-        "cost+grad {} images: {:.3} s, cost {c0:.4e}",
-        images,
-        t.elapsed().as_secs_f64()
-    );
+    println!("cost+grad {} images: {:.3} s, cost {c0:.4e}", images, t.elapsed().as_secs_f64());
     let mut x = vec![0.0; n];
     for e in [3usize, n / 2, n - 5] {
         let h = 1e-2;
@@ -91,11 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         x[e] = -h;
         let cm = model.cost.cost(&x);
         x[e] = 0.0;
-        println!(
-            "grad[{e}] analytic {:.5e} numeric {:.5e}",
-            g0[e],
-            (cp - cm) / (2.0 * h)
-        );
+        println!("grad[{e}] analytic {:.5e} numeric {:.5e}", g0[e], (cp - cm) / (2.0 * h));
     }
     // 16-group warm start then per-element L-BFGS.
     let gm = build_model(&sim, &measurements, sim.mask_fraction, 3)?;
@@ -107,20 +81,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(peak(&sim.arfi_image(&c)?) / ideal)
     };
     let circ = sim.element_phases(&condense(&truth, &sim.groups)?)?;
-    println!(
-        "aberrated {aberr:.3}; ideal 16-group {:.3}; 16-group estimate {:.3}",
-        corr(&circ)?,
-        corr(&start)?
-    );
+    println!("aberrated {aberr:.3}; ideal 16-group {:.3}; 16-group estimate {:.3}", corr(&circ)?, corr(&start)?);
     let t = Instant::now();
-    let e = Estimator::lbfgs()
-        .with_starts(1)?
-        .with_max_evaluations(evals)?
-        .with_start(start)?
-        .run(&model.cost, None)?;
+    let e = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(evals)?.with_start(start)?.run(&model.cost, None)?;
     println!(
         "element L-BFGS: cost {:.3e} evals {} {:.1} s stop {} | recovered {:.3} phase error {:.3} rad",
-        e.cost, e.evaluations, t.elapsed().as_secs_f64(), e.stop.name(), corr(&e.phases)?, phase_error(&e.phases, &truth)
+        e.cost,
+        e.evaluations,
+        t.elapsed().as_secs_f64(),
+        e.stop.name(),
+        corr(&e.phases)?,
+        phase_error(&e.phases, &truth)
     );
     Ok(())
 }

@@ -43,29 +43,13 @@ fn per_call(rounds: usize, calls: usize, mut f: impl FnMut()) -> f64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let repeats: usize = args
-        .next()
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(3)
-        .max(1);
+    let repeats: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3).max(1);
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let (sim_s, sim) = secs(|| Simulation::new(&Scenario::default()));
     let sim = sim?;
-    let positions: Vec<[f64; 3]> = sim
-        .transducer
-        .elements
-        .iter()
-        .map(|e| e.reference_point())
-        .collect();
-    let truth = condense(
-        &SkullScreen::default().phases(&positions, seed)?,
-        &sim.groups,
-    )?;
-    let meas = vec![Measurement {
-        image: sim.noisy_arfi_image(&truth, 0.02, seed)?,
-        known: vec![],
-    }];
+    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let truth = condense(&SkullScreen::default().phases(&positions, seed)?, &sim.groups)?;
+    let meas = vec![Measurement { image: sim.noisy_arfi_image(&truth, 0.02, seed)?, known: vec![] }];
 
     // build_model as a whole, and its parts (box as build_model chooses it).
     let mut build = Vec::new();
@@ -88,16 +72,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let recs = recs?;
         let (t, kern) = secs(|| -> Result<ArfiKernel, Box<dyn std::error::Error>> {
             let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
-            let fields: Vec<Vec<C64>> = recs
-                .iter()
-                .map(|r| sim.sampler.window.extract(&r.window, &sampler.window))
-                .collect();
-            Ok(ArfiKernel::from_fields(
-                &sampler,
-                &fields,
-                sim.amplitude,
-                [u.clone(), v.clone()],
-            )?)
+            let fields: Vec<Vec<C64>> = recs.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
+            Ok(ArfiKernel::from_fields(&sampler, &fields, sim.amplitude, [u.clone(), v.clone()])?)
         });
         kernel_s.push(t);
         kern?;
@@ -121,11 +97,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (t, e) = secs(|| Estimator::nelder_mead().run(&model.cost, None));
         nm_s.push(t);
         nm = Some(e?);
-        let (t, e) = secs(|| {
-            Estimator::lbfgs()
-                .with_twins(sigma.clone())
-                .run(&model.cost, None)
-        });
+        let (t, e) = secs(|| Estimator::lbfgs().with_twins(sigma.clone()).run(&model.cost, None));
         lb_s.push(t);
         let e = e?;
         let (t, a) = secs(|| e.assess(&model, sigma.as_deref(), 0.9, seed));

@@ -13,25 +13,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
     let sim = Simulation::new(&scenario)?;
     let g = &sim.grid;
-    println!(
-        "{}: grid {} x {} x {} at {:.3} mm, plan built in {:.2} s",
-        sim.name,
-        g.nx,
-        g.ny,
-        g.nz,
-        g.dx * 1e3,
-        t.elapsed().as_secs_f64()
-    );
+    println!("{}: grid {} x {} x {} at {:.3} mm, plan built in {:.2} s", sim.name, g.nx, g.ny, g.nz, g.dx * 1e3, t.elapsed().as_secs_f64());
     let t = Instant::now();
     let field = sim.field(&[], None)?;
-    let (n, peak) = field
-        .axis_pressure
-        .iter()
-        .enumerate()
-        .fold(
-            (0, 0.0),
-            |a, (i, p)| if p.norm() > a.1 { (i, p.norm()) } else { a },
-        );
+    let (n, peak) = field.axis_pressure.iter().enumerate().fold((0, 0.0), |a, (i, p)| if p.norm() > a.1 { (i, p.norm()) } else { a });
     println!(
         "axis peak {:.2} MPa at z = {:.2} mm (face pressure {:.3} MPa), field in {:.2} s",
         peak / 1e6,
@@ -42,11 +27,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
     let image = sim.arfi_image(&[])?;
     let max = image.iter().copied().fold(f64::MIN, f64::max);
-    println!(
-        "ideal MR-ARFI image {:?}, focal phase {:.3} rad, in {:.2} s",
-        image.dim(),
-        max,
-        t.elapsed().as_secs_f64()
-    );
+    println!("ideal MR-ARFI image {:?}, focal phase {:.3} rad, in {:.2} s", image.dim(), max, t.elapsed().as_secs_f64());
     Ok(())
 }

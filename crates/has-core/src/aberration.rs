@@ -20,11 +20,7 @@ pub struct SkullScreen {
 impl Default for SkullScreen {
     /// 12 mm correlation length, 6 rad peak to peak, 0.5 rad per-element jitter.
     fn default() -> Self {
-        SkullScreen {
-            correlation_length: 12e-3,
-            peak_to_peak: 6.0,
-            jitter: 0.5,
-        }
+        SkullScreen { correlation_length: 12e-3, peak_to_peak: 6.0, jitter: 0.5 }
     }
 }
 
@@ -43,49 +39,18 @@ impl SkullScreen {
             }
         }
         let l = self.correlation_length;
-        let (x0, x1, y0, y1) = (
-            lo[0] - 2.0 * l,
-            hi[0] + 2.0 * l,
-            lo[1] - 2.0 * l,
-            hi[1] + 2.0 * l,
-        );
+        let (x0, x1, y0, y1) = (lo[0] - 2.0 * l, hi[0] + 2.0 * l, lo[1] - 2.0 * l, hi[1] + 2.0 * l);
         let bumps = (4.0 * (x1 - x0) * (y1 - y0) / (l * l)).ceil() as usize;
-        let normal =
-            Normal::new(0.0, 1.0).map_err(|e| crate::HasError::invalid("screen", e.to_string()))?;
-        let centres: Vec<(f64, f64, f64)> = (0..bumps)
-            .map(|_| {
-                (
-                    rng.random_range(x0..x1),
-                    rng.random_range(y0..y1),
-                    normal.sample(&mut rng),
-                )
-            })
-            .collect();
+        let normal = Normal::new(0.0, 1.0).map_err(|e| crate::HasError::invalid("screen", e.to_string()))?;
+        let centres: Vec<(f64, f64, f64)> =
+            (0..bumps).map(|_| (rng.random_range(x0..x1), rng.random_range(y0..y1), normal.sample(&mut rng))).collect();
         let smooth: Vec<f64> = positions
             .iter()
-            .map(|p| {
-                centres
-                    .iter()
-                    .map(|&(cx, cy, a)| {
-                        a * (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * l * l)).exp()
-                    })
-                    .sum()
-            })
+            .map(|p| centres.iter().map(|&(cx, cy, a)| a * (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * l * l)).exp()).sum())
             .collect();
-        let (mn, mx) = smooth
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let scale = if mx > mn {
-            self.peak_to_peak / (mx - mn)
-        } else {
-            0.0
-        };
+        let (mn, mx) = smooth.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let scale = if mx > mn { self.peak_to_peak / (mx - mn) } else { 0.0 };
         let mean = 0.5 * (mx + mn);
-        Ok(smooth
-            .iter()
-            .map(|v| (v - mean) * scale + self.jitter * normal.sample(&mut rng))
-            .collect())
+        Ok(smooth.iter().map(|v| (v - mean) * scale + self.jitter * normal.sample(&mut rng)).collect())
     }
 }

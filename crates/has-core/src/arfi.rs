@@ -33,10 +33,7 @@ impl MrPlane {
             "xy" => Ok(MrPlane::Xy),
             "xz" => Ok(MrPlane::Xz),
             "yz" => Ok(MrPlane::Yz),
-            _ => Err(HasError::invalid(
-                "mr.plane",
-                format!("must be \"xy\", \"xz\" or \"yz\", got \"{s}\""),
-            )),
+            _ => Err(HasError::invalid("mr.plane", format!("must be \"xy\", \"xz\" or \"yz\", got \"{s}\""))),
         }
     }
     /// The name used in scenario files.
@@ -74,17 +71,8 @@ impl MrGeometry {
         require_positive("mr.fov_mm[0]", self.fov[0])?;
         require_positive("mr.fov_mm[1]", self.fov[1])?;
         require_positive("mr.slice_thickness_mm", self.slice_thickness)?;
-        if self.matrix[0] == 0
-            || self.matrix[1] == 0
-            || self.matrix[0] * self.matrix[1] > 4096 * 4096
-        {
-            return Err(HasError::invalid(
-                "mr.matrix",
-                format!(
-                    "must be positive and at most 4096 x 4096, got {:?}",
-                    self.matrix
-                ),
-            ));
+        if self.matrix[0] == 0 || self.matrix[1] == 0 || self.matrix[0] * self.matrix[1] > 4096 * 4096 {
+            return Err(HasError::invalid("mr.matrix", format!("must be positive and at most 4096 x 4096, got {:?}", self.matrix)));
         }
         if !self.center.iter().all(|c| c.is_finite()) {
             return Err(HasError::invalid("mr.center_mm", "must be finite"));
@@ -94,10 +82,7 @@ impl MrGeometry {
 
     /// Pixel size along u and v (m).
     pub fn pixel_size(&self) -> [f64; 2] {
-        [
-            self.fov[0] / self.matrix[0] as f64,
-            self.fov[1] / self.matrix[1] as f64,
-        ]
+        [self.fov[0] / self.matrix[0] as f64, self.fov[1] / self.matrix[1] as f64]
     }
 
     /// Centre of pixel `i` along image axis `a` (0 = u, 1 = v), metres.
@@ -123,11 +108,7 @@ impl MrGeometry {
         let mut a = [[0.0; 4]; 4];
         a[3][3] = 1.0;
         for (k, &f) in ax.iter().enumerate() {
-            let (step, start) = if k < 2 {
-                (px[k], self.pixel_center(k, 0))
-            } else {
-                (self.slice_thickness, self.center[f])
-            };
+            let (step, start) = if k < 2 { (px[k], self.pixel_center(k, 0)) } else { (self.slice_thickness, self.center[f]) };
             a[f][f] = step * 1e3;
             a[f][3] = start * 1e3;
         }
@@ -167,13 +148,7 @@ pub struct MrSampler {
 
 impl MrSampler {
     /// Builds the window and operators for `geometry` on `grid` (broadening `width` in metres).
-    pub fn new(
-        grid: &Grid,
-        medium: &Medium,
-        frequency: f64,
-        geometry: &MrGeometry,
-        broadening: Broadening,
-    ) -> Result<Self> {
+    pub fn new(grid: &Grid, medium: &Medium, frequency: f64, geometry: &MrGeometry, broadening: Broadening) -> Result<Self> {
         geometry.validate()?;
         require_non_negative("arfi.broadening_width_mm", broadening.width)?;
         let ax = geometry.plane.axes();
@@ -194,20 +169,14 @@ impl MrSampler {
             let (c, d) = coords(a);
             let (lo, hi) = if k < 2 {
                 let half = 0.5 * geometry.fov[k];
-                (
-                    geometry.center[a] - half - reach - d,
-                    geometry.center[a] + half + reach + d,
-                )
+                (geometry.center[a] - half - reach - d, geometry.center[a] + half + reach + d)
             } else {
                 let half = 0.5 * geometry.slice_thickness;
                 (geometry.center[a] - half - d, geometry.center[a] + half + d)
             };
             let range = index_range(&c, lo, hi);
             if range.is_empty() {
-                return Err(HasError::invalid(
-                    "mr",
-                    "the MR slice lies outside the simulation grid",
-                ));
+                return Err(HasError::invalid("mr", "the MR slice lies outside the simulation grid"));
             }
             let local = c[range.clone()].to_vec();
             if k < 2 {
@@ -216,58 +185,26 @@ impl MrSampler {
             } else {
                 let t = geometry.slice_thickness;
                 let lo = geometry.center[a] - 0.5 * t;
-                slab_weights = local
-                    .iter()
-                    .map(|&s| overlap(s, d, lo, lo + t) / t)
-                    .collect();
+                slab_weights = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
             }
             ranges[a] = range;
         }
-        let window = Window {
-            planes: ranges[2].clone(),
-            rows: ranges[1].clone(),
-            cols: ranges[0].clone(),
-        };
+        let window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
         let mut force_coefficient = Vec::with_capacity(window.len());
         for n in window.planes.clone() {
             for j in window.rows.clone() {
                 for i in window.cols.clone() {
                     let p = medium.properties_at(grid.x(i), grid.y(j), grid.z(n), frequency);
-                    force_coefficient
-                        .push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
+                    force_coefficient.push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
                 }
             }
         }
         let pixels = [0..geometry.matrix[0], 0..geometry.matrix[1]];
         let m = [
-            axis_operator(
-                geometry,
-                0,
-                pixels[0].clone(),
-                &samples[0],
-                spacing[0],
-                broadening.width,
-            ),
-            axis_operator(
-                geometry,
-                1,
-                pixels[1].clone(),
-                &samples[1],
-                spacing[1],
-                broadening.width,
-            ),
+            axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width),
+            axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width),
         ];
-        Ok(MrSampler {
-            geometry: geometry.clone(),
-            broadening,
-            window,
-            pixels,
-            force_coefficient,
-            slab_weights,
-            samples,
-            spacing,
-            m,
-        })
+        Ok(MrSampler { geometry: geometry.clone(), broadening, window, pixels, force_coefficient, slab_weights, samples, spacing, m })
     }
 
     /// The same sampler with another broadening width (m), on the same window.
@@ -276,14 +213,7 @@ impl MrSampler {
         let mut s = self.clone();
         s.broadening = Broadening { width };
         for k in 0..2 {
-            s.m[k] = axis_operator(
-                &self.geometry,
-                k,
-                self.pixels[k].clone(),
-                &self.samples[k],
-                self.spacing[k],
-                width,
-            );
+            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width);
         }
         Ok(s)
     }
@@ -298,40 +228,24 @@ impl MrSampler {
         for k in 0..2 {
             let r = &wanted[k];
             if r.is_empty() || r.start < self.pixels[k].start || r.end > self.pixels[k].end {
-                return Err(HasError::invalid(
-                    "pixels",
-                    format!("box {r:?} lies outside {:?}", self.pixels[k]),
-                ));
+                return Err(HasError::invalid("pixels", format!("box {r:?} lies outside {:?}", self.pixels[k])));
             }
             let rows = (r.start - self.pixels[k].start)..(r.end - self.pixels[k].start);
             let m = self.m[k].slice(ndarray::s![rows, ..]);
-            let nz: Vec<usize> = (0..m.ncols())
-                .filter(|&j| m.column(j).iter().any(|&x| x != 0.0))
-                .collect();
-            let (a0, a1) = (
-                nz.first().copied().unwrap_or(0),
-                nz.last().map_or(0, |l| l + 1),
-            );
+            let nz: Vec<usize> = (0..m.ncols()).filter(|&j| m.column(j).iter().any(|&x| x != 0.0)).collect();
+            let (a0, a1) = (nz.first().copied().unwrap_or(0), nz.last().map_or(0, |l| l + 1));
             s.m[k] = m.slice(ndarray::s![.., a0..a1]).to_owned();
             s.samples[k] = self.samples[k][a0..a1].to_vec();
             cut[k] = a0..a1;
             s.pixels[k] = r.clone();
         }
         // Window ranges along frame axes (x = cols, y = rows, z = planes).
-        let mut ranges = [
-            self.window.cols.clone(),
-            self.window.rows.clone(),
-            self.window.planes.clone(),
-        ];
+        let mut ranges = [self.window.cols.clone(), self.window.rows.clone(), self.window.planes.clone()];
         for k in 0..2 {
             let base = ranges[ax[k]].start;
             ranges[ax[k]] = base + cut[k].start..base + cut[k].end;
         }
-        s.window = Window {
-            planes: ranges[2].clone(),
-            rows: ranges[1].clone(),
-            cols: ranges[0].clone(),
-        };
+        s.window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
         s.force_coefficient = self.window.extract(&self.force_coefficient, &s.window);
         Ok(s)
     }
@@ -348,10 +262,7 @@ impl MrSampler {
     pub fn apply(&self, q: &[f64]) -> Result<Array2<f64>> {
         let w = &self.window;
         if q.len() != w.len() {
-            return Err(HasError::invalid(
-                "window",
-                format!("has {} samples, expected {}", q.len(), w.len()),
-            ));
+            return Err(HasError::invalid("window", format!("has {} samples, expected {}", q.len(), w.len())));
         }
         let ax = self.geometry.plane.axes();
         // Collapse the slice-normal axis into a 2-D map indexed [b][a] (v-axis, u-axis samples).
@@ -377,14 +288,7 @@ impl MrSampler {
     /// `∂J/∂|p|²`.
     pub fn apply_adjoint(&self, r: &Array2<f64>) -> Result<Vec<f64>> {
         if r.dim() != (self.pixels[0].len(), self.pixels[1].len()) {
-            return Err(HasError::invalid(
-                "image",
-                format!(
-                    "has shape {:?}, the sampler's pixel box is {:?}",
-                    r.dim(),
-                    self.pixels
-                ),
-            ));
+            return Err(HasError::invalid("image", format!("has shape {:?}, the sampler's pixel box is {:?}", r.dim(), self.pixels)));
         }
         // map̄[a, b] = Σ_u Σ_v M_u[u, a] · r[u, v] · M_v[v, b]
         let map = self.m[0].t().dot(r).dot(&self.m[1]);
@@ -397,9 +301,7 @@ impl MrSampler {
                 for i in 0..dims[0] {
                     let s = (n * dims[1] + j) * dims[0] + i;
                     let idx = [i, j, n];
-                    q[s] = map[[idx[ax[0]], idx[ax[1]]]]
-                        * self.force_coefficient[s]
-                        * self.slab_weights[idx[ax[2]]];
+                    q[s] = map[[idx[ax[0]], idx[ax[1]]]] * self.force_coefficient[s] * self.slab_weights[idx[ax[2]]];
                 }
             }
         }
@@ -409,14 +311,7 @@ impl MrSampler {
 
 /// `M = P·G` along image axis `k`: Gaussian broadening on the samples, then the area average over
 /// the pixels in `pixels`.
-fn axis_operator(
-    g: &MrGeometry,
-    k: usize,
-    pixels: Range<usize>,
-    samples: &[f64],
-    d: f64,
-    width: f64,
-) -> Array2<f64> {
+fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64], d: f64, width: f64) -> Array2<f64> {
     let px = g.pixel_size()[k];
     let centres: Vec<f64> = pixels.map(|i| g.pixel_center(k, i)).collect();
     pixel_average(&centres, px, samples, d).dot(&gaussian(samples, d, width))
@@ -425,11 +320,7 @@ fn axis_operator(
 /// Indices of the sorted coordinates `c` that lie within `[lo, hi]`.
 fn index_range(c: &[f64], lo: f64, hi: f64) -> std::ops::Range<usize> {
     let start = c.iter().position(|&v| v >= lo).unwrap_or(c.len());
-    let end = c
-        .iter()
-        .rposition(|&v| v <= hi)
-        .map_or(start, |e| e + 1)
-        .max(start);
+    let end = c.iter().rposition(|&v| v <= hi).map_or(start, |e| e + 1).max(start);
     start..end
 }
 
@@ -455,9 +346,7 @@ fn gaussian(samples: &[f64], d: f64, w: f64) -> Array2<f64> {
         return Array2::eye(n);
     }
     let half = (4.0 * w / d).ceil() as i64;
-    let g: Vec<f64> = (-half..=half)
-        .map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp())
-        .collect();
+    let g: Vec<f64> = (-half..=half).map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp()).collect();
     let sum: f64 = g.iter().sum();
     Array2::from_shape_fn((n, n), |(i, j)| {
         let m = j as i64 - i as i64;
@@ -475,71 +364,18 @@ pub fn add_noise(image: &mut Array2<f64>, sigma: f64, seed: u64) -> Result<()> {
     if sigma == 0.0 {
         return Ok(());
     }
-    let normal =
-        Normal::new(0.0, sigma).map_err(|e| HasError::invalid("noise_rad", e.to_string()))?;
+    let normal = Normal::new(0.0, sigma).map_err(|e| HasError::invalid("noise_rad", e.to_string()))?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     image.iter_mut().for_each(|v| *v += normal.sample(&mut rng));
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn pixel_average_and_gaussian_preserve_a_constant() {
-        let s: Vec<f64> = (0..200).map(|i| i as f64 * 0.5e-3).collect();
-        let centres: Vec<f64> = (0..30).map(|p| 20e-3 + p as f64 * 1.4e-3).collect();
-        let m = pixel_average(&centres, 1.4e-3, &s, 0.5e-3).dot(&gaussian(&s, 0.5e-3, 2.7e-3));
-        for r in m.rows() {
-            assert!((r.sum() - 1.0).abs() < 1e-12, "{}", r.sum());
-        }
-    }
-
-    #[test]
-    fn affine_maps_pixel_centres() {
-        let g = MrGeometry {
-            plane: MrPlane::Xy,
-            center: [0.0, 0.0, 0.085],
-            fov: [0.18, 0.135],
-            matrix: [128, 96],
-            slice_thickness: 3e-3,
-        };
-        let a = g.affine_mm();
-        assert!((a[0][3] - (-90.0 + 0.703125)).abs() < 1e-9);
-        assert!(
-            (a[0][0] - 1.40625).abs() < 1e-12
-                && (a[2][2] - 3.0).abs() < 1e-12
-                && (a[2][3] - 85.0).abs() < 1e-9
-        );
-        assert_eq!(g.volume_shape(), [128, 96, 1]);
-        let g = MrGeometry {
-            plane: MrPlane::Yz,
-            ..g
-        };
-        assert_eq!(g.volume_shape(), [1, 128, 96]);
-    }
-
-    #[test]
-    fn noise_is_seeded() {
-        let mut a = Array2::zeros((4, 4));
-        let mut b = Array2::zeros((4, 4));
-        add_noise(&mut a, 0.02, 7).unwrap();
-        add_noise(&mut b, 0.02, 7).unwrap();
-        assert_eq!(a, b);
-        assert!(a.iter().any(|v| *v != 0.0));
-    }
 }
 
 /// The noise level (rad) of an ARFI image from its background: `1.4826 · MAD` (the standard
 /// deviation for Gaussian noise) over the pixels outside `exclude` (u and v ranges around the
 /// focus), or over every pixel below `threshold` when too few remain.
 pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2], threshold: f64) -> f64 {
-    let mut bg: Vec<f64> = image
-        .indexed_iter()
-        .filter(|((i, j), _)| !(exclude[0].contains(i) && exclude[1].contains(j)))
-        .map(|(_, v)| *v)
-        .collect();
+    let mut bg: Vec<f64> =
+        image.indexed_iter().filter(|((i, j), _)| !(exclude[0].contains(i) && exclude[1].contains(j))).map(|(_, v)| *v).collect();
     if bg.len() < 50 {
         bg = image.iter().copied().filter(|v| *v < threshold).collect();
     }
@@ -558,5 +394,41 @@ fn median(v: &mut [f64]) -> f64 {
         v[n / 2]
     } else {
         0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_average_and_gaussian_preserve_a_constant() {
+        let s: Vec<f64> = (0..200).map(|i| i as f64 * 0.5e-3).collect();
+        let centres: Vec<f64> = (0..30).map(|p| 20e-3 + p as f64 * 1.4e-3).collect();
+        let m = pixel_average(&centres, 1.4e-3, &s, 0.5e-3).dot(&gaussian(&s, 0.5e-3, 2.7e-3));
+        for r in m.rows() {
+            assert!((r.sum() - 1.0).abs() < 1e-12, "{}", r.sum());
+        }
+    }
+
+    #[test]
+    fn affine_maps_pixel_centres() {
+        let g = MrGeometry { plane: MrPlane::Xy, center: [0.0, 0.0, 0.085], fov: [0.18, 0.135], matrix: [128, 96], slice_thickness: 3e-3 };
+        let a = g.affine_mm();
+        assert!((a[0][3] - (-90.0 + 0.703125)).abs() < 1e-9);
+        assert!((a[0][0] - 1.40625).abs() < 1e-12 && (a[2][2] - 3.0).abs() < 1e-12 && (a[2][3] - 85.0).abs() < 1e-9);
+        assert_eq!(g.volume_shape(), [128, 96, 1]);
+        let g = MrGeometry { plane: MrPlane::Yz, ..g };
+        assert_eq!(g.volume_shape(), [1, 128, 96]);
+    }
+
+    #[test]
+    fn noise_is_seeded() {
+        let mut a = Array2::zeros((4, 4));
+        let mut b = Array2::zeros((4, 4));
+        add_noise(&mut a, 0.02, 7).unwrap();
+        add_noise(&mut b, 0.02, 7).unwrap();
+        assert_eq!(a, b);
+        assert!(a.iter().any(|v| *v != 0.0));
     }
 }

@@ -40,12 +40,7 @@ pub struct FieldBasis {
 impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches and keeps the
     /// samples that pixels `u x v` depend on. `progress(done, total)` is called after each batch.
-    pub fn build(
-        sim: &Simulation,
-        u: Range<usize>,
-        v: Range<usize>,
-        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-    ) -> Result<Self> {
+    pub fn build(sim: &Simulation, u: Range<usize>, v: Range<usize>, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Result<Self> {
         let sampler = sim.sampler.restrict(u, v)?;
         let n = sim.n_elements();
         let s_len = sampler.window.len();
@@ -57,11 +52,7 @@ impl FieldBasis {
                 limit: MEMORY_LIMIT,
             });
         }
-        let spec = crate::has::RecordSpec {
-            window: Some(sampler.window.clone()),
-            reflections: sim.reflections,
-            ..Default::default()
-        };
+        let spec = crate::has::RecordSpec { window: Some(sampler.window.clone()), reflections: sim.reflections, ..Default::default() };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
         for start in (0..n).step_by(BATCH) {
@@ -84,12 +75,7 @@ impl FieldBasis {
                 f(end, n);
             }
         }
-        Ok(FieldBasis {
-            sampler,
-            amplitude: sim.amplitude,
-            re,
-            im,
-        })
+        Ok(FieldBasis { sampler, amplitude: sim.amplitude, re, im })
     }
 
     /// Number of elements (columns of `B`).
@@ -110,8 +96,7 @@ impl FieldBasis {
     /// Index into the box of full-image pixel `(i, j)`, if inside.
     pub fn pixel_index(&self, i: usize, j: usize) -> Option<usize> {
         let p = &self.sampler.pixels;
-        (p[0].contains(&i) && p[1].contains(&j))
-            .then(|| (i - p[0].start) * p[1].len() + (j - p[1].start))
+        (p[0].contains(&i) && p[1].contains(&j)).then(|| (i - p[0].start) * p[1].len() + (j - p[1].start))
     }
 
     /// Fields `P = B·V` for drive columns `V` (elements x images): real and imaginary parts,
@@ -148,10 +133,7 @@ impl FieldBasis {
                 let b = (a + BLOCK).min(self.n_samples());
                 let (br, bi) = (self.re.slice(s![a..b, ..]), self.im.slice(s![a..b, ..]));
                 let (h_r, h_i) = (hr.slice(s![a..b, ..]), hi.slice(s![a..b, ..]));
-                (
-                    br.t().dot(&h_r) - bi.t().dot(&h_i),
-                    br.t().dot(&h_i) + bi.t().dot(&h_r),
-                )
+                (br.t().dot(&h_r) - bi.t().dot(&h_i), br.t().dot(&h_i) + bi.t().dot(&h_r))
             })
             .collect();
         let k = hr.ncols();
@@ -182,23 +164,12 @@ impl FieldBasis {
     /// The image on the box for per-element phases (rad) added to the steering.
     pub fn image(&self, phases: &[f64]) -> Result<Array2<f64>> {
         if phases.len() != self.n_elements() {
-            return Err(HasError::invalid(
-                "phases",
-                format!(
-                    "has {} values for {} elements",
-                    phases.len(),
-                    self.n_elements()
-                ),
-            ));
+            return Err(HasError::invalid("phases", format!("has {} values for {} elements", phases.len(), self.n_elements())));
         }
         let zero = vec![0.0; phases.len()];
         let (vr, vi) = Self::drives(phases, &[&zero]);
         let (pr, pi) = self.fields(&vr, &vi);
-        let q: Vec<f64> = pr
-            .iter()
-            .zip(pi.iter())
-            .map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2))
-            .collect();
+        let q: Vec<f64> = pr.iter().zip(pi.iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
         Ok(self.sampler.apply(&q)? * self.amplitude)
     }
 }
@@ -230,35 +201,19 @@ impl ElementCost {
         if terms.is_empty() {
             return Err(HasError::invalid("images", "need at least one image"));
         }
-        let (g, n_box) = (
-            basis.n_elements(),
-            basis.sampler.pixels[0].len() * basis.sampler.pixels[1].len(),
-        );
+        let (g, n_box) = (basis.n_elements(), basis.sampler.pixels[0].len() * basis.sampler.pixels[1].len());
         for (k, t) in terms.iter().enumerate() {
             if t.offset.len() != g {
                 return Err(HasError::invalid(
                     format!("image[{k}]"),
-                    format!(
-                        "known phases have {} values for {g} elements",
-                        t.offset.len()
-                    ),
+                    format!("known phases have {} values for {g} elements", t.offset.len()),
                 ));
             }
-            if t.mask.is_empty()
-                || t.mask.len() != t.measured.len()
-                || t.mask.iter().any(|&p| p >= n_box)
-            {
-                return Err(HasError::invalid(
-                    format!("image[{k}]"),
-                    "mask is empty or outside the basis' pixel box",
-                ));
+            if t.mask.is_empty() || t.mask.len() != t.measured.len() || t.mask.iter().any(|&p| p >= n_box) {
+                return Err(HasError::invalid(format!("image[{k}]"), "mask is empty or outside the basis' pixel box"));
             }
         }
-        Ok(ElementCost {
-            basis,
-            terms,
-            fit_scale: false,
-        })
+        Ok(ElementCost { basis, terms, fit_scale: false })
     }
 
     /// Model images on the box for every term, and the fields they came from.
@@ -268,17 +223,9 @@ impl ElementCost {
         let (pr, pi) = self.basis.fields(&vr, &vi);
         let images = (0..self.terms.len())
             .map(|k| {
-                let q: Vec<f64> = pr
-                    .column(k)
-                    .iter()
-                    .zip(pi.column(k).iter())
-                    .map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2))
-                    .collect();
-                self.basis
-                    .sampler
-                    .apply(&q)
-                    .map(|img| img * self.basis.amplitude)
-                    .unwrap_or_else(|_| Array2::from_elem((0, 0), f64::NAN))
+                let q: Vec<f64> =
+                    pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
+                self.basis.sampler.apply(&q).map(|img| img * self.basis.amplitude).unwrap_or_else(|_| Array2::from_elem((0, 0), f64::NAN))
             })
             .collect();
         (images, pr, pi)
@@ -286,16 +233,7 @@ impl ElementCost {
 
     /// Masked model values per term.
     fn masked(&self, images: &[Array2<f64>]) -> Vec<Vec<f64>> {
-        images
-            .iter()
-            .zip(&self.terms)
-            .map(|(img, t)| {
-                t.mask
-                    .iter()
-                    .map(|&p| img.as_slice().map_or(f64::NAN, |s| s[p]))
-                    .collect()
-            })
-            .collect()
+        images.iter().zip(&self.terms).map(|(img, t)| t.mask.iter().map(|&p| img.as_slice().map_or(f64::NAN, |s| s[p])).collect()).collect()
     }
 
     fn scale_for(&self, model: &[Vec<f64>]) -> f64 {
@@ -326,16 +264,7 @@ impl Objective for ElementCost {
         let (images, _, _) = self.evaluate(phases);
         let model = self.masked(&images);
         let s = self.scale_for(&model);
-        model
-            .iter()
-            .zip(&self.terms)
-            .map(|(d, t)| {
-                d.iter()
-                    .zip(&t.measured)
-                    .map(|(x, m)| (s * x - m).powi(2))
-                    .sum::<f64>()
-            })
-            .sum()
+        model.iter().zip(&self.terms).map(|(d, t)| d.iter().zip(&t.measured).map(|(x, m)| (s * x - m).powi(2)).sum::<f64>()).sum()
     }
 
     fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
@@ -397,16 +326,11 @@ pub fn build_element_model(
     margin: usize,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<ElementModel> {
-    let (masks, [u, v], noise) = masks_and_box(sim, measurements, mask_fraction, margin)?;
+    let crate::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
     let mut terms = Vec::with_capacity(measurements.len());
     for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
-        let offset = if meas.known.is_empty() {
-            vec![0.0; sim.n_elements()]
-        } else {
-            sim.element_phases(&meas.known).map_err(|e| {
-                HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string())
-            })?
-        };
+        let offset =
+            known_per_element(sim, &meas.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
         let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
         terms.push(ElementTerm {
             mask: mask.iter().map(local).collect(),
@@ -415,9 +339,31 @@ pub fn build_element_model(
         });
     }
     let basis = Arc::new(FieldBasis::build(sim, u, v, progress)?);
-    Ok(ElementModel {
-        cost: ElementCost::new(basis, terms)?,
-        noise,
+    Ok(ElementModel { cost: ElementCost::new(basis, terms)?, noise })
+}
+
+/// Known phases per element from values per element, per group of `sim`, or per default group
+/// of the array (the 16 groups of SPEC §2; empty = none).
+pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
+    let n = sim.n_elements();
+    if known.is_empty() {
+        return Ok(vec![0.0; n]);
+    }
+    let default = sim.transducer.default_groups();
+    let n_default = default.iter().max().map_or(0, |m| m + 1);
+    if known.len() == n_default && known.len() != sim.n_groups && known.len() != n {
+        crate::error::require_finite("phases", known)?;
+        return Ok(default.iter().map(|&g| known[g]).collect());
+    }
+    sim.element_phases(known).map_err(|_| {
+        HasError::invalid(
+            "phases",
+            format!(
+                "has {} values; expected {n} (one per element), {} (one per group) or {n_default} (one per default group)",
+                known.len(),
+                sim.n_groups
+            ),
+        )
     })
 }
 
@@ -458,10 +404,5 @@ pub fn estimate_elements(
         .with_time_limit_opt(group_estimator.time_limit)
         .with_start(start)?
         .run(&model.cost, cancel)?;
-    Ok(ElementEstimate {
-        group_model,
-        group,
-        model,
-        elements,
-    })
+    Ok(ElementEstimate { group_model, group, model, elements })
 }

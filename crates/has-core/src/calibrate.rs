@@ -28,22 +28,12 @@ pub struct Calibration {
 
 /// Fits W (searched in `[0, max_width]`, m) and A to a measured image of the beam steered with
 /// `known` phases added (per element or per group; empty = none).
-pub fn calibrate(
-    sim: &Simulation,
-    image: &Array2<f64>,
-    known: &[f64],
-    mask_fraction: f64,
-    max_width: f64,
-) -> Result<Calibration> {
+pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_fraction: f64, max_width: f64) -> Result<Calibration> {
     check_image(sim, image, "image")?;
     if !(mask_fraction > 0.0 && mask_fraction < 1.0) {
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
-    let spec = RecordSpec {
-        window: Some(sim.sampler.window.clone()),
-        reflections: sim.reflections,
-        ..RecordSpec::default()
-    };
+    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
     let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal
@@ -51,26 +41,11 @@ pub fn calibrate(
     let zone = mask_pixels(image, mask_fraction);
     let m = sim.sampler.geometry.matrix;
     let px = sim.sampler.geometry.pixel_size();
-    let reach = [
-        (0.5 * max_width / px[0]).ceil() as usize,
-        (0.5 * max_width / px[1]).ceil() as usize,
-    ];
-    let (u0, u1) = (
-        zone.iter().map(|p| p.0).min().unwrap_or(0),
-        zone.iter().map(|p| p.0).max().unwrap_or(0) + 1,
-    );
-    let (v0, v1) = (
-        zone.iter().map(|p| p.1).min().unwrap_or(0),
-        zone.iter().map(|p| p.1).max().unwrap_or(0) + 1,
-    );
-    let (u, v) = (
-        u0.saturating_sub(reach[0])..(u1 + reach[0]).min(m[0]),
-        v0.saturating_sub(reach[1])..(v1 + reach[1]).min(m[1]),
-    );
-    let mask: Vec<(usize, usize)> = u
-        .clone()
-        .flat_map(|i| v.clone().map(move |j| (i, j)))
-        .collect();
+    let reach = [(0.5 * max_width / px[0]).ceil() as usize, (0.5 * max_width / px[1]).ceil() as usize];
+    let (u0, u1) = (zone.iter().map(|p| p.0).min().unwrap_or(0), zone.iter().map(|p| p.0).max().unwrap_or(0) + 1);
+    let (v0, v1) = (zone.iter().map(|p| p.1).min().unwrap_or(0), zone.iter().map(|p| p.1).max().unwrap_or(0) + 1);
+    let (u, v) = (u0.saturating_sub(reach[0])..(u1 + reach[0]).min(m[0]), v0.saturating_sub(reach[1])..(v1 + reach[1]).min(m[1]));
+    let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
     let measured: Vec<f64> = mask.iter().map(|&ij| image[ij]).collect();
     let fit = |w: f64| -> Result<(f64, f64)> {
         let f = sim.sampler.with_broadening(w)?.apply(&power)?;
@@ -78,28 +53,16 @@ pub fn calibrate(
         let ff: f64 = model.iter().map(|x| x * x).sum();
         let fm: f64 = model.iter().zip(&measured).map(|(x, y)| x * y).sum();
         let a = if ff > 0.0 { fm / ff } else { 0.0 };
-        let j = model
-            .iter()
-            .zip(&measured)
-            .map(|(x, y)| (a * x - y).powi(2))
-            .sum();
+        let j = model.iter().zip(&measured).map(|(x, y)| (a * x - y).powi(2)).sum();
         Ok((j, a))
     };
     // Scan, then golden-section search around the best scan point.
     let n = 40;
     let step = max_width / n as f64;
-    let scan = (0..=n)
-        .map(|i| Ok((i as f64 * step, fit(i as f64 * step)?.0)))
-        .collect::<Result<Vec<_>>>()?;
-    let (i_best, _) = scan
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
-        .ok_or_else(|| HasError::invalid("image", "empty"))?;
-    let (mut lo, mut hi) = (
-        (i_best as f64 - 1.0).max(0.0) * step,
-        (i_best as f64 + 1.0).min(n as f64) * step,
-    );
+    let scan = (0..=n).map(|i| Ok((i as f64 * step, fit(i as f64 * step)?.0))).collect::<Result<Vec<_>>>()?;
+    let (i_best, _) =
+        scan.iter().enumerate().min_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).ok_or_else(|| HasError::invalid("image", "empty"))?;
+    let (mut lo, mut hi) = ((i_best as f64 - 1.0).max(0.0) * step, (i_best as f64 + 1.0).min(n as f64) * step);
     let r = 0.5 * (5f64.sqrt() - 1.0);
     let (mut c, mut d) = (hi - r * (hi - lo), lo + r * (hi - lo));
     let (mut fc, mut fd) = (fit(c)?.0, fit(d)?.0);
@@ -125,11 +88,5 @@ pub fn calibrate(
     }
     let max = image.iter().copied().fold(f64::MIN, f64::max);
     let noise = noise_floor(image, &[u, v], mask_fraction * max);
-    Ok(Calibration {
-        broadening_width: w,
-        amplitude,
-        cost,
-        n_pixels: mask.len(),
-        noise,
-    })
+    Ok(Calibration { broadening_width: w, amplitude, cost, n_pixels: mask.len(), noise })
 }

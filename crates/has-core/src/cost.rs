@@ -41,13 +41,7 @@ pub struct ArfiKernel {
 impl ArfiKernel {
     /// Marches the `G` group fields (steering plus `known` element phases, rad; empty = none) and
     /// builds the kernels of the pixels in the box `u x v`.
-    pub fn build(
-        sim: &Simulation,
-        groups: &[usize],
-        known: &[f64],
-        u: Range<usize>,
-        v: Range<usize>,
-    ) -> Result<Self> {
+    pub fn build(sim: &Simulation, groups: &[usize], known: &[f64], u: Range<usize>, v: Range<usize>) -> Result<Self> {
         let g_count = groups.iter().max().map_or(0, |m| m + 1);
         if g_count < 2 {
             return Err(HasError::invalid("groups", "need at least two groups"));
@@ -55,40 +49,21 @@ impl ArfiKernel {
         let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
         let sources = sim.group_sources(groups, known)?;
         let recordings = sim.record_window(&sources)?;
-        let fields: Vec<Vec<C64>> = recordings
-            .iter()
-            .map(|r| sim.sampler.window.extract(&r.window, &sampler.window))
-            .collect();
+        let fields: Vec<Vec<C64>> = recordings.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
         Self::from_fields(&sampler, &fields, sim.amplitude, [u, v])
     }
 
     /// Kernels from group fields already recorded on `sampler.window`.
-    pub fn from_fields(
-        sampler: &MrSampler,
-        fields: &[Vec<C64>],
-        amplitude: f64,
-        pixels: [Range<usize>; 2],
-    ) -> Result<Self> {
+    pub fn from_fields(sampler: &MrSampler, fields: &[Vec<C64>], amplitude: f64, pixels: [Range<usize>; 2]) -> Result<Self> {
         let g = fields.len();
         let pairs: Vec<(usize, usize)> = (0..g).flat_map(|a| (a..g).map(move |b| (a, b))).collect();
         let maps: Vec<(Array2<f64>, Array2<f64>)> = pairs
             .par_iter()
             .map(|&(a, b)| {
-                let q: Vec<C64> = fields[a]
-                    .iter()
-                    .zip(&fields[b])
-                    .map(|(x, y)| x.conj() * y)
-                    .collect();
+                let q: Vec<C64> = fields[a].iter().zip(&fields[b]).map(|(x, y)| x.conj() * y).collect();
                 let re: Vec<f64> = q.iter().map(|c| c.re).collect();
                 let im: Vec<f64> = q.iter().map(|c| c.im).collect();
-                Ok((
-                    sampler.apply(&re)? * amplitude,
-                    if a == b {
-                        Array2::zeros((0, 0))
-                    } else {
-                        sampler.apply(&im)? * amplitude
-                    },
-                ))
+                Ok((sampler.apply(&re)? * amplitude, if a == b { Array2::zeros((0, 0)) } else { sampler.apply(&im)? * amplitude }))
             })
             .collect::<Result<Vec<_>>>()?;
         let n_pix = pixels[0].len() * pixels[1].len();
@@ -104,12 +79,7 @@ impl ArfiKernel {
                 }
             }
         }
-        Ok(ArfiKernel {
-            n_groups: g,
-            pixels,
-            diag,
-            upper,
-        })
+        Ok(ArfiKernel { n_groups: g, pixels, diag, upper })
     }
 
     /// Number of pixels in the box.
@@ -151,17 +121,13 @@ impl ArfiKernel {
     /// The image on the whole box for group phases (rad), shape `(len u, len v)`.
     pub fn image(&self, phases: &[f64]) -> Result<Array2<f64>> {
         if phases.len() != self.n_groups {
-            return Err(HasError::invalid(
-                "phases",
-                format!("has {} values for {} groups", phases.len(), self.n_groups),
-            ));
+            return Err(HasError::invalid("phases", format!("has {} values for {} groups", phases.len(), self.n_groups)));
         }
         let v: Vec<C64> = phases.iter().map(|&p| C64::from_polar(1.0, p)).collect();
         let all: Vec<usize> = (0..self.n_pixels()).collect();
         let mut out = Vec::new();
         self.image_at(&v, &all, &mut out);
-        Array2::from_shape_vec((self.pixels[0].len(), self.pixels[1].len()), out)
-            .map_err(|e| HasError::invalid("kernel", e.to_string()))
+        Array2::from_shape_vec((self.pixels[0].len(), self.pixels[1].len()), out).map_err(|e| HasError::invalid("kernel", e.to_string()))
     }
 
     /// Adds `Σ_i r_i · K_i` over the pixels `which` into the dense Hermitian `acc` (G x G,
@@ -196,11 +162,7 @@ fn re_dot(a: &[C64], b: &[C64]) -> f64 {
             acc[k] += x[k].re * y[k].re - x[k].im * y[k].im;
         }
     }
-    let tail: f64 = ra
-        .iter()
-        .zip(rb)
-        .map(|(x, y)| x.re * y.re - x.im * y.im)
-        .sum();
+    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x.re * y.re - x.im * y.im).sum();
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
@@ -242,26 +204,16 @@ pub struct HybridCost {
 impl HybridCost {
     /// Checks that every term has the same number of groups.
     pub fn new(terms: Vec<Term>) -> Result<Self> {
-        let n_groups = terms
-            .first()
-            .map(|t| t.kernel.n_groups)
-            .ok_or_else(|| HasError::invalid("images", "need at least one image"))?;
+        let n_groups = terms.first().map(|t| t.kernel.n_groups).ok_or_else(|| HasError::invalid("images", "need at least one image"))?;
         for (k, t) in terms.iter().enumerate() {
             if t.kernel.n_groups != n_groups || t.offset.len() != n_groups {
-                return Err(HasError::invalid(
-                    format!("image[{k}]"),
-                    "group count differs from the first image",
-                ));
+                return Err(HasError::invalid(format!("image[{k}]"), "group count differs from the first image"));
             }
             if t.mask.is_empty() || t.mask.len() != t.measured.len() {
                 return Err(HasError::invalid(format!("image[{k}]"), "empty mask"));
             }
         }
-        Ok(HybridCost {
-            terms,
-            n_groups,
-            fit_scale: false,
-        })
+        Ok(HybridCost { terms, n_groups, fit_scale: false })
     }
 
     /// Number of masked pixels over all images.
@@ -274,11 +226,7 @@ impl HybridCost {
         self.terms
             .iter()
             .map(|t| {
-                let v: Vec<C64> = phases
-                    .iter()
-                    .zip(&t.offset)
-                    .map(|(p, o)| C64::from_polar(1.0, p + o))
-                    .collect();
+                let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
                 let mut img = Vec::new();
                 t.kernel.image_at(&v, &t.mask, &mut img);
                 img
@@ -314,16 +262,7 @@ impl HybridCost {
     pub fn cost(&self, phases: &[f64]) -> f64 {
         let images = self.images(phases);
         let s = self.scale_for(&images);
-        images
-            .iter()
-            .zip(&self.terms)
-            .map(|(img, t)| {
-                img.iter()
-                    .zip(&t.measured)
-                    .map(|(d, m)| (s * d - m).powi(2))
-                    .sum::<f64>()
-            })
-            .sum()
+        images.iter().zip(&self.terms).map(|(img, t)| img.iter().zip(&t.measured).map(|(d, m)| (s * d - m).powi(2)).sum::<f64>()).sum()
     }
 
     /// `J` and `∂J/∂phi_g = 4·s·Σ_k Im(conj(v_g)·(R_k v)_g)`, `R_k = Σ_i r_i·K_i`, `r = s·d - m`
@@ -336,16 +275,8 @@ impl HybridCost {
         let mut total = 0.0;
         let mut r_mat = vec![C64::new(0.0, 0.0); g * g];
         for (t, img) in self.terms.iter().zip(&images) {
-            let v: Vec<C64> = phases
-                .iter()
-                .zip(&t.offset)
-                .map(|(p, o)| C64::from_polar(1.0, p + o))
-                .collect();
-            let r: Vec<f64> = img
-                .iter()
-                .zip(&t.measured)
-                .map(|(d, m)| s * d - m)
-                .collect();
+            let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
+            let r: Vec<f64> = img.iter().zip(&t.measured).map(|(d, m)| s * d - m).collect();
             total += r.iter().map(|x| x * x).sum::<f64>();
             r_mat.iter_mut().for_each(|x| *x = C64::new(0.0, 0.0));
             t.kernel.weighted_sum(&t.mask, &r, &mut r_mat);
@@ -417,24 +348,13 @@ pub struct Model {
 pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
     let m = sim.sampler.geometry.matrix;
     if image.dim() != (m[0], m[1]) {
-        return Err(HasError::invalid(
-            name,
-            format!(
-                "has shape {:?}, the scenario's MR matrix is {} x {}",
-                image.dim(),
-                m[0],
-                m[1]
-            ),
-        ));
+        return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
     }
     if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
         return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v}")));
     }
     if !(image.iter().copied().fold(f64::MIN, f64::max) > 0.0) {
-        return Err(HasError::invalid(
-            name,
-            "has no positive pixel (all-zero or inverted image?)",
-        ));
+        return Err(HasError::invalid(name, "has no positive pixel (all-zero or inverted image?)"));
     }
     Ok(())
 }
@@ -453,12 +373,7 @@ pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     while let Some((i, j)) = stack.pop() {
         out.push((i, j));
-        let neighbours = [
-            (i.wrapping_sub(1), j),
-            (i + 1, j),
-            (i, j.wrapping_sub(1)),
-            (i, j + 1),
-        ];
+        let neighbours = [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)];
         for (a, b) in neighbours {
             if a < nu && b < nv && !seen[[a, b]] && image[[a, b]] > level {
                 seen[[a, b]] = true;
@@ -474,79 +389,49 @@ pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
 /// of each image's maximum, one pixel box around all masks (plus `margin` pixels), kernels from
 /// one batched march per distinct known-phase pattern (patterns constant within groups reuse the
 /// plain kernel with a phase offset).
-pub fn build_model(
-    sim: &Simulation,
-    measurements: &[Measurement],
-    mask_fraction: f64,
-    margin: usize,
-) -> Result<Model> {
+pub fn build_model(sim: &Simulation, measurements: &[Measurement], mask_fraction: f64, margin: usize) -> Result<Model> {
     if measurements.is_empty() {
         return Err(HasError::invalid("images", "need at least one image"));
     }
     let g = sim.n_groups;
     if g > 128 {
-        return Err(HasError::invalid(
-            "groups",
-            format!("{g} groups: the per-pixel kernels are limited to 128 groups"),
-        ));
+        return Err(HasError::invalid("groups", format!("{g} groups: the per-pixel kernels are limited to 128 groups")));
     }
-    let (masks, [u, v], noise) = masks_and_box(sim, measurements, mask_fraction, margin)?;
-    let base = std::sync::Arc::new(ArfiKernel::build(
-        sim,
-        &sim.groups,
-        &[],
-        u.clone(),
-        v.clone(),
-    )?);
+    let MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
+    let base = std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &[], u.clone(), v.clone())?);
     let mut terms = Vec::with_capacity(measurements.len());
     for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
         let (kernel, offset) = if meas.known.is_empty() {
             (base.clone(), vec![0.0; g])
         } else {
-            let per_element = sim.element_phases(&meas.known).map_err(|e| {
-                HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string())
-            })?;
+            let per_element =
+                sim.element_phases(&meas.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
             match group_constant(&per_element, &sim.groups, g) {
                 Some(offset) => (base.clone(), offset),
-                None => (
-                    std::sync::Arc::new(ArfiKernel::build(
-                        sim,
-                        &sim.groups,
-                        &per_element,
-                        u.clone(),
-                        v.clone(),
-                    )?),
-                    vec![0.0; g],
-                ),
+                None => (std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &per_element, u.clone(), v.clone())?), vec![0.0; g]),
             }
         };
-        let idx: Vec<usize> = mask
-            .iter()
-            .filter_map(|&(i, j)| kernel.pixel_index(i, j))
-            .collect();
+        let idx: Vec<usize> = mask.iter().filter_map(|&(i, j)| kernel.pixel_index(i, j)).collect();
         let measured: Vec<f64> = mask.iter().map(|&ij| meas.image[ij]).collect();
-        terms.push(Term {
-            kernel,
-            mask: idx,
-            measured,
-            offset,
-        });
+        terms.push(Term { kernel, mask: idx, measured, offset });
     }
-    Ok(Model {
-        cost: HybridCost::new(terms)?,
-        base,
-        noise,
-    })
+    Ok(Model { cost: HybridCost::new(terms)?, base, noise })
 }
 
-/// Checks the images; returns each one's mask ([`mask_pixels`]), one pixel box around all masks
-/// (plus `margin` pixels) and the RMS over images of the background noise level.
-pub fn masks_and_box(
-    sim: &Simulation,
-    measurements: &[Measurement],
-    mask_fraction: f64,
-    margin: usize,
-) -> Result<(Vec<Vec<(usize, usize)>>, [Range<usize>; 2], f64)> {
+/// The images' masks, one pixel box around them and their noise level.
+#[derive(Debug, Clone)]
+pub struct MaskedBox {
+    /// Each image's mask ([`mask_pixels`]), full-image pixel indices.
+    pub masks: Vec<Vec<(usize, usize)>>,
+    /// The box around all masks plus a margin: ranges along u and v.
+    pub pixels: [Range<usize>; 2],
+    /// RMS over the images of the background noise level (rad).
+    pub noise: f64,
+}
+
+/// Checks the images; returns their masks, one pixel box around all masks (plus `margin`
+/// pixels) and the noise level.
+pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fraction: f64, margin: usize) -> Result<MaskedBox> {
     if measurements.is_empty() {
         return Err(HasError::invalid("images", "need at least one image"));
     }
@@ -560,30 +445,19 @@ pub fn masks_and_box(
         })
         .collect::<Result<_>>()?;
     let all = masks.iter().flatten();
-    let lo_u = all
-        .clone()
-        .map(|p| p.0)
-        .min()
-        .unwrap_or(0)
-        .saturating_sub(margin);
+    let lo_u = all.clone().map(|p| p.0).min().unwrap_or(0).saturating_sub(margin);
     let hi_u = (all.clone().map(|p| p.0).max().unwrap_or(0) + margin + 1).min(m[0]);
-    let lo_v = all
-        .clone()
-        .map(|p| p.1)
-        .min()
-        .unwrap_or(0)
-        .saturating_sub(margin);
+    let lo_v = all.clone().map(|p| p.1).min().unwrap_or(0).saturating_sub(margin);
     let hi_v = (all.map(|p| p.1).max().unwrap_or(0) + margin + 1).min(m[1]);
     let (u, v) = (lo_u..hi_u, lo_v..hi_v);
     let noise2: f64 = measurements
         .iter()
         .map(|meas| {
             let peak = meas.image.iter().copied().fold(f64::MIN, f64::max);
-            crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()], mask_fraction * peak)
-                .powi(2)
+            crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()], mask_fraction * peak).powi(2)
         })
         .sum();
-    Ok((masks, [u, v], (noise2 / measurements.len() as f64).sqrt()))
+    Ok(MaskedBox { masks, pixels: [u, v], noise: (noise2 / measurements.len() as f64).sqrt() })
 }
 
 /// The per-group value of element phases that are constant within every group, if they are.

@@ -12,20 +12,13 @@ pub enum HasError {
     /// A file exists but could not be read or parsed.
     BadFile { path: String, reason: String },
     /// The request would need more memory than allowed.
-    TooLarge {
-        what: String,
-        bytes: u64,
-        limit: u64,
-    },
+    TooLarge { what: String, bytes: u64, limit: u64 },
 }
 
 impl HasError {
     /// Shorthand for [`HasError::InvalidParameter`].
     pub fn invalid(name: impl Into<String>, reason: impl Into<String>) -> Self {
-        HasError::InvalidParameter {
-            name: name.into(),
-            reason: reason.into(),
-        }
+        HasError::InvalidParameter { name: name.into(), reason: reason.into() }
     }
 }
 
@@ -55,10 +48,7 @@ pub fn require_positive(name: &str, value: f64) -> Result<()> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(HasError::invalid(
-            name,
-            format!("must be a finite number > 0, got {value}"),
-        ))
+        Err(HasError::invalid(name, format!("must be a finite number > 0, got {value}")))
     }
 }
 
@@ -67,10 +57,7 @@ pub fn require_non_negative(name: &str, value: f64) -> Result<()> {
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(HasError::invalid(
-            name,
-            format!("must be a finite number >= 0, got {value}"),
-        ))
+        Err(HasError::invalid(name, format!("must be a finite number >= 0, got {value}")))
     }
 }
 
@@ -78,9 +65,6 @@ pub fn require_non_negative(name: &str, value: f64) -> Result<()> {
 pub fn require_finite(name: &str, values: &[f64]) -> Result<()> {
     match values.iter().position(|v| !v.is_finite()) {
         None => Ok(()),
-        Some(i) => Err(HasError::invalid(
-            name,
-            format!("value {i} is not finite ({})", values[i]),
-        )),
+        Some(i) => Err(HasError::invalid(name, format!("value {i} is not finite ({})", values[i]))),
     }
 }

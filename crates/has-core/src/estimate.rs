@@ -77,10 +77,7 @@ impl Estimator {
     /// 5 % of a zero start, 0.00025 rad, barely leaves the start).
     pub fn nelder_mead() -> Self {
         Estimator {
-            method: Method::NelderMead {
-                step: 1.0,
-                tolerance: 1e-8,
-            },
+            method: Method::NelderMead { step: 1.0, tolerance: 1e-8 },
             max_evaluations: 8000,
             time_limit: None,
             seed: 0,
@@ -91,24 +88,13 @@ impl Estimator {
 
     /// Particle swarm: 40 particles, 8000 evaluations.
     pub fn particle_swarm() -> Self {
-        Estimator {
-            method: Method::ParticleSwarm { particles: 40 },
-            max_evaluations: 8000,
-            ..Self::nelder_mead()
-        }
+        Estimator { method: Method::ParticleSwarm { particles: 40 }, max_evaluations: 8000, ..Self::nelder_mead() }
     }
 
     /// L-BFGS: 20 random starts then 20 from twins and perturbations of the best, memory 10,
     /// 40000 evaluations over all starts.
     pub fn lbfgs() -> Self {
-        Estimator {
-            method: Method::Lbfgs {
-                starts: 20,
-                memory: 10,
-            },
-            max_evaluations: 40000,
-            ..Self::nelder_mead()
-        }
+        Estimator { method: Method::Lbfgs { starts: 20, memory: 10 }, max_evaluations: 40000, ..Self::nelder_mead() }
     }
 
     /// At most this many cost evaluations (> 0).
@@ -123,10 +109,7 @@ impl Estimator {
     /// Stop after this many seconds (> 0).
     pub fn with_time_limit(mut self, seconds: f64) -> Result<Self> {
         if !(seconds.is_finite() && seconds > 0.0) {
-            return Err(HasError::invalid(
-                "time_limit_s",
-                format!("must be a finite number > 0, got {seconds}"),
-            ));
+            return Err(HasError::invalid("time_limit_s", format!("must be a finite number > 0, got {seconds}")));
         }
         self.time_limit = Some(Duration::from_secs_f64(seconds));
         Ok(self)
@@ -171,20 +154,12 @@ impl Estimator {
     pub fn run(&self, cost: &dyn Objective, cancel: Option<&AtomicBool>) -> Result<Estimate> {
         let g = cost.n_phases();
         if g < 2 {
-            return Err(HasError::invalid(
-                "groups",
-                "need at least two phases to estimate",
-            ));
+            return Err(HasError::invalid("groups", "need at least two phases to estimate"));
         }
         let t0 = Instant::now();
         let deadline = self.time_limit.map(|d| t0 + d);
         let start = match &self.start {
-            Some(s) if s.len() != g => {
-                return Err(HasError::invalid(
-                    "start",
-                    format!("has {} values for {g} groups", s.len()),
-                ))
-            }
+            Some(s) if s.len() != g => return Err(HasError::invalid("start", format!("has {} values for {g} groups", s.len()))),
             Some(s) => reduced(s),
             None => vec![0.0; g - 1],
         };
@@ -214,10 +189,7 @@ impl Estimator {
                         .and_then(|s| s.with_rho(0.5))
                         .and_then(|s| s.with_sigma(1.0 - 1.0 / n))
                         .map_err(argmin_error)?;
-                    let outcome = Executor::new(&p, solver)
-                        .configure(|s| s.max_iters(self.max_evaluations as u64))
-                        .run()
-                        .map(|_| ());
+                    let outcome = Executor::new(&p, solver).configure(|s| s.max_iters(self.max_evaluations as u64)).run().map(|_| ());
                     let (best, params) = p.best();
                     if outcome.is_err() || best >= last {
                         break outcome;
@@ -232,13 +204,9 @@ impl Estimator {
             Method::ParticleSwarm { particles } => {
                 let p = Problem::new(cost, start.clone(), self.max_evaluations, deadline, cancel);
                 let bounds = (vec![-PI; g - 1], vec![PI; g - 1]);
-                let solver = ParticleSwarm::new(bounds, *particles)
-                    .with_rng_generator(ChaCha8Rng::seed_from_u64(self.seed));
+                let solver = ParticleSwarm::new(bounds, *particles).with_rng_generator(ChaCha8Rng::seed_from_u64(self.seed));
                 let iters = (self.max_evaluations / particles.max(&1)).max(1) as u64;
-                let outcome = Executor::new(&p, solver)
-                    .configure(|s| s.max_iters(iters))
-                    .run()
-                    .map(|_| ());
+                let outcome = Executor::new(&p, solver).configure(|s| s.max_iters(iters)).run().map(|_| ());
                 vec![p.finish(outcome)]
             }
             Method::Lbfgs { starts, memory } => {
@@ -250,10 +218,7 @@ impl Estimator {
                 let rounds = if *starts > 1 { 2 } else { 1 };
                 let per_start = (self.max_evaluations / (rounds * starts)).max(1);
                 let run_all = |inits: &[Vec<f64>]| {
-                    inits
-                        .par_iter()
-                        .map(|x0| lbfgs_run(cost, x0.clone(), *memory, per_start, deadline, cancel))
-                        .collect::<Result<Vec<_>>>()
+                    inits.par_iter().map(|x0| lbfgs_run(cost, x0.clone(), *memory, per_start, deadline, cancel)).collect::<Result<Vec<_>>>()
                 };
                 let mut runs = run_all(&inits)?;
                 // A single start only polishes it; more starts get a second round from the twins
@@ -266,25 +231,10 @@ impl Estimator {
             }
         };
         let evaluations = runs.iter().map(|r| r.evaluations).sum();
-        let stop = runs
-            .iter()
-            .map(|r| r.stop)
-            .find(|s| *s != Stop::Converged)
-            .unwrap_or(Stop::Converged);
+        let stop = runs.iter().map(|r| r.stop).find(|s| *s != Stop::Converged).unwrap_or(Stop::Converged);
         // Best over all runs; ties go to the earliest start (deterministic).
-        let best = runs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0)))
-            .map(|(i, _)| i)
-            .unwrap_or(0);
-        let minima: Vec<Minimum> = runs
-            .iter()
-            .map(|r| Minimum {
-                phases: centred(&full(&r.params)),
-                cost: r.cost,
-            })
-            .collect();
+        let best = runs.iter().enumerate().min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0))).map(|(i, _)| i).unwrap_or(0);
+        let minima: Vec<Minimum> = runs.iter().map(|r| Minimum { phases: centred(&full(&r.params)), cost: r.cost }).collect();
         let b = &runs[best];
         Ok(Estimate {
             phases: centred(&full(&b.params)),
@@ -314,11 +264,7 @@ impl Estimator {
         }
         let best = runs[0].params.clone();
         while second.len() < starts {
-            second.push(
-                best.iter()
-                    .map(|b| wrap(b + rng.random_range(-1.0..1.0)))
-                    .collect(),
-            );
+            second.push(best.iter().map(|b| wrap(b + rng.random_range(-1.0..1.0))).collect());
         }
         second
     }
@@ -378,21 +324,8 @@ impl std::error::Error for EarlyStop {}
 
 impl<'a> Problem<'a> {
     /// `start` is reported when the run ends before its first evaluation (a limit already hit).
-    fn new(
-        cost: &'a dyn Objective,
-        start: Vec<f64>,
-        budget: usize,
-        deadline: Option<Instant>,
-        cancel: Option<&'a AtomicBool>,
-    ) -> Self {
-        Problem {
-            cost,
-            budget,
-            deadline,
-            cancel,
-            evaluations: AtomicUsize::new(0),
-            best: Mutex::new((f64::INFINITY, start, vec![])),
-        }
+    fn new(cost: &'a dyn Objective, start: Vec<f64>, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
+        Problem { cost, budget, deadline, cancel, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, start, vec![])) }
     }
 
     fn check(&self) -> std::result::Result<(), EarlyStop> {
@@ -421,10 +354,7 @@ impl<'a> Problem<'a> {
 
     /// The best cost and point so far.
     fn best(&self) -> (f64, Vec<f64>) {
-        self.best
-            .lock()
-            .map(|b| (b.0, b.1.clone()))
-            .unwrap_or((f64::INFINITY, vec![]))
+        self.best.lock().map(|b| (b.0, b.1.clone())).unwrap_or((f64::INFINITY, vec![]))
     }
 
     fn finish(self, outcome: std::result::Result<(), argmin::core::Error>) -> Run {
@@ -433,18 +363,10 @@ impl<'a> Problem<'a> {
             // argmin's iteration cap (set to the budget) ends a run that used it all.
             Ok(()) if evaluations >= self.budget => Stop::EvaluationLimit,
             Ok(()) => Stop::Converged,
-            Err(e) => e
-                .downcast_ref::<EarlyStop>()
-                .map_or(Stop::Converged, |s| s.0),
+            Err(e) => e.downcast_ref::<EarlyStop>().map_or(Stop::Converged, |s| s.0),
         };
         let (cost, params, history) = self.best.into_inner().unwrap_or_else(|p| p.into_inner());
-        Run {
-            params,
-            cost,
-            evaluations,
-            history,
-            stop,
-        }
+        Run { params, cost, evaluations, history, stop }
     }
 }
 
@@ -469,10 +391,7 @@ impl Gradient for &Problem<'_> {
         self.check()?;
         let (c, g) = self.cost.cost_and_gradient(&full(x));
         self.record(x, if c.is_finite() { c } else { PENALTY });
-        Ok(g[1..]
-            .iter()
-            .map(|v| if v.is_finite() { *v } else { 0.0 })
-            .collect())
+        Ok(g[1..].iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect())
     }
 }
 
@@ -489,10 +408,7 @@ fn lbfgs_run(
         .with_tolerance_grad(1e-12)
         .and_then(|s| s.with_tolerance_cost(1e-14))
         .map_err(argmin_error)?;
-    let outcome = Executor::new(&p, solver)
-        .configure(|s| s.param(x0).max_iters(budget as u64))
-        .run()
-        .map(|_| ());
+    let outcome = Executor::new(&p, solver).configure(|s| s.param(x0).max_iters(budget as u64)).run().map(|_| ());
     Ok(p.finish(outcome))
 }
 
@@ -529,31 +445,15 @@ pub fn centred(phases: &[f64]) -> Vec<f64> {
 
 /// RMS of the wrapped difference `a - b` after removing the best common offset (SPEC §6).
 pub fn phase_error(a: &[f64], b: &[f64]) -> f64 {
-    let m: C64 = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| C64::from_polar(1.0, x - y))
-        .sum();
+    let m: C64 = a.iter().zip(b).map(|(x, y)| C64::from_polar(1.0, x - y)).sum();
     let offset = m.arg();
-    (a.iter()
-        .zip(b)
-        .map(|(x, y)| wrap(x - y - offset).powi(2))
-        .sum::<f64>()
-        / a.len() as f64)
-        .sqrt()
+    (a.iter().zip(b).map(|(x, y)| wrap(x - y - offset).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
 }
 
 /// Condenses per-element phases to per-group ones by the circular mean over each group (SPEC §2).
 pub fn condense(element_phases: &[f64], groups: &[usize]) -> Result<Vec<f64>> {
     if element_phases.len() != groups.len() {
-        return Err(HasError::invalid(
-            "phases",
-            format!(
-                "has {} values for {} elements",
-                element_phases.len(),
-                groups.len()
-            ),
-        ));
+        return Err(HasError::invalid("phases", format!("has {} values for {} elements", element_phases.len(), groups.len())));
     }
     let g = groups.iter().max().map_or(0, |m| m + 1);
     let mut sums = vec![C64::new(0.0, 0.0); g];
@@ -608,17 +508,9 @@ pub fn point_reflection(positions: &[[f64; 3]], groups: &[usize]) -> Option<Vec<
         c[k][1] += p[1];
         n[k] += 1;
     }
-    c.iter_mut()
-        .zip(&n)
-        .for_each(|(c, &n)| c.iter_mut().for_each(|v| *v /= n.max(1) as f64));
+    c.iter_mut().zip(&n).for_each(|(c, &n)| c.iter_mut().for_each(|v| *v /= n.max(1) as f64));
     let d = |a: [f64; 2], b: [f64; 2]| (a[0] + b[0]).hypot(a[1] + b[1]);
-    let sigma: Vec<usize> = (0..g)
-        .map(|a| {
-            (0..g)
-                .min_by(|&x, &y| d(c[a], c[x]).total_cmp(&d(c[a], c[y])))
-                .unwrap_or(a)
-        })
-        .collect();
+    let sigma: Vec<usize> = (0..g).map(|a| (0..g).min_by(|&x, &y| d(c[a], c[x]).total_cmp(&d(c[a], c[y]))).unwrap_or(a)).collect();
     let scale = c.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
     let is_perm = (0..g).all(|a| sigma[sigma[a]] == a);
     let close = (0..g).all(|a| d(c[a], c[sigma[a]]) <= 0.05 * scale.max(1e-9));
@@ -635,20 +527,11 @@ impl Estimate {
     /// start, a 24-start L-BFGS exploration of its own (from the estimate, random points and
     /// twins) and the refined twin of the estimate; each within the chi² margin of the best cost
     /// is a candidate, scored by the focus its truth would leave after the estimate's correction.
-    pub fn assess(
-        &self,
-        model: &crate::cost::Model,
-        sigma: Option<&[usize]>,
-        threshold: f64,
-        seed: u64,
-    ) -> Result<Assessment> {
+    pub fn assess(&self, model: &crate::cost::Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
         let g = model.cost.n_groups;
         let margin = model.noise.powi(2) * chi2_95(g - 1);
         let mut points: Vec<Minimum> = self.minima.clone();
-        points.push(Minimum {
-            phases: self.phases.clone(),
-            cost: self.cost,
-        });
+        points.push(Minimum { phases: self.phases.clone(), cost: self.cost });
         // An exploration of its own, whatever method produced the estimate: L-BFGS from the
         // estimate, its twin and seeded random starts.
         let explore = Estimator::lbfgs()
@@ -661,69 +544,34 @@ impl Estimate {
         if let Some(sig) = sigma {
             let t = twin(&self.phases, sig);
             let run = lbfgs_run(&model.cost, reduced(&t), 10, 3000, None, None)?;
-            points.push(Minimum {
-                phases: centred(&full(&run.params)),
-                cost: run.cost,
-            });
+            points.push(Minimum { phases: centred(&full(&run.params)), cost: run.cost });
         }
         let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
         let ideal = focal(&model.base, &vec![0.0; g])?;
         let mut candidates: Vec<Candidate> = Vec::new();
         for p in points.iter().filter(|p| p.cost <= best + margin) {
-            if candidates
-                .iter()
-                .any(|c| phase_error(&c.phases, &p.phases) < 0.05)
-            {
+            if candidates.iter().any(|c| phase_error(&c.phases, &p.phases) < 0.05) {
                 continue;
             }
-            let residual: Vec<f64> = p
-                .phases
-                .iter()
-                .zip(&self.phases)
-                .map(|(t, e)| t - e)
-                .collect();
+            let residual: Vec<f64> = p.phases.iter().zip(&self.phases).map(|(t, e)| t - e).collect();
             let predicted_recovery = focal(&model.base, &residual)? / ideal;
-            candidates.push(Candidate {
-                phases: p.phases.clone(),
-                cost: p.cost,
-                predicted_recovery,
-            });
+            candidates.push(Candidate { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
         }
-        let worst_recovery = candidates
-            .iter()
-            .map(|c| c.predicted_recovery)
-            .fold(1.0, f64::min);
-        let (suggested_phases, suggested_separation) =
-            propose_diversity(model, &candidates, 64, seed)?;
-        Ok(Assessment {
-            ambiguous: worst_recovery < threshold,
-            margin,
-            candidates,
-            worst_recovery,
-            suggested_phases,
-            suggested_separation,
-        })
+        let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+        let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
+        Ok(Assessment { ambiguous: worst_recovery < threshold, margin, candidates, worst_recovery, suggested_phases, suggested_separation })
     }
 }
 
 /// The largest value of the kernel's image (the focal ARFI) for group phases.
 fn focal(kernel: &crate::cost::ArfiKernel, phases: &[f64]) -> Result<f64> {
-    Ok(kernel
-        .image(phases)?
-        .iter()
-        .copied()
-        .fold(f64::MIN, f64::max))
+    Ok(kernel.image(phases)?.iter().copied().fold(f64::MIN, f64::max))
 }
 
 /// Among `tries` seeded random group-phase patterns (and a quadratic defocus-like pattern when
 /// there is one candidate), the one whose added image best separates the candidates: it
 /// maximises the smallest `Σ (d_a - d_b)² / sigma²` over candidate pairs.
-pub fn propose_diversity(
-    model: &crate::cost::Model,
-    candidates: &[Candidate],
-    tries: usize,
-    seed: u64,
-) -> Result<(Vec<f64>, f64)> {
+pub fn propose_diversity(model: &crate::cost::Model, candidates: &[Candidate], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
     let g = model.cost.n_groups;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_d17e);
     let sigma2 = model.noise.powi(2).max(1e-30);
@@ -732,21 +580,12 @@ pub fn propose_diversity(
         let d: Vec<f64> = (0..g).map(|_| rng.random_range(-PI..PI)).collect();
         let images = candidates
             .iter()
-            .map(|c| {
-                model.base.image(
-                    &c.phases
-                        .iter()
-                        .zip(&d)
-                        .map(|(p, q)| p + q)
-                        .collect::<Vec<_>>(),
-                )
-            })
+            .map(|c| model.base.image(&c.phases.iter().zip(&d).map(|(p, q)| p + q).collect::<Vec<_>>()))
             .collect::<Result<Vec<_>>>()?;
         let mut sep = f64::INFINITY;
         for a in 0..images.len() {
             for b in a + 1..images.len() {
-                sep =
-                    sep.min((&images[a] - &images[b]).iter().map(|x| x * x).sum::<f64>() / sigma2);
+                sep = sep.min((&images[a] - &images[b]).iter().map(|x| x * x).sum::<f64>() / sigma2);
             }
         }
         if images.len() < 2 {

@@ -37,30 +37,14 @@ impl Fft2 {
         let inv_x = planner.plan_fft_inverse(nx);
         let fwd_y = planner.plan_fft_forward(ny);
         let inv_y = planner.plan_fft_inverse(ny);
-        let scratch_len = [&fwd_x, &inv_x, &fwd_y, &inv_y]
-            .iter()
-            .map(|f| f.get_inplace_scratch_len())
-            .max()
-            .unwrap_or(0);
-        Fft2 {
-            nx,
-            ny,
-            fwd_x,
-            inv_x,
-            fwd_y,
-            inv_y,
-            scratch_len,
-        }
+        let scratch_len = [&fwd_x, &inv_x, &fwd_y, &inv_y].iter().map(|f| f.get_inplace_scratch_len()).max().unwrap_or(0);
+        Fft2 { nx, ny, fwd_x, inv_x, fwd_y, inv_y, scratch_len }
     }
 
     /// A workspace; `parallel` spreads rows over the rayon pool (use for a single field, not inside
     /// an already parallel batch).
     pub fn workspace(&self, parallel: bool) -> FftWorkspace {
-        let chunks = if parallel {
-            (2 * rayon::current_num_threads()).clamp(1, self.nx.min(self.ny))
-        } else {
-            1
-        };
+        let chunks = if parallel { (2 * rayon::current_num_threads()).clamp(1, self.nx.min(self.ny)) } else { 1 };
         FftWorkspace {
             spectrum: vec![C64::new(0.0, 0.0); self.nx * self.ny],
             scratch: vec![vec![C64::new(0.0, 0.0); self.scratch_len]; chunks],
@@ -72,43 +56,23 @@ impl Fft2 {
     pub fn forward(&self, field: &mut [C64], ws: &mut FftWorkspace) {
         rows(&*self.fwd_x, field, self.nx, &mut ws.scratch, ws.parallel);
         transpose(field, &mut ws.spectrum, self.ny, self.nx, ws.parallel);
-        rows(
-            &*self.fwd_y,
-            &mut ws.spectrum,
-            self.ny,
-            &mut ws.scratch,
-            ws.parallel,
-        );
+        rows(&*self.fwd_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
     }
 
     /// `ws.spectrum` (nx, ny) → `field` (ny, nx), unnormalised. The spectrum is overwritten.
     pub fn inverse(&self, ws: &mut FftWorkspace, field: &mut [C64]) {
-        rows(
-            &*self.inv_y,
-            &mut ws.spectrum,
-            self.ny,
-            &mut ws.scratch,
-            ws.parallel,
-        );
+        rows(&*self.inv_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
         transpose(&ws.spectrum, field, self.nx, self.ny, ws.parallel);
         rows(&*self.inv_x, field, self.nx, &mut ws.scratch, ws.parallel);
     }
 }
 
 /// In-place FFT of every length-`len` row of `data`.
-fn rows(
-    fft: &dyn Fft<f64>,
-    data: &mut [C64],
-    len: usize,
-    scratch: &mut [Vec<C64>],
-    parallel: bool,
-) {
+fn rows(fft: &dyn Fft<f64>, data: &mut [C64], len: usize, scratch: &mut [Vec<C64>], parallel: bool) {
     if parallel && scratch.len() > 1 {
         let n_rows = data.len() / len;
         let per = n_rows.div_ceil(scratch.len()) * len;
-        data.par_chunks_mut(per)
-            .zip(scratch.par_iter_mut())
-            .for_each(|(d, s)| fft.process_with_scratch(d, s));
+        data.par_chunks_mut(per).zip(scratch.par_iter_mut()).for_each(|(d, s)| fft.process_with_scratch(d, s));
     } else {
         fft.process_with_scratch(data, &mut scratch[0]);
     }
@@ -143,9 +107,7 @@ where
 {
     const CHUNK: usize = 8192;
     if parallel {
-        a.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks(CHUNK))
-            .for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y));
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y));
     } else {
         a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y);
     }
@@ -163,9 +125,7 @@ mod tests {
                 let mut acc = C64::new(0.0, 0.0);
                 for j in 0..ny {
                     for i in 0..nx {
-                        let ph = -2.0
-                            * std::f64::consts::PI
-                            * ((kx * i) as f64 / nx as f64 + (ky * j) as f64 / ny as f64);
+                        let ph = -2.0 * std::f64::consts::PI * ((kx * i) as f64 / nx as f64 + (ky * j) as f64 / ny as f64);
                         acc += x[j * nx + i] * C64::from_polar(1.0, ph);
                     }
                 }
@@ -181,9 +141,7 @@ mod tests {
         // Fixed pseudo-random input (LCG) so the test is deterministic.
         let mut s = 12345u64;
         let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
         let x: Vec<C64> = (0..nx * ny).map(|_| C64::new(rnd(), rnd())).collect();
@@ -193,19 +151,10 @@ mod tests {
             let mut ws = f.workspace(parallel);
             let mut field = x.clone();
             f.forward(&mut field, &mut ws);
-            let err = ws
-                .spectrum
-                .iter()
-                .zip(&reference)
-                .map(|(a, b)| (a - b).norm())
-                .fold(0.0, f64::max);
+            let err = ws.spectrum.iter().zip(&reference).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
             assert!(err < 1e-11, "forward error {err}");
             f.inverse(&mut ws, &mut field);
-            let err = field
-                .iter()
-                .zip(&x)
-                .map(|(a, b)| (a / (nx * ny) as f64 - b).norm())
-                .fold(0.0, f64::max);
+            let err = field.iter().zip(&x).map(|(a, b)| (a / (nx * ny) as f64 - b).norm()).fold(0.0, f64::max);
             assert!(err < 1e-14, "round trip error {err}");
         }
     }

@@ -20,15 +20,7 @@ pub struct Grid {
 
 impl Grid {
     /// Validates sizes and spacings.
-    pub fn new(
-        nx: usize,
-        ny: usize,
-        dx: f64,
-        dy: f64,
-        nz: usize,
-        dz: f64,
-        z0: f64,
-    ) -> Result<Self> {
+    pub fn new(nx: usize, ny: usize, dx: f64, dy: f64, nz: usize, dz: f64, z0: f64) -> Result<Self> {
         require_positive("grid.dx", dx)?;
         require_positive("grid.dy", dy)?;
         require_positive("grid.dz", dz)?;
@@ -36,20 +28,9 @@ impl Grid {
             return Err(HasError::invalid("grid.z0", "must be finite"));
         }
         if nx < 4 || ny < 4 || nz < 2 {
-            return Err(HasError::invalid(
-                "grid",
-                format!("too few samples ({nx} x {ny} x {nz})"),
-            ));
+            return Err(HasError::invalid("grid", format!("too few samples ({nx} x {ny} x {nz})")));
         }
-        Ok(Grid {
-            nx,
-            ny,
-            dx,
-            dy,
-            nz,
-            dz,
-            z0,
-        })
+        Ok(Grid { nx, ny, dx, dy, nz, dz, z0 })
     }
 
     /// x of lateral column `i` (m).
@@ -76,11 +57,7 @@ impl Grid {
     /// Spatial frequency (rad/m) of FFT bin `i` of `n` samples spaced `d` apart, in FFT order
     /// (0, 1, …, n/2-1, -n/2, …, -1)·2π/(n·d).
     pub fn wavenumber(i: usize, n: usize, d: f64) -> f64 {
-        let k = if i < n.div_ceil(2) {
-            i as f64
-        } else {
-            i as f64 - n as f64
-        };
+        let k = if i < n.div_ceil(2) { i as f64 } else { i as f64 - n as f64 };
         2.0 * std::f64::consts::PI * k / (n as f64 * d)
     }
 }

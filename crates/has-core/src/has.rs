@@ -40,10 +40,7 @@ pub struct HasOptions {
 
 impl Default for HasOptions {
     fn default() -> Self {
-        HasOptions {
-            sponge_width: 10e-3,
-            sponge_strength: 6.9,
-        }
+        HasOptions { sponge_width: 10e-3, sponge_strength: 6.9 }
     }
 }
 
@@ -111,10 +108,7 @@ impl Window {
         for n in sub.planes.clone() {
             for r in sub.rows.clone() {
                 let base = ((n - self.planes.start) * nr + (r - self.rows.start)) * nc;
-                out.extend_from_slice(
-                    &data[base + sub.cols.start - self.cols.start
-                        ..base + sub.cols.end - self.cols.start],
-                );
+                out.extend_from_slice(&data[base + sub.cols.start - self.cols.start..base + sub.cols.end - self.cols.start]);
             }
         }
         out
@@ -171,10 +165,7 @@ impl HasPlan {
     ) -> Result<(Self, Recording)> {
         let n = grid.lateral_len();
         if reference.len() != n {
-            return Err(HasError::invalid(
-                "reference",
-                format!("has {} samples, grid has {n}", reference.len()),
-            ));
+            return Err(HasError::invalid("reference", format!("has {} samples, grid has {n}", reference.len())));
         }
         let omega = 2.0 * PI * frequency;
         let fft = Fft2::new(grid.nx, grid.ny);
@@ -209,25 +200,13 @@ impl HasPlan {
             };
             prev_key = key;
             let current = slabs[slab].clone();
-            let transmission = (!Arc::ptr_eq(&current, &prev) && *current != *prev)
-                .then(|| Arc::new(transmission_map(&prev, &current)));
+            let transmission = (!Arc::ptr_eq(&current, &prev) && *current != *prev).then(|| Arc::new(transmission_map(&prev, &current)));
             let k_mean = mean_wavenumber(&field, &current, omega, k_quantum);
             let k_bits = k_mean.to_bits();
-            let propagator = propagator_cache
-                .entry(k_bits)
-                .or_insert_with(|| Arc::new(propagator(grid, k_mean)))
-                .clone();
-            let screen = screen_cache
-                .entry((slab, k_bits))
-                .or_insert_with(|| Arc::new(screen(&current, &sponge, omega, k_mean, grid.dz)))
-                .clone();
-            let s = Step {
-                slab,
-                transmission,
-                propagator,
-                screen,
-                mean_wavenumber: k_mean,
-            };
+            let propagator = propagator_cache.entry(k_bits).or_insert_with(|| Arc::new(propagator(grid, k_mean))).clone();
+            let screen =
+                screen_cache.entry((slab, k_bits)).or_insert_with(|| Arc::new(screen(&current, &sponge, omega, k_mean, grid.dz))).clone();
+            let s = Step { slab, transmission, propagator, screen, mean_wavenumber: k_mean };
             if step == 0 {
                 record_plane(grid, &current, 0, &field, spec, &mut rec);
             }
@@ -236,16 +215,7 @@ impl HasPlan {
             record_plane(grid, &current, step + 1, &field, spec, &mut rec);
             prev = current;
         }
-        Ok((
-            HasPlan {
-                grid: grid.clone(),
-                frequency,
-                fft,
-                slabs,
-                steps,
-            },
-            rec,
-        ))
+        Ok((HasPlan { grid: grid.clone(), frequency, fft, slabs, steps }, rec))
     }
 
     /// The mean wavenumber `k̄` (rad/m) used for the slab after each plane.
@@ -270,45 +240,26 @@ impl HasPlan {
 
     /// Marches many sources through the same steps (one source per rayon task). The result is
     /// the same as calling [`HasPlan::propagate`] on each.
-    pub fn propagate_batch(
-        &self,
-        sources: &[Vec<C64>],
-        spec: &RecordSpec,
-    ) -> Result<Vec<Recording>> {
+    pub fn propagate_batch(&self, sources: &[Vec<C64>], spec: &RecordSpec) -> Result<Vec<Recording>> {
         for s in sources {
             self.check(s, spec)?;
         }
         if sources.len() == 1 {
             return Ok(vec![self.propagate(&sources[0], spec)?]);
         }
-        Ok(sources
-            .par_iter()
-            .map(|s| self.march(s.clone(), spec, false))
-            .collect())
+        Ok(sources.par_iter().map(|s| self.march(s.clone(), spec, false)).collect())
     }
 
     fn check(&self, source: &[C64], spec: &RecordSpec) -> Result<()> {
         let g = &self.grid;
         if source.len() != g.lateral_len() {
-            return Err(HasError::invalid(
-                "source",
-                format!("has {} samples, grid has {}", source.len(), g.lateral_len()),
-            ));
+            return Err(HasError::invalid("source", format!("has {} samples, grid has {}", source.len(), g.lateral_len())));
         }
-        if source
-            .iter()
-            .any(|v| !v.re.is_finite() || !v.im.is_finite())
-        {
-            return Err(HasError::invalid(
-                "source",
-                "contains NaN or infinite values",
-            ));
+        if source.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()) {
+            return Err(HasError::invalid("source", "contains NaN or infinite values"));
         }
         if let Some(&p) = spec.planes.iter().find(|&&p| p >= g.nz) {
-            return Err(HasError::invalid(
-                "planes",
-                format!("plane {p} is beyond the grid ({} planes)", g.nz),
-            ));
+            return Err(HasError::invalid("planes", format!("plane {p} is beyond the grid ({} planes)", g.nz)));
         }
         if let Some(w) = &spec.window {
             if w.planes.end > g.nz || w.rows.end > g.ny || w.cols.end > g.nx {
@@ -335,14 +286,7 @@ impl HasPlan {
             record_plane(g, self.slab_properties(n), n, &field, spec, &mut rec);
             if spec.reflections {
                 if let Some(t) = self.steps.get(n).and_then(|s| s.transmission.as_ref()) {
-                    reflected.push((
-                        n,
-                        field
-                            .iter()
-                            .zip(t.iter())
-                            .map(|(p, t)| p * (t - 1.0))
-                            .collect(),
-                    ));
+                    reflected.push((n, field.iter().zip(t.iter()).map(|(p, t)| p * (t - 1.0)).collect()));
                 }
             }
         }
@@ -377,18 +321,13 @@ impl HasPlan {
                     Some((n, _)) if *n == m => reflected.pop().map(|x| x.1),
                     _ => None,
                 };
-                back.iter_mut()
-                    .zip(t.iter())
-                    .for_each(|(b, t)| *b *= 2.0 - t);
+                back.iter_mut().zip(t.iter()).for_each(|(b, t)| *b *= 2.0 - t);
                 if let Some(r) = r {
                     back.iter_mut().zip(&r).for_each(|(b, r)| *b += r);
                 }
             }
             if let Ok(i) = planes.binary_search(&m) {
-                rec.planes[i]
-                    .iter_mut()
-                    .zip(&back)
-                    .for_each(|(a, b)| *a += b);
+                rec.planes[i].iter_mut().zip(&back).for_each(|(a, b)| *a += b);
             }
             if spec.axis {
                 rec.axis[m] += back[(g.ny / 2) * g.nx + g.nx / 2];
@@ -416,14 +355,7 @@ impl HasPlan {
 }
 
 /// Keeps what `spec` asks of plane `n`; `slab` gives the impedance for the power.
-fn record_plane(
-    g: &Grid,
-    slab: &SliceProperties,
-    n: usize,
-    field: &[C64],
-    spec: &RecordSpec,
-    rec: &mut Recording,
-) {
+fn record_plane(g: &Grid, slab: &SliceProperties, n: usize, field: &[C64], spec: &RecordSpec, rec: &mut Recording) {
     if spec.planes.contains(&n) {
         rec.planes.push(field.to_vec());
     }
@@ -432,17 +364,11 @@ fn record_plane(
     }
     if let Some(w) = spec.window.as_ref().filter(|w| w.planes.contains(&n)) {
         for r in w.rows.clone() {
-            rec.window
-                .extend_from_slice(&field[r * g.nx + w.cols.start..r * g.nx + w.cols.end]);
+            rec.window.extend_from_slice(&field[r * g.nx + w.cols.start..r * g.nx + w.cols.end]);
         }
     }
     if spec.power {
-        let p: f64 = field
-            .iter()
-            .zip(&slab.sound_speed)
-            .zip(&slab.density)
-            .map(|((v, c), rho)| v.norm_sqr() / (2.0 * rho * c))
-            .sum();
+        let p: f64 = field.iter().zip(&slab.sound_speed).zip(&slab.density).map(|((v, c), rho)| v.norm_sqr() / (2.0 * rho * c)).sum();
         rec.power.push(p * g.dx * g.dy);
     }
 }
@@ -483,11 +409,7 @@ fn mean_wavenumber(field: &[C64], props: &SliceProperties, omega: f64, quantum: 
         num += w * omega / c;
         den += w;
     }
-    let k = if den > 0.0 {
-        num / den
-    } else {
-        props.sound_speed.iter().map(|c| omega / c).sum::<f64>() / props.sound_speed.len() as f64
-    };
+    let k = if den > 0.0 { num / den } else { props.sound_speed.iter().map(|c| omega / c).sum::<f64>() / props.sound_speed.len() as f64 };
     (k / quantum).round() * quantum
 }
 
@@ -500,11 +422,7 @@ fn propagator(g: &Grid, k: f64) -> Vec<C64> {
         for j in 0..g.ny {
             let ky = Grid::wavenumber(j, g.ny, g.dy);
             let kz2 = k * k - kx * kx - ky * ky;
-            h.push(if kz2 >= 0.0 {
-                C64::from_polar(norm, kz2.sqrt() * g.dz)
-            } else {
-                C64::new(norm * (-(-kz2).sqrt() * g.dz).exp(), 0.0)
-            });
+            h.push(if kz2 >= 0.0 { C64::from_polar(norm, kz2.sqrt() * g.dz) } else { C64::new(norm * (-(-kz2).sqrt() * g.dz).exp(), 0.0) });
         }
     }
     h

@@ -14,6 +14,9 @@
 //! let image = sim.arfi_image(&[]).unwrap(); // ideal MR-ARFI image, rad
 //! ```
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod aberration;
 pub mod arfi;
 pub mod basis;

@@ -23,19 +23,8 @@ pub struct Material {
 
 impl Material {
     /// Validates the acoustic parameters.
-    pub fn new(
-        name: &str,
-        sound_speed: f64,
-        density: f64,
-        attenuation_db_cm_mhz: f64,
-    ) -> Result<Self> {
-        let m = Material {
-            name: name.to_string(),
-            sound_speed,
-            density,
-            attenuation_db_cm_mhz,
-            attenuation_power: 1.0,
-        };
+    pub fn new(name: &str, sound_speed: f64, density: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
+        let m = Material { name: name.to_string(), sound_speed, density, attenuation_db_cm_mhz, attenuation_power: 1.0 };
         m.validate()?;
         Ok(m)
     }
@@ -52,19 +41,12 @@ impl Material {
 
     /// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz).
     pub fn attenuation_np_m(&self, frequency: f64) -> f64 {
-        self.attenuation_db_cm_mhz
-            * (frequency / 1e6).powf(self.attenuation_power)
-            * 100.0
-            * NP_PER_DB
+        self.attenuation_db_cm_mhz * (frequency / 1e6).powf(self.attenuation_power) * 100.0 * NP_PER_DB
     }
 
     /// Local properties at `frequency`.
     pub fn properties(&self, frequency: f64) -> Properties {
-        Properties {
-            sound_speed: self.sound_speed,
-            density: self.density,
-            attenuation: self.attenuation_np_m(frequency),
-        }
+        Properties { sound_speed: self.sound_speed, density: self.density, attenuation: self.attenuation_np_m(frequency) }
     }
 }
 
@@ -87,12 +69,7 @@ impl Properties {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shape {
     /// `(x-cx)² + (y-cy)² <= r²` and `z_min <= z <= z_max`.
-    Cylinder {
-        radius: f64,
-        z_min: f64,
-        z_max: f64,
-        center: [f64; 2],
-    },
+    Cylinder { radius: f64, z_min: f64, z_max: f64, center: [f64; 2] },
     /// `z_min <= z <= z_max`, all x, y.
     Slab { z_min: f64, z_max: f64 },
 }
@@ -101,12 +78,7 @@ impl Shape {
     /// Whether the point lies inside.
     pub fn contains(&self, x: f64, y: f64, z: f64) -> bool {
         match *self {
-            Shape::Cylinder {
-                radius,
-                z_min,
-                z_max,
-                center,
-            } => {
+            Shape::Cylinder { radius, z_min, z_max, center } => {
                 let (dx, dy) = (x - center[0], y - center[1]);
                 z >= z_min && z <= z_max && dx * dx + dy * dy <= radius * radius
             }
@@ -116,18 +88,10 @@ impl Shape {
 
     fn validate(&self, name: &str) -> Result<()> {
         let (z_min, z_max) = match *self {
-            Shape::Cylinder {
-                radius,
-                z_min,
-                z_max,
-                center,
-            } => {
+            Shape::Cylinder { radius, z_min, z_max, center } => {
                 require_positive(&format!("{name}.radius_mm"), radius)?;
                 if !center.iter().all(|c| c.is_finite()) {
-                    return Err(HasError::invalid(
-                        format!("{name}.center_mm"),
-                        "must be finite",
-                    ));
+                    return Err(HasError::invalid(format!("{name}.center_mm"), "must be finite"));
                 }
                 (z_min, z_max)
             }
@@ -181,36 +145,21 @@ impl VoxelMap {
             ("voxels.attenuation", &self.attenuation_db_cm_mhz),
         ] {
             if v.len() != n {
-                return Err(HasError::invalid(
-                    name,
-                    format!("has {} values, shape needs {n}", v.len()),
-                ));
+                return Err(HasError::invalid(name, format!("has {} values, shape needs {n}", v.len())));
             }
         }
         for (i, s) in self.spacing.iter().enumerate() {
             require_positive(&format!("voxels.spacing[{i}]"), *s)?;
         }
-        let bad = |v: &[f64], strict: bool| {
-            v.iter()
-                .position(|x| !x.is_finite() || (strict && *x <= 0.0) || *x < 0.0)
-        };
+        let bad = |v: &[f64], strict: bool| v.iter().position(|x| !x.is_finite() || (strict && *x <= 0.0) || *x < 0.0);
         if let Some(i) = bad(&self.sound_speed, true) {
-            return Err(HasError::invalid(
-                "voxels.sound_speed",
-                format!("voxel {i} is {} (need > 0)", self.sound_speed[i]),
-            ));
+            return Err(HasError::invalid("voxels.sound_speed", format!("voxel {i} is {} (need > 0)", self.sound_speed[i])));
         }
         if let Some(i) = bad(&self.density, true) {
-            return Err(HasError::invalid(
-                "voxels.density",
-                format!("voxel {i} is {} (need > 0)", self.density[i]),
-            ));
+            return Err(HasError::invalid("voxels.density", format!("voxel {i} is {} (need > 0)", self.density[i])));
         }
         if let Some(i) = bad(&self.attenuation_db_cm_mhz, false) {
-            return Err(HasError::invalid(
-                "voxels.attenuation",
-                format!("voxel {i} is {} (need >= 0)", self.attenuation_db_cm_mhz[i]),
-            ));
+            return Err(HasError::invalid("voxels.attenuation", format!("voxel {i} is {} (need >= 0)", self.attenuation_db_cm_mhz[i])));
         }
         Ok(())
     }
@@ -247,12 +196,7 @@ pub struct Medium {
 impl Medium {
     /// A single homogeneous material.
     pub fn homogeneous(material: Material) -> Self {
-        Medium {
-            materials: vec![material],
-            background: 0,
-            regions: vec![],
-            voxels: None,
-        }
+        Medium { materials: vec![material], background: 0, regions: vec![], voxels: None }
     }
 
     /// Checks materials, indices and shapes.
@@ -268,10 +212,7 @@ impl Medium {
         }
         for (i, r) in self.regions.iter().enumerate() {
             if r.material >= self.materials.len() {
-                return Err(HasError::invalid(
-                    format!("region[{i}].material"),
-                    "names no material",
-                ));
+                return Err(HasError::invalid(format!("region[{i}].material"), "names no material"));
             }
             r.shape.validate(&format!("region[{i}]"))?;
         }
@@ -283,26 +224,15 @@ impl Medium {
 
     /// Index of the material at a point (last region containing it, else the background).
     pub fn material_at(&self, x: f64, y: f64, z: f64) -> usize {
-        self.regions
-            .iter()
-            .rev()
-            .find(|r| r.shape.contains(x, y, z))
-            .map_or(self.background, |r| r.material)
+        self.regions.iter().rev().find(|r| r.shape.contains(x, y, z)).map_or(self.background, |r| r.material)
     }
 
     /// Properties at a point for `frequency` (Hz).
     pub fn properties_at(&self, x: f64, y: f64, z: f64, frequency: f64) -> Properties {
         if let Some(v) = &self.voxels {
             if let Some(i) = v.index(x, y, z) {
-                let a = v.attenuation_db_cm_mhz[i]
-                    * (frequency / 1e6).powf(v.attenuation_power)
-                    * 100.0
-                    * NP_PER_DB;
-                return Properties {
-                    sound_speed: v.sound_speed[i],
-                    density: v.density[i],
-                    attenuation: a,
-                };
+                let a = v.attenuation_db_cm_mhz[i] * (frequency / 1e6).powf(v.attenuation_power) * 100.0 * NP_PER_DB;
+                return Properties { sound_speed: v.sound_speed[i], density: v.density[i], attenuation: a };
             }
         }
         self.materials[self.material_at(x, y, z)].properties(frequency)
@@ -310,11 +240,7 @@ impl Medium {
 
     /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
-        let m = self
-            .materials
-            .iter()
-            .map(|m| m.sound_speed)
-            .fold(f64::INFINITY, f64::min);
+        let m = self.materials.iter().map(|m| m.sound_speed).fold(f64::INFINITY, f64::min);
         match &self.voxels {
             Some(v) => v.sound_speed.iter().copied().fold(m, f64::min),
             None => m,
@@ -324,25 +250,14 @@ impl Medium {
     /// Properties on the lateral grid at height `z`: row-major `(ny, nx)`.
     pub fn slice(&self, grid: &Grid, z: f64, frequency: f64) -> SliceProperties {
         let n = grid.lateral_len();
-        let per_material: Vec<Properties> = self
-            .materials
-            .iter()
-            .map(|m| m.properties(frequency))
-            .collect();
-        let mut s = SliceProperties {
-            sound_speed: Vec::with_capacity(n),
-            density: Vec::with_capacity(n),
-            attenuation: Vec::with_capacity(n),
-        };
+        let per_material: Vec<Properties> = self.materials.iter().map(|m| m.properties(frequency)).collect();
+        let mut s =
+            SliceProperties { sound_speed: Vec::with_capacity(n), density: Vec::with_capacity(n), attenuation: Vec::with_capacity(n) };
         let voxels_here = self.voxels.as_ref().is_some_and(|v| v.covers_z(z));
         for j in 0..grid.ny {
             for i in 0..grid.nx {
                 let (x, y) = (grid.x(i), grid.y(j));
-                let p = if voxels_here {
-                    self.properties_at(x, y, z, frequency)
-                } else {
-                    per_material[self.material_at(x, y, z)]
-                };
+                let p = if voxels_here { self.properties_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] };
                 s.sound_speed.push(p.sound_speed);
                 s.density.push(p.density);
                 s.attenuation.push(p.attenuation);
@@ -361,9 +276,7 @@ impl Medium {
             self.regions
                 .iter()
                 .map(|r| match r.shape {
-                    Shape::Cylinder { z_min, z_max, .. } | Shape::Slab { z_min, z_max } => {
-                        z >= z_min && z <= z_max
-                    }
+                    Shape::Cylinder { z_min, z_max, .. } | Shape::Slab { z_min, z_max } => z >= z_min && z <= z_max,
                 })
                 .collect(),
         )
@@ -396,22 +309,8 @@ mod tests {
         let b = Material::new("b", 1700.0, 1000.0, 0.0).unwrap();
         let mut m = Medium::homogeneous(water);
         m.materials.extend([a, b]);
-        m.regions.push(Region {
-            material: 1,
-            shape: Shape::Slab {
-                z_min: 0.01,
-                z_max: 0.05,
-            },
-        });
-        m.regions.push(Region {
-            material: 2,
-            shape: Shape::Cylinder {
-                radius: 0.01,
-                z_min: 0.02,
-                z_max: 0.03,
-                center: [0.0, 0.0],
-            },
-        });
+        m.regions.push(Region { material: 1, shape: Shape::Slab { z_min: 0.01, z_max: 0.05 } });
+        m.regions.push(Region { material: 2, shape: Shape::Cylinder { radius: 0.01, z_min: 0.02, z_max: 0.03, center: [0.0, 0.0] } });
         assert_eq!(m.properties_at(0.0, 0.0, 0.005, 1e6).sound_speed, 1500.0);
         assert_eq!(m.properties_at(0.02, 0.0, 0.025, 1e6).sound_speed, 1600.0);
         assert_eq!(m.properties_at(0.0, 0.0, 0.025, 1e6).sound_speed, 1700.0);

@@ -97,9 +97,7 @@ pub struct FocusSpec {
 
 impl Default for FocusSpec {
     fn default() -> Self {
-        FocusSpec {
-            position_mm: d::focus(),
-        }
+        FocusSpec { position_mm: d::focus() }
     }
 }
 
@@ -181,13 +179,7 @@ pub struct MrSpec {
 
 impl Default for MrSpec {
     fn default() -> Self {
-        MrSpec {
-            plane: d::plane(),
-            center_mm: None,
-            fov_mm: d::fov(),
-            matrix: d::matrix(),
-            slice_thickness_mm: d::thickness(),
-        }
+        MrSpec { plane: d::plane(), center_mm: None, fov_mm: d::fov(), matrix: d::matrix(), slice_thickness_mm: d::thickness() }
     }
 }
 
@@ -312,13 +304,7 @@ fn default_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
         z_max_mm: 160.0,
         center_mm: None,
     }];
-    (
-        materials,
-        MediumSpec {
-            background: "water".into(),
-        },
-        regions,
-    )
+    (materials, MediumSpec { background: "water".into() }, regions)
 }
 
 /// The scenario in SI units, validated.
@@ -342,16 +328,14 @@ pub struct Resolved {
 impl Scenario {
     /// Parses TOML text. `base_dir` resolves relative paths.
     pub fn from_toml(text: &str, base_dir: Option<&Path>) -> Result<Self> {
-        let mut s: Scenario = toml::from_str(text)
-            .map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
+        let mut s: Scenario = toml::from_str(text).map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
         s.base_dir = base_dir.map(Path::to_path_buf);
         Ok(s)
     }
 
     /// Parses JSON text with the same keys.
     pub fn from_json(text: &str, base_dir: Option<&Path>) -> Result<Self> {
-        let mut s: Scenario = serde_json::from_str(text)
-            .map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
+        let mut s: Scenario = serde_json::from_str(text).map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
         s.base_dir = base_dir.map(Path::to_path_buf);
         Ok(s)
     }
@@ -361,15 +345,9 @@ impl Scenario {
         let p = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
             std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-            _ => HasError::BadFile {
-                path: p.clone(),
-                reason: e.to_string(),
-            },
+            _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
         })?;
-        let mut s: Scenario = toml::from_str(&text).map_err(|e| HasError::BadFile {
-            path: p.clone(),
-            reason: one_line(&e.to_string()),
-        })?;
+        let mut s: Scenario = toml::from_str(&text).map_err(|e| HasError::BadFile { path: p.clone(), reason: one_line(&e.to_string()) })?;
         s.base_dir = path.parent().map(Path::to_path_buf);
         Ok(s)
     }
@@ -381,8 +359,7 @@ impl Scenario {
 
     /// The scenario with every default written out, as JSON.
     pub fn to_json(&self) -> Result<String> {
-        serde_json::to_string(&self.explicit())
-            .map_err(|e| HasError::invalid("scenario", e.to_string()))
+        serde_json::to_string(&self.explicit()).map_err(|e| HasError::invalid("scenario", e.to_string()))
     }
 
     fn explicit(&self) -> Scenario {
@@ -409,10 +386,7 @@ impl Scenario {
         let transducer = self.transducer_si()?;
         let mr = MrGeometry {
             plane: MrPlane::parse(&self.mr.plane)?,
-            center: mm3(
-                self.mr.center_mm.unwrap_or(self.focus.position_mm),
-                "mr.center_mm",
-            )?,
+            center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
             fov: [self.mr.fov_mm[0] * 1e-3, self.mr.fov_mm[1] * 1e-3],
             matrix: self.mr.matrix,
             slice_thickness: self.mr.slice_thickness_mm * 1e-3,
@@ -423,10 +397,7 @@ impl Scenario {
         require_non_negative("arfi.noise_rad", a.noise_rad)?;
         require_positive("arfi.ideal_focal_phase_rad", a.ideal_focal_phase_rad)?;
         if !(a.mask_fraction.is_finite() && a.mask_fraction > 0.0 && a.mask_fraction < 1.0) {
-            return Err(HasError::invalid(
-                "arfi.mask_fraction",
-                format!("must lie in (0, 1), got {}", a.mask_fraction),
-            ));
+            return Err(HasError::invalid("arfi.mask_fraction", format!("must lie in (0, 1), got {}", a.mask_fraction)));
         }
         if let Some(v) = a.amplitude_rad_m3_per_n {
             require_positive("arfi.amplitude_rad_m3_per_n", v)?;
@@ -464,29 +435,15 @@ impl Scenario {
     fn medium_si(&self) -> Result<Medium> {
         let (dm, db, dr) = default_medium();
         let custom = self.materials.is_some() || self.regions.is_some();
-        let materials = if custom {
-            self.materials.clone().unwrap_or_default()
-        } else {
-            dm
-        };
-        let regions = if custom {
-            self.regions.clone().unwrap_or_default()
-        } else {
-            dr
-        };
+        let materials = if custom { self.materials.clone().unwrap_or_default() } else { dm };
+        let regions = if custom { self.regions.clone().unwrap_or_default() } else { dr };
         if materials.is_empty() {
-            return Err(HasError::invalid(
-                "material",
-                "a scenario with [[region]] must also name its [[material]]s",
-            ));
+            return Err(HasError::invalid("material", "a scenario with [[region]] must also name its [[material]]s"));
         }
         let mut mats = Vec::with_capacity(materials.len());
         for (i, m) in materials.iter().enumerate() {
             if materials[..i].iter().any(|o| o.name == m.name) {
-                return Err(HasError::invalid(
-                    "material.name",
-                    format!("'{}' is given twice", m.name),
-                ));
+                return Err(HasError::invalid("material.name", format!("'{}' is given twice", m.name)));
             }
             let mut mat = Material {
                 name: m.name.clone(),
@@ -500,9 +457,7 @@ impl Scenario {
             mats.push(mat);
         }
         let index = |name: &str, key: &str| {
-            mats.iter()
-                .position(|m| m.name == name)
-                .ok_or_else(|| HasError::invalid(key, format!("names no material: '{name}'")))
+            mats.iter().position(|m| m.name == name).ok_or_else(|| HasError::invalid(key, format!("names no material: '{name}'")))
         };
         let background = match (&self.medium, custom) {
             (Some(m), _) => index(&m.background, "medium.background")?,
@@ -516,41 +471,21 @@ impl Scenario {
             let (z_min, z_max) = (r.z_min_mm * 1e-3, r.z_max_mm * 1e-3);
             let shape = match r.shape.as_str() {
                 "cylinder" => {
-                    let radius = r.radius_mm.ok_or_else(|| {
-                        HasError::invalid(format!("{key}.radius_mm"), "is required for a cylinder")
-                    })?;
+                    let radius = r.radius_mm.ok_or_else(|| HasError::invalid(format!("{key}.radius_mm"), "is required for a cylinder"))?;
                     let c = r.center_mm.unwrap_or([0.0, 0.0]);
-                    Shape::Cylinder {
-                        radius: radius * 1e-3,
-                        z_min,
-                        z_max,
-                        center: [c[0] * 1e-3, c[1] * 1e-3],
-                    }
+                    Shape::Cylinder { radius: radius * 1e-3, z_min, z_max, center: [c[0] * 1e-3, c[1] * 1e-3] }
                 }
                 "slab" => {
                     if r.radius_mm.is_some() || r.center_mm.is_some() {
-                        return Err(HasError::invalid(
-                            key,
-                            "a slab takes no radius_mm or center_mm",
-                        ));
+                        return Err(HasError::invalid(key, "a slab takes no radius_mm or center_mm"));
                     }
                     Shape::Slab { z_min, z_max }
                 }
-                s => {
-                    return Err(HasError::invalid(
-                        format!("{key}.shape"),
-                        format!("must be \"cylinder\" or \"slab\", got \"{s}\""),
-                    ))
-                }
+                s => return Err(HasError::invalid(format!("{key}.shape"), format!("must be \"cylinder\" or \"slab\", got \"{s}\""))),
             };
             regs.push(Region { material, shape });
         }
-        let m = Medium {
-            materials: mats,
-            background,
-            regions: regs,
-            voxels: None,
-        };
+        let m = Medium { materials: mats, background, regions: regs, voxels: None };
         m.validate()?;
         Ok(m)
     }
@@ -570,18 +505,8 @@ impl Scenario {
             given("element_shape", t.element_shape.is_some()),
         ];
         let allowed: &[&str] = match t.kind.as_str() {
-            "planar-quadrants" => &[
-                "elements_per_side",
-                "pitch_mm",
-                "element_size_mm",
-                "quadrant_gap_mm",
-            ],
-            "bowl" => &[
-                "radius_of_curvature_mm",
-                "aperture_diameter_mm",
-                "elements",
-                "element_size_mm",
-            ],
+            "planar-quadrants" => &["elements_per_side", "pitch_mm", "element_size_mm", "quadrant_gap_mm"],
+            "bowl" => &["radius_of_curvature_mm", "aperture_diameter_mm", "elements", "element_size_mm"],
             "elements" => &["file", "element_shape"],
             k => {
                 return Err(HasError::invalid(
@@ -590,14 +515,8 @@ impl Scenario {
                 ))
             }
         };
-        if let Some((name, _)) = fields
-            .iter()
-            .find(|(n, g)| *g && !allowed.contains(&n.as_str()))
-        {
-            return Err(HasError::invalid(
-                format!("transducer.{name}"),
-                format!("is not a key of kind \"{}\"", t.kind),
-            ));
+        if let Some((name, _)) = fields.iter().find(|(n, g)| *g && !allowed.contains(&n.as_str())) {
+            return Err(HasError::invalid(format!("transducer.{name}"), format!("is not a key of kind \"{}\"", t.kind)));
         }
         match t.kind.as_str() {
             "planar-quadrants" => Transducer::planar_quadrants(
@@ -607,36 +526,28 @@ impl Scenario {
                 t.quadrant_gap_mm.unwrap_or(1.0) * 1e-3,
             ),
             "bowl" => {
-                let r = t.radius_of_curvature_mm.ok_or_else(|| {
-                    HasError::invalid(
-                        "transducer.radius_of_curvature_mm",
-                        "is required for a bowl",
-                    )
-                })? * 1e-3;
-                let a = t.aperture_diameter_mm.ok_or_else(|| {
-                    HasError::invalid("transducer.aperture_diameter_mm", "is required for a bowl")
-                })? * 1e-3;
+                let r = t
+                    .radius_of_curvature_mm
+                    .ok_or_else(|| HasError::invalid("transducer.radius_of_curvature_mm", "is required for a bowl"))?
+                    * 1e-3;
+                let a =
+                    t.aperture_diameter_mm.ok_or_else(|| HasError::invalid("transducer.aperture_diameter_mm", "is required for a bowl"))?
+                        * 1e-3;
                 match t.elements {
-                    None if t.element_size_mm.is_some() => Err(HasError::invalid(
-                        "transducer.element_size_mm",
-                        "needs transducer.elements",
-                    )),
+                    None if t.element_size_mm.is_some() => {
+                        Err(HasError::invalid("transducer.element_size_mm", "needs transducer.elements"))
+                    }
                     None => Transducer::bowl(r, a),
                     Some(n) => {
                         // Default element diameter: 80 % of the centre spacing of equal-area cells.
                         let cap = Transducer::bowl(r, a)?.area();
-                        let size = t
-                            .element_size_mm
-                            .map(|s| s * 1e-3)
-                            .unwrap_or(0.8 * (cap / n.max(1) as f64).sqrt());
+                        let size = t.element_size_mm.map(|s| s * 1e-3).unwrap_or(0.8 * (cap / n.max(1) as f64).sqrt());
                         Transducer::bowl_elements(r, a, n, size)
                     }
                 }
             }
             _ => {
-                let file = t.file.as_deref().ok_or_else(|| {
-                    HasError::invalid("transducer.file", "is required for kind \"elements\"")
-                })?;
+                let file = t.file.as_deref().ok_or_else(|| HasError::invalid("transducer.file", "is required for kind \"elements\""))?;
                 let path = match &self.base_dir {
                     Some(b) if Path::new(file).is_relative() => b.join(file),
                     _ => PathBuf::from(file),
@@ -644,20 +555,12 @@ impl Scenario {
                 let shape = match t.element_shape.as_deref().unwrap_or("square") {
                     "square" => ElementShape::Square,
                     "disc" => ElementShape::Disc,
-                    s => {
-                        return Err(HasError::invalid(
-                            "transducer.element_shape",
-                            format!("must be \"square\" or \"disc\", got \"{s}\""),
-                        ))
-                    }
+                    s => return Err(HasError::invalid("transducer.element_shape", format!("must be \"square\" or \"disc\", got \"{s}\""))),
                 };
                 let p = path.display().to_string();
                 let text = std::fs::read_to_string(&path).map_err(|e| match e.kind() {
                     std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-                    _ => HasError::BadFile {
-                        path: p.clone(),
-                        reason: e.to_string(),
-                    },
+                    _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
                 })?;
                 Transducer::from_csv(&text, &p, shape)
             }
@@ -675,13 +578,8 @@ fn mm3(v: [f64; 3], name: &str) -> Result<[f64; 3]> {
 
 /// Parser messages span several lines (with a source excerpt); keep one line.
 fn one_line(s: &str) -> String {
-    let parts: Vec<&str> = s
-        .lines()
-        .map(str::trim)
-        .filter(|l| {
-            !l.is_empty() && !l.starts_with('|') && !l.chars().all(|c| c == '^' || c == ' ')
-        })
-        .collect();
+    let parts: Vec<&str> =
+        s.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('|') && !l.chars().all(|c| c == '^' || c == ' ')).collect();
     parts.join(": ").replace("TOML parse error at ", "")
 }
 
@@ -698,19 +596,14 @@ mod tests {
         let r = back.resolve().unwrap();
         assert_eq!(r.transducer.elements.len(), 1024);
         assert_eq!(r.medium.materials.len(), 2);
-        assert!(
-            (r.medium.properties_at(0.0, 0.0, 0.085, 550e3).sound_speed - 1533.0).abs() < 1e-12
-        );
+        assert!((r.medium.properties_at(0.0, 0.0, 0.085, 550e3).sound_speed - 1533.0).abs() < 1e-12);
     }
 
     #[test]
     fn unknown_keys_are_errors() {
         let e = Scenario::from_toml("frequency_hz = 5e5\nfrequncy = 3\n", None).unwrap_err();
         assert!(e.to_string().contains("frequncy"), "{e}");
-        let e = Scenario::from_toml("[transducer]\nkind = \"bowl\"\npitch_mm = 2\n", None)
-            .unwrap()
-            .resolve()
-            .unwrap_err();
+        let e = Scenario::from_toml("[transducer]\nkind = \"bowl\"\npitch_mm = 2\n", None).unwrap().resolve().unwrap_err();
         assert!(e.to_string().contains("pitch_mm"), "{e}");
     }
 

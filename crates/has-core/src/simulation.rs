@@ -63,49 +63,21 @@ impl Simulation {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
         let steering = steering_phases(&r.transducer, &r.medium, r.frequency, r.focus)?;
-        let at_source = r
-            .medium
-            .properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
+        let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
         let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
-        let face_pressure =
-            (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
-        let source = SourceModel::new(
-            &r.transducer,
-            &grid,
-            face_pressure,
-            k0,
-            at_source.attenuation,
-        )?;
-        let options = HasOptions {
-            sponge_width: r.grid.sponge_width_mm.map_or(10e-3, |w| w * 1e-3),
-            ..HasOptions::default()
-        };
-        let sampler = MrSampler::new(
-            &grid,
-            &r.medium,
-            r.frequency,
-            &r.mr,
-            Broadening {
-                width: r.broadening_width,
-            },
-        )?;
+        let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
+        let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
+        let options = HasOptions { sponge_width: r.grid.sponge_width_mm.map_or(10e-3, |w| w * 1e-3), ..HasOptions::default() };
+        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width })?;
         let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
         let reference = source.field(&drive)?;
-        let spec = RecordSpec {
-            window: Some(sampler.window.clone()),
-            ..RecordSpec::default()
-        };
-        let (plan, ideal) =
-            HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
+        let spec = RecordSpec { window: Some(sampler.window.clone()), ..RecordSpec::default() };
+        let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
         let amplitude = match r.amplitude {
             Some(a) => a,
             None => {
-                let peak = sampler
-                    .force_image(&ideal.window)?
-                    .iter()
-                    .copied()
-                    .fold(0.0, f64::max);
+                let peak = sampler.force_image(&ideal.window)?.iter().copied().fold(0.0, f64::max);
                 if !(peak > 0.0) {
                     return Err(HasError::invalid(
                         "mr",
@@ -150,23 +122,13 @@ impl Simulation {
     /// Replaces the element → group map (every group from 0 to G-1 must have an element).
     pub fn set_groups(&mut self, groups: Vec<usize>) -> Result<()> {
         if groups.len() != self.n_elements() {
-            return Err(HasError::invalid(
-                "groups",
-                format!(
-                    "has {} entries for {} elements",
-                    groups.len(),
-                    self.n_elements()
-                ),
-            ));
+            return Err(HasError::invalid("groups", format!("has {} entries for {} elements", groups.len(), self.n_elements())));
         }
         let n_groups = groups.iter().max().map_or(0, |m| m + 1);
         let mut used = vec![false; n_groups];
         groups.iter().for_each(|&g| used[g] = true);
         if let Some(g) = used.iter().position(|u| !u) {
-            return Err(HasError::invalid(
-                "groups",
-                format!("group {g} has no element"),
-            ));
+            return Err(HasError::invalid("groups", format!("group {g} has no element")));
         }
         self.groups = groups;
         self.n_groups = n_groups;
@@ -200,17 +162,8 @@ impl Simulation {
 
     /// Source plane for the steering plus `added` phases (per element or per group; empty = none).
     pub fn source_field(&self, added: &[f64]) -> Result<Vec<C64>> {
-        let extra = if added.is_empty() {
-            vec![0.0; self.n_elements()]
-        } else {
-            self.element_phases(added)?
-        };
-        let drive: Vec<C64> = self
-            .steering
-            .iter()
-            .zip(&extra)
-            .map(|(s, a)| C64::from_polar(1.0, s + a))
-            .collect();
+        let extra = if added.is_empty() { vec![0.0; self.n_elements()] } else { self.element_phases(added)? };
+        let drive: Vec<C64> = self.steering.iter().zip(&extra).map(|(s, a)| C64::from_polar(1.0, s + a)).collect();
         self.source.field(&drive)
     }
 
@@ -219,27 +172,14 @@ impl Simulation {
     pub fn group_sources(&self, groups: &[usize], known: &[f64]) -> Result<Vec<Vec<C64>>> {
         let n = self.n_elements();
         if groups.len() != n {
-            return Err(HasError::invalid(
-                "groups",
-                format!("has {} entries for {n} elements", groups.len()),
-            ));
+            return Err(HasError::invalid("groups", format!("has {} entries for {n} elements", groups.len())));
         }
-        let known = if known.is_empty() {
-            vec![0.0; n]
-        } else {
-            self.element_phases(known)?
-        };
+        let known = if known.is_empty() { vec![0.0; n] } else { self.element_phases(known)? };
         let g_count = groups.iter().max().map_or(0, |m| m + 1);
         (0..g_count)
             .map(|g| {
                 let drive: Vec<C64> = (0..n)
-                    .map(|e| {
-                        if groups[e] == g {
-                            C64::from_polar(1.0, self.steering[e] + known[e])
-                        } else {
-                            C64::new(0.0, 0.0)
-                        }
-                    })
+                    .map(|e| if groups[e] == g { C64::from_polar(1.0, self.steering[e] + known[e]) } else { C64::new(0.0, 0.0) })
                     .collect();
                 self.source.field(&drive)
             })
@@ -251,25 +191,12 @@ impl Simulation {
         let g = &self.grid;
         let z = z.unwrap_or(self.focus[2]);
         if !z.is_finite() || z < g.z0 || z > g.z(g.nz - 1) {
-            return Err(HasError::invalid(
-                "z_mm",
-                format!(
-                    "must lie within the grid, {:.1} to {:.1} mm",
-                    g.z0 * 1e3,
-                    g.z(g.nz - 1) * 1e3
-                ),
-            ));
+            return Err(HasError::invalid("z_mm", format!("must lie within the grid, {:.1} to {:.1} mm", g.z0 * 1e3, g.z(g.nz - 1) * 1e3)));
         }
         let plane = g.plane_index(z);
-        let spec = RecordSpec {
-            planes: vec![plane],
-            axis: true,
-            reflections: self.reflections,
-            ..RecordSpec::default()
-        };
+        let spec = RecordSpec { planes: vec![plane], axis: true, reflections: self.reflections, ..RecordSpec::default() };
         let mut rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
-        let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0))
-            .map_err(|e| HasError::invalid("field", e.to_string()))?;
+        let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
             pressure,
             x: (0..g.nx).map(|i| g.x(i)).collect(),
@@ -296,11 +223,7 @@ impl Simulation {
 
     /// Marches several sources in one batch, keeping the MR window.
     pub fn record_window(&self, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
-        let spec = RecordSpec {
-            window: Some(self.sampler.window.clone()),
-            reflections: self.reflections,
-            ..RecordSpec::default()
-        };
+        let spec = RecordSpec { window: Some(self.sampler.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         self.plan.propagate_batch(sources, &spec)
     }
 }
@@ -329,13 +252,7 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
     let z0 = source_plane_z(&r.transducer, wavelength, dx);
     let dz = match r.grid.step_mm {
         Some(s) if s * 1e-3 > wavelength => {
-            return Err(HasError::invalid(
-                "grid.step_mm",
-                format!(
-                    "must not exceed the wavelength ({:.3} mm)",
-                    wavelength * 1e3
-                ),
-            ))
+            return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)))
         }
         Some(s) => s * 1e-3,
         // At most the lateral spacing, and a whole number of steps to the focal depth, so that a
@@ -343,39 +260,19 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
         None if r.focus[2] > z0 + dx => (r.focus[2] - z0) / ((r.focus[2] - z0) / dx).ceil(),
         None => dx,
     };
-    let extent = r
-        .transducer
-        .lateral_extent()
-        .max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
-    let size = r
-        .grid
-        .lateral_size_mm
-        .map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
+    let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
+    let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
     let n = fft_friendly((size / dx).ceil() as usize);
     let ax = r.mr.plane.axes();
-    let mr_z_end = if ax[1] == 2 {
-        r.mr.center[2] + 0.5 * r.mr.fov[1]
-    } else {
-        r.mr.center[2] + r.mr.slice_thickness
-    };
-    let z_end = r
-        .grid
-        .z_max_mm
-        .map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);
+    let mr_z_end = if ax[1] == 2 { r.mr.center[2] + 0.5 * r.mr.fov[1] } else { r.mr.center[2] + r.mr.slice_thickness };
+    let z_end = r.grid.z_max_mm.map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);
     if z_end <= z0 + dz {
-        return Err(HasError::invalid(
-            "grid.z_max_mm",
-            format!("must lie beyond the source plane at {:.1} mm", z0 * 1e3),
-        ));
+        return Err(HasError::invalid("grid.z_max_mm", format!("must lie beyond the source plane at {:.1} mm", z0 * 1e3)));
     }
     let nz = ((z_end - z0) / dz).ceil() as usize + 1;
     let bytes = (n * n) as u64 * 16 * 8;
     if bytes > MEMORY_LIMIT || nz > 100_000 {
-        return Err(HasError::TooLarge {
-            what: format!("a {n} x {n} x {nz} grid"),
-            bytes,
-            limit: MEMORY_LIMIT,
-        });
+        return Err(HasError::TooLarge { what: format!("a {n} x {n} x {nz} grid"), bytes, limit: MEMORY_LIMIT });
     }
     Grid::new(n, n, dx, dx, nz, dz, z0)
 }

@@ -39,11 +39,7 @@ pub fn source_plane_z(transducer: &Transducer, wavelength: f64, dz: f64) -> f64 
     if transducer.is_planar() {
         0.0
     } else {
-        let z = transducer
-            .elements
-            .iter()
-            .map(Surface::z_max)
-            .fold(0.0, f64::max);
+        let z = transducer.elements.iter().map(Surface::z_max).fold(0.0, f64::max);
         z + (0.5 * wavelength).max(dz)
     }
 }
@@ -51,13 +47,7 @@ pub fn source_plane_z(transducer: &Transducer, wavelength: f64, dz: f64) -> f64 
 impl SourceModel {
     /// Builds the footprints. `wavenumber` and `attenuation` (rad/m, Np/m) describe the coupling
     /// medium; `face_pressure` (Pa) is the same on every element.
-    pub fn new(
-        transducer: &Transducer,
-        grid: &Grid,
-        face_pressure: f64,
-        wavenumber: f64,
-        attenuation: f64,
-    ) -> Result<Self> {
+    pub fn new(transducer: &Transducer, grid: &Grid, face_pressure: f64, wavenumber: f64, attenuation: f64) -> Result<Self> {
         let z0 = grid.z0;
         let wavelength = 2.0 * std::f64::consts::PI / wavenumber;
         let spacing = (wavelength / 8.0).min(grid.dx.min(grid.dy) / 2.0);
@@ -70,20 +60,11 @@ impl SourceModel {
                 } else if e.z_max() < z0 {
                     Ok(Footprint::Points(e.quadrature(spacing)))
                 } else {
-                    Err(HasError::invalid(
-                        "transducer",
-                        "an element reaches beyond the source plane",
-                    ))
+                    Err(HasError::invalid("transducer", "an element reaches beyond the source plane"))
                 }
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(SourceModel {
-            grid: grid.clone(),
-            footprints,
-            face_pressure,
-            wavenumber,
-            attenuation,
-        })
+        Ok(SourceModel { grid: grid.clone(), footprints, face_pressure, wavenumber, attenuation })
     }
 
     /// Number of elements.
@@ -100,14 +81,7 @@ impl SourceModel {
     /// (element `e` radiates `face_pressure · phasors[e]`). Zero phasors cost nothing.
     pub fn field(&self, phasors: &[C64]) -> Result<Vec<C64>> {
         if phasors.len() != self.footprints.len() {
-            return Err(HasError::invalid(
-                "phasors",
-                format!(
-                    "has {} values for {} elements",
-                    phasors.len(),
-                    self.footprints.len()
-                ),
-            ));
+            return Err(HasError::invalid("phasors", format!("has {} values for {} elements", phasors.len(), self.footprints.len())));
         }
         let g = &self.grid;
         let mut out = vec![C64::new(0.0, 0.0); g.lateral_len()];
@@ -137,10 +111,7 @@ impl SourceModel {
         let g = &self.grid;
         let (k, alpha, z0) = (self.wavenumber, self.attenuation, g.z0);
         let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
-        let sources: Vec<([f64; 3], C64)> = points
-            .iter()
-            .map(|(p, a)| (p.position, a * p.area))
-            .collect();
+        let sources: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
         let xs: Vec<f64> = (0..g.nx).map(|i| g.x(i)).collect();
         out.par_chunks_mut(g.nx).enumerate().for_each(|(j, row)| {
             let y = g.y(j);
@@ -152,11 +123,7 @@ impl SourceModel {
                     let dx = x - p[0];
                     let r = (dx * dx + d2).sqrt();
                     let (s, c) = (k * r).sin_cos();
-                    let f = if alpha > 0.0 {
-                        (-alpha * r).exp() / r
-                    } else {
-                        1.0 / r
-                    };
+                    let f = if alpha > 0.0 { (-alpha * r).exp() / r } else { 1.0 / r };
                     *v += w * C64::new(c * f, s * f);
                 }
             }
@@ -170,19 +137,11 @@ impl SourceModel {
 /// Exact pixel coverage of a flat element lying in the plane of the grid (squares: product of 1-D
 /// overlaps; discs: 8 x 8 sub-samples per pixel).
 fn rasterise(e: &Surface, g: &Grid) -> Vec<(u32, f64)> {
-    let Surface::Flat {
-        center,
-        size,
-        shape,
-        ..
-    } = *e
-    else {
+    let Surface::Flat { center, size, shape, .. } = *e else {
         return vec![];
     };
     let half = 0.5 * size;
-    let overlap = |c: f64, d: f64, lo: f64, hi: f64| {
-        ((c + 0.5 * d).min(hi) - (c - 0.5 * d).max(lo)).max(0.0) / d
-    };
+    let overlap = |c: f64, d: f64, lo: f64, hi: f64| ((c + 0.5 * d).min(hi) - (c - 0.5 * d).max(lo)).max(0.0) / d;
     let range = |c: f64, d: f64, n: usize, mid: usize| {
         let lo = (((c - half) / d).floor() as i64 + mid as i64 - 1).max(0) as usize;
         let hi = (((c + half) / d).ceil() as i64 + mid as i64 + 1).clamp(0, n as i64 - 1) as usize;
@@ -194,8 +153,7 @@ fn rasterise(e: &Surface, g: &Grid) -> Vec<(u32, f64)> {
             let (x, y) = (g.x(i), g.y(j));
             let w = match shape {
                 ElementShape::Square => {
-                    overlap(x, g.dx, center[0] - half, center[0] + half)
-                        * overlap(y, g.dy, center[1] - half, center[1] + half)
+                    overlap(x, g.dx, center[0] - half, center[0] + half) * overlap(y, g.dy, center[1] - half, center[1] + half)
                 }
                 ElementShape::Disc => {
                     let m = 8;
@@ -227,26 +185,13 @@ mod tests {
     #[test]
     fn rasterised_square_carries_its_area_and_nearly_its_centroid() {
         let g = Grid::new(64, 64, 0.7e-3, 0.7e-3, 2, 0.7e-3, 0.0).unwrap();
-        let e = Surface::Flat {
-            center: [1.3e-3, -2.1e-3, 0.0],
-            normal: [0.0, 0.0, 1.0],
-            size: 2.3e-3,
-            shape: ElementShape::Square,
-        };
+        let e = Surface::Flat { center: [1.3e-3, -2.1e-3, 0.0], normal: [0.0, 0.0, 1.0], size: 2.3e-3, shape: ElementShape::Square };
         let px = rasterise(&e, &g);
         let area: f64 = px.iter().map(|&(_, w)| w * g.dx * g.dy).sum();
         assert!((area / 2.3e-3f64.powi(2) - 1.0).abs() < 1e-12);
-        let cx: f64 = px
-            .iter()
-            .map(|&(i, w)| w * g.dx * g.dy * g.x(i as usize % 64))
-            .sum::<f64>()
-            / area;
+        let cx: f64 = px.iter().map(|&(i, w)| w * g.dx * g.dy * g.x(i as usize % 64)).sum::<f64>() / area;
         // Partly covered edge pixels put their share at the pixel centre: the centroid is exact
         // only to a fraction of a pixel (here the two edges' errors nearly cancel).
-        assert!(
-            (cx - 1.3e-3).abs() < 0.05 * g.dx,
-            "centroid off by {} m",
-            cx - 1.3e-3
-        );
+        assert!((cx - 1.3e-3).abs() < 0.05 * g.dx, "centroid off by {} m", cx - 1.3e-3);
     }
 }

@@ -16,9 +16,7 @@ pub fn time_of_flight(medium: &Medium, frequency: f64, a: [f64; 3], b: [f64; 3],
         .map(|i| {
             let t = (i as f64 + 0.5) / n as f64;
             let p: [f64; 3] = std::array::from_fn(|k| a[k] + t * d[k]);
-            h / medium
-                .properties_at(p[0], p[1], p[2], frequency)
-                .sound_speed
+            h / medium.properties_at(p[0], p[1], p[2], frequency).sound_speed
         })
         .sum()
 }
@@ -27,26 +25,14 @@ pub fn time_of_flight(medium: &Medium, frequency: f64, a: [f64; 3], b: [f64; 3],
 /// element's wave arrives at the target at the same time (`phi_e = 2·pi·f·(t_max - t_e)`,
 /// SPEC §2 sign: a positive phase delays the emission). Straight-line time of flight through the
 /// regions from each element's centre.
-pub fn steering_phases(
-    transducer: &Transducer,
-    medium: &Medium,
-    frequency: f64,
-    target: [f64; 3],
-) -> Result<Vec<f64>> {
+pub fn steering_phases(transducer: &Transducer, medium: &Medium, frequency: f64, target: [f64; 3]) -> Result<Vec<f64>> {
     if !target.iter().all(|v| v.is_finite()) {
         return Err(HasError::invalid("focus.position_mm", "must be finite"));
     }
     let step = 0.1e-3;
-    let tof: Vec<f64> = transducer
-        .elements
-        .iter()
-        .map(|e| time_of_flight(medium, frequency, e.reference_point(), target, step))
-        .collect();
+    let tof: Vec<f64> = transducer.elements.iter().map(|e| time_of_flight(medium, frequency, e.reference_point(), target, step)).collect();
     let t_max = tof.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    Ok(tof
-        .iter()
-        .map(|t| 2.0 * PI * frequency * (t_max - t))
-        .collect())
+    Ok(tof.iter().map(|t| 2.0 * PI * frequency * (t_max - t)).collect())
 }
 
 #[cfg(test)]
@@ -69,10 +55,7 @@ mod tests {
             .zip(&phi)
             .map(|(e, p)| {
                 let c = e.reference_point();
-                let r = ((c[0] - target[0]).powi(2)
-                    + (c[1] - target[1]).powi(2)
-                    + (c[2] - target[2]).powi(2))
-                .sqrt();
+                let r = ((c[0] - target[0]).powi(2) + (c[1] - target[1]).powi(2) + (c[2] - target[2]).powi(2)).sqrt();
                 p + k * r
             })
             .collect();

@@ -16,12 +16,7 @@ pub enum ElementShape {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Surface {
     /// A flat element centred at `center` facing `normal` (unit).
-    Flat {
-        center: [f64; 3],
-        normal: [f64; 3],
-        size: f64,
-        shape: ElementShape,
-    },
+    Flat { center: [f64; 3], normal: [f64; 3], size: f64, shape: ElementShape },
     /// A whole spherical cap: apex at the origin, centre of curvature at (0, 0, radius).
     Cap { radius: f64, aperture_diameter: f64 },
 }
@@ -38,20 +33,9 @@ impl Surface {
     /// Radiating area (m²).
     pub fn area(&self) -> f64 {
         match *self {
-            Surface::Flat {
-                size,
-                shape: ElementShape::Square,
-                ..
-            } => size * size,
-            Surface::Flat {
-                size,
-                shape: ElementShape::Disc,
-                ..
-            } => PI * size * size / 4.0,
-            Surface::Cap {
-                radius,
-                aperture_diameter,
-            } => 2.0 * PI * radius * cap_depth(radius, aperture_diameter),
+            Surface::Flat { size, shape: ElementShape::Square, .. } => size * size,
+            Surface::Flat { size, shape: ElementShape::Disc, .. } => PI * size * size / 4.0,
+            Surface::Cap { radius, aperture_diameter } => 2.0 * PI * radius * cap_depth(radius, aperture_diameter),
         }
     }
 
@@ -66,19 +50,11 @@ impl Surface {
     /// Largest z reached by the surface.
     pub fn z_max(&self) -> f64 {
         match *self {
-            Surface::Flat {
-                center,
-                normal,
-                size,
-                ..
-            } => {
+            Surface::Flat { center, normal, size, .. } => {
                 let tilt = (1.0 - normal[2] * normal[2]).max(0.0).sqrt();
                 center[2] + 0.5 * size * std::f64::consts::SQRT_2 * tilt
             }
-            Surface::Cap {
-                radius,
-                aperture_diameter,
-            } => cap_depth(radius, aperture_diameter),
+            Surface::Cap { radius, aperture_diameter } => cap_depth(radius, aperture_diameter),
         }
     }
 
@@ -91,12 +67,7 @@ impl Surface {
     /// Quadrature points no more than `spacing` apart (midpoint rule on sub-cells).
     pub fn quadrature(&self, spacing: f64) -> Vec<SurfacePoint> {
         match *self {
-            Surface::Flat {
-                center,
-                normal,
-                size,
-                shape,
-            } => {
+            Surface::Flat { center, normal, size, shape } => {
                 let (u, v) = in_plane_axes(normal);
                 let m = (size / spacing).ceil().max(1.0) as usize;
                 let h = size / m as f64;
@@ -109,11 +80,7 @@ impl Surface {
                             continue;
                         }
                         let p = std::array::from_fn(|k| center[k] + s * u[k] + t * v[k]);
-                        pts.push(SurfacePoint {
-                            position: p,
-                            normal,
-                            area: h * h,
-                        });
+                        pts.push(SurfacePoint { position: p, normal, area: h * h });
                     }
                 }
                 if shape == ElementShape::Disc {
@@ -124,10 +91,7 @@ impl Surface {
                 }
                 pts
             }
-            Surface::Cap {
-                radius,
-                aperture_diameter,
-            } => cap_quadrature(radius, aperture_diameter, spacing),
+            Surface::Cap { radius, aperture_diameter } => cap_quadrature(radius, aperture_diameter, spacing),
         }
     }
 }
@@ -139,22 +103,12 @@ pub fn cap_depth(r: f64, d: f64) -> f64 {
 
 /// Two unit vectors spanning the plane normal to `n`: u along the frame's x where possible.
 fn in_plane_axes(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
+    let cross = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
     let norm = |a: [f64; 3]| {
         let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
         [a[0] / l, a[1] / l, a[2] / l]
     };
-    let ey = if n[1].abs() < 0.9 {
-        [0.0, 1.0, 0.0]
-    } else {
-        [1.0, 0.0, 0.0]
-    };
+    let ey = if n[1].abs() < 0.9 { [0.0, 1.0, 0.0] } else { [1.0, 0.0, 0.0] };
     let u = norm(cross(ey, n));
     let v = cross(n, u);
     (u, v)
@@ -177,11 +131,7 @@ fn cap_quadrature(r: f64, d: f64, spacing: f64) -> Vec<SurfacePoint> {
             let (s, c) = (t.sin(), t.cos());
             let normal = [-s * phi.cos(), -s * phi.sin(), c];
             let position = [r * s * phi.cos(), r * s * phi.sin(), r * (1.0 - c)];
-            pts.push(SurfacePoint {
-                position,
-                normal,
-                area: a,
-            });
+            pts.push(SurfacePoint { position, normal, area: a });
         }
     }
     pts
@@ -199,40 +149,23 @@ impl Transducer {
     /// of largest y, column 0 of smallest x. Element centres at `±(gap/2 + pitch/2 + pitch·i)`.
     pub fn planar_quadrants(n: usize, pitch: f64, element_size: f64, gap: f64) -> Result<Self> {
         if n == 0 || n > 256 {
-            return Err(HasError::invalid(
-                "transducer.elements_per_side",
-                format!("must be 1..=256, got {n}"),
-            ));
+            return Err(HasError::invalid("transducer.elements_per_side", format!("must be 1..=256, got {n}")));
         }
         require_positive("transducer.pitch_mm", pitch)?;
         require_positive("transducer.element_size_mm", element_size)?;
         if element_size > pitch {
-            return Err(HasError::invalid(
-                "transducer.element_size_mm",
-                "must not exceed pitch_mm",
-            ));
+            return Err(HasError::invalid("transducer.element_size_mm", "must not exceed pitch_mm"));
         }
         if !(gap.is_finite() && gap >= 0.0) {
-            return Err(HasError::invalid(
-                "transducer.quadrant_gap_mm",
-                "must be >= 0",
-            ));
+            return Err(HasError::invalid("transducer.quadrant_gap_mm", "must be >= 0"));
         }
         let offset = |i: usize| 0.5 * gap + 0.5 * pitch + pitch * i as f64;
         let mut elements = Vec::with_capacity(4 * n * n);
         for q in 0..4 {
             for r in 0..n {
                 for c in 0..n {
-                    let x = if q == 1 || q == 2 {
-                        offset(c)
-                    } else {
-                        -offset(n - 1 - c)
-                    };
-                    let y = if q <= 1 {
-                        offset(n - 1 - r)
-                    } else {
-                        -offset(r)
-                    };
+                    let x = if q == 1 || q == 2 { offset(c) } else { -offset(n - 1 - c) };
+                    let y = if q <= 1 { offset(n - 1 - r) } else { -offset(r) };
                     elements.push(Surface::Flat {
                         center: [x, y, 0.0],
                         normal: [0.0, 0.0, 1.0],
@@ -248,28 +181,15 @@ impl Transducer {
     /// A single spherical cap, apex at the origin, centre of curvature at (0, 0, R).
     pub fn bowl(radius: f64, aperture_diameter: f64) -> Result<Self> {
         validate_bowl(radius, aperture_diameter)?;
-        Ok(Transducer {
-            elements: vec![Surface::Cap {
-                radius,
-                aperture_diameter,
-            }],
-        })
+        Ok(Transducer { elements: vec![Surface::Cap { radius, aperture_diameter }] })
     }
 
     /// `count` flat disc elements of diameter `element_size` on a spherical cap, on a sunflower
     /// (Fibonacci) pattern of equal cap area per element, each facing the centre of curvature.
-    pub fn bowl_elements(
-        radius: f64,
-        aperture_diameter: f64,
-        count: usize,
-        element_size: f64,
-    ) -> Result<Self> {
+    pub fn bowl_elements(radius: f64, aperture_diameter: f64, count: usize, element_size: f64) -> Result<Self> {
         validate_bowl(radius, aperture_diameter)?;
         if count == 0 || count > 100_000 {
-            return Err(HasError::invalid(
-                "transducer.elements",
-                format!("must be 1..=100000, got {count}"),
-            ));
+            return Err(HasError::invalid("transducer.elements", format!("must be 1..=100000, got {count}")));
         }
         require_positive("transducer.element_size_mm", element_size)?;
         let cos_max = 1.0 - cap_depth(radius, aperture_diameter) / radius;
@@ -281,17 +201,8 @@ impl Transducer {
                 let st = (1.0 - ct * ct).max(0.0).sqrt();
                 let phi = golden * i as f64;
                 let normal = [-st * phi.cos(), -st * phi.sin(), ct];
-                let center = [
-                    radius * st * phi.cos(),
-                    radius * st * phi.sin(),
-                    radius * (1.0 - ct),
-                ];
-                Surface::Flat {
-                    center,
-                    normal,
-                    size: element_size,
-                    shape: ElementShape::Disc,
-                }
+                let center = [radius * st * phi.cos(), radius * st * phi.sin(), radius * (1.0 - ct)];
+                Surface::Flat { center, normal, size: element_size, shape: ElementShape::Disc }
             })
             .collect();
         Ok(Transducer { elements })
@@ -299,25 +210,15 @@ impl Transducer {
 
     /// Elements from CSV text with header `x_mm,y_mm,z_mm,nx,ny,nz,size_mm`, one row per element.
     pub fn from_csv(text: &str, path: &str, shape: ElementShape) -> Result<Self> {
-        let bad = |reason: String| HasError::BadFile {
-            path: path.to_string(),
-            reason,
-        };
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty());
+        let bad = |reason: String| HasError::BadFile { path: path.to_string(), reason };
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
         let header: Vec<String> = match lines.next() {
             Some((_, h)) => h.split(',').map(|s| s.trim().to_string()).collect(),
             None => return Err(bad("empty file".into())),
         };
         let expected = ["x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "size_mm"];
         if header != expected {
-            return Err(bad(format!(
-                "header must be '{}', got '{}'",
-                expected.join(","),
-                header.join(",")
-            )));
+            return Err(bad(format!("header must be '{}', got '{}'", expected.join(","), header.join(","))));
         }
         let mut elements = Vec::new();
         for (ln, line) in lines {
@@ -331,10 +232,7 @@ impl Transducer {
             }
             let l = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
             if l < 1e-9 || v[5] <= 0.0 {
-                return Err(bad(format!(
-                    "line {}: the normal must point towards +z",
-                    ln + 1
-                )));
+                return Err(bad(format!("line {}: the normal must point towards +z", ln + 1)));
             }
             if v[6] <= 0.0 {
                 return Err(bad(format!("line {}: size_mm must be > 0", ln + 1)));
@@ -362,12 +260,8 @@ impl Transducer {
         self.elements
             .iter()
             .map(|e| match *e {
-                Surface::Flat { center, size, .. } => {
-                    center[0].abs().max(center[1].abs()) + size * std::f64::consts::FRAC_1_SQRT_2
-                }
-                Surface::Cap {
-                    aperture_diameter, ..
-                } => 0.5 * aperture_diameter,
+                Surface::Flat { center, size, .. } => center[0].abs().max(center[1].abs()) + size * std::f64::consts::FRAC_1_SQRT_2,
+                Surface::Cap { aperture_diameter, .. } => 0.5 * aperture_diameter,
             })
             .fold(0.0, f64::max)
     }
@@ -390,10 +284,7 @@ fn validate_bowl(radius: f64, aperture_diameter: f64) -> Result<()> {
     require_positive("transducer.radius_of_curvature_mm", radius)?;
     require_positive("transducer.aperture_diameter_mm", aperture_diameter)?;
     if aperture_diameter > 2.0 * radius {
-        return Err(HasError::invalid(
-            "transducer.aperture_diameter_mm",
-            "must not exceed twice the radius of curvature (a hemisphere)",
-        ));
+        return Err(HasError::invalid("transducer.aperture_diameter_mm", "must not exceed twice the radius of curvature (a hemisphere)"));
     }
     Ok(())
 }
@@ -429,18 +320,10 @@ mod tests {
 
     #[test]
     fn quadrature_carries_the_exact_area() {
-        let cap = Surface::Cap {
-            radius: 0.085,
-            aperture_diameter: 0.08,
-        };
+        let cap = Surface::Cap { radius: 0.085, aperture_diameter: 0.08 };
         let a: f64 = cap.quadrature(0.5e-3).iter().map(|p| p.area).sum();
         assert!((a / cap.area() - 1.0).abs() < 1e-12);
-        let disc = Surface::Flat {
-            center: [0.0; 3],
-            normal: [0.0, 0.6, 0.8],
-            size: 3e-3,
-            shape: ElementShape::Disc,
-        };
+        let disc = Surface::Flat { center: [0.0; 3], normal: [0.0, 0.6, 0.8], size: 3e-3, shape: ElementShape::Disc };
         let a: f64 = disc.quadrature(0.3e-3).iter().map(|p| p.area).sum();
         assert!((a / disc.area() - 1.0).abs() < 1e-12);
     }

@@ -51,14 +51,7 @@ fn count<T>(f: impl FnOnce() -> T) -> (usize, T) {
 /// Only a 4 x 4 window on plane `last` is kept, so recording reserves once and never grows.
 fn window_on(last: usize, n: usize) -> RecordSpec {
     let c = n / 2;
-    RecordSpec {
-        window: Some(Window {
-            planes: last..last + 1,
-            rows: c - 2..c + 2,
-            cols: c - 2..c + 2,
-        }),
-        ..Default::default()
-    }
+    RecordSpec { window: Some(Window { planes: last..last + 1, rows: c - 2..c + 2, cols: c - 2..c + 2 }), ..Default::default() }
 }
 
 #[test]
@@ -74,10 +67,7 @@ fn per_slice_loop_does_not_allocate() {
     let r = (n / 6) as f64;
     let source: Vec<C64> = (0..n * n)
         .map(|i| {
-            let (x, y) = (
-                (i % n) as f64 - (n / 2) as f64,
-                (i / n) as f64 - (n / 2) as f64,
-            );
+            let (x, y) = ((i % n) as f64 - (n / 2) as f64, (i / n) as f64 - (n / 2) as f64);
             if x * x + y * y <= r * r {
                 C64::new(1.0, 0.0)
             } else {
@@ -85,21 +75,10 @@ fn per_slice_loop_does_not_allocate() {
             }
         })
         .collect();
-    let (plan, _) = HasPlan::build(
-        &grid,
-        &medium,
-        f,
-        &source,
-        &HasOptions::default(),
-        &RecordSpec::default(),
-    )
-    .unwrap();
+    let (plan, _) = HasPlan::build(&grid, &medium, f, &source, &HasOptions::default(), &RecordSpec::default()).unwrap();
 
     // A dedicated pool of 2 workers, so the parallel paths run (4 FFT chunks) on any machine.
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
     // Warm once (lazy initialisation in the pool and its thread-locals), then count.
     let counted = |run: &(dyn Fn() + Sync)| {
         pool.install(run);
@@ -111,40 +90,21 @@ fn per_slice_loop_does_not_allocate() {
         let spec = window_on(last, n);
         let rec = plan.propagate(&source, &spec).unwrap();
         assert_eq!(rec.window.len(), 16);
-        (
-            counted(&|| drop(plan.propagate(&source, &spec).unwrap())),
-            rec.window,
-        )
+        (counted(&|| drop(plan.propagate(&source, &spec).unwrap())), rec.window)
     };
     let (a_n, w_n) = single(N);
     let (a_2n, w_2n) = single(2 * N);
-    assert!(
-        w_n != w_2n,
-        "the two marches should end on different planes"
-    );
+    assert!(w_n != w_2n, "the two marches should end on different planes");
     assert!(a_n > 0, "the counting allocator saw no allocation at all");
-    assert_eq!(
-        a_n,
-        a_2n,
-        "march to plane {N}: {a_n} allocations; to plane {}: {a_2n}",
-        2 * N
-    );
+    assert_eq!(a_n, a_2n, "march to plane {N}: {a_n} allocations; to plane {}: {a_2n}", 2 * N);
 
     // Batch of sources (one sequential march per rayon task): same property.
-    let sources = vec![
-        source.clone(),
-        source.iter().map(|v| v * C64::new(0.0, 1.0)).collect(),
-    ];
+    let sources = vec![source.clone(), source.iter().map(|v| v * C64::new(0.0, 1.0)).collect()];
     let batch = |last: usize| {
         let spec = window_on(last, n);
         counted(&|| drop(plan.propagate_batch(&sources, &spec).unwrap()))
     };
     let (b_n, b_2n) = (batch(N), batch(2 * N));
     assert!(b_n > 0);
-    assert_eq!(
-        b_n,
-        b_2n,
-        "batch march to plane {N}: {b_n} allocations; to plane {}: {b_2n}",
-        2 * N
-    );
+    assert_eq!(b_n, b_2n, "batch march to plane {N}: {b_n} allocations; to plane {}: {b_2n}", 2 * N);
 }

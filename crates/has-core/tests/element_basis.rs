@@ -14,40 +14,20 @@ fn peak(img: &Array2<f64>) -> f64 {
 }
 
 fn small_array() -> Simulation {
-    Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap())
-        .unwrap()
+    Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap()).unwrap()
 }
 
 /// Element-level skull aberration plus images with known random group phases (noise-free).
 fn study(sim: &Simulation, images: u64) -> (Vec<f64>, Vec<Measurement>) {
-    let positions: Vec<[f64; 3]> = sim
-        .transducer
-        .elements
-        .iter()
-        .map(|e| e.reference_point())
-        .collect();
+    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
     let truth = SkullScreen::default().phases(&positions, 1).unwrap();
-    let mut m = vec![Measurement {
-        image: sim.arfi_image(&truth).unwrap(),
-        known: vec![],
-    }];
+    let mut m = vec![Measurement { image: sim.arfi_image(&truth).unwrap(), known: vec![] }];
     for k in 1..images {
-        let d = SkullScreen {
-            correlation_length: 1.0,
-            peak_to_peak: 0.0,
-            jitter: 1.5,
-        }
-        .phases(&vec![[0.0; 3]; sim.n_groups], 1000 + k)
-        .unwrap();
-        let total: Vec<f64> = truth
-            .iter()
-            .zip(sim.element_phases(&d).unwrap())
-            .map(|(t, x)| t + x)
-            .collect();
-        m.push(Measurement {
-            image: sim.arfi_image(&total).unwrap(),
-            known: d,
-        });
+        let d = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 1.5 }
+            .phases(&vec![[0.0; 3]; sim.n_groups], 1000 + k)
+            .unwrap();
+        let total: Vec<f64> = truth.iter().zip(sim.element_phases(&d).unwrap()).map(|(t, x)| t + x).collect();
+        m.push(Measurement { image: sim.arfi_image(&total).unwrap(), known: d });
     }
     (truth, m)
 }
@@ -66,16 +46,12 @@ fn element_basis_images_gradient_and_estimate() {
     let direct = sim.arfi_image(&truth).unwrap();
     let p = &basis.sampler.pixels;
     let from_basis = basis.image(&truth).unwrap();
-    let err = (&from_basis - &direct.slice(ndarray::s![p[0].clone(), p[1].clone()]))
-        .iter()
-        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    let err = (&from_basis - &direct.slice(ndarray::s![p[0].clone(), p[1].clone()])).iter().fold(0.0_f64, |m, x| m.max(x.abs()));
     assert!(err < 1e-6 * peak(&direct), "basis image error {err:e}");
 
     // Adjoint gradient against central differences (h = 0.01 rad: truncation ~h² ≈ 1e-4 relative,
     // above the single-precision rounding of the cost); tolerance 1 % of the largest component.
-    let x: Vec<f64> = (0..n)
-        .map(|e| 0.3 * ((e * 7919 % 101) as f64 / 101.0 - 0.5))
-        .collect();
+    let x: Vec<f64> = (0..n).map(|e| 0.3 * ((e * 7919 % 101) as f64 / 101.0 - 0.5)).collect();
     let (_, g) = model.cost.cost_and_gradient(&x);
     let scale = g.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     for e in [0, 37, 128, 200, 255] {
@@ -84,11 +60,7 @@ fn element_basis_images_gradient_and_estimate() {
         a[e] += h;
         b[e] -= h;
         let fd = (model.cost.cost(&a) - model.cost.cost(&b)) / (2.0 * h);
-        assert!(
-            (fd - g[e]).abs() < 1e-2 * scale,
-            "element {e}: analytic {} numeric {fd}",
-            g[e]
-        );
+        assert!((fd - g[e]).abs() < 1e-2 * scale, "element {e}: analytic {} numeric {fd}", g[e]);
     }
 
     // Estimation: the 16-group estimate, expanded to elements, warm-starts L-BFGS on all 256
@@ -97,11 +69,7 @@ fn element_basis_images_gradient_and_estimate() {
     // best any 16-group correction of this kind can do.
     let ideal = peak(&sim.arfi_image(&[]).unwrap());
     let recovered = |est: &[f64]| {
-        let c: Vec<f64> = truth
-            .iter()
-            .zip(sim.element_phases(est).unwrap())
-            .map(|(t, e)| t - e)
-            .collect();
+        let c: Vec<f64> = truth.iter().zip(sim.element_phases(est).unwrap()).map(|(t, e)| t - e).collect();
         peak(&sim.arfi_image(&c).unwrap()) / ideal
     };
     let groups = build_model(&sim, &ms, sim.mask_fraction, 3).unwrap();
@@ -118,14 +86,7 @@ fn element_basis_images_gradient_and_estimate() {
         .unwrap();
     let best16 = recovered(&condense(&truth, &sim.groups).unwrap());
     let per_element = recovered(&e.phases);
-    println!(
-        "aberrated {:.3}, best 16-group {best16:.3}, per-element {per_element:.3}, cost {:.2e}",
-        recovered(&vec![0.0; n]),
-        e.cost
-    );
+    println!("aberrated {:.3}, best 16-group {best16:.3}, per-element {per_element:.3}, cost {:.2e}", recovered(&vec![0.0; n]), e.cost);
     assert_eq!(e.phases.len(), n);
-    assert!(
-        per_element > best16 + 0.05,
-        "per-element {per_element:.3} vs best 16-group {best16:.3}"
-    );
+    assert!(per_element > best16 + 0.05, "per-element {per_element:.3} vs best 16-group {best16:.3}");
 }

@@ -16,11 +16,7 @@ fn sim() -> &'static Simulation {
 }
 
 fn positions(s: &Simulation) -> Vec<[f64; 3]> {
-    s.transducer
-        .elements
-        .iter()
-        .map(|e| e.reference_point())
-        .collect()
+    s.transducer.elements.iter().map(|e| e.reference_point()).collect()
 }
 
 fn peak(img: &Array2<f64>) -> f64 {
@@ -30,11 +26,7 @@ fn peak(img: &Array2<f64>) -> f64 {
 /// Skull-like 16-group aberration (SPEC §3) for a seed.
 fn group_truth(seed: u64) -> Vec<f64> {
     let s = sim();
-    condense(
-        &SkullScreen::default().phases(&positions(s), seed).unwrap(),
-        &s.groups,
-    )
-    .unwrap()
+    condense(&SkullScreen::default().phases(&positions(s), seed).unwrap(), &s.groups).unwrap()
 }
 
 /// Recovered fraction: focal ARFI after subtracting the estimate, over the ideal (SPEC §6).
@@ -43,47 +35,27 @@ fn recovered(truth: &[f64], estimate: &[f64]) -> f64 {
     let corrected: Vec<f64> = if truth.len() == estimate.len() {
         truth.iter().zip(estimate).map(|(t, e)| t - e).collect()
     } else {
-        truth
-            .iter()
-            .zip(&s.groups)
-            .map(|(t, &g)| t - estimate[g])
-            .collect()
+        truth.iter().zip(&s.groups).map(|(t, &g)| t - estimate[g]).collect()
     };
     peak(&s.arfi_image(&corrected).unwrap()) / peak(&s.arfi_image(&[]).unwrap())
 }
 
 /// Random known group phases for diversity image `k`.
 fn diversity(seed: u64, k: u64) -> Vec<f64> {
-    SkullScreen {
-        correlation_length: 1.0,
-        peak_to_peak: 0.0,
-        jitter: 1.5,
-    }
-    .phases(&vec![[0.0; 3]; 16], 7919 * seed + k)
-    .unwrap()
+    SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 1.5 }.phases(&vec![[0.0; 3]; 16], 7919 * seed + k).unwrap()
 }
 
 fn measurements(truth: &[f64], noise: f64, images: u64, seed: u64) -> Vec<Measurement> {
     let s = sim();
-    let mut m = vec![Measurement {
-        image: s.noisy_arfi_image(truth, noise, seed).unwrap(),
-        known: vec![],
-    }];
+    let mut m = vec![Measurement { image: s.noisy_arfi_image(truth, noise, seed).unwrap(), known: vec![] }];
     for k in 1..images {
         let d = diversity(seed, k);
         let total: Vec<f64> = if truth.len() == 16 {
             truth.iter().zip(&d).map(|(t, x)| t + x).collect()
         } else {
-            truth
-                .iter()
-                .zip(&s.groups)
-                .map(|(t, &g)| t + d[g])
-                .collect()
+            truth.iter().zip(&s.groups).map(|(t, &g)| t + d[g]).collect()
         };
-        m.push(Measurement {
-            image: s.noisy_arfi_image(&total, noise, 1000 * seed + k).unwrap(),
-            known: d,
-        });
+        m.push(Measurement { image: s.noisy_arfi_image(&total, noise, 1000 * seed + k).unwrap(), known: d });
     }
     m
 }
@@ -102,10 +74,7 @@ fn kernel_image_equals_the_direct_simulation() {
     let fast = k.image(&truth).unwrap();
     let scale = peak(&direct);
     for ((i, j), v) in fast.indexed_iter() {
-        assert!(
-            (v - direct[[50 + i, 35 + j]]).abs() < 1e-9 * scale,
-            "pixel ({i}, {j})"
-        );
+        assert!((v - direct[[50 + i, 35 + j]]).abs() < 1e-9 * scale, "pixel ({i}, {j})");
     }
 }
 
@@ -124,11 +93,7 @@ fn gradient_matches_finite_differences() {
         b[g] -= h;
         let fd = (model.cost.cost(&a) - model.cost.cost(&b)) / (2.0 * h);
         // Central differences are accurate to O(h²) ≈ 1e-12 relative plus rounding ~1e-10/h.
-        assert!(
-            (fd - grad[g]).abs() <= 1e-5 * grad.iter().map(|v| v.abs()).fold(0.0, f64::max),
-            "group {g}: {fd} vs {}",
-            grad[g]
-        );
+        assert!((fd - grad[g]).abs() <= 1e-5 * grad.iter().map(|v| v.abs()).fold(0.0, f64::max), "group {g}: {fd} vs {}", grad[g]);
     }
 }
 
@@ -172,19 +137,18 @@ fn single_noisy_image_never_gives_a_silent_bad_answer() {
             let e = lbfgs().run(&model.cost, None).unwrap();
             let a = e.assess(&model, sigma.as_deref(), 0.9, seed).unwrap();
             let r = recovered(&truth, &e.phases);
-            eprintln!("noise {noise} seed {seed}: recovered {r:.3}, ambiguous {} (worst {:.3}, {} candidates)", a.ambiguous, a.worst_recovery, a.candidates.len());
+            eprintln!(
+                "noise {noise} seed {seed}: recovered {r:.3}, ambiguous {} (worst {:.3}, {} candidates)",
+                a.ambiguous,
+                a.worst_recovery,
+                a.candidates.len()
+            );
             if r < 0.8 {
-                assert!(
-                    a.ambiguous,
-                    "noise {noise} seed {seed}: recovered {r:.3} without a flag"
-                );
+                assert!(a.ambiguous, "noise {noise} seed {seed}: recovered {r:.3} without a flag");
                 assert!(a.suggested_phases.len() == 16 && a.suggested_separation > 0.0);
             }
             if !a.ambiguous {
-                assert!(
-                    r >= 0.9,
-                    "noise {noise} seed {seed}: unflagged estimate recovered {r:.3}"
-                );
+                assert!(r >= 0.9, "noise {noise} seed {seed}: unflagged estimate recovered {r:.3}");
             }
         }
     }
@@ -197,18 +161,16 @@ fn nelder_mead_from_zero_refocuses_and_lbfgs_recovers_the_applied_phases_noise_f
     // (phase error ~0.3 rad, cost 1e-5 against 0 at the truth); L-BFGS with the analytic gradient
     // recovers the applied phases themselves, up to the common phase.
     let s = sim();
-    let truth = SkullScreen {
-        correlation_length: 1.0,
-        peak_to_peak: 0.0,
-        jitter: 0.4,
-    }
-    .phases(&vec![[0.0; 3]; 16], 3)
-    .unwrap();
+    let truth = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 0.4 }.phases(&vec![[0.0; 3]; 16], 3).unwrap();
     let model = build_model(s, &measurements(&truth, 0.0, 1, 3), 0.05, 3).unwrap();
     let nm = Estimator::nelder_mead().run(&model.cost, None).unwrap();
     let r = recovered(&truth, &nm.phases);
     let aberrated = recovered(&truth, &[0.0; 16]);
-    eprintln!("Nelder-Mead noise-free: aberrated {aberrated:.4}, recovered {r:.4}, phase error {:.4} rad, {} evaluations", phase_error(&nm.phases, &truth), nm.evaluations);
+    eprintln!(
+        "Nelder-Mead noise-free: aberrated {aberrated:.4}, recovered {r:.4}, phase error {:.4} rad, {} evaluations",
+        phase_error(&nm.phases, &truth),
+        nm.evaluations
+    );
     assert!(nm.evaluations <= 8000);
     // Measured 0.935 from 0.920 aberrated (2026-11-23); from a 1 rad aberration it ends worse
     // than it started (0.42 from 0.58), so the paper-faithful default is not the recommended one.
@@ -243,25 +205,15 @@ fn evaluation_and_time_limits_are_honoured() {
     let s = sim();
     let truth = group_truth(4);
     let model = build_model(s, &measurements(&truth, 0.02, 1, 4), 0.05, 3).unwrap();
-    let e = Estimator::nelder_mead()
-        .with_max_evaluations(100)
-        .unwrap()
-        .run(&model.cost, None)
-        .unwrap();
+    let e = Estimator::nelder_mead().with_max_evaluations(100).unwrap().run(&model.cost, None).unwrap();
     assert_eq!(e.evaluations, 100);
     assert_eq!(e.stop.name(), "evaluation limit");
-    let e = Estimator::lbfgs()
-        .with_time_limit(0.05)
-        .unwrap()
-        .run(&model.cost, None)
-        .unwrap();
+    let e = Estimator::lbfgs().with_time_limit(0.05).unwrap().run(&model.cost, None).unwrap();
     assert!(e.seconds < 1.0, "{}", e.seconds);
     assert!(e.phases.len() == 16 && e.minima.iter().all(|m| m.phases.len() == 16));
     // Cancelled before the first evaluation: the start (zero) comes back, flagged.
     let cancel = std::sync::atomic::AtomicBool::new(true);
-    let e = Estimator::particle_swarm()
-        .run(&model.cost, Some(&cancel))
-        .unwrap();
+    let e = Estimator::particle_swarm().run(&model.cost, Some(&cancel)).unwrap();
     assert_eq!(e.stop.name(), "interrupted");
     assert_eq!(e.phases, vec![0.0; 16]);
 }
@@ -271,11 +223,7 @@ fn estimation_is_deterministic() {
     let s = sim();
     let truth = group_truth(5);
     let model = build_model(s, &measurements(&truth, 0.02, 1, 5), 0.05, 3).unwrap();
-    for est in [
-        Estimator::nelder_mead(),
-        Estimator::particle_swarm().with_seed(9),
-        lbfgs().with_seed(9),
-    ] {
+    for est in [Estimator::nelder_mead(), Estimator::particle_swarm().with_seed(9), lbfgs().with_seed(9)] {
         let a = est.run(&model.cost, None).unwrap();
         let b = est.run(&model.cost, None).unwrap();
         assert_eq!(a.phases, b.phases);

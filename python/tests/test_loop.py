@@ -1,0 +1,69 @@
+"""The paper's loop 2 with a measured safeguard (issue 3): successive images with the current
+correction applied, fitted jointly; a correction is kept only if the scanner shows it better."""
+
+import numpy as np
+import pytest
+
+from arfi.loop import loop2, robust_focal
+
+NOISE = 0.02
+
+
+def run_loop(sim, applied, seed, iterations):
+    """Loop 2 on simulated acquisitions of the element phases `applied` with ARFI noise."""
+    count = [0]
+
+    def acquire(added):
+        count[0] += 1
+        return sim.arfi_image(applied + np.asarray(added)[sim.groups], noise_rad=NOISE, seed=100 * seed + count[0])
+
+    first = sim.arfi_image(applied, noise_rad=NOISE, seed=seed)
+    return loop2(sim, first, acquire, iterations=iterations, seed=seed)
+
+
+def test_a_16_group_correction_of_1024_aberrations_never_makes_the_focus_worse(sim, ideal):
+    # Issue 3 acceptance. With the default skull screen the fitted 16-group estimates of these
+    # element-level aberrations all leave a weaker focus than no correction (measured 2026-11-23:
+    # true focus 0.13-0.34 of ideal after correction vs 0.25-0.53 aberrated), so the safeguard
+    # must see that in the noisy images and keep no correction. The check is on noise-free truth.
+    for seed in range(1, 6):
+        applied = sim.skull_phases(seed)
+        r = run_loop(sim, applied, seed, iterations=2)
+        aberrated = sim.arfi_image(applied).max()
+        corrected = sim.arfi_image(applied - r.correction_rad[sim.groups]).max()
+        assert corrected >= aberrated - 1e-12, f"seed {seed}: {corrected / ideal.max():.3f} < {aberrated / ideal.max():.3f}"
+        assert len(r.steps) >= 2 and r.steps[0].estimate is None and r.steps[1].estimate is not None
+
+
+def test_loop2_refocuses_16_group_aberrations_one_image_cannot(sim, ideal):
+    # SPEC §8: one image at 0.02 rad recovers about 0.5 on average; loop 2 adds the corrected
+    # images to the joint fit. Measured 2026-11-23 (3 iterations, seeds 1-5): kept corrections
+    # recover 0.88, 0.85, 0.98, 0.90, 0.97 of the ideal focus (mean 0.92; paper loop 1: 0.83).
+    # Required: mean >= 0.85 and never below the aberrated focus.
+    recovered = []
+    for seed in range(1, 6):
+        applied = sim.condense(sim.skull_phases(seed))[sim.groups]
+        r = run_loop(sim, applied, seed, iterations=3)
+        corrected = sim.arfi_image(applied - r.correction_rad[sim.groups]).max()
+        assert corrected >= sim.arfi_image(applied).max() - 1e-12
+        recovered.append(corrected / ideal.max())
+    assert np.mean(recovered) >= 0.85, recovered
+
+
+def test_robust_focal_is_the_mean_around_the_peak():
+    image = np.zeros((9, 9))
+    image[4, 4] = 9.0
+    assert robust_focal(image) == pytest.approx(1.0)
+    image[3:6, 3:6] = 2.0
+    assert robust_focal(image) == pytest.approx(2.0)
+
+
+def test_loop2_rejects_bad_arguments(sim, ideal):
+    with pytest.raises(ValueError, match="iterations"):
+        loop2(sim, ideal, lambda a: ideal, iterations=0)
+    with pytest.raises(ValueError, match="acquire: must be a callable"):
+        loop2(sim, ideal, None)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="acquire: returned an image of shape"):
+        loop2(sim, sim.arfi_image(np.linspace(-1, 1, 16)), lambda a: np.zeros((3, 3)), iterations=1)
+    with pytest.raises(ValueError, match="margin_sigma"):
+        loop2(sim, ideal, lambda a: ideal, margin_sigma=float("nan"))
