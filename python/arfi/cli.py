@@ -189,6 +189,10 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
               f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
               f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
+    if e.model_mismatch:
+        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+              f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
+              f"the focus: check it with an image taken with the correction applied (loop 2).")
     if args.out_phases:
         with_atomic_npy(args.out_phases, e.phases_rad)
     if args.suggest:

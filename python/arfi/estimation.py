@@ -49,6 +49,11 @@ class Estimate:
     """Known group phases to add for one more acquisition that would best separate the candidates."""
     suggested_separation: float
     cost_history: NDArray[np.float64] = field(repr=False)
+    misfit: float = float("nan")
+    """Best cost over its noise expectation, ``cost / (n_pixels·noise_floor²)``: about 1 when the model explains the images."""
+    model_mismatch: bool = False
+    """The cost is above the 95 % chi-square point of the noise: the model cannot explain the images (e.g. element-level
+    aberrations fitted with group phases) and the correction may make the focus worse; check it with loop 2."""
     group_phases_rad: NDArray[np.float64] | None = None
     """Per-element estimation only: the default-group estimate that warm-started it."""
     underdetermined: bool = False

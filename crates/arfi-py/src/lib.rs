@@ -369,6 +369,8 @@ impl CoreSimulation {
         d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
         d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
         d.set_item("suggested_separation", a.suggested_separation)?;
+        d.set_item("misfit", a.misfit)?;
+        d.set_item("model_mismatch", a.mismatch)?;
         Ok(d)
     }
 

@@ -487,6 +487,13 @@ pub struct Assessment {
     /// candidates, and that separation (squared image difference in units of sigma²).
     pub suggested_phases: Vec<f64>,
     pub suggested_separation: f64,
+    /// The best cost over its expectation under the model, `J / (n_pixels·sigma²)` (about 1
+    /// when the model explains the data down to the noise; `sigma` at least 1e-4 rad).
+    pub misfit: f64,
+    /// The best cost lies above the 95 % point of `sigma²·chi²(n_pixels - G + 1)`: the model
+    /// cannot explain the images (e.g. element-level aberrations fitted with group phases), and
+    /// a correction from it may make the focus worse.
+    pub mismatch: bool,
 }
 
 /// Upper 95 % point of chi² with `k` degrees of freedom (Wilson–Hilferty, within 1 % for k ≥ 3).
@@ -559,7 +566,20 @@ impl Estimate {
         }
         let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
         let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
-        Ok(Assessment { ambiguous: worst_recovery < threshold, margin, candidates, worst_recovery, suggested_phases, suggested_separation })
+        let n = model.cost.n_pixels();
+        let sigma2 = model.noise.max(1e-4).powi(2);
+        let misfit = best / (n as f64 * sigma2);
+        let mismatch = best > sigma2 * chi2_95(n.saturating_sub(g - 1).max(1));
+        Ok(Assessment {
+            ambiguous: worst_recovery < threshold,
+            margin,
+            candidates,
+            worst_recovery,
+            suggested_phases,
+            suggested_separation,
+            misfit,
+            mismatch,
+        })
     }
 }
 
