@@ -144,6 +144,9 @@ pub struct MrSampler {
     spacing: [f64; 2],
     /// `M_u` (pixels u x samples u), `M_v` (pixels v x samples v).
     m: [Array2<f64>; 2],
+    /// Shift (m, along u and v) of the image content against the pixel grid: pixel centres sample
+    /// the field at `centre - shift` (a registration offset; zero for the scenario's geometry).
+    pub shift: [f64; 2],
 }
 
 impl MrSampler {
@@ -201,19 +204,41 @@ impl MrSampler {
         }
         let pixels = [0..geometry.matrix[0], 0..geometry.matrix[1]];
         let m = [
-            axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width),
-            axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width),
+            axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width, 0.0),
+            axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width, 0.0),
         ];
-        Ok(MrSampler { geometry: geometry.clone(), broadening, window, pixels, force_coefficient, slab_weights, samples, spacing, m })
+        Ok(MrSampler {
+            geometry: geometry.clone(),
+            broadening,
+            window,
+            pixels,
+            force_coefficient,
+            slab_weights,
+            samples,
+            spacing,
+            m,
+            shift: [0.0; 2],
+        })
     }
 
     /// The same sampler with another broadening width (m), on the same window.
     pub fn with_broadening(&self, width: f64) -> Result<Self> {
+        self.with_view(width, self.shift)
+    }
+
+    /// The same sampler with broadening `width` (m) and the image content shifted by `shift`
+    /// (m, along u and v), on the same window. A shift moves the pixels over the recorded window:
+    /// keep it well inside the window's margin (4 W plus a sample beyond the field of view).
+    pub fn with_view(&self, width: f64, shift: [f64; 2]) -> Result<Self> {
         require_non_negative("broadening_width_mm", width)?;
+        if !shift.iter().all(|v| v.is_finite()) {
+            return Err(HasError::invalid("shift_mm", "must be finite"));
+        }
         let mut s = self.clone();
         s.broadening = Broadening { width };
+        s.shift = shift;
         for k in 0..2 {
-            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width);
+            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width, shift[k]);
         }
         Ok(s)
     }
@@ -310,10 +335,10 @@ impl MrSampler {
 }
 
 /// `M = P·G` along image axis `k`: Gaussian broadening on the samples, then the area average over
-/// the pixels in `pixels`.
-fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64], d: f64, width: f64) -> Array2<f64> {
+/// the pixels in `pixels`, whose centres are moved by `-shift` (m).
+fn axis_operator(g: &MrGeometry, k: usize, pixels: Range<usize>, samples: &[f64], d: f64, width: f64, shift: f64) -> Array2<f64> {
     let px = g.pixel_size()[k];
-    let centres: Vec<f64> = pixels.map(|i| g.pixel_center(k, i)).collect();
+    let centres: Vec<f64> = pixels.map(|i| g.pixel_center(k, i) - shift).collect();
     pixel_average(&centres, px, samples, d).dot(&gaussian(samples, d, width))
 }
 

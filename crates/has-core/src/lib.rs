@@ -22,6 +22,7 @@ pub mod arfi;
 pub mod basis;
 pub mod calibrate;
 pub mod cost;
+pub mod diagnose;
 pub mod error;
 pub mod estimate;
 pub mod fft;
