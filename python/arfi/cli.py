@@ -201,6 +201,21 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    t = time.perf_counter()
+    sim = _calibrated(args)
+    image, known = _read_image(sim, args.image)
+    d = sim.diagnose(image, known, threshold=args.threshold)
+    for k, e in enumerate(d.effects, 1):
+        params = ", ".join(f"{n} {v:.4g}" for n, v in e["params"].items())
+        print(f"diagnose: {k}. {e['name']} ({params}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, evidence {e['evidence']:.1f}")
+    if not d.effects:
+        print("diagnose: no effect missing: the residual is consistent with the noise")
+    print(f"diagnose: residual RMS {d.residual_rms_initial:.4f} -> {d.residual_rms_final:.4f} rad, noise floor {d.noise_floor:.4f} rad")
+    _finish(args, {**d.to_dict(), "image": args.image, "seconds": time.perf_counter() - t})
+    return 0
+
+
 def with_atomic_npy(path: str, array: np.ndarray) -> None:
     """Writes a .npy file atomically."""
     from arfi.io import atomic_path
@@ -303,6 +318,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
     p.set_defaults(run=cmd_estimate)
+
+    p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing (SPEC §7)",
+                       description="Compare a measured MR-ARFI image with the model, fit every candidate effect "
+                       "(amplitude, broadening, registration_shift, background_phase), add the best while its BIC evidence "
+                       "against the background noise is positive, and repeat until the residual is noise.",
+                       epilog="example: arfi diagnose --image measured.nii.gz --calibration cal.json --json diagnosis.json")
+    _add_common(p)
+    p.add_argument("--image", required=True, metavar="M.nii.gz")
+    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    p.add_argument("--threshold", type=float, default=0.0, help="evidence an effect needs (default 0: the plain BIC)")
+    p.set_defaults(run=cmd_diagnose)
 
     p = sub.add_parser("reproduce", help="re-run the paper's study in simulation (Table 1, Figures 2-10, HTML)",
                        description="Re-run the paper's phantom study in simulation with seeded skull-like aberrations: "

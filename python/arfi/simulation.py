@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
 
@@ -239,6 +240,15 @@ class Simulation:
         d = self._core.estimate(arrays, kn_arrays, method, max_evaluations, time_limit_s, int(seed), starts, bool(fit_amplitude),
                                 progress=bool(progress))
         return Estimate(**d)
+
+    def diagnose(self, image: ArrayLike, known: ArrayLike | None = None, threshold: float = 0.0) -> Diagnosis:
+        """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image taken with ``known`` phases
+        added: names the effects missing from this model, in order, with their fitted parameters,
+        until the residual is consistent with the noise of the image background. Effects fitted:
+        amplitude, broadening, registration_shift, background_phase. ``threshold`` is the evidence
+        (BIC gain, in units of the noise variance) an effect needs; 0 is the plain BIC."""
+        d = self._core.diagnose(_as_image(image, "image"), as_phases(known, "known"), float(threshold))
+        return Diagnosis(**d)
 
     def source_field(self, phases: ArrayLike | None = None) -> NDArray[np.complex128]:
         """Pressure (Pa) on the source plane, shape (ny, nx)."""

@@ -7,6 +7,7 @@ use has_core::aberration::SkullScreen;
 use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
 use has_core::cost::{build_model, Measurement};
+use has_core::diagnose::{diagnose, DiagnoseOptions};
 use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
@@ -246,6 +247,68 @@ impl CoreSimulation {
         d.set_item("cost", c.cost)?;
         d.set_item("n_pixels", c.n_pixels)?;
         d.set_item("noise_rad", c.noise)?;
+        Ok(d)
+    }
+
+    /// The model-discrepancy workflow (SPEC §7) on one image taken with `known` added phases.
+    #[pyo3(signature = (image, known=None, threshold=0.0, max_iterations=1500))]
+    fn diagnose<'py>(
+        &self,
+        py: Python<'py>,
+        image: PyReadonlyArray2<'py, f64>,
+        known: Option<PyReadonlyArray1<'py, f64>>,
+        threshold: f64,
+        max_iterations: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let image = image.as_array().to_owned();
+        let known = phases_vec(known);
+        if !threshold.is_finite() {
+            return Err(pyo3::exceptions::PyValueError::new_err("threshold: must be finite"));
+        }
+        if max_iterations == 0 {
+            return Err(pyo3::exceptions::PyValueError::new_err("max_iterations: must be > 0"));
+        }
+        let options = DiagnoseOptions { threshold, max_iterations };
+        let r = py.detach(|| diagnose(&self.inner, &image, &known, &options)).map_err(to_py)?;
+        let candidates = |cands: &[has_core::diagnose::Candidate]| -> PyResult<Vec<Bound<'py, PyDict>>> {
+            cands
+                .iter()
+                .map(|c| {
+                    let d = PyDict::new(py);
+                    d.set_item("name", c.effect.name())?;
+                    d.set_item("cost", c.cost)?;
+                    d.set_item("evidence", c.evidence)?;
+                    Ok(d)
+                })
+                .collect()
+        };
+        let mut effects = Vec::new();
+        for step in &r.steps {
+            let e = PyDict::new(py);
+            e.set_item("name", step.effect.name())?;
+            let params = PyDict::new(py);
+            for (k, v) in &step.params {
+                params.set_item(*k, *v)?;
+            }
+            e.set_item("params", params)?;
+            e.set_item("cost_before", step.cost_before)?;
+            e.set_item("cost_after", step.cost_after)?;
+            e.set_item("evidence", step.evidence)?;
+            e.set_item("candidates", candidates(&step.candidates)?)?;
+            effects.push(e);
+        }
+        let d = PyDict::new(py);
+        let (rms0, rms1) = r.residual_rms();
+        d.set_item("effects", effects)?;
+        d.set_item("rejected", candidates(&r.rejected)?)?;
+        d.set_item("cost_initial", r.cost_initial)?;
+        d.set_item("cost_final", r.cost_final)?;
+        d.set_item("noise_floor", r.noise_floor)?;
+        d.set_item("n_pixels", r.n_pixels)?;
+        d.set_item("residual_rms_initial", rms0)?;
+        d.set_item("residual_rms_final", rms1)?;
+        d.set_item("model_initial", r.model_initial.into_pyarray(py))?;
+        d.set_item("model_final", r.model_final.into_pyarray(py))?;
         Ok(d)
     }
 

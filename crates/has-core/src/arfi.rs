@@ -237,9 +237,7 @@ impl MrSampler {
         let mut s = self.clone();
         s.broadening = Broadening { width };
         s.shift = shift;
-        for k in 0..2 {
-            s.m[k] = axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width, shift[k]);
-        }
+        s.m = [0, 1].map(|k| axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width, shift[k]));
         Ok(s)
     }
 
