@@ -32,7 +32,7 @@ def test_reproduce_rejects_bad_options(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
-def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path):
+def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path, capsys):
     js = tmp_path / "r.json"
     assert main(["reproduce", "--case", "1024", "--repeats", "1", "--loop2", "1", "--method", "lbfgs",
                  "--out", str(tmp_path / "study"), "--json", str(js)]) == 0
@@ -41,3 +41,4 @@ def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path):
     assert r["loop2_iterations"] == 1 and row["images"] == 2 and row["loop2_kept"] in (0, 1)
     assert row["focal_corrected_rad"] >= row["focal_aberrated_rad"] - 1e-12
     assert "loop2_kept" in (tmp_path / "study" / "table.csv").read_text().splitlines()[0]
+    assert ("1 of 1 estimates flagged ambiguous" in capsys.readouterr().out) == row["ambiguous"]
