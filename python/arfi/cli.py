@@ -325,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing (SPEC §7)",
                        description="Compare a measured MR-ARFI image with the model, fit every candidate effect "
-                       "(amplitude, broadening, registration_shift, background_phase), add the best while its BIC evidence "
+                       "(amplitude, broadening, registration_shift, background_phase, slice_offset), add the best while its BIC evidence "
                        "against the background noise is positive, and repeat until the residual is noise.",
                        epilog="example: arfi diagnose --image measured.nii.gz --calibration cal.json --json diagnosis.json")
     _add_common(p)

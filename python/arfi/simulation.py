@@ -245,7 +245,7 @@ class Simulation:
         """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image taken with ``known`` phases
         added: names the effects missing from this model, in order, with their fitted parameters,
         until the residual is consistent with the noise of the image background. Effects fitted:
-        amplitude, broadening, registration_shift, background_phase. ``threshold`` is the evidence
+        amplitude, broadening, registration_shift, background_phase, slice_offset. ``threshold`` is the evidence
         (BIC gain, in units of the noise variance) an effect needs; 0 is the plain BIC."""
         d = self._core.diagnose(_as_image(image, "image"), as_phases(known, "known"), float(threshold))
         return Diagnosis(**d)

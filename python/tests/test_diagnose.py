@@ -30,7 +30,7 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path):
 
 def test_diagnose_on_noise_only_names_nothing_and_rejects_bad_input(sim):
     d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=11))
-    assert d.names == [] and len(d.rejected) == 4
+    assert d.names == [] and len(d.rejected) == 5
     with pytest.raises(ValueError, match="image"):
         sim.diagnose(sim.arfi_image()[:10])
     assert sim.diagnose(sim.arfi_image()).names == []  # noise-free and the exact model: nothing to add

@@ -11,8 +11,9 @@
 //! 128 x 96 image.
 //!
 //! This module holds the effects that act after the pressure field (the image-space part of the
-//! model): `amplitude`, `broadening`, `registration_shift` and `background_phase`. They share one
-//! march of the model's field.
+//! model) and the slice: `amplitude`, `broadening`, `registration_shift`, `background_phase` and
+//! `slice_offset`. They share one march of the model's field, recorded on the MR window extended
+//! along the slice normal.
 
 use crate::arfi::MrSampler;
 use crate::cost::{masks_and_box, Measurement};
@@ -36,11 +37,14 @@ pub enum Effect {
     RegistrationShift,
     /// A constant plus a linear phase ramp across the image.
     BackgroundPhase,
+    /// An offset of the imaged slice from the model's along its normal.
+    SliceOffset,
 }
 
 impl Effect {
     /// Every effect this module fits, in a fixed order (ties go to the earlier).
-    pub const ALL: [Effect; 4] = [Effect::Amplitude, Effect::Broadening, Effect::RegistrationShift, Effect::BackgroundPhase];
+    pub const ALL: [Effect; 5] =
+        [Effect::Amplitude, Effect::Broadening, Effect::RegistrationShift, Effect::BackgroundPhase, Effect::SliceOffset];
 
     /// The SPEC §7 name.
     pub fn name(&self) -> &'static str {
@@ -49,6 +53,7 @@ impl Effect {
             Effect::Broadening => "broadening",
             Effect::RegistrationShift => "registration_shift",
             Effect::BackgroundPhase => "background_phase",
+            Effect::SliceOffset => "slice_offset",
         }
     }
 
@@ -59,6 +64,7 @@ impl Effect {
             Effect::Broadening => &[1],
             Effect::RegistrationShift => &[2, 3],
             Effect::BackgroundPhase => &[4, 5, 6],
+            Effect::SliceOffset => &[7],
         }
     }
 }
@@ -73,51 +79,92 @@ pub struct View {
     /// `offset + slope_u·u + slope_v·v` (rad, rad/mm; u, v pixel-centre coordinates in mm).
     pub background_offset_rad: f64,
     pub background_slope_rad_per_mm: [f64; 2],
+    /// Offset of the slice along its normal (mm), within ±[`SLICE_REACH_MM`].
+    pub slice_offset_mm: f64,
 }
 
+/// The largest slice offset fitted (mm): the extra field recorded on each side of the slice.
+pub const SLICE_REACH_MM: f64 = 8.0;
+
 /// Parameter names with units, in [`View::to_vec`] order.
-const NAMES: [&str; 7] = ["scale", "broadening_width_mm", "dx_mm", "dy_mm", "offset_rad", "slope_x_rad_per_mm", "slope_y_rad_per_mm"];
+const NAMES: [&str; 8] =
+    ["scale", "broadening_width_mm", "dx_mm", "dy_mm", "offset_rad", "slope_x_rad_per_mm", "slope_y_rad_per_mm", "dz_mm"];
 /// Initial simplex steps, in [`View::to_vec`] order.
-const STEPS: [f64; 7] = [0.05, 0.5, 0.5, 0.5, 0.01, 2e-4, 2e-4];
+const STEPS: [f64; 8] = [0.05, 0.5, 0.5, 0.5, 0.01, 2e-4, 2e-4, 1.0];
 
 impl View {
-    fn to_vec(self) -> [f64; 7] {
+    fn to_vec(self) -> [f64; 8] {
         let b = self.background_slope_rad_per_mm;
-        [self.scale, self.broadening_width_mm, self.shift_mm[0], self.shift_mm[1], self.background_offset_rad, b[0], b[1]]
+        [
+            self.scale,
+            self.broadening_width_mm,
+            self.shift_mm[0],
+            self.shift_mm[1],
+            self.background_offset_rad,
+            b[0],
+            b[1],
+            self.slice_offset_mm,
+        ]
     }
-    fn from_vec(v: &[f64; 7]) -> Self {
+    fn from_vec(v: &[f64; 8]) -> Self {
         View {
             scale: v[0],
             broadening_width_mm: v[1].abs(),
             shift_mm: [v[2], v[3]],
             background_offset_rad: v[4],
             background_slope_rad_per_mm: [v[5], v[6]],
+            slice_offset_mm: v[7],
         }
     }
 }
 
 /// The model image for [`View`] parameters: one recorded `|p|²` window, re-sampled.
 struct Forward {
-    sampler: MrSampler,
+    sim: Simulation,
+    /// `|p|²` on the MR window extended by [`SLICE_REACH_MM`] (plus a sample) along the normal.
+    window: crate::has::Window,
     power: Vec<f64>,
     amplitude: f64,
     /// Pixel-centre coordinates along u and v (mm).
     coords: [Vec<f64>; 2],
     /// The last sampled force image and its (width, shift): scale and background changes reuse it.
-    cache: std::sync::Mutex<Option<([f64; 3], Array2<f64>)>>,
+    cache: std::sync::Mutex<Option<([f64; 4], Array2<f64>)>>,
 }
 
 impl Forward {
     fn new(sim: &Simulation, known: &[f64]) -> Result<Self> {
-        let rec = sim.record_window(&[sim.source_field(known)?])?.remove(0);
         let g = &sim.sampler.geometry;
+        let window = extended_window(sim);
+        let spec = crate::has::RecordSpec { window: Some(window.clone()), reflections: sim.reflections, ..Default::default() };
+        let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
         let coords = [0, 1].map(|k| (0..g.matrix[k]).map(|i| g.pixel_center(k, i) * 1e3).collect());
         let power = rec.window.iter().map(|p| p.norm_sqr()).collect();
-        Ok(Forward { sampler: sim.sampler.clone(), power, amplitude: sim.amplitude, coords, cache: std::sync::Mutex::new(None) })
+        Ok(Forward { sim: sim.clone(), window, power, amplitude: sim.amplitude, coords, cache: std::sync::Mutex::new(None) })
+    }
+
+    /// The sampler of the slice moved `dz_mm` along its normal, and its `|p|²` samples.
+    fn slice(&self, dz_mm: f64) -> Result<(MrSampler, Vec<f64>)> {
+        let s = &self.sim;
+        if dz_mm == 0.0 {
+            return Ok((s.sampler.clone(), self.window.extract(&self.power, &s.sampler.window)));
+        }
+        if !(dz_mm.abs() <= SLICE_REACH_MM) {
+            return Err(HasError::invalid("dz_mm", format!("slice offsets are fitted within ±{SLICE_REACH_MM} mm")));
+        }
+        let mut geometry = s.sampler.geometry.clone();
+        geometry.center[geometry.plane.axes()[2]] += dz_mm * 1e-3;
+        let sampler = MrSampler::new(&s.grid, &s.medium, s.frequency, &geometry, s.sampler.broadening)?;
+        let w = &sampler.window;
+        let inside = |a: &std::ops::Range<usize>, b: &std::ops::Range<usize>| a.start >= b.start && a.end <= b.end;
+        if !(inside(&w.planes, &self.window.planes) && inside(&w.rows, &self.window.rows) && inside(&w.cols, &self.window.cols)) {
+            return Err(HasError::invalid("dz_mm", "the moved slice leaves the recorded field"));
+        }
+        let power = self.window.extract(&self.power, w);
+        Ok((sampler, power))
     }
 
     /// The broadened, shifted force image (N/m³) for a width and shift (mm).
-    fn force(&self, key: [f64; 3]) -> Result<Array2<f64>> {
+    fn force(&self, key: [f64; 4]) -> Result<Array2<f64>> {
         if let Ok(c) = self.cache.lock() {
             if let Some((k, img)) = c.as_ref() {
                 if *k == key {
@@ -125,7 +172,8 @@ impl Forward {
                 }
             }
         }
-        let img = self.sampler.with_view(key[0] * 1e-3, [key[1] * 1e-3, key[2] * 1e-3])?.apply(&self.power)?;
+        let (sampler, power) = self.slice(key[3])?;
+        let img = sampler.with_view(key[0] * 1e-3, [key[1] * 1e-3, key[2] * 1e-3])?.apply(&power)?;
         if let Ok(mut c) = self.cache.lock() {
             *c = Some((key, img.clone()));
         }
@@ -133,7 +181,7 @@ impl Forward {
     }
 
     fn image(&self, v: &View) -> Result<Array2<f64>> {
-        let mut img = self.force([v.broadening_width_mm, v.shift_mm[0], v.shift_mm[1]])? * (self.amplitude * v.scale);
+        let mut img = self.force([v.broadening_width_mm, v.shift_mm[0], v.shift_mm[1], v.slice_offset_mm])? * (self.amplitude * v.scale);
         let b = v.background_slope_rad_per_mm;
         for ((i, j), x) in img.indexed_iter_mut() {
             *x += v.background_offset_rad + b[0] * self.coords[0][i] + b[1] * self.coords[1][j];
@@ -227,6 +275,7 @@ pub fn diagnose(sim: &Simulation, image: &Array2<f64>, known: &[f64], options: &
         shift_mm: [0.0; 2],
         background_offset_rad: 0.0,
         background_slope_rad_per_mm: [0.0; 2],
+        slice_offset_mm: 0.0,
     };
     let model_initial = forward.image(&view)?;
     let cost_initial = forward.cost(&view, image);
@@ -299,7 +348,7 @@ fn fit(forward: &Forward, measured: &Array2<f64>, start: View, free: &[usize], m
 struct Fit<'a> {
     forward: &'a Forward,
     measured: &'a Array2<f64>,
-    base: [f64; 7],
+    base: [f64; 8],
     free: &'a [usize],
 }
 
@@ -321,4 +370,19 @@ impl CostFunction for &Fit<'_> {
         let c = self.forward.cost(&self.view(x), self.measured);
         Ok(if c.is_finite() { c } else { PENALTY })
     }
+}
+
+/// The MR window extended by [`SLICE_REACH_MM`] plus the slice half-thickness and a sample on each
+/// side along the slice normal, within the grid.
+fn extended_window(sim: &Simulation) -> crate::has::Window {
+    let g = &sim.grid;
+    let mut w = sim.sampler.window.clone();
+    let (range, step, n) = match sim.sampler.geometry.plane.axes()[2] {
+        0 => (&mut w.cols, g.dx, g.nx),
+        1 => (&mut w.rows, g.dy, g.ny),
+        _ => (&mut w.planes, g.dz, g.nz),
+    };
+    let extra = ((SLICE_REACH_MM * 1e-3 + sim.sampler.geometry.slice_thickness) / step).ceil() as usize + 1;
+    *range = range.start.saturating_sub(extra)..(range.end + extra).min(n);
+    w
 }
