@@ -239,9 +239,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
           f"(paper {s['paper']['gain']:+.0%}), phase error {s['mean_phase_error_rad']:.2f} rad "
           f"(paper {s['paper']['phase_error_rad']}) in {s['seconds']:.1f} s -> {args.out}/report.html")
     flagged = sum(bool(r["ambiguous"]) for r in s["table"])
-    if flagged:
+    if flagged and not (args.diversity or args.loop2):
         print(f"reproduce: {flagged} of {len(s['table'])} estimates flagged ambiguous (other aberrations fit their image within "
               f"the noise, SPEC §8); known diversity images (--diversity 3) or the paper's loop 2 (--loop2 3) resolve them")
+    elif flagged:
+        print(f"reproduce: {flagged} of {len(s['table'])} final estimates still flagged ambiguous: more images would narrow them")
     _finish(args, s)
     return 0
 
