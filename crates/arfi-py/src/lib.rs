@@ -394,8 +394,8 @@ impl CoreSimulation {
             })?;
             let (r, a) = outcome.map_err(to_py)?;
             // One image's masked pixels cannot determine more phases than they number.
-            let underdetermined = r.model.cost.terms.iter().map(|t| t.mask.len()).sum::<usize>() < sim.n_elements();
-            d.set_item("n_pixels", r.model.cost.terms.iter().map(|t| t.mask.len()).sum::<usize>())?;
+            let underdetermined = r.model.cost.n_pixels() < sim.n_elements();
+            d.set_item("n_pixels", r.model.cost.n_pixels())?;
             d.set_item("scale", 1.0)?;
             d.set_item("group_phases_rad", r.group.phases.clone().into_pyarray(py))?;
             d.set_item("underdetermined", underdetermined)?;

@@ -93,12 +93,6 @@ impl FieldBasis {
         2 * self.re.len() * std::mem::size_of::<f32>()
     }
 
-    /// Index into the box of full-image pixel `(i, j)`, if inside.
-    pub fn pixel_index(&self, i: usize, j: usize) -> Option<usize> {
-        let p = &self.sampler.pixels;
-        (p[0].contains(&i) && p[1].contains(&j)).then(|| (i - p[0].start) * p[1].len() + (j - p[1].start))
-    }
-
     /// Fields `P = B·V` for drive columns `V` (elements x images): real and imaginary parts,
     /// samples x images.
     fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
@@ -240,18 +234,12 @@ impl ElementCost {
         if !self.fit_scale {
             return 1.0;
         }
-        let (mut dm, mut dd) = (0.0, 0.0);
-        for (d, t) in model.iter().zip(&self.terms) {
-            for (x, m) in d.iter().zip(&t.measured) {
-                dm += x * m;
-                dd += x * x;
-            }
-        }
-        if dd > 0.0 {
-            dm / dd
-        } else {
-            1.0
-        }
+        crate::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
+    }
+
+    /// Number of masked pixels over all images.
+    pub fn n_pixels(&self) -> usize {
+        self.terms.iter().map(|t| t.mask.len()).sum()
     }
 }
 

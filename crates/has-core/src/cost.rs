@@ -239,18 +239,7 @@ impl HybridCost {
         if !self.fit_scale {
             return 1.0;
         }
-        let (mut dm, mut dd) = (0.0, 0.0);
-        for (img, t) in images.iter().zip(&self.terms) {
-            for (d, m) in img.iter().zip(&t.measured) {
-                dm += d * m;
-                dd += d * d;
-            }
-        }
-        if dd > 0.0 {
-            dm / dd
-        } else {
-            1.0
-        }
+        least_squares_scale(images.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
     }
 
     /// The amplitude scale at `phases` (1 unless `fit_scale`).
@@ -294,6 +283,23 @@ impl HybridCost {
             }
         }
         (total, grad)
+    }
+}
+
+/// The scale `s = <d, m> / <d, d>` minimising `Σ (s·d - m)²` over (model, measured) pairs; 1 when
+/// the model is all zero.
+pub(crate) fn least_squares_scale<'a>(pairs: impl Iterator<Item = (&'a [f64], &'a [f64])>) -> f64 {
+    let (mut dm, mut dd) = (0.0, 0.0);
+    for (d, m) in pairs {
+        for (x, y) in d.iter().zip(m) {
+            dm += x * y;
+            dd += x * x;
+        }
+    }
+    if dd > 0.0 {
+        dm / dd
+    } else {
+        1.0
     }
 }
 
