@@ -93,19 +93,19 @@ impl FieldBasis {
         2 * self.re.len() * std::mem::size_of::<f32>()
     }
 
+    /// `f` over the fixed blocks of [`BLOCK`] sample rows, in parallel, results in block order.
+    fn map_blocks<T: Send>(&self, f: impl Fn(Range<usize>) -> T + Sync) -> Vec<T> {
+        let n = self.n_samples();
+        (0..n).step_by(BLOCK).collect::<Vec<_>>().into_par_iter().map(|a| f(a..(a + BLOCK).min(n))).collect()
+    }
+
     /// Fields `P = B·V` for drive columns `V` (elements x images): real and imaginary parts,
     /// samples x images.
     fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
-        let blocks: Vec<(Array2<f32>, Array2<f32>)> = (0..self.n_samples())
-            .step_by(BLOCK)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|a| {
-                let b = (a + BLOCK).min(self.n_samples());
-                let (br, bi) = (self.re.slice(s![a..b, ..]), self.im.slice(s![a..b, ..]));
-                (br.dot(vr) - bi.dot(vi), br.dot(vi) + bi.dot(vr))
-            })
-            .collect();
+        let blocks = self.map_blocks(|rows| {
+            let (br, bi) = (self.re.slice(s![rows.clone(), ..]), self.im.slice(s![rows, ..]));
+            (br.dot(vr) - bi.dot(vi), br.dot(vi) + bi.dot(vr))
+        });
         let k = vr.ncols();
         let mut pr = Array2::zeros((self.n_samples(), k));
         let mut pi = Array2::zeros((self.n_samples(), k));
@@ -119,17 +119,11 @@ impl FieldBasis {
 
     /// `C = Bᵀ·H` for sample columns `H` (samples x images), summed block by block in order.
     fn back_project(&self, hr: &Array2<f32>, hi: &Array2<f32>) -> (Array2<f64>, Array2<f64>) {
-        let blocks: Vec<(Array2<f32>, Array2<f32>)> = (0..self.n_samples())
-            .step_by(BLOCK)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|a| {
-                let b = (a + BLOCK).min(self.n_samples());
-                let (br, bi) = (self.re.slice(s![a..b, ..]), self.im.slice(s![a..b, ..]));
-                let (h_r, h_i) = (hr.slice(s![a..b, ..]), hi.slice(s![a..b, ..]));
-                (br.t().dot(&h_r) - bi.t().dot(&h_i), br.t().dot(&h_i) + bi.t().dot(&h_r))
-            })
-            .collect();
+        let blocks = self.map_blocks(|rows| {
+            let (br, bi) = (self.re.slice(s![rows.clone(), ..]), self.im.slice(s![rows.clone(), ..]));
+            let (h_r, h_i) = (hr.slice(s![rows.clone(), ..]), hi.slice(s![rows, ..]));
+            (br.t().dot(&h_r) - bi.t().dot(&h_i), br.t().dot(&h_i) + bi.t().dot(&h_r))
+        });
         let k = hr.ncols();
         let mut cr = Array2::<f64>::zeros((self.n_elements(), k));
         let mut ci = Array2::<f64>::zeros((self.n_elements(), k));
