@@ -155,30 +155,48 @@ fn single_noisy_image_never_gives_a_silent_bad_answer() {
 }
 
 #[test]
-fn nelder_mead_from_zero_refocuses_and_lbfgs_recovers_the_applied_phases_noise_free() {
-    // The paper's Figure 3 setting: a moderate random aberration, noise-free image, zero start.
-    // Nelder–Mead with the paper's limits refocuses the beam but stops in a shallow local minimum
-    // (phase error ~0.3 rad, cost 1e-5 against 0 at the truth); L-BFGS with the analytic gradient
-    // recovers the applied phases themselves, up to the common phase.
+fn nelder_mead_from_zero_recovers_the_applied_phases_or_ends_at_a_true_local_minimum() {
+    // The paper's Figure 3 setting: random group aberrations (uniform jitter of ±0.4 rad, seeds
+    // 1–5), one noise-free image, zero start, the paper's limits. One in-focus image leaves
+    // genuine local minima near the twin of the truth (SPEC §8), so Nelder–Mead cannot find
+    // the truth from zero on every seed; what it must do is end either at the applied phases
+    // or at a true local minimum (an L-BFGS polish from its end point does not reach the truth),
+    // never stall on a slope. Measured 2026-11-23 (curvature-shaped restarts): phase errors
+    // 0.008, 0.439, 0.096, 0.357, 0.327 rad; the polish from seeds 2, 4, 5 stays at 0.44, 0.36,
+    // 0.32 rad. Before the restarts, seeds 1, 3 and 4 stalled at 0.11–0.29 rad off the truth
+    // with the truth downhill. L-BFGS with the analytic gradient recovers the applied phases.
     let s = sim();
-    let truth = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 0.4 }.phases(&vec![[0.0; 3]; 16], 3).unwrap();
-    let model = build_model(s, &measurements(&truth, 0.0, 1, 3), 0.05, 3).unwrap();
-    let nm = Estimator::nelder_mead().run(&model.cost, None).unwrap();
-    let r = recovered(&truth, &nm.phases);
-    let aberrated = recovered(&truth, &[0.0; 16]);
-    eprintln!(
-        "Nelder-Mead noise-free: aberrated {aberrated:.4}, recovered {r:.4}, phase error {:.4} rad, {} evaluations",
-        phase_error(&nm.phases, &truth),
-        nm.evaluations
-    );
-    assert!(nm.evaluations <= 8000);
-    // Measured 0.935 from 0.920 aberrated (2026-11-23); from a 1 rad aberration it ends worse
-    // than it started (0.42 from 0.58), so the paper-faithful default is not the recommended one.
-    assert!(r >= 0.9 && r > aberrated, "recovered {r} from {aberrated}");
-    let lb = lbfgs().run(&model.cost, None).unwrap();
-    let err = phase_error(&lb.phases, &truth);
-    eprintln!("L-BFGS noise-free: phase error {err:.2e} rad");
-    assert!(err < 0.01, "phase error {err}");
+    let mut recovered_phases = 0;
+    for seed in 1..=5 {
+        let truth = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 0.4 }.phases(&vec![[0.0; 3]; 16], seed).unwrap();
+        let model = build_model(s, &measurements(&truth, 0.0, 1, seed), 0.05, 3).unwrap();
+        let nm = Estimator::nelder_mead().run(&model.cost, None).unwrap();
+        assert!(nm.evaluations <= 8000);
+        let err = phase_error(&nm.phases, &truth);
+        let polish = Estimator::lbfgs().with_starts(1).unwrap().with_start(nm.phases.clone()).unwrap().run(&model.cost, None).unwrap();
+        let polished = phase_error(&polish.phases, &truth);
+        eprintln!(
+            "Nelder-Mead noise-free seed {seed}: recovered {:.4} (aberrated {:.4}), phase error {err:.3} rad, cost {:.2e}, {} evaluations; polished {polished:.3} rad",
+            recovered(&truth, &nm.phases),
+            recovered(&truth, &[0.0; 16]),
+            nm.cost,
+            nm.evaluations
+        );
+        // 0.15 rad: the end point lies in the truth's basin (the polish then reaches < 1e-3);
+        // 0.2 rad: a distinct minimum, well beyond the 0.03 rad the polish moves such points.
+        if err < 0.15 {
+            recovered_phases += 1;
+        } else {
+            assert!(polished > 0.2, "seed {seed}: Nelder-Mead stopped at {err:.3} rad with the truth downhill ({polished:.3})");
+        }
+        if seed == 3 {
+            let lb = lbfgs().run(&model.cost, None).unwrap();
+            let e = phase_error(&lb.phases, &truth);
+            eprintln!("L-BFGS noise-free seed 3: phase error {e:.2e} rad");
+            assert!(e < 0.01, "phase error {e}");
+        }
+    }
+    assert!(recovered_phases >= 2, "Nelder-Mead recovered the applied phases on {recovered_phases} of 5 seeds");
 }
 
 #[test]
