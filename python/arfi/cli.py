@@ -202,17 +202,36 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
+    from arfi.diagnose import EFFECTS, _params
+
     t = time.perf_counter()
+    effects = None
+    if args.effects:
+        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+        unknown = [e for e in effects if e not in EFFECTS]
+        if unknown or not effects:
+            raise UsageError(f"arfi diagnose: --effects: unknown effect(s) {', '.join(unknown) or '(none given)'}; "
+                             f"known: {', '.join(EFFECTS)}")
     sim = _calibrated(args)
-    image, known = _read_image(sim, args.image)
-    d = sim.diagnose(image, known, threshold=args.threshold)
+    pairs = [_read_image(sim, p) for p in args.image]
+    images = [p[0] for p in pairs]
+    d = sim.diagnose(images, [p[1] for p in pairs], threshold=args.threshold, effects=effects)
     for k, e in enumerate(d.effects, 1):
-        params = ", ".join(f"{n} {v:.4g}" for n, v in e["params"].items())
-        print(f"diagnose: {k}. {e['name']} ({params}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, evidence {e['evidence']:.1f}")
+        same = f"; explained as well by {', '.join(e['equivalent'])}" if e["equivalent"] else ""
+        print(f"diagnose: {k}. {e['name']} ({_params(e['params'])}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, "
+              f"evidence {e['evidence']:.1f}{same}")
     if not d.effects:
         print("diagnose: no effect missing: the residual is consistent with the noise")
+    failed = [c for c in d.rejected + [c for e in d.effects for c in e["candidates"]] if c["failure"]]
+    for c in {c["name"]: c for c in failed}.values():
+        print(f"diagnose: {c['name']} could not be fitted: {c['failure']}")
+    if d.alternative and d.total_evidence - d.alternative["total_evidence"] < 10:
+        print(f"diagnose: the data explain about as well by {', '.join(d.alternative['effects'])} (total evidence "
+              f"{d.alternative['total_evidence']:.1f} against {d.total_evidence:.1f}); images with known diversity phases tell them apart")
     print(f"diagnose: residual RMS {d.residual_rms_initial:.4f} -> {d.residual_rms_final:.4f} rad, noise floor {d.noise_floor:.4f} rad")
-    _finish(args, {**d.to_dict(), "image": args.image, "seconds": time.perf_counter() - t})
+    if args.report:
+        print(f"diagnose: report -> {d.report(sim, images, args.report)}")
+    _finish(args, {**d.to_dict(), "images": args.image, "seconds": time.perf_counter() - t})
     return 0
 
 
@@ -326,14 +345,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_estimate)
 
     p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing (SPEC §7)",
-                       description="Compare a measured MR-ARFI image with the model, fit every candidate effect "
-                       "(amplitude, broadening, registration_shift, background_phase, slice_offset), add the best while its BIC evidence "
-                       "against the background noise is positive, and repeat until the residual is noise.",
-                       epilog="example: arfi diagnose --image measured.nii.gz --calibration cal.json --json diagnosis.json")
+                       description="Compare measured MR-ARFI image(s) with the model, fit every candidate effect of the "
+                       "SPEC §7 library (amplitude, broadening, registration_shift, background_phase, slice_offset, "
+                       "broadening_anisotropic, attenuation, sound_speed, element_dropout, phase_aberration), add the best "
+                       "while its BIC evidence against the background noise is positive, and repeat until the residual is noise.",
+                       epilog="example: arfi diagnose --image measured.nii.gz --calibration cal.json --json diagnosis.json "
+                       "--report diagnosis/")
     _add_common(p)
-    p.add_argument("--image", required=True, metavar="M.nii.gz")
+    p.add_argument("--image", required=True, action="append", metavar="M.nii.gz",
+                   help="measured image (repeat for several; each sidecar's applied_phases_rad are its known phases)")
     p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
     p.add_argument("--threshold", type=float, default=0.0, help="evidence an effect needs (default 0: the plain BIC)")
+    p.add_argument("--effects", metavar="A,B", help="comma-separated effects to try (default: the whole library)")
+    p.add_argument("--report", metavar="DIR", help="write per-step PNG figures and report.html to DIR")
     p.set_defaults(run=cmd_diagnose)
 
     p = sub.add_parser("reproduce", help="re-run the paper's study in simulation (Table 1, Figures 2-10, HTML)",

@@ -241,14 +241,45 @@ class Simulation:
                                 progress=bool(progress))
         return Estimate(**d)
 
-    def diagnose(self, image: ArrayLike, known: ArrayLike | None = None, threshold: float = 0.0) -> Diagnosis:
-        """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image taken with ``known`` phases
-        added: names the effects missing from this model, in order, with their fitted parameters,
-        until the residual is consistent with the noise of the image background. Effects fitted:
-        amplitude, broadening, registration_shift, background_phase, slice_offset. ``threshold`` is the evidence
-        (BIC gain, in units of the noise variance) an effect needs; 0 is the plain BIC."""
-        d = self._core.diagnose(_as_image(image, "image"), as_phases(known, "known"), float(threshold))
+    def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
+                 threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500) -> Diagnosis:
+        """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image or a list of them (e.g. a
+        calibration image and an aberrated one), each taken with its ``known`` added phases (rad,
+        per element or group; None = none). Names the effects missing from this model, in order,
+        with their fitted parameters, until the residual is consistent with the noise of the
+        image backgrounds. ``effects`` limits the library (default: all of
+        ``arfi.diagnose.EFFECTS``); ``threshold`` is the evidence (BIC gain, in units of the noise
+        variance) an effect needs, 0 being the plain BIC."""
+        imgs, knowns = self._image_list(images, known)
+        d = self._core.diagnose(imgs, knowns, float(threshold), int(max_iterations), effects)
         return Diagnosis(**d)
+
+    def effect_images(self, effects: dict[str, Any], known: list[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
+        """The model's MR-ARFI images (rad) with the effects of SPEC §7 applied: ``effects`` maps the
+        parameter names that ``diagnose`` reports (``scale``, ``broadening_width_mm``,
+        ``broadening_anisotropy_mm``, ``dx_mm``, ``dy_mm``, ``offset_rad``, ``slope_x_rad_per_mm``,
+        ``slope_y_rad_per_mm``, ``dz_mm``, ``sound_speed_m_per_s``, ``attenuation_db_cm_mhz``,
+        ``group_phases_rad``, ``dead_groups``) to values; one image per entry of ``known``."""
+        knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known or [None])]
+        return self._core.effect_images(knowns, dict(effects))
+
+    def _image_list(self, images: ArrayLike | list[ArrayLike], known: Any) -> tuple[list[NDArray[np.float64]], list[Any]]:
+        """Images as a list of 2-D arrays and their known phases (one entry, or None, per image)."""
+        # One image: a 2-D array, or a list of rows; several: a list of 2-D arrays.
+        single = isinstance(images, np.ndarray) or (isinstance(images, (list, tuple)) and len(images) > 0
+                                                    and not hasattr(images[0], "shape") and np.ndim(images[0]) == 1)
+        imgs = [_as_image(images, "image")] if single else [_as_image(m, f"images[{i}]") for i, m in enumerate(images)]
+        if not imgs:
+            raise ValueError("images: need at least one image")
+        if known is None:
+            knowns = [None] * len(imgs)
+        elif single:
+            knowns = [as_phases(known, "known")]
+        else:
+            if len(known) != len(imgs):
+                raise ValueError(f"known: need one entry (or None) per image, got {len(known)} for {len(imgs)}")
+            knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known)]
+        return imgs, knowns
 
     def source_field(self, phases: ArrayLike | None = None) -> NDArray[np.complex128]:
         """Pressure (Pa) on the source plane, shape (ny, nx)."""

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 import arfi
@@ -17,7 +18,8 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path):
     cal = tmp_path / "cal.json"
     cal.write_text(json.dumps({"broadening_width_mm": 0.0, "amplitude": sim.amplitude}))
     js = tmp_path / "d.json"
-    assert main(["diagnose", "--image", str(image), "--calibration", str(cal), "--json", str(js)]) == 0
+    report = tmp_path / "report"
+    assert main(["diagnose", "--image", str(image), "--calibration", str(cal), "--json", str(js), "--report", str(report)]) == 0
     d = json.loads(js.read_text())
     for key in ("effects", "cost_initial", "cost_final", "noise_floor"):
         assert key in d
@@ -26,11 +28,15 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path):
     assert set(e) >= {"name", "params", "cost_before", "cost_after", "evidence"}
     assert e["params"]["broadening_width_mm"] == pytest.approx(2.7, abs=0.2)
     assert d["cost_final"] < d["cost_initial"] and d["residual_rms_final"] < 1.2 * d["noise_floor"]
+    # The report: one figure per step (measured, model, residual, candidates), the gap, one page.
+    assert sorted(p.name for p in report.iterdir()) == ["diagnose_gap.png", "diagnose_step0.png", "diagnose_step1.png", "report.html"]
+    page = (report / "report.html").read_text()
+    assert "broadening" in page and page.count("data:image/png;base64") == 3
 
 
 def test_diagnose_on_noise_only_names_nothing_and_rejects_bad_input(sim):
     d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=11))
-    assert d.names == [] and len(d.rejected) == 5
+    assert d.names == [] and len(d.rejected) == len(arfi.diagnose.EFFECTS)
     with pytest.raises(ValueError, match="image"):
         sim.diagnose(sim.arfi_image()[:10])
     assert sim.diagnose(sim.arfi_image()).names == []  # noise-free and the exact model: nothing to add
@@ -43,3 +49,36 @@ def test_cli_diagnose_bad_input_is_one_line_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("arfi: error:")
     assert not list(tmp_path.iterdir())
+
+
+def test_several_images_at_once_and_effect_images(sim):
+    # A calibration image and one with known group phases, both 0.9 mm off in x: the shift is
+    # named once for both, within 0.3 mm (issue 4).
+    known = np.linspace(-1.0, 1.0, sim.n_groups)
+    images = [m + np.random.default_rng(k).normal(0.0, 0.02, m.shape)
+              for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))]
+    d = sim.diagnose(images, [None, known])
+    assert d.names == ["registration_shift"]
+    assert d.effects[0]["params"]["dx_mm"] == pytest.approx(0.9, abs=0.3)
+    assert len(d.models_final) == 2 and d.n_pixels == 2 * images[0].size
+    assert d.residual_rms_final < 1.2 * d.noise_floor
+    with pytest.raises(ValueError, match="known"):
+        sim.diagnose(images, [None])
+    with pytest.raises(ValueError, match="effects"):
+        sim.diagnose(images, [None, known], effects=["no_such_effect"])
+    with pytest.raises(ValueError, match="unknown parameter"):
+        sim.effect_images({"dx": 1.0})
+    with pytest.raises(ValueError, match="dead_groups"):
+        sim.effect_images({"dead_groups": [99]})
+    with pytest.raises(ValueError, match="finite"):
+        sim.effect_images({"scale": float("nan")})
+
+
+def test_cli_diagnose_effects_option(tmp_path, capsys):
+    image = tmp_path / "m.nii.gz"
+    assert main(["simulate", "--noise-rad", "0.02", "--seed", "3", "--out", str(image)]) == 0
+    assert main(["diagnose", "--image", str(image), "--effects", "amplitude,broadening"]) == 0
+    assert "no effect missing" in capsys.readouterr().out
+    assert main(["diagnose", "--image", str(image), "--effects", "amplitude,warp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "warp" in err[0]

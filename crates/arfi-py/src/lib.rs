@@ -7,12 +7,13 @@ use has_core::aberration::SkullScreen;
 use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
 use has_core::cost::{build_model, Measurement};
-use has_core::diagnose::{diagnose, DiagnoseOptions};
+use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Value};
 use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
@@ -54,6 +55,61 @@ fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<S
 
 fn phases_vec(phases: Option<PyReadonlyArray1<'_, f64>>) -> Vec<f64> {
     phases.map(|p| p.as_array().to_vec()).unwrap_or_default()
+}
+
+/// Images paired with their known phases, copied out of NumPy.
+fn measurements(images: Vec<PyReadonlyArray2<'_, f64>>, known: Vec<Option<PyReadonlyArray1<'_, f64>>>) -> PyResult<Vec<Measurement>> {
+    if images.len() != known.len() {
+        return Err(PyValueError::new_err("known: need one entry (or None) per image"));
+    }
+    Ok(images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect())
+}
+
+/// [`Effects`] from a dict keyed by the parameter names `diagnose` reports (others: ValueError).
+fn effects_from_dict(sim: &Simulation, d: &Bound<'_, PyDict>) -> PyResult<Effects> {
+    let mut e = Effects::none(sim);
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        let number = || -> PyResult<f64> {
+            let x: f64 = v.extract().map_err(|_| PyValueError::new_err(format!("effects[{key:?}]: must be a number")))?;
+            if x.is_finite() {
+                Ok(x)
+            } else {
+                Err(PyValueError::new_err(format!("effects[{key:?}]: must be finite")))
+            }
+        };
+        let view = &mut e.view;
+        match key.as_str() {
+            "scale" => view.scale = number()?,
+            "broadening_width_mm" => view.broadening_width_mm = number()?,
+            "broadening_anisotropy_mm" => view.broadening_anisotropy_mm = number()?,
+            "dx_mm" => view.shift_mm[0] = number()?,
+            "dy_mm" => view.shift_mm[1] = number()?,
+            "offset_rad" => view.background_offset_rad = number()?,
+            "slope_x_rad_per_mm" => view.background_slope_rad_per_mm[0] = number()?,
+            "slope_y_rad_per_mm" => view.background_slope_rad_per_mm[1] = number()?,
+            "dz_mm" => view.slice_offset_mm = number()?,
+            "sound_speed_m_per_s" => e.field.sound_speed = number()?,
+            "attenuation_db_cm_mhz" => e.field.attenuation_db_cm_mhz = number()?,
+            "group_phases_rad" => {
+                let p: Vec<f64> =
+                    v.extract().map_err(|_| PyValueError::new_err("effects[\"group_phases_rad\"]: must be a list of numbers"))?;
+                if !p.iter().all(|x| x.is_finite()) {
+                    return Err(PyValueError::new_err("effects[\"group_phases_rad\"]: must be finite"));
+                }
+                e.field.group_phases = p;
+            }
+            "dead_groups" => {
+                let mut g: Vec<usize> =
+                    v.extract().map_err(|_| PyValueError::new_err("effects[\"dead_groups\"]: must be a list of group indices"))?;
+                g.sort_unstable();
+                g.dedup();
+                e.field.dead_groups = g;
+            }
+            _ => return Err(PyValueError::new_err(format!("effects: unknown parameter {key:?}"))),
+        }
+    }
+    Ok(e)
 }
 
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
@@ -250,26 +306,39 @@ impl CoreSimulation {
         Ok(d)
     }
 
-    /// The model-discrepancy workflow (SPEC §7) on one image taken with `known` added phases.
-    #[pyo3(signature = (image, known=None, threshold=0.0, max_iterations=1500))]
+    /// The model-discrepancy workflow (SPEC §7) on images, each taken with its `known` added
+    /// phases; `effects` limits the library (names of SPEC §7; default all).
+    #[pyo3(signature = (images, known, threshold=0.0, max_iterations=1500, effects=None))]
     fn diagnose<'py>(
         &self,
         py: Python<'py>,
-        image: PyReadonlyArray2<'py, f64>,
-        known: Option<PyReadonlyArray1<'py, f64>>,
+        images: Vec<PyReadonlyArray2<'py, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
         threshold: f64,
         max_iterations: usize,
+        effects: Option<Vec<String>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let image = image.as_array().to_owned();
-        let known = phases_vec(known);
+        let measurements = measurements(images, known)?;
         if !threshold.is_finite() {
-            return Err(pyo3::exceptions::PyValueError::new_err("threshold: must be finite"));
+            return Err(PyValueError::new_err("threshold: must be finite"));
         }
         if max_iterations == 0 {
-            return Err(pyo3::exceptions::PyValueError::new_err("max_iterations: must be > 0"));
+            return Err(PyValueError::new_err("max_iterations: must be > 0"));
         }
-        let options = DiagnoseOptions { threshold, max_iterations };
-        let r = py.detach(|| diagnose(&self.inner, &image, &known, &options)).map_err(to_py)?;
+        let effects = match effects {
+            None => Effect::ALL.to_vec(),
+            Some(names) => names
+                .iter()
+                .map(|n| {
+                    Effect::from_name(n).ok_or_else(|| {
+                        let known: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+                        PyValueError::new_err(format!("effects: unknown effect {n:?} (known: {})", known.join(", ")))
+                    })
+                })
+                .collect::<PyResult<_>>()?,
+        };
+        let options = DiagnoseOptions { threshold, max_iterations, effects };
+        let r = py.detach(|| diagnose(&self.inner, &measurements, &options)).map_err(to_py)?;
         let candidates = |cands: &[has_core::diagnose::Candidate]| -> PyResult<Vec<Bound<'py, PyDict>>> {
             cands
                 .iter()
@@ -278,28 +347,39 @@ impl CoreSimulation {
                     d.set_item("name", c.effect.name())?;
                     d.set_item("cost", c.cost)?;
                     d.set_item("evidence", c.evidence)?;
+                    d.set_item("failure", c.failure.clone())?;
                     Ok(d)
                 })
                 .collect()
         };
-        let mut effects = Vec::new();
+        let images =
+            |imgs: &[ndarray::Array2<f64>]| -> Vec<Bound<'py, PyArray2<f64>>> { imgs.iter().map(|m| m.clone().into_pyarray(py)).collect() };
+        let n = r.n_pixels.max(1) as f64;
+        let mut steps = Vec::new();
         for step in &r.steps {
             let e = PyDict::new(py);
             e.set_item("name", step.effect.name())?;
             let params = PyDict::new(py);
             for (k, v) in &step.params {
-                params.set_item(*k, *v)?;
+                match v {
+                    Value::Number(x) => params.set_item(*k, *x)?,
+                    Value::Numbers(x) => params.set_item(*k, x.clone())?,
+                    Value::Indices(x) => params.set_item(*k, x.clone())?,
+                }
             }
             e.set_item("params", params)?;
             e.set_item("cost_before", step.cost_before)?;
             e.set_item("cost_after", step.cost_after)?;
             e.set_item("evidence", step.evidence)?;
+            e.set_item("residual_rms_after", (step.cost_after / n).sqrt())?;
+            e.set_item("equivalent", step.equivalent.iter().map(|x| x.name()).collect::<Vec<_>>())?;
             e.set_item("candidates", candidates(&step.candidates)?)?;
-            effects.push(e);
+            e.set_item("models", images(&step.models))?;
+            steps.push(e);
         }
         let d = PyDict::new(py);
         let (rms0, rms1) = r.residual_rms();
-        d.set_item("effects", effects)?;
+        d.set_item("effects", steps)?;
         d.set_item("rejected", candidates(&r.rejected)?)?;
         d.set_item("cost_initial", r.cost_initial)?;
         d.set_item("cost_final", r.cost_final)?;
@@ -307,9 +387,35 @@ impl CoreSimulation {
         d.set_item("n_pixels", r.n_pixels)?;
         d.set_item("residual_rms_initial", rms0)?;
         d.set_item("residual_rms_final", rms1)?;
-        d.set_item("model_initial", r.model_initial.into_pyarray(py))?;
-        d.set_item("model_final", r.model_final.into_pyarray(py))?;
+        d.set_item("total_evidence", r.total_evidence)?;
+        let alternative = match &r.alternative {
+            Some(a) => {
+                let x = PyDict::new(py);
+                x.set_item("effects", a.effects.iter().map(|e| e.name()).collect::<Vec<_>>())?;
+                x.set_item("total_evidence", a.total_evidence)?;
+                x.set_item("cost", a.cost)?;
+                Some(x)
+            }
+            None => None,
+        };
+        d.set_item("alternative", alternative)?;
+        d.set_item("models_initial", images(&r.models_initial))?;
+        d.set_item("models_final", images(&r.models_final))?;
         Ok(d)
+    }
+
+    /// The model images of images taken with `known` phases under the effects of `effects`
+    /// (keys: the parameter names of SPEC §7 as `diagnose` reports them).
+    fn effect_images<'py>(
+        &self,
+        py: Python<'py>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
+        effects: Bound<'py, PyDict>,
+    ) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+        let knowns: Vec<Vec<f64>> = known.into_iter().map(phases_vec).collect();
+        let e = effects_from_dict(&self.inner, &effects)?;
+        let imgs = py.detach(|| effect_images(&self.inner, &knowns, &e)).map_err(to_py)?;
+        Ok(imgs.into_iter().map(|m| m.into_pyarray(py)).collect())
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
@@ -329,11 +435,7 @@ impl CoreSimulation {
         threshold: f64,
         progress: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
-        if images.len() != known.len() {
-            return Err(pyo3::exceptions::PyValueError::new_err("known: need one entry (or None) per image"));
-        }
-        let measurements: Vec<Measurement> =
-            images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect();
+        let measurements = measurements(images, known)?;
         let positions: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
         let sigma = point_reflection(&positions, &self.inner.groups);
         let mut est = match method {

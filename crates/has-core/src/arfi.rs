@@ -223,21 +223,25 @@ impl MrSampler {
 
     /// The same sampler with another broadening width (m), on the same window.
     pub fn with_broadening(&self, width: f64) -> Result<Self> {
-        self.with_view(width, self.shift)
+        self.with_view([width; 2], self.shift)
     }
 
-    /// The same sampler with broadening `width` (m) and the image content shifted by `shift`
-    /// (m, along u and v), on the same window. A shift moves the pixels over the recorded window:
-    /// keep it well inside the window's margin (4 W plus a sample beyond the field of view).
-    pub fn with_view(&self, width: f64, shift: [f64; 2]) -> Result<Self> {
-        require_non_negative("broadening_width_mm", width)?;
+    /// The same sampler with broadening widths `widths` (m, along u and v: an anisotropic
+    /// Gaussian when they differ; `broadening.width` then holds their mean) and the image content
+    /// shifted by `shift` (m, along u and v), on the same window. A shift moves the pixels over
+    /// the recorded window: keep it well inside the window's margin (4 W plus a sample beyond the
+    /// field of view).
+    pub fn with_view(&self, widths: [f64; 2], shift: [f64; 2]) -> Result<Self> {
+        require_non_negative("broadening_width_mm", widths[0])?;
+        require_non_negative("broadening_width_mm", widths[1])?;
         if !shift.iter().all(|v| v.is_finite()) {
             return Err(HasError::invalid("shift_mm", "must be finite"));
         }
         let mut s = self.clone();
-        s.broadening = Broadening { width };
+        s.broadening = Broadening { width: 0.5 * (widths[0] + widths[1]) };
         s.shift = shift;
-        s.m = [0, 1].map(|k| axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], width, shift[k]));
+        s.m = [0, 1]
+            .map(|k| axis_operator(&self.geometry, k, self.pixels[k].clone(), &self.samples[k], self.spacing[k], widths[k], shift[k]));
         Ok(s)
     }
 
@@ -393,21 +397,35 @@ pub fn add_noise(image: &mut Array2<f64>, sigma: f64, seed: u64) -> Result<()> {
     Ok(())
 }
 
-/// The noise level (rad) of an ARFI image from its background: `1.4826 · MAD` (the standard
-/// deviation for Gaussian noise) over the pixels outside `exclude` (u and v ranges around the
-/// focus), or over every pixel below `threshold` when too few remain.
-pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2], threshold: f64) -> f64 {
-    let mut bg: Vec<f64> =
-        image.indexed_iter().filter(|((i, j), _)| !(exclude[0].contains(i) && exclude[1].contains(j))).map(|(_, v)| *v).collect();
-    if bg.len() < 50 {
-        bg = image.iter().copied().filter(|v| *v < threshold).collect();
+/// The noise level (rad) of an ARFI image from its background: `1.4826 · MAD / √2` of the
+/// differences of neighbouring pixels along u (the standard deviation for white Gaussian noise;
+/// differences cancel a constant or slowly varying background phase) over the pixel pairs
+/// outside `exclude` (u and v ranges around the focus), or over the whole image when fewer than
+/// 50 pairs remain (the median ignores the few pairs on the focus).
+pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2]) -> f64 {
+    let (nu, nv) = image.dim();
+    let pairs = |outside: bool| -> Vec<f64> {
+        let mut d = Vec::new();
+        for j in 0..nv {
+            for i in 0..nu.saturating_sub(1) {
+                let inside = |i: usize| exclude[0].contains(&i) && exclude[1].contains(&j);
+                if !outside || !(inside(i) || inside(i + 1)) {
+                    d.push(image[[i + 1, j]] - image[[i, j]]);
+                }
+            }
+        }
+        d
+    };
+    let mut d = pairs(true);
+    if d.len() < 50 {
+        d = pairs(false);
     }
-    if bg.is_empty() {
+    if d.is_empty() {
         return 0.0;
     }
-    let med = median(&mut bg);
-    let mut dev: Vec<f64> = bg.iter().map(|v| (v - med).abs()).collect();
-    1.4826 * median(&mut dev)
+    let med = median(&mut d);
+    let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
+    1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
 }
 
 fn median(v: &mut [f64]) -> f64 {

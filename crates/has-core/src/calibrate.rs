@@ -86,7 +86,6 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     if !(amplitude > 0.0) {
         return Err(HasError::invalid("image", "the calibration image does not resemble the simulated focus (no positive amplitude fits)"));
     }
-    let max = image.iter().copied().fold(f64::MIN, f64::max);
-    let noise = noise_floor(image, &[u, v], mask_fraction * max);
+    let noise = noise_floor(image, &[u, v]);
     Ok(Calibration { broadening_width: w, amplitude, cost, n_pixels: mask.len(), noise })
 }

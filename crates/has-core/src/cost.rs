@@ -456,13 +456,7 @@ pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fracti
     let lo_v = all.clone().map(|p| p.1).min().unwrap_or(0).saturating_sub(margin);
     let hi_v = (all.map(|p| p.1).max().unwrap_or(0) + margin + 1).min(m[1]);
     let (u, v) = (lo_u..hi_u, lo_v..hi_v);
-    let noise2: f64 = measurements
-        .iter()
-        .map(|meas| {
-            let peak = meas.image.iter().copied().fold(f64::MIN, f64::max);
-            crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()], mask_fraction * peak).powi(2)
-        })
-        .sum();
+    let noise2: f64 = measurements.iter().map(|meas| crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()]).powi(2)).sum();
     Ok(MaskedBox { masks, pixels: [u, v], noise: (noise2 / measurements.len() as f64).sqrt() })
 }
 

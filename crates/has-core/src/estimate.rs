@@ -410,6 +410,7 @@ fn restarted_nelder_mead(
 }
 
 /// The simplex of [`restarted_nelder_mead`]'s restarts around `x` (cost `cost`).
+#[allow(clippy::needless_range_loop)] // index loops read as the matrix algebra
 fn curvature_simplex(p: &Problem, x: &[f64], cost: f64) -> std::result::Result<Vec<Vec<f64>>, argmin::core::Error> {
     let n = x.len();
     let h = 1e-4;
@@ -443,6 +444,7 @@ fn curvature_simplex(p: &Problem, x: &[f64], cost: f64) -> std::result::Result<V
 
 /// Eigenvalues and unit eigenvectors of a symmetric matrix (cyclic Jacobi rotations, Golub &
 /// Van Loan §8.5); the vectors are returned as rows.
+#[allow(clippy::needless_range_loop)] // index loops read as the textbook algorithm
 fn symmetric_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
     let n = a.len();
     let mut v: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect();
@@ -713,6 +715,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn symmetric_eigen_reconstructs_the_matrix() {
         // A random symmetric 15×15 matrix (seeded): A·v = λ·v and orthonormal vectors to
         // 1e-10 of the largest entry (Jacobi converges to rounding).

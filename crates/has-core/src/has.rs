@@ -61,6 +61,8 @@ struct Step {
 pub struct HasPlan {
     pub grid: Grid,
     pub frequency: f64,
+    /// The options it was built with.
+    pub options: HasOptions,
     fft: Fft2,
     slabs: Vec<Arc<SliceProperties>>,
     steps: Vec<Step>,
@@ -215,7 +217,7 @@ impl HasPlan {
             record_plane(grid, &current, step + 1, &field, spec, &mut rec);
             prev = current;
         }
-        Ok((HasPlan { grid: grid.clone(), frequency, fft, slabs, steps }, rec))
+        Ok((HasPlan { grid: grid.clone(), frequency, options: options.clone(), fft, slabs, steps }, rec))
     }
 
     /// The mean wavenumber `k̄` (rad/m) used for the slab after each plane.

@@ -4,7 +4,7 @@ use crate::arfi::{add_noise, Broadening, MrSampler};
 use crate::error::{HasError, Result};
 use crate::grid::{fft_friendly, Grid};
 use crate::has::{HasOptions, HasPlan, RecordSpec, Recording};
-use crate::medium::Medium;
+use crate::medium::{Material, Medium};
 use crate::scenario::{Resolved, Scenario};
 use crate::source::{source_plane_z, SourceModel};
 use crate::steering::steering_phases;
@@ -117,6 +117,26 @@ impl Simulation {
         s.sampler = self.sampler.with_broadening(broadening_width)?;
         s.amplitude = amplitude;
         Ok(s)
+    }
+
+    /// The same simulation (steering, groups, amplitude and sampler window kept: the device is
+    /// driven as before) in a medium whose material `material` has another sound speed (m/s)
+    /// and attenuation (dB/cm/MHz); rebuilds the HAS plan and the force coefficients.
+    pub fn with_material(&self, material: usize, sound_speed: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
+        let Some(m) = self.medium.materials.get(material) else {
+            return Err(HasError::invalid("material", format!("index {material} names no material")));
+        };
+        let mut medium = self.medium.clone();
+        let changed = Material { sound_speed, attenuation_db_cm_mhz, ..m.clone() };
+        changed.validate()?;
+        medium.materials[material] = changed;
+        let drive: Vec<C64> = self.steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
+        let reference = self.source.field(&drive)?;
+        let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
+        let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &reference, &self.plan.options, &spec)?;
+        let sampler = MrSampler::new(&self.grid, &medium, self.frequency, &self.sampler.geometry, self.sampler.broadening)?
+            .with_view([self.sampler.broadening.width; 2], self.sampler.shift)?;
+        Ok(Simulation { medium, plan, sampler, ..self.clone() })
     }
 
     /// Replaces the element → group map (every group from 0 to G-1 must have an element).

@@ -1,11 +1,19 @@
-//! The model-discrepancy workflow on data in which one effect is hidden (issue 4), for the
-//! image-space effects and the slice offset: the image is simulated with the effect, the model
-//! lacks it.
+//! The model-discrepancy workflow on data in which effects are hidden (issue 4): the images are
+//! simulated with the effect (at a seeded random but realistic strength), the model lacks it,
+//! and the workflow must name it, measure it and close the gap to the noise. The shift and the
+//! slice offset are simulated independently of the workflow's forward model (a simulation with
+//! the MR slice moved); the other effects through `effect_images`.
 
-use has_core::diagnose::{diagnose, DiagnoseOptions, Diagnosis};
+use has_core::aberration::SkullScreen;
+use has_core::arfi::add_noise;
+use has_core::cost::Measurement;
+use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Diagnosis, Effect, Effects, Value};
+use has_core::estimate::{condense, phase_error};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::sync::OnceLock;
 
 const NOISE: f64 = 0.02;
@@ -16,7 +24,57 @@ fn sim() -> &'static Simulation {
 }
 
 fn run(model: &Simulation, image: &Array2<f64>) -> Diagnosis {
-    diagnose(model, image, &[], &DiagnoseOptions::default()).expect("diagnose")
+    run_all(model, &[Measurement { image: image.clone(), known: vec![] }], &DiagnoseOptions::default())
+}
+
+fn run_all(model: &Simulation, measurements: &[Measurement], options: &DiagnoseOptions) -> Diagnosis {
+    let t = std::time::Instant::now();
+    let d = diagnose(model, measurements, options).expect("diagnose");
+    let params: Vec<_> = d
+        .steps
+        .iter()
+        .map(|s| (s.effect.name(), s.evidence.round(), &s.params, s.equivalent.iter().map(|e| e.name()).collect::<Vec<_>>()))
+        .collect();
+    eprintln!("diagnose: {params:?}, alternative {:?}, gap {:.2}, in {:.1} s", d.alternative, gap(&d), t.elapsed().as_secs_f64());
+    d
+}
+
+/// Images with `effects` hidden: the first with no known phases, the others with seeded random
+/// known group phases (diversity), each with 0.02 rad noise.
+fn hidden(effects: &Effects, images: usize, seed: u64) -> Vec<Measurement> {
+    let s = sim();
+    let knowns: Vec<Vec<f64>> = (0..images as u64)
+        .map(|k| {
+            if k == 0 {
+                vec![]
+            } else {
+                SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 1.5 }
+                    .phases(&vec![[0.0; 3]; 16], 7919 * seed + k)
+                    .unwrap()
+            }
+        })
+        .collect();
+    let images = effect_images(s, &knowns, effects).unwrap();
+    images
+        .into_iter()
+        .zip(knowns)
+        .enumerate()
+        .map(|(k, (mut image, known))| {
+            add_noise(&mut image, NOISE, 1000 * seed + k as u64).unwrap();
+            Measurement { image, known }
+        })
+        .collect()
+}
+
+/// Whether `effect` was named, or reported as explaining a named step equally well.
+fn identified(d: &Diagnosis, effect: Effect) -> bool {
+    d.steps.iter().any(|s| s.effect == effect || s.equivalent.contains(&effect))
+}
+
+/// A seeded random strength in `lo..hi` with a random sign.
+fn strength(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
+    let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    sign * rng.random_range(lo..hi)
 }
 
 fn names(d: &Diagnosis) -> Vec<&'static str> {
@@ -24,7 +82,14 @@ fn names(d: &Diagnosis) -> Vec<&'static str> {
 }
 
 fn param(d: &Diagnosis, name: &str) -> f64 {
-    d.steps.iter().flat_map(|s| s.params.iter()).find(|p| p.0 == name).map(|p| p.1).unwrap_or(f64::NAN)
+    d.steps
+        .iter()
+        .flat_map(|s| s.params.iter())
+        .find_map(|p| match p {
+            (n, Value::Number(v)) if *n == name => Some(*v),
+            _ => None,
+        })
+        .unwrap_or(f64::NAN)
 }
 
 /// The gap at the end: residual RMS over the noise floor (required ≤ 1.2).
@@ -103,4 +168,166 @@ fn a_hidden_slice_offset_is_named_and_measured() {
     // depth (measured 2026-11-23: dz = 4.47 mm, evidence 79).
     assert!((param(&d, "dz_mm") - 4.0).abs() < 1.0, "dz = {}", param(&d, "dz_mm"));
     assert!(gap(&d) < 1.2, "gap {}", gap(&d));
+}
+
+#[test]
+fn hidden_amplitude_broadening_and_anisotropy_over_seeds() {
+    let s = sim();
+    for seed in 1..=2u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        // Amplitude: ±8–20 % (a miscalibrated force-to-phase scale); within 2 %.
+        let mut e = Effects::none(s);
+        e.view.scale = 1.0 + strength(&mut rng, 0.08, 0.2);
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert_eq!(names(&d), ["amplitude"], "seed {seed}");
+        assert!((param(&d, "scale") / e.view.scale - 1.0).abs() < 0.02 && gap(&d) < 1.2);
+        // Broadening: W from 2.7 to 1.5–2.2 or 3.2–4.0 mm; within 0.2 mm (issue 4).
+        let mut e = Effects::none(s);
+        e.view.broadening_width_mm = if rng.random_bool(0.5) { rng.random_range(3.2..4.0) } else { rng.random_range(1.5..2.2) };
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert_eq!(names(&d), ["broadening"], "seed {seed}");
+        assert!((param(&d, "broadening_width_mm") - e.view.broadening_width_mm).abs() < 0.2 && gap(&d) < 1.2);
+        // Anisotropic broadening: widths differing by 1–2 mm about 2.7 mm; each within 0.2 mm.
+        let mut e = Effects::none(s);
+        e.view.broadening_anisotropy_mm = strength(&mut rng, 1.0, 2.0);
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert_eq!(names(&d), ["broadening_anisotropic"], "seed {seed}");
+        let w = e.view.widths_mm();
+        assert!((param(&d, "broadening_width_u_mm") - w[0]).abs() < 0.2 && (param(&d, "broadening_width_v_mm") - w[1]).abs() < 0.2);
+        assert!(gap(&d) < 1.2);
+    }
+}
+
+#[test]
+fn hidden_background_slice_offset_and_dropout_over_seeds() {
+    let s = sim();
+    for seed in 1..=2u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(10 + seed);
+        // Background phase: 0.02–0.05 rad offset, ramps up to 5e-4 rad/mm (0.05 rad over the FOV).
+        let mut e = Effects::none(s);
+        e.view.background_offset_rad = strength(&mut rng, 0.02, 0.05);
+        e.view.background_slope_rad_per_mm = [rng.random_range(-5e-4..5e-4), rng.random_range(-5e-4..5e-4)];
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert_eq!(names(&d), ["background_phase"], "seed {seed}");
+        assert!((param(&d, "offset_rad") - e.view.background_offset_rad).abs() < 0.005 && gap(&d) < 1.2);
+        // Slice offset: 4.5–7 mm either way; within 1 mm (the focal depth of field is ~20 mm: at
+        // 3 mm a defocus is as well explained by a 0.2 mm wider broadening).
+        let mut e = Effects::none(s);
+        e.view.slice_offset_mm = strength(&mut rng, 4.5, 7.0);
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert_eq!(names(&d), ["slice_offset"], "seed {seed}");
+        assert!((param(&d, "dz_mm") - e.view.slice_offset_mm).abs() < 1.0 && gap(&d) < 1.2);
+        // One dead group of 16: named with the right group, or (a group whose loss mostly lowers
+        // the focus) reported as explaining the named amplitude change equally well.
+        let mut e = Effects::none(s);
+        e.field.dead_groups = vec![rng.random_range(0..16)];
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert!(d.steps.len() == 1 && identified(&d, Effect::ElementDropout), "seed {seed}: {:?}", names(&d));
+        if d.steps[0].effect == Effect::ElementDropout {
+            assert_eq!(d.steps[0].params[0].1, Value::Indices(e.field.dead_groups.clone()));
+        }
+        assert!(gap(&d) < 1.2);
+    }
+}
+
+#[test]
+fn hidden_attenuation_and_sound_speed_are_identified_up_to_what_the_image_can_tell() {
+    // In one focal-plane image a change of the focal material's attenuation (force ∝ alpha·I)
+    // or sound speed (force ∝ 1/c², the focus hardly moves at these strengths) acts almost as
+    // a scale: the workflow must name it or report it as explaining the named step equally
+    // well. With the amplitude known (calibrated: `amplitude` not in the library) attenuation
+    // is named and measured.
+    let s = sim();
+    let a0 = Effects::none(s).field.attenuation_db_cm_mhz;
+    let c0 = Effects::none(s).field.sound_speed;
+    for seed in 1..=2u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(20 + seed);
+        let mut e = Effects::none(s);
+        e.field.attenuation_db_cm_mhz = a0 * (1.0 + strength(&mut rng, 0.2, 0.5));
+        let data = hidden(&e, 1, seed);
+        let d = run_all(s, &data, &DiagnoseOptions::default());
+        assert!(d.steps.len() == 1 && identified(&d, Effect::Attenuation), "seed {seed}: {:?}", names(&d));
+        let mut calibrated = DiagnoseOptions::default();
+        calibrated.effects.retain(|e| *e != Effect::Amplitude);
+        let d = run_all(s, &data, &calibrated);
+        assert_eq!(names(&d), ["attenuation"], "seed {seed}");
+        // Within 0.03 dB/cm/MHz (measured 2026-11-23: 0.002–0.005 off).
+        assert!((param(&d, "attenuation_db_cm_mhz") - e.field.attenuation_db_cm_mhz).abs() < 0.03 && gap(&d) < 1.2);
+
+        let mut e = Effects::none(s);
+        e.field.sound_speed = c0 + strength(&mut rng, 80.0, 120.0);
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        assert!(d.steps.len() == 1 && identified(&d, Effect::SoundSpeed), "seed {seed}: {:?}", names(&d));
+        assert!(gap(&d) < 1.2);
+    }
+}
+
+#[test]
+fn a_hidden_phase_aberration_is_named_from_diversity_images() {
+    // One in-focus image of a 16-group aberration is explained as well by a shift, a slice
+    // offset or an anisotropic blur (low-order aberrations are exactly those): the workflow
+    // then reports the aberration as the alternative. Three images with known diversity phases
+    // tell them apart, and the aberration is named and measured.
+    let s = sim();
+    let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let seed = 1;
+    let mut e = Effects::none(s);
+    e.field.group_phases = condense(&SkullScreen::default().phases(&positions, seed).unwrap(), &s.groups).unwrap();
+    let one = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+    let alternative = one.alternative.as_ref().map(|a| a.effects.clone()).unwrap_or_default();
+    assert!(identified(&one, Effect::PhaseAberration) || alternative.contains(&Effect::PhaseAberration), "{:?}", names(&one));
+    assert!(gap(&one) < 1.2);
+    let d = run_all(s, &hidden(&e, 3, seed), &DiagnoseOptions::default());
+    assert_eq!(names(&d), ["phase_aberration"]);
+    assert!(gap(&d) < 1.2);
+    let Value::Numbers(fitted) = &d.steps[0].params[0].1 else { panic!("group phases") };
+    let corrected: Vec<f64> = e.field.group_phases.iter().zip(fitted).map(|(t, f)| t - f).collect();
+    let peak = |p: &[f64]| s.arfi_image(p).unwrap().iter().copied().fold(f64::MIN, f64::max);
+    let recovered = peak(&corrected) / peak(&[]);
+    eprintln!(
+        "phase aberration from 3 images: phase error {:.3} rad, recovered {recovered:.3}",
+        phase_error(fitted, &e.field.group_phases)
+    );
+    // Subtracting the fitted phases refocuses as the estimators do from 4 such images (issue 3:
+    // >= 0.9 on average).
+    assert!(recovered > 0.9, "recovered {recovered}");
+}
+
+#[test]
+fn pairs_of_hidden_effects_are_both_named() {
+    let s = sim();
+    let mut rng = ChaCha8Rng::seed_from_u64(30);
+    let pairs: [(Effect, Effect); 3] = [
+        (Effect::Broadening, Effect::RegistrationShift),
+        (Effect::ElementDropout, Effect::RegistrationShift),
+        (Effect::Amplitude, Effect::BackgroundPhase),
+    ];
+    for (seed, (a, b)) in (1..).zip(pairs) {
+        let mut e = Effects::none(s);
+        for effect in [a, b] {
+            match effect {
+                Effect::Broadening => e.view.broadening_width_mm = rng.random_range(3.2..4.0),
+                Effect::RegistrationShift => {
+                    let (r, t) = (rng.random_range(0.7..1.5), rng.random_range(0.0..std::f64::consts::TAU));
+                    e.view.shift_mm = [r * f64::cos(t), r * f64::sin(t)];
+                }
+                Effect::ElementDropout => e.field.dead_groups = vec![rng.random_range(0..16)],
+                Effect::Amplitude => e.view.scale = 1.0 + strength(&mut rng, 0.08, 0.2),
+                _ => {
+                    e.view.background_offset_rad = strength(&mut rng, 0.02, 0.05);
+                    e.view.background_slope_rad_per_mm = [3e-4, -2e-4];
+                }
+            }
+        }
+        let d = run_all(s, &hidden(&e, 1, seed), &DiagnoseOptions::default());
+        let mut got = names(&d);
+        got.sort_unstable();
+        let mut want = vec![a.name(), b.name()];
+        want.sort_unstable();
+        assert_eq!(got, want, "pair {seed}");
+        assert!(gap(&d) < 1.2);
+        if e.view.shift_mm != [0.0; 2] {
+            assert!((param(&d, "dx_mm") - e.view.shift_mm[0]).abs() < 0.3 && (param(&d, "dy_mm") - e.view.shift_mm[1]).abs() < 0.3);
+        }
+    }
 }
