@@ -28,7 +28,8 @@ class Diagnosis:
     ``residual_rms_after`` (rad), ``equivalent`` (other effects that explain the data as well:
     the images cannot tell them apart), the ``candidates`` tried at that step and ``models``
     (the model's image of each measurement after the step); ``rejected`` are the candidates of
-    the last round, none of which passed."""
+    the last round, none of which passed. A candidate that could not be fitted has ``cost`` and
+    ``evidence`` None and says why in ``failure``."""
 
     effects: list[dict[str, Any]]
     rejected: list[dict[str, Any]]
@@ -91,8 +92,8 @@ class Diagnosis:
             rms = float(np.sqrt(np.mean(residual ** 2)))
             ax[2].set_title(f"residual (RMS {rms:.4f} rad, noise {self.noise_floor:.4f} rad)")
             names = [c["name"] for c in candidates]
-            ev = [c["evidence"] if np.isfinite(c["evidence"]) else np.nan for c in candidates]
-            ax[3].barh(names, ev, color=["C2" if (v or 0) > 0 else "0.6" for v in ev])
+            ev = [np.nan if c["evidence"] is None else c["evidence"] for c in candidates]
+            ax[3].barh(names, np.nan_to_num(ev), color=["C2" if v > 0 else "0.6" for v in np.nan_to_num(ev)])
             ax[3].axvline(0, color="k", lw=0.8)
             ax[3].set(xlabel="evidence (BIC gain / sigma²)", title="next candidates" if k < len(stages) - 1 else "rejected")
             ax[3].set_xscale("symlog")

@@ -82,3 +82,15 @@ def test_cli_diagnose_effects_option(tmp_path, capsys):
     assert main(["diagnose", "--image", str(image), "--effects", "amplitude,warp"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "warp" in err[0]
+
+
+def test_an_effect_that_cannot_be_fitted_is_reported_not_fatal():
+    # With one group per element, element_dropout and phase_aberration (at most 128 groups) cannot
+    # be fitted: the run goes on with the other effects and reports why they were left out.
+    sim = arfi.Simulation(groups=1024)
+    d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=4))
+    failed = {c["name"]: c["failure"] for c in d.rejected if c["failure"]}
+    assert set(failed) == {"element_dropout", "phase_aberration"}
+    assert all("128 groups" in f for f in failed.values())
+    assert d.names == []
+    json.dumps(d.to_dict(), allow_nan=False)  # failed candidates carry null, not inf

@@ -345,8 +345,10 @@ impl CoreSimulation {
                 .map(|c| {
                     let d = PyDict::new(py);
                     d.set_item("name", c.effect.name())?;
-                    d.set_item("cost", c.cost)?;
-                    d.set_item("evidence", c.evidence)?;
+                    // A candidate that could not be fitted has no cost or evidence (JSON null).
+                    let finite = |x: f64| x.is_finite().then_some(x);
+                    d.set_item("cost", finite(c.cost))?;
+                    d.set_item("evidence", finite(c.evidence))?;
                     d.set_item("failure", c.failure.clone())?;
                     Ok(d)
                 })

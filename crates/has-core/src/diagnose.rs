@@ -268,6 +268,10 @@ struct Forward<'a> {
     samplers: Mutex<Vec<(u64, Slice)>>,
 }
 
+/// The most groups `element_dropout` and `phase_aberration` are fitted for (one march per
+/// group; the group kernels' limit).
+const MAX_GROUPS: usize = 128;
+
 /// How many field states and samplers the caches keep.
 const CACHED: usize = 6;
 
@@ -806,6 +810,16 @@ impl Context<'_> {
 
     /// Fits `effect` on top of `current` (image-space slots `free` refitted with it).
     fn fit(&self, effect: Effect, current: &Effects, free: &[usize]) -> Result<(f64, Effects)> {
+        if matches!(effect, Effect::ElementDropout | Effect::PhaseAberration) && self.sim.n_groups > MAX_GROUPS {
+            return Err(HasError::invalid(
+                "groups",
+                format!(
+                    "{} groups: {} is fitted for at most {MAX_GROUPS} groups (use the default grouping)",
+                    self.sim.n_groups,
+                    effect.name()
+                ),
+            ));
+        }
         let field = |f: FieldState| Effects { view: current.view, field: f };
         let start = match effect {
             Effect::SoundSpeed => {
@@ -938,7 +952,9 @@ impl Context<'_> {
                 y[i] = 1.0;
                 simplex.push(y);
             }
-            let solver = NelderMead::new(simplex).with_sd_tolerance(1e-10).map_err(|e| HasError::invalid("diagnose", e.to_string()))?;
+            // Costs matter to a small fraction of sigma² (the evidence unit).
+            let tolerance = 1e-4 * self.noise.powi(2);
+            let solver = NelderMead::new(simplex).with_sd_tolerance(tolerance).map_err(|e| HasError::invalid("diagnose", e.to_string()))?;
             let res = Executor::new(&problem, solver)
                 .configure(|s| s.max_iters(self.max_iterations as u64))
                 .run()
