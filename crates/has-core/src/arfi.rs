@@ -198,7 +198,7 @@ impl MrSampler {
             for j in window.rows.clone() {
                 for i in window.cols.clone() {
                     let p = medium.properties_at(grid.x(i), grid.y(j), grid.z(n), frequency);
-                    force_coefficient.push(p.attenuation / (p.density * p.sound_speed * p.sound_speed));
+                    force_coefficient.push(p.force_coefficient());
                 }
             }
         }

@@ -244,8 +244,8 @@ pub fn effect_images(sim: &Simulation, knowns: &[Vec<f64>], effects: &Effects) -
     Forward::new(sim, knowns)?.images(effects)
 }
 
-/// The sampler of a moved slice and its window.
-type Slice = Arc<(MrSampler, Window)>;
+/// The sampler of a moved slice (its window is `sampler.window`).
+type Slice = Arc<MrSampler>;
 
 /// `|p|²` of each image on the extended window, for one field state.
 type Power = Arc<Vec<Vec<f64>>>;
@@ -263,9 +263,34 @@ struct Forward<'a> {
     /// Pixel-centre coordinates along u and v (mm).
     coords: [Vec<f64>; 2],
     /// Recent field states and their powers.
-    powers: Mutex<Vec<(FieldState, Power)>>,
+    powers: Recent<FieldState, Power>,
     /// Samplers of moved slices, by offset bits.
-    samplers: Mutex<Vec<(u64, Slice)>>,
+    samplers: Recent<u64, Slice>,
+}
+
+/// A small cache of the last [`CACHED`] values computed (pure functions of their keys, so a
+/// hit returns what a recomputation would).
+struct Recent<K, V>(Mutex<Vec<(K, V)>>);
+
+impl<K: PartialEq + Clone, V: Clone> Recent<K, V> {
+    fn new() -> Self {
+        Recent(Mutex::new(vec![]))
+    }
+
+    /// The value for `key`, computed by `make` when it is not held.
+    fn get_or_try(&self, key: &K, make: impl FnOnce() -> Result<V>) -> Result<V> {
+        if let Some(v) = self.0.lock().ok().and_then(|c| c.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone())) {
+            return Ok(v);
+        }
+        let v = make()?;
+        if let Ok(mut c) = self.0.lock() {
+            if c.len() >= CACHED {
+                c.remove(0);
+            }
+            c.push((key.clone(), v.clone()));
+        }
+        Ok(v)
+    }
 }
 
 /// The most groups `element_dropout` and `phase_aberration` are fitted for (one march per
@@ -294,15 +319,17 @@ impl<'a> Forward<'a> {
             .map(|k| if k.is_empty() { Ok(vec![0.0; sim.n_elements()]) } else { sim.element_phases(k) })
             .collect::<Result<_>>()?;
         let coords = [0, 1].map(|k| (0..g.matrix[k]).map(|i| g.pixel_center(k, i) * 1e3).collect());
-        Ok(Forward { sim, knowns, material, window, in_material, coords, powers: Mutex::new(vec![]), samplers: Mutex::new(vec![]) })
+        Ok(Forward { sim, knowns, material, window, in_material, coords, powers: Recent::new(), samplers: Recent::new() })
     }
 
     /// `|p|²` (times the force coefficient relative to the model's) on the extended window for
     /// every image of a field state.
     fn powers(&self, state: &FieldState) -> Result<Power> {
-        if let Some(p) = self.powers.lock().ok().and_then(|c| c.iter().find(|(s, _)| s == state).map(|(_, p)| p.clone())) {
-            return Ok(p);
-        }
+        self.powers.get_or_try(state, || self.march(state))
+    }
+
+    /// [`Forward::powers`], computed.
+    fn march(&self, state: &FieldState) -> Result<Power> {
         let (sim, ratio) = self.in_medium(state)?;
         let sim = sim.as_ref();
         let s = self.sim;
@@ -336,14 +363,7 @@ impl<'a> Forward<'a> {
             .into_iter()
             .map(|rec| rec.window.iter().zip(&self.in_material).map(|(p, &m)| p.norm_sqr() * if m { ratio } else { 1.0 }).collect())
             .collect();
-        let power = Arc::new(power);
-        if let Ok(mut c) = self.powers.lock() {
-            if c.len() >= CACHED {
-                c.remove(0);
-            }
-            c.push((state.clone(), power.clone()));
-        }
-        Ok(power)
+        Ok(Arc::new(power))
     }
 
     /// The simulation in the medium of `state`, and the ratio of its force coefficient
@@ -354,20 +374,18 @@ impl<'a> Forward<'a> {
             return Ok((std::borrow::Cow::Borrowed(self.sim), 1.0));
         }
         let sim = self.sim.with_material(self.material, state.sound_speed, state.attenuation_db_cm_mhz)?;
-        let coef = |m: &crate::medium::Material| {
-            let p = m.properties(self.sim.frequency);
-            p.attenuation / (p.density * p.sound_speed * p.sound_speed)
-        };
+        let coef = |m: &crate::medium::Material| m.properties(self.sim.frequency).force_coefficient();
         let ratio = coef(&sim.medium.materials[self.material]) / coef(model);
         Ok((std::borrow::Cow::Owned(sim), ratio))
     }
 
     /// The sampler of the slice moved `dz_mm` along its normal, and its window.
     fn slice(&self, dz_mm: f64) -> Result<Slice> {
-        let key = dz_mm.to_bits();
-        if let Some(s) = self.samplers.lock().ok().and_then(|c| c.iter().find(|(k, _)| *k == key).map(|(_, s)| s.clone())) {
-            return Ok(s);
-        }
+        self.samplers.get_or_try(&dz_mm.to_bits(), || self.moved_slice(dz_mm))
+    }
+
+    /// [`Forward::slice`], computed.
+    fn moved_slice(&self, dz_mm: f64) -> Result<Slice> {
         let s = &self.sim;
         if !(dz_mm.abs() <= SLICE_REACH_MM) {
             return Err(HasError::invalid("dz_mm", format!("slice offsets are fitted within ±{SLICE_REACH_MM} mm")));
@@ -375,19 +393,12 @@ impl<'a> Forward<'a> {
         let mut geometry = s.sampler.geometry.clone();
         geometry.center[geometry.plane.axes()[2]] += dz_mm * 1e-3;
         let sampler = MrSampler::new(&s.grid, &s.medium, s.frequency, &geometry, s.sampler.broadening)?;
-        let w = sampler.window.clone();
+        let w = &sampler.window;
         let inside = |a: &std::ops::Range<usize>, b: &std::ops::Range<usize>| a.start >= b.start && a.end <= b.end;
         if !(inside(&w.planes, &self.window.planes) && inside(&w.rows, &self.window.rows) && inside(&w.cols, &self.window.cols)) {
             return Err(HasError::invalid("dz_mm", "the moved slice leaves the recorded field"));
         }
-        let out = Arc::new((sampler, w));
-        if let Ok(mut c) = self.samplers.lock() {
-            if c.len() >= CACHED {
-                c.remove(0);
-            }
-            c.push((key, out.clone()));
-        }
-        Ok(out)
+        Ok(Arc::new(sampler))
     }
 
     /// The force images times the model's amplitude (rad, before the scale and background).
@@ -395,8 +406,8 @@ impl<'a> Forward<'a> {
         let power = self.powers(&e.field)?;
         let v = &e.view;
         let slice = self.slice(v.slice_offset_mm)?;
-        let sampler = slice.0.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|s| s * 1e-3))?;
-        power.iter().map(|p| Ok(sampler.apply(&self.window.extract(p, &slice.1))? * self.sim.amplitude)).collect()
+        let sampler = slice.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|s| s * 1e-3))?;
+        power.iter().map(|p| Ok(sampler.apply(&self.window.extract(p, &slice.window))? * self.sim.amplitude)).collect()
     }
 
     /// The model image of every image.
@@ -626,7 +637,7 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
         penalty: (n as f64).ln(),
         memory: Mutex::new(vec![]),
     };
-    let start = Path { steps: vec![], included: vec![], effects: initial, cost: cost_initial, rejected: vec![] };
+    let start = Path { steps: vec![], effects: initial, cost: cost_initial, rejected: vec![] };
     // The 15-parameter phase aberration and the simpler effects can mimic each other (a tilt
     // is a shift, a defocus a slice offset, a blur a broadening), so greedy selection would let
     // whichever comes first swallow the rest. Two paths are built: the simpler effects first
@@ -636,15 +647,15 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
     let simple_path = ctx.extend(start.clone(), &simple, options.threshold)?;
     let (path, alternative) = if options.effects.contains(&Effect::PhaseAberration) {
         let with = ctx.extend(simple_path.clone(), &[Effect::PhaseAberration], options.threshold)?;
-        let a = if with.included.contains(&Effect::PhaseAberration) {
+        let a = if with.included().contains(&Effect::PhaseAberration) {
             ctx.extend(with, &simple, options.threshold)?
         } else {
             Path { rejected: [simple_path.rejected.clone(), with.rejected].concat(), ..simple_path.clone() }
         };
         // When the simpler effects added nothing, the aberration-first path is the same one.
         let first =
-            if simple_path.included.is_empty() { None } else { Some(ctx.extend(start, &[Effect::PhaseAberration], options.threshold)?) };
-        match first.filter(|f| !f.included.is_empty()) {
+            if simple_path.steps.is_empty() { None } else { Some(ctx.extend(start, &[Effect::PhaseAberration], options.threshold)?) };
+        match first.filter(|f| !f.steps.is_empty()) {
             None => (a, None),
             Some(first) => {
                 let b = ctx.extend(first, &simple, options.threshold)?;
@@ -658,14 +669,14 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
     } else {
         (simple_path, None)
     };
-    let alternative = alternative.filter(|p| p.included != path.included).map(|p| Alternative {
-        effects: p.included.clone(),
+    let alternative = alternative.filter(|p| p.included() != path.included()).map(|p| Alternative {
+        effects: p.included(),
         total_evidence: p.total_evidence(),
         cost: p.cost,
     });
     let total_evidence = path.total_evidence();
     Ok(Diagnosis {
-        models_final: forward.images(&path.effects)?,
+        models_final: path.steps.last().map_or_else(|| models_initial.clone(), |s| s.models.clone()),
         steps: path.steps,
         rejected: path.rejected,
         cost_initial,
@@ -683,7 +694,6 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
 #[derive(Clone)]
 struct Path {
     steps: Vec<Step>,
-    included: Vec<Effect>,
     effects: Effects,
     cost: f64,
     /// Candidates of the last round, none of which passed.
@@ -691,6 +701,11 @@ struct Path {
 }
 
 impl Path {
+    /// The effects added, in order.
+    fn included(&self) -> Vec<Effect> {
+        self.steps.iter().map(|s| s.effect).collect()
+    }
+
     /// `(J_0 - J) / sigma² - K·ln n` over the whole path.
     fn total_evidence(&self) -> f64 {
         self.steps.iter().map(|s| s.evidence).sum()
@@ -760,8 +775,9 @@ impl Context<'_> {
     /// evidence each round, while it exceeds `threshold`.
     fn extend(&self, mut path: Path, allowed: &[Effect], threshold: f64) -> Result<Path> {
         loop {
-            let free: Vec<usize> = path.included.iter().flat_map(|e| e.slots().iter().copied()).collect();
-            let todo: Vec<Effect> = allowed.iter().copied().filter(|e| !path.included.contains(e) && adds_parameters(*e, &free)).collect();
+            let included = path.included();
+            let free: Vec<usize> = included.iter().flat_map(|e| e.slots().iter().copied()).collect();
+            let todo: Vec<Effect> = allowed.iter().copied().filter(|e| !included.contains(e) && adds_parameters(*e, &free)).collect();
             let g = self.sim.n_groups;
             let fits: Vec<Fitted> = todo
                 .par_iter()
@@ -801,7 +817,6 @@ impl Context<'_> {
                 effects: f.effects.clone(),
                 models: self.forward.images(&f.effects)?,
             });
-            path.included.push(effect);
             path.effects = f.effects.clone();
             path.cost = f.candidate.cost;
             path.rejected = vec![];
@@ -822,28 +837,18 @@ impl Context<'_> {
         }
         let field = |f: FieldState| Effects { view: current.view, field: f };
         let start = match effect {
-            Effect::SoundSpeed => {
-                let c = self.search(
-                    effect,
-                    current.field.sound_speed,
-                    100.0,
-                    4.0,
-                    |c| FieldState { sound_speed: c, ..current.field.clone() },
-                    &current.view,
-                );
-                field(FieldState { sound_speed: c, ..current.field.clone() })
-            }
+            Effect::SoundSpeed => self.search(
+                effect,
+                current.field.sound_speed,
+                100.0,
+                4.0,
+                |c| FieldState { sound_speed: c, ..current.field.clone() },
+                current,
+            ),
             Effect::Attenuation => {
                 let a0 = current.field.attenuation_db_cm_mhz;
-                let a = self.search(
-                    effect,
-                    a0,
-                    1.5 * a0 + 0.25,
-                    0.02,
-                    |a| FieldState { attenuation_db_cm_mhz: a.max(0.0), ..current.field.clone() },
-                    &current.view,
-                );
-                field(FieldState { attenuation_db_cm_mhz: a.max(0.0), ..current.field.clone() })
+                let state = |a: f64| FieldState { attenuation_db_cm_mhz: a.max(0.0), ..current.field.clone() };
+                self.search(effect, a0, 1.5 * a0 + 0.25, 0.02, state, current)
             }
             Effect::ElementDropout => {
                 let options: Vec<Effects> = (0..self.sim.n_groups)
@@ -882,27 +887,22 @@ impl Context<'_> {
         self.forward.cost(e, self.measured)
     }
 
-    /// Brent search of one field parameter within `reach` of `centre` to `tol`, the
-    /// view held. Later rounds search within a fifth of the reach around this effect's last
-    /// optimum, and widen again when the optimum lands near an end. Each evaluation marches.
-    fn search(&self, effect: Effect, centre: f64, reach: f64, tol: f64, state: impl Fn(f64) -> FieldState, view: &View) -> f64 {
-        let cost = |x: f64| self.cost(&Effects { view: *view, field: state(x) });
+    /// Brent search of one field parameter within `reach` of `centre` to `tol`, the view of
+    /// `current` held; returns the model at the optimum. Later rounds search within a fifth of
+    /// the reach around this effect's last optimum, and widen again when the optimum lands near
+    /// an end. Each evaluation marches.
+    fn search(&self, effect: Effect, centre: f64, reach: f64, tol: f64, state: impl Fn(f64) -> FieldState, current: &Effects) -> Effects {
+        let model = |x: f64| Effects { view: current.view, field: state(x) };
+        let cost = |x: f64| self.cost(&model(x));
         let last = self.memory.lock().ok().and_then(|m| m.iter().find(|(e, _)| *e == effect).map(|(_, x)| *x));
-        let narrow = last.map(|x| (x, 0.2 * reach));
-        let mut best = None;
-        if let Some((x0, r)) = narrow {
-            let (x, _) = brent(cost, x0 - r, x0 + r, tol);
-            if (x - x0).abs() < 0.8 * r {
-                best = Some(x);
-            }
-        }
-        let x =
-            best.unwrap_or_else(|| brent(|x| self.cost(&Effects { view: *view, field: state(x) }), centre - reach, centre + reach, tol).0);
+        let narrowed =
+            last.map(|x0| (x0, brent(cost, x0 - 0.2 * reach, x0 + 0.2 * reach, tol).0)).filter(|(x0, x)| (x - x0).abs() < 0.16 * reach);
+        let x = narrowed.map_or_else(|| brent(cost, centre - reach, centre + reach, tol).0, |(_, x)| x);
         if let Ok(mut m) = self.memory.lock() {
             m.retain(|(e, _)| *e != effect);
             m.push((effect, x));
         }
-        x
+        model(x)
     }
 
     /// Group phases fitted by multi-start L-BFGS on the group kernels of the current model
@@ -916,7 +916,7 @@ impl Context<'_> {
         let mut sim = sim.into_owned();
         let v = &current.view;
         let slice = self.forward.slice(v.slice_offset_mm)?;
-        sim.sampler = slice.0.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|x| x * 1e-3))?;
+        sim.sampler = slice.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|x| x * 1e-3))?;
         sim.amplitude = s.amplitude * v.scale * ratio;
         let background = self.forward.images(&Effects { view: View { scale: 0.0, ..*v }, field: f.clone() })?;
         let measurements = self

@@ -63,6 +63,12 @@ impl Properties {
     pub fn impedance(&self) -> f64 {
         self.density * self.sound_speed
     }
+
+    /// The radiation-force coefficient `alpha / (rho·c²)` (m·s/kg): force density per unit
+    /// `|p|²` (`F = 2·alpha·I/c` with `I = |p|²/(2·rho·c)`).
+    pub fn force_coefficient(&self) -> f64 {
+        self.attenuation / (self.density * self.sound_speed * self.sound_speed)
+    }
 }
 
 /// The geometry of a region (metres, transducer frame).
