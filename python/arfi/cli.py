@@ -215,7 +215,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     sim = _calibrated(args)
     pairs = [_read_image(sim, p) for p in args.image]
     images = [p[0] for p in pairs]
-    d = sim.diagnose(images, [p[1] for p in pairs], threshold=args.threshold, effects=effects)
+    d = sim.diagnose(images, [p[1] for p in pairs], threshold=args.threshold, effects=effects, time_limit_s=args.time_limit_s)
     for k, e in enumerate(d.effects, 1):
         same = f"; explained as well by {', '.join(e['equivalent'])}" if e["equivalent"] else ""
         print(f"diagnose: {k}. {e['name']} ({_params(e['params'])}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, "
@@ -228,6 +228,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if d.alternative and d.total_evidence - d.alternative["total_evidence"] < 10:
         print(f"diagnose: the data explain about as well by {', '.join(d.alternative['effects'])} (total evidence "
               f"{d.alternative['total_evidence']:.1f} against {d.total_evidence:.1f}); images with known diversity phases tell them apart")
+    if d.stop == "time limit":
+        print(f"diagnose: stopped at the time limit ({args.time_limit_s:g} s) after {len(d.effects)} effect(s); more may be missing")
     print(f"diagnose: residual RMS {d.residual_rms_initial:.4f} -> {d.residual_rms_final:.4f} rad, noise floor {d.noise_floor:.4f} rad")
     if args.report:
         print(f"diagnose: report -> {d.report(sim, images, args.report)}")
@@ -358,6 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threshold", type=float, default=0.0, help="evidence an effect needs (default 0: the plain BIC)")
     p.add_argument("--effects", metavar="A,B", help="comma-separated effects to try (default: the whole library)")
     p.add_argument("--report", metavar="DIR", help="write per-step PNG figures and report.html to DIR")
+    p.add_argument("--time-limit-s", type=float, dest="time_limit_s",
+                   help="stop after this many seconds and report the effects added so far")
     p.set_defaults(run=cmd_diagnose)
 
     p = sub.add_parser("reproduce", help="re-run the paper's study in simulation (Table 1, Figures 2-10, HTML)",

@@ -46,6 +46,9 @@ class Diagnosis:
     """The other set of effects fitted in full when ``phase_aberration`` competed with simpler
     effects (``effects``, ``total_evidence``, ``cost``); within about 10 of ``total_evidence``
     the data do not decide between them."""
+    stop: str
+    """``"converged"`` (no candidate passes the threshold) or ``"time limit"`` (the effects added
+    before ``time_limit_s`` passed)."""
     models_initial: list[NDArray[np.float64]] = field(repr=False)
     models_final: list[NDArray[np.float64]] = field(repr=False)
 

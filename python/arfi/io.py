@@ -133,7 +133,7 @@ def read_phases(path: str | os.PathLike[str], name: str = "phases") -> NDArray[n
         else:
             lines = [ln.strip() for ln in p.read_text(encoding="utf-8").splitlines()]
             a = np.array([float(ln) for ln in lines if ln and not ln.startswith("#")], dtype=np.float64)
-    except (ValueError, UnicodeDecodeError, OSError) as e:
+    except Exception as e:  # numpy raises many types (EOFError, UnpicklingError, ...) for corrupt files
         raise ValueError(f"{name}: {p}: not a phase vector ({e})") from None
     a = np.asarray(a)
     if a.dtype.kind not in "fiu":

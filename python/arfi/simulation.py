@@ -14,14 +14,25 @@ from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
 
 
+def _real_array(value: Any, name: str) -> NDArray[np.float64]:
+    """``value`` as a float64 array; complex input is refused rather than cast (which drops the
+    imaginary part). Raises ValueError naming `name`."""
+    try:
+        mixed = not isinstance(value, np.ndarray) or value.dtype == object  # a list may hold one complex
+        if np.iscomplexobj(value) or (mixed and any(np.iscomplexobj(v) for v in np.ravel(np.asarray(value, dtype=object)))):
+            raise ValueError(f"{name}: must be real, got complex values")
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as e:
+        if str(e).startswith(name):
+            raise
+        raise ValueError(f"{name}: not numeric ({e})") from None
+
+
 def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.float64] | None:
     """Phases (rad) as a 1-D float64 array, or None. Raises ValueError naming `name`."""
     if phases is None:
         return None
-    try:
-        a = np.asarray(phases, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{name}: not numeric ({e})") from None
+    a = _real_array(phases, name)
     if a.ndim != 1:
         raise ValueError(f"{name}: must be one-dimensional, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
@@ -29,11 +40,29 @@ def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.floa
     return np.ascontiguousarray(a)
 
 
-def _as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
+def as_number(value: Any, name: str, low: float = -np.inf, low_open: bool = False) -> float:
+    """A finite real number >= ``low`` (> ``low`` when ``low_open``). Raises ValueError naming `name`."""
     try:
-        a = np.asarray(image, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{name}: not numeric ({e})") from None
+        if np.iscomplexobj(value):
+            raise TypeError
+        x = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name}: must be a number, got {value!r}") from None
+    if isinstance(value, (bool, np.bool_, str, bytes)) or not np.isfinite(x) or x < low or (low_open and x == low):
+        bound = "" if low == -np.inf else f" {'>' if low_open else '>='} {low:g}"
+        raise ValueError(f"{name}: must be a finite number{bound}, got {value!r}")
+    return x
+
+
+def as_count(value: Any, name: str, low: int = 0, high: int = 2**64 - 1) -> int:
+    """An integer in [low, high]. Raises ValueError naming `name`."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not low <= int(value) <= high:
+        raise ValueError(f"{name}: must be an integer in [{low}, {high}], got {value!r}")
+    return int(value)
+
+
+def _as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
+    a = _real_array(image, name)
     if a.ndim != 2:
         raise ValueError(f"{name}: must be a 2-D image, got shape {a.shape}")
     return np.ascontiguousarray(a)
@@ -165,20 +194,15 @@ class Simulation:
 
     def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
-        if z_mm is not None and not np.isfinite(z_mm):
-            raise ValueError("z_mm: must be finite")
-        d = self._core.field(as_phases(phases), None if z_mm is None else float(z_mm))
+        d = self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
         return Field(**d)
 
     def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
         """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).
 
         ``noise_rad`` adds seeded Gaussian noise (same seed, same noise)."""
-        if not (np.isfinite(noise_rad) and noise_rad >= 0):
-            raise ValueError(f"noise_rad: must be a finite number >= 0, got {noise_rad}")
-        if not (isinstance(seed, (int, np.integer)) and 0 <= int(seed) < 2**64):
-            raise ValueError(f"seed: must be an integer in [0, 2**64), got {seed!r}")
-        return self._core.arfi_image(as_phases(phases), float(noise_rad), int(seed))
+        noise = as_number(noise_rad, "noise_rad", 0.0)
+        return self._core.arfi_image(as_phases(phases), noise, as_count(seed, "seed"))
 
     def skull_phases(self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0,
                      jitter_rad: float = 0.5) -> NDArray[np.float64]:
@@ -189,6 +213,8 @@ class Simulation:
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
         """Added phases, one per element or one per group, as one per element. Errors name ``name``."""
         a = as_phases(phases, name)
+        if a is None:
+            raise ValueError(f"{name}: required, got None")
         try:
             return self._core.element_phases(a)
         except ValueError as e:
@@ -197,11 +223,15 @@ class Simulation:
 
     def condense(self, element_phases: ArrayLike) -> NDArray[np.float64]:
         """Per-group circular means of per-element phases (SPEC §2)."""
-        return self._core.condense(as_phases(element_phases, "element_phases"))
+        a = as_phases(element_phases, "element_phases")
+        if a is None:
+            raise ValueError("element_phases: required, got None")
+        return self._core.condense(a)
 
     def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
         """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
-        return Calibration(**self._core.calibrate(_as_image(image, "image"), as_phases(known, "known"), None, float(max_width_mm)))
+        return Calibration(**self._core.calibrate(_as_image(image, "image"), as_phases(known, "known"), None,
+                                                    as_number(max_width_mm, "max_width_mm", 0.0, low_open=True)))
 
     def estimate(
         self,
@@ -227,7 +257,9 @@ class Simulation:
         element, about a minute for 1024), warm-started by the estimate on the default 16 groups;
         ``max_evaluations`` (default 500) bounds that fit. ``progress`` prints the basis
         marching to stderr."""
-        imgs = [images] if isinstance(images, np.ndarray) and np.ndim(images) == 2 else list(images)  # type: ignore[arg-type]
+        # A list (or a 3-D stack) of images, or one image.
+        stack = isinstance(images, (list, tuple)) or (isinstance(images, np.ndarray) and images.ndim == 3)
+        imgs = list(images) if stack else [images]  # type: ignore[arg-type]
         if not imgs:
             raise ValueError("images: need at least one image")
         arrays = [_as_image(im, f"images[{k}]") for k, im in enumerate(imgs)]
@@ -235,23 +267,33 @@ class Simulation:
         if len(kn) != len(arrays):
             raise ValueError(f"known: has {len(kn)} entries for {len(arrays)} images")
         kn_arrays = [as_phases(k, f"known[{i}]") for i, k in enumerate(kn)]
-        if max_evaluations is not None and int(max_evaluations) <= 0:
-            raise ValueError("max_evaluations: must be > 0")
-        d = self._core.estimate(arrays, kn_arrays, method, max_evaluations, time_limit_s, int(seed), starts, bool(fit_amplitude),
+        if not isinstance(method, str):
+            raise ValueError(f"method: must be \"nelder-mead\", \"pso\" or \"lbfgs\", got {method!r}")
+        evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations", 1)
+        limit = None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True)
+        n_starts = None if starts is None else as_count(starts, "starts", 1, 10_000)
+        d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress))
         return Estimate(**d)
 
     def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
-                 threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500) -> Diagnosis:
+                 threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
+                 time_limit_s: float | None = None) -> Diagnosis:
         """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image or a list of them (e.g. a
         calibration image and an aberrated one), each taken with its ``known`` added phases (rad,
         per element or group; None = none). Names the effects missing from this model, in order,
         with their fitted parameters, until the residual is consistent with the noise of the
         image backgrounds. ``effects`` limits the library (default: all of
         ``arfi.diagnose.EFFECTS``); ``threshold`` is the evidence (BIC gain, in units of the noise
-        variance) an effect needs, 0 being the plain BIC."""
+        variance) an effect needs, 0 being the plain BIC. ``max_iterations`` bounds each candidate's
+        Nelder–Mead fit; after ``time_limit_s`` the effects added so far are returned with
+        ``stop == "time limit"``. Ctrl-C stops the run within a second."""
         imgs, knowns = self._image_list(images, known)
-        d = self._core.diagnose(imgs, knowns, float(threshold), int(max_iterations), effects)
+        if effects is not None and (isinstance(effects, str) or not all(isinstance(e, str) for e in effects)):
+            raise ValueError(f"effects: must be a list of effect names, got {effects!r}")
+        d = self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations", 1, 10**9),
+                                None if effects is None else list(effects),
+                                None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True))
         return Diagnosis(**d)
 
     def effect_images(self, effects: dict[str, Any], known: list[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
@@ -261,7 +303,11 @@ class Simulation:
         ``slope_y_rad_per_mm``, ``dz_mm``, ``sound_speed_m_per_s``, ``attenuation_db_cm_mhz``,
         ``group_phases_rad``, ``dead_groups``) to values; one image per entry of ``known``."""
         knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known or [None])]
-        return self._core.effect_images(knowns, dict(effects))
+        effects = dict(effects)
+        for key, value in effects.items():
+            if key != "dead_groups":
+                _real_array(value, f"effects[{key!r}]")
+        return self._core.effect_images(knowns, effects)
 
     def _image_list(self, images: ArrayLike | list[ArrayLike], known: Any) -> tuple[list[NDArray[np.float64]], list[Any]]:
         """Images as a list of 2-D arrays and their known phases (one entry, or None, per image)."""

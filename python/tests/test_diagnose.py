@@ -7,6 +7,7 @@ import pytest
 
 import arfi
 from arfi.cli import main
+from arfi.io import write_arfi_image
 
 
 def test_cli_diagnose_names_the_missing_broadening(tmp_path):
@@ -94,3 +95,22 @@ def test_an_effect_that_cannot_be_fitted_is_reported_not_fatal():
     assert all("128 groups" in f for f in failed.values())
     assert d.names == []
     json.dumps(d.to_dict(), allow_nan=False)  # failed candidates carry null, not inf
+
+
+def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
+    import time
+
+    image = sim.effect_images({"broadening_width_mm": 3.6, "dx_mm": 1.0})[0] + np.random.default_rng(3).normal(0.0, 0.02, sim.arfi_image().shape)
+    full = sim.diagnose(image)
+    assert full.stop == "converged" and set(full.names) >= {"broadening", "registration_shift"}
+    t = time.perf_counter()
+    d = sim.diagnose(image, time_limit_s=0.5)
+    # Within the limit plus one candidate evaluation and the set-up (one HAS window, ~1 s).
+    assert time.perf_counter() - t < 3.0
+    assert d.stop == "time limit" and d.names == full.names[: len(d.names)] and len(d.names) < len(full.names)
+    with pytest.raises(ValueError, match="time_limit_s"):
+        sim.diagnose(image, time_limit_s=0.0)
+    path = tmp_path / "m.nii.gz"
+    write_arfi_image(path, image, sim.mr_affine_mm, sim.mr_volume_shape)
+    assert main(["diagnose", "--image", str(path), "--time-limit-s", "0.5"]) == 0
+    assert "stopped at the time limit" in capsys.readouterr().out

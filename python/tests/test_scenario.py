@@ -57,6 +57,17 @@ def test_coarse_spacing_is_refused_with_a_suggestion():
         arfi.Simulation(s)
 
 
+def test_a_grid_beyond_the_memory_budget_is_refused_before_allocating(monkeypatch):
+    # 20 m across at λ/4: a 29 000² grid (~100 GiB), more than this machine has.
+    s = arfi.Scenario.from_toml("[grid]\nlateral_size_mm = 20000.0\n")
+    with pytest.raises(ValueError, match=r"grid needs [0-9.]+ GiB, more than .* coarser grid.spacing_mm"):
+        arfi.Simulation(s)
+    # The budget can be lowered for a shared machine.
+    monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.001")
+    with pytest.raises(ValueError, match=r"more than the 0.0 GiB"):
+        arfi.Simulation()
+
+
 def test_elements_csv_is_read_relative_to_the_scenario(tmp_path):
     rows = ["x_mm,y_mm,z_mm,nx,ny,nz,size_mm"]
     for i in range(8):

@@ -308,7 +308,8 @@ impl CoreSimulation {
 
     /// The model-discrepancy workflow (SPEC §7) on images, each taken with its `known` added
     /// phases; `effects` limits the library (names of SPEC §7; default all).
-    #[pyo3(signature = (images, known, threshold=0.0, max_iterations=1500, effects=None))]
+    #[pyo3(signature = (images, known, threshold=0.0, max_iterations=1500, effects=None, time_limit_s=None))]
+    #[allow(clippy::too_many_arguments)] // the Python keyword arguments
     fn diagnose<'py>(
         &self,
         py: Python<'py>,
@@ -317,6 +318,7 @@ impl CoreSimulation {
         threshold: f64,
         max_iterations: usize,
         effects: Option<Vec<String>>,
+        time_limit_s: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
         if !threshold.is_finite() {
@@ -337,8 +339,15 @@ impl CoreSimulation {
                 })
                 .collect::<PyResult<_>>()?,
         };
-        let options = DiagnoseOptions { threshold, max_iterations, effects };
-        let r = py.detach(|| diagnose(&self.inner, &measurements, &options)).map_err(to_py)?;
+        let time_limit = match time_limit_s {
+            Some(t) if !(t.is_finite() && t > 0.0) => {
+                return Err(PyValueError::new_err(format!("time_limit_s: must be a finite number > 0, got {t}")))
+            }
+            t => t.map(std::time::Duration::from_secs_f64),
+        };
+        let options = DiagnoseOptions { threshold, max_iterations, effects, time_limit };
+        let cancel = AtomicBool::new(false);
+        let r = run_interruptible(py, &cancel, || diagnose(&self.inner, &measurements, &options, Some(&cancel)))?.map_err(to_py)?;
         let candidates = |cands: &[has_core::diagnose::Candidate]| -> PyResult<Vec<Bound<'py, PyDict>>> {
             cands
                 .iter()
@@ -390,6 +399,7 @@ impl CoreSimulation {
         d.set_item("residual_rms_initial", rms0)?;
         d.set_item("residual_rms_final", rms1)?;
         d.set_item("total_evidence", r.total_evidence)?;
+        d.set_item("stop", r.stop.name())?;
         let alternative = match &r.alternative {
             Some(a) => {
                 let x = PyDict::new(py);

@@ -43,6 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 eprintln!("basis {d}/{n}")
             }
         }),
+        None,
     )?;
     let b = &model.cost.basis;
     println!(

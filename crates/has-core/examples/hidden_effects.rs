@@ -4,7 +4,9 @@
 //! (e.g. `4 1 broadening slice_offset broadening+registration_shift`). Each case prints what
 //! was named, the equally good explanations, the alternative path, the final gap (residual RMS
 //! over the noise floor) and the time; the last line gives, per case, how often the hidden
-//! effects were all named, and how often named or reported as equivalent.
+//! effects were all named, and how often named or reported as equivalent. Environment:
+//! `ARFI_PLANE` = `xz` or `yz` images a plane through the beam axis instead of the default
+//! `xy` focal plane; `ARFI_FIRST_SEED` (default 1) continues a sweep.
 
 use has_core::aberration::SkullScreen;
 use has_core::arfi::add_noise;
@@ -54,13 +56,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(2);
     let images: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(1).max(1);
     let cases: Vec<String> = args.collect();
-    let s = Simulation::new(&Scenario::default())?;
+    let mut scenario = Scenario::default();
+    if let Ok(plane) = std::env::var("ARFI_PLANE") {
+        scenario.mr.plane = plane;
+    }
+    let s = Simulation::new(&scenario)?;
     let mut summary = Vec::new();
     for case in &cases {
         let hidden: Vec<Effect> =
             case.split('+').map(|n| Effect::from_name(n).ok_or_else(|| format!("unknown effect {n}"))).collect::<Result<_, _>>()?;
         let (mut named, mut identified) = (0, 0);
-        for seed in 1..=seeds {
+        let first: u64 = std::env::var("ARFI_FIRST_SEED").ok().map(|s| s.parse()).transpose()?.unwrap_or(1);
+        for seed in first..first + seeds {
             let mut rng = ChaCha8Rng::seed_from_u64(seed * 7919 + case.len() as u64);
             let mut e = Effects::none(&s);
             for &h in &hidden {
@@ -76,7 +83,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 meas.push(Measurement { image, known });
             }
             let t = std::time::Instant::now();
-            let d = diagnose(&s, &meas, &DiagnoseOptions::default())?;
+            let d = diagnose(&s, &meas, &DiagnoseOptions::default(), None)?;
             let names: Vec<&str> = d.steps.iter().map(|st| st.effect.name()).collect();
             let all_named = hidden.iter().all(|h| d.steps.iter().any(|st| st.effect == *h));
             let all_identified = hidden.iter().all(|h| d.steps.iter().any(|st| st.effect == *h || st.equivalent.contains(h)));

@@ -372,9 +372,18 @@ fn gaussian(samples: &[f64], d: f64, w: f64) -> Array2<f64> {
     if w <= 0.0 {
         return Array2::eye(n);
     }
-    let half = (4.0 * w / d).ceil() as i64;
-    let g: Vec<f64> = (-half..=half).map(|m| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp()).collect();
-    let sum: f64 = g.iter().sum();
+    // In samples, r = w/d: g(m) = exp(-(m/r)²/2). Written this way (and g(0) = 1 exactly) a
+    // width far below the spacing, whose square underflows, still gives the identity.
+    let r = w / d;
+    let reach = (4.0 * r).ceil();
+    let g = |m: f64| if m == 0.0 { 1.0 } else { (-0.5 * (m / r).powi(2)).exp() };
+    // The normalisation sums the whole kernel (±4 W), which may reach past the window; beyond
+    // 10^7 terms (absurd widths) it takes the integral value sqrt(2π)·r.
+    let sum: f64 =
+        if reach <= 1e7 { (-(reach as i64)..=reach as i64).map(|m| g(m as f64)).sum() } else { (2.0 * std::f64::consts::PI).sqrt() * r };
+    // Offsets beyond the window never pair two samples.
+    let half = reach.min(n as f64) as i64;
+    let g: Vec<f64> = (-half..=half).map(|m| g(m as f64)).collect();
     Array2::from_shape_fn((n, n), |(i, j)| {
         let m = j as i64 - i as i64;
         if m.abs() <= half {
@@ -449,6 +458,24 @@ mod tests {
         let m = pixel_average(&centres, 1.4e-3, &s, 0.5e-3).dot(&gaussian(&s, 0.5e-3, 2.7e-3));
         for r in m.rows() {
             assert!((r.sum() - 1.0).abs() < 1e-12, "{}", r.sum());
+        }
+    }
+
+    #[test]
+    fn a_kernel_wider_than_the_window_keeps_the_gaussian_normalisation() {
+        // 40 samples of 0.5 mm: a 6 mm kernel reaches 48 samples, past the window. Reference:
+        // the direct sum of g over ±48 (the definition), to rounding.
+        let s: Vec<f64> = (0..40).map(|i| i as f64 * 0.5e-3).collect();
+        let (d, w) = (0.5e-3, 6e-3);
+        let direct: f64 = (-48..=48).map(|m: i32| (-(m as f64 * d).powi(2) / (2.0 * w * w)).exp()).sum();
+        let g = gaussian(&s, d, w);
+        assert!((g[[0, 0]] * direct - 1.0).abs() < 1e-12, "{}", g[[0, 0]] * direct);
+        // Absurd widths give a finite, nearly flat kernel instead of an allocation failure.
+        let g = gaussian(&s, d, 1e300);
+        assert!(g.iter().all(|v| v.is_finite() && *v >= 0.0));
+        // A width whose square underflows (hypothesis found 1e-300 mm giving NaN) is the identity.
+        for w in [1e-303, 5e-324] {
+            assert_eq!(gaussian(&s, d, w), Array2::<f64>::eye(40), "w = {w}");
         }
     }
 

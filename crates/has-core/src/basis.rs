@@ -13,11 +13,13 @@
 use crate::arfi::MrSampler;
 use crate::cost::{masks_and_box, Measurement, Objective};
 use crate::error::{HasError, Result};
-use crate::simulation::{Simulation, MEMORY_LIMIT};
+use crate::memory;
+use crate::simulation::Simulation;
 use ndarray::{s, Array2};
 use num_complex::Complex64 as C64;
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Samples per block of the matrix products.
@@ -39,23 +41,32 @@ pub struct FieldBasis {
 
 impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches and keeps the
-    /// samples that pixels `u x v` depend on. `progress(done, total)` is called after each batch.
-    pub fn build(sim: &Simulation, u: Range<usize>, v: Range<usize>, progress: Option<&(dyn Fn(usize, usize) + Sync)>) -> Result<Self> {
+    /// samples that pixels `u x v` depend on. `progress(done, total)` is called after each batch;
+    /// `cancel`, when set by another thread, ends the build before the next batch
+    /// ([`HasError::Interrupted`]).
+    pub fn build(
+        sim: &Simulation,
+        u: Range<usize>,
+        v: Range<usize>,
+        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+        cancel: Option<&AtomicBool>,
+    ) -> Result<Self> {
         let sampler = sim.sampler.restrict(u, v)?;
         let n = sim.n_elements();
         let s_len = sampler.window.len();
         let bytes = (s_len * n) as u64 * 8;
-        if bytes > MEMORY_LIMIT {
-            return Err(HasError::TooLarge {
-                what: format!("a field basis of {s_len} samples x {n} elements"),
-                bytes,
-                limit: MEMORY_LIMIT,
-            });
-        }
+        memory::check(
+            || format!("a field basis of {s_len} samples x {n} elements"),
+            bytes,
+            "estimate fewer groups, or give the MR slice a smaller field of view or matrix",
+        )?;
         let spec = crate::has::RecordSpec { window: Some(sampler.window.clone()), reflections: sim.reflections, ..Default::default() };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
         for start in (0..n).step_by(BATCH) {
+            if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                return Err(HasError::Interrupted);
+            }
             let end = (start + BATCH).min(n);
             let sources = (start..end)
                 .map(|e| {
@@ -307,6 +318,7 @@ pub fn build_element_model(
     mask_fraction: f64,
     margin: usize,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    cancel: Option<&AtomicBool>,
 ) -> Result<ElementModel> {
     let crate::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
     let mut terms = Vec::with_capacity(measurements.len());
@@ -320,7 +332,7 @@ pub fn build_element_model(
             offset,
         });
     }
-    let basis = Arc::new(FieldBasis::build(sim, u, v, progress)?);
+    let basis = Arc::new(FieldBasis::build(sim, u, v, progress, cancel)?);
     Ok(ElementModel { cost: ElementCost::new(basis, terms)?, noise })
 }
 
@@ -369,7 +381,7 @@ pub fn estimate_elements(
     group_estimator: &crate::estimate::Estimator,
     max_evaluations: usize,
     fit_scale: bool,
-    cancel: Option<&std::sync::atomic::AtomicBool>,
+    cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<ElementEstimate> {
     let mut grouped = sim.clone();
@@ -378,7 +390,7 @@ pub fn estimate_elements(
     group_model.cost.fit_scale = fit_scale;
     let group = group_estimator.run(&group_model.cost, cancel)?;
     let start = grouped.element_phases(&group.phases)?;
-    let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress)?;
+    let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
     model.cost.fit_scale = fit_scale;
     let elements = crate::estimate::Estimator::lbfgs()
         .with_starts(1)?

@@ -7,7 +7,7 @@
 
 use crate::arfi::noise_floor;
 use crate::cost::{check_image, mask_pixels};
-use crate::error::{HasError, Result};
+use crate::error::{require_positive, HasError, Result};
 use crate::has::RecordSpec;
 use crate::simulation::Simulation;
 use ndarray::Array2;
@@ -33,6 +33,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     if !(mask_fraction > 0.0 && mask_fraction < 1.0) {
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
+    require_positive("max_width_mm", max_width)?;
     let spec = RecordSpec { window: Some(sim.sampler.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
     let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
@@ -44,7 +45,10 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     let reach = [(0.5 * max_width / px[0]).ceil() as usize, (0.5 * max_width / px[1]).ceil() as usize];
     let (u0, u1) = (zone.iter().map(|p| p.0).min().unwrap_or(0), zone.iter().map(|p| p.0).max().unwrap_or(0) + 1);
     let (v0, v1) = (zone.iter().map(|p| p.1).min().unwrap_or(0), zone.iter().map(|p| p.1).max().unwrap_or(0) + 1);
-    let (u, v) = (u0.saturating_sub(reach[0])..(u1 + reach[0]).min(m[0]), v0.saturating_sub(reach[1])..(v1 + reach[1]).min(m[1]));
+    let (u, v) = (
+        u0.saturating_sub(reach[0])..u1.saturating_add(reach[0]).min(m[0]),
+        v0.saturating_sub(reach[1])..v1.saturating_add(reach[1]).min(m[1]),
+    );
     let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
     let measured: Vec<f64> = mask.iter().map(|&ij| image[ij]).collect();
     let fit = |w: f64| -> Result<(f64, f64)> {

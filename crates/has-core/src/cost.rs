@@ -350,6 +350,10 @@ pub struct Model {
     pub noise: f64,
 }
 
+/// Largest |pixel| of a measured image (rad): far beyond any unwrapped MR-ARFI phase, small
+/// enough that squared residuals summed over every pixel stay finite.
+pub const MAX_PHASE: f64 = 1e6;
+
 /// Checks a measured image against the scenario's MR geometry.
 pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
     let m = sim.sampler.geometry.matrix;
@@ -358,6 +362,9 @@ pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<
     }
     if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
         return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v}")));
+    }
+    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| v.abs() > MAX_PHASE) {
+        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v:e} rad, beyond any MR phase (|phase| <= {MAX_PHASE} rad)")));
     }
     if !(image.iter().copied().fold(f64::MIN, f64::max) > 0.0) {
         return Err(HasError::invalid(name, "has no positive pixel (all-zero or inverted image?)"));

@@ -21,7 +21,7 @@
 use crate::arfi::MrSampler;
 use crate::cost::{build_model, masks_and_box, Measurement};
 use crate::error::{HasError, Result};
-use crate::estimate::{point_reflection, Estimator};
+use crate::estimate::{point_reflection, Estimator, Stop};
 use crate::has::{RecordSpec, Window};
 use crate::simulation::Simulation;
 use crate::Complex64 as C64;
@@ -29,7 +29,9 @@ use argmin::core::{CostFunction, Executor};
 use argmin::solver::neldermead::NelderMead;
 use ndarray::Array2;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 /// Cost returned in place of a non-finite one.
 const PENALTY: f64 = 1e300;
@@ -239,9 +241,14 @@ fn focal_material(sim: &Simulation) -> usize {
 }
 
 /// The model images (rad) of images taken with `knowns` (per element or group; empty = none)
-/// under `effects`: the forward model with every effect of the library applied.
+/// under `effects`: the forward model with every effect of the library applied. Values so extreme
+/// that an image overflows are refused (an error naming `effects`), never returned as inf or NaN.
 pub fn effect_images(sim: &Simulation, knowns: &[Vec<f64>], effects: &Effects) -> Result<Vec<Array2<f64>>> {
-    Forward::new(sim, knowns)?.images(effects)
+    let images = Forward::new(sim, knowns)?.images(effects)?;
+    if images.iter().any(|m| m.iter().any(|v| !v.is_finite())) {
+        return Err(HasError::invalid("effects", "the model image overflows for these values (not finite); use realistic strengths"));
+    }
+    Ok(images)
 }
 
 /// The sampler of a moved slice (its window is `sampler.window`).
@@ -520,11 +527,14 @@ pub struct DiagnoseOptions {
     pub max_iterations: usize,
     /// The effects to try (default: all of [`Effect::ALL`]).
     pub effects: Vec<Effect>,
+    /// Wall-clock limit: when it passes, the round under way is dropped and the effects added
+    /// so far are reported, with [`Diagnosis::stop`] = [`Stop::TimeLimit`].
+    pub time_limit: Option<Duration>,
 }
 
 impl Default for DiagnoseOptions {
     fn default() -> Self {
-        DiagnoseOptions { threshold: 0.0, max_iterations: 1500, effects: Effect::ALL.to_vec() }
+        DiagnoseOptions { threshold: 0.0, max_iterations: 1500, effects: Effect::ALL.to_vec(), time_limit: None }
     }
 }
 
@@ -585,6 +595,8 @@ pub struct Diagnosis {
     pub total_evidence: f64,
     /// The other path tried (when the phase aberration competes with simpler effects).
     pub alternative: Option<Alternative>,
+    /// `Converged` (no candidate passes the threshold) or `TimeLimit`.
+    pub stop: Stop,
 }
 
 /// Another set of effects that was fitted in full: the data may not decide between it and the
@@ -612,8 +624,17 @@ struct Fitted {
 }
 
 /// Runs the workflow on measured images (each with the known phases added for it), starting
-/// from the simulation's model.
-pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &DiagnoseOptions) -> Result<Diagnosis> {
+/// from the simulation's model. `cancel`, when set by another thread, ends the run promptly
+/// with [`HasError::Interrupted`].
+pub fn diagnose(
+    sim: &Simulation,
+    measurements: &[Measurement],
+    options: &DiagnoseOptions,
+    cancel: Option<&AtomicBool>,
+) -> Result<Diagnosis> {
+    let never = AtomicBool::new(false);
+    let cancel = cancel.unwrap_or(&never);
+    let deadline = options.time_limit.map(|t| Instant::now() + t);
     let noise = masks_and_box(sim, measurements, sim.mask_fraction, 3)?.noise;
     if !(noise > 0.0) {
         return Err(HasError::invalid("image", "has no measurable background noise: the evidence needs a noise level"));
@@ -636,6 +657,9 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
         noise,
         penalty: (n as f64).ln(),
         memory: Mutex::new(vec![]),
+        cancel,
+        deadline,
+        timed_out: AtomicBool::new(false),
     };
     let start = Path { steps: vec![], effects: initial, cost: cost_initial, rejected: vec![] };
     // The 15-parameter phase aberration and the simpler effects can mimic each other (a tilt
@@ -687,6 +711,7 @@ pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &Diagno
         total_evidence,
         effects: path.effects,
         alternative,
+        stop: if ctx.timed_out.load(Ordering::Relaxed) { Stop::TimeLimit } else { Stop::Converged },
     })
 }
 
@@ -768,13 +793,41 @@ struct Context<'a> {
     penalty: f64,
     /// The last optimum of each searched field parameter.
     memory: Mutex<Vec<(Effect, f64)>>,
+    /// Set by another thread to stop: evaluations then return at once and the run ends.
+    cancel: &'a AtomicBool,
+    /// When passed, evaluations return at once and each path keeps the steps it has.
+    deadline: Option<Instant>,
+    timed_out: AtomicBool,
 }
 
 impl Context<'_> {
+    /// Whether the time limit has passed; `Err(Interrupted)` when cancelled.
+    fn out_of_time(&self) -> Result<bool> {
+        match self.halted() {
+            Err(HasError::Interrupted) => Err(HasError::Interrupted),
+            other => Ok(other.is_err()),
+        }
+    }
+
+    /// Whether evaluations should stop: cancelled, or past the deadline.
+    fn halted(&self) -> Result<()> {
+        if self.cancel.load(Ordering::Relaxed) {
+            return Err(HasError::Interrupted);
+        }
+        if self.deadline.is_some_and(|d| Instant::now() > d) {
+            self.timed_out.store(true, Ordering::Relaxed);
+            return Err(HasError::invalid("time_limit_s", "reached"));
+        }
+        Ok(())
+    }
+
     /// Adds effects from `allowed` to `path` one at a time, the candidate with the largest
     /// evidence each round, while it exceeds `threshold`.
     fn extend(&self, mut path: Path, allowed: &[Effect], threshold: f64) -> Result<Path> {
         loop {
+            if self.out_of_time()? {
+                return Ok(path);
+            }
             let included = path.included();
             let free: Vec<usize> = included.iter().flat_map(|e| e.slots().iter().copied()).collect();
             let todo: Vec<Effect> = allowed.iter().copied().filter(|e| !included.contains(e) && adds_parameters(*e, &free)).collect();
@@ -793,6 +846,9 @@ impl Context<'_> {
                     },
                 })
                 .collect();
+            if self.out_of_time()? {
+                return Ok(path); // this round's fits are incomplete
+            }
             let best = fits.iter().enumerate().max_by(|a, b| a.1.candidate.evidence.total_cmp(&b.1.candidate.evidence).then(b.0.cmp(&a.0)));
             let Some((i, f)) = best.filter(|(_, f)| f.candidate.evidence > threshold) else {
                 path.rejected = fits.into_iter().map(|f| f.candidate).collect();
@@ -884,6 +940,9 @@ impl Context<'_> {
     }
 
     fn cost(&self, e: &Effects) -> f64 {
+        if self.halted().is_err() {
+            return f64::INFINITY;
+        }
         self.forward.cost(e, self.measured)
     }
 
@@ -931,7 +990,10 @@ impl Context<'_> {
             .collect::<Vec<_>>();
         let hybrid = build_model(&sim, &measurements, s.mask_fraction, 3)?;
         let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
-        let estimate = Estimator::lbfgs().with_twins(point_reflection(&positions, &s.groups)).run(&hybrid.cost, None)?;
+        let estimate = Estimator::lbfgs()
+            .with_twins(point_reflection(&positions, &s.groups))
+            .with_time_limit_opt(self.deadline.map(|d| d.saturating_duration_since(Instant::now()).max(Duration::from_millis(1))))
+            .run(&hybrid.cost, Some(self.cancel))?;
         Ok(estimate.phases.iter().enumerate().map(|(g, p)| p + f.group_phases.get(g).copied().unwrap_or(0.0)).collect())
     }
 
@@ -981,6 +1043,7 @@ struct ViewFit<'a> {
 impl ViewFit<'_> {
     /// The view at `x` (with its linear parameters solved) and its cost.
     fn evaluate(&self, x: &[f64]) -> Result<(f64, View)> {
+        self.ctx.halted()?;
         let mut v = self.base;
         for (&k, &xi) in self.slots.iter().zip(x) {
             v[k] += xi * STEPS[k];

@@ -11,8 +11,10 @@ pub enum HasError {
     FileNotFound { path: String },
     /// A file exists but could not be read or parsed.
     BadFile { path: String, reason: String },
-    /// The request would need more memory than allowed.
-    TooLarge { what: String, bytes: u64, limit: u64 },
+    /// The request would need more memory than the budget of [`crate::memory::limit`].
+    TooLarge { what: String, bytes: u64, limit: u64, suggestion: String },
+    /// A long computation was stopped through its cancel flag.
+    Interrupted,
 }
 
 impl HasError {
@@ -28,12 +30,13 @@ impl fmt::Display for HasError {
             HasError::InvalidParameter { name, reason } => write!(f, "{name}: {reason}"),
             HasError::FileNotFound { path } => write!(f, "{path}: no such file"),
             HasError::BadFile { path, reason } => write!(f, "{path}: {reason}"),
-            HasError::TooLarge { what, bytes, limit } => write!(
+            HasError::TooLarge { what, bytes, limit, suggestion } => write!(
                 f,
-                "{what} needs {:.1} GiB, more than the limit of {:.1} GiB",
+                "{what} needs {:.1} GiB, more than the {:.1} GiB this machine has for it; {suggestion}",
                 *bytes as f64 / 2f64.powi(30),
                 *limit as f64 / 2f64.powi(30)
             ),
+            HasError::Interrupted => write!(f, "interrupted"),
         }
     }
 }
@@ -58,6 +61,15 @@ pub fn require_non_negative(name: &str, value: f64) -> Result<()> {
         Ok(())
     } else {
         Err(HasError::invalid(name, format!("must be a finite number >= 0, got {value}")))
+    }
+}
+
+/// Checks that `value` lies in `[lo, hi]` (finite); `why` says where the range comes from.
+pub fn require_in_range(name: &str, value: f64, lo: f64, hi: f64, why: &str) -> Result<()> {
+    if value.is_finite() && (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(HasError::invalid(name, format!("must be between {lo} and {hi} ({why}), got {value}")))
     }
 }
 

@@ -178,12 +178,14 @@ impl Estimator {
                 vec![p.finish(outcome)]
             }
             Method::Lbfgs { starts, memory } => {
+                // Every start gets at least one evaluation of the budget, a second round two.
+                let starts = &(*starts).min(self.max_evaluations).max(1);
                 let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
                 let mut inits = vec![start.clone()];
                 for _ in 1..*starts {
                     inits.push((0..g - 1).map(|_| rng.random_range(-PI..PI)).collect());
                 }
-                let rounds = if *starts > 1 { 2 } else { 1 };
+                let rounds = if *starts > 1 && self.max_evaluations >= 2 * starts { 2 } else { 1 };
                 let per_start = (self.max_evaluations / (rounds * starts)).max(1);
                 let run_all = |inits: &[Vec<f64>]| {
                     inits.par_iter().map(|x0| lbfgs_run(cost, x0.clone(), *memory, per_start, deadline, cancel)).collect::<Result<Vec<_>>>()
@@ -191,7 +193,7 @@ impl Estimator {
                 let mut runs = run_all(&inits)?;
                 // A single start only polishes it; more starts get a second round from the twins
                 // of the best distinct minima and perturbations of the best.
-                if *starts > 1 {
+                if rounds > 1 {
                     let second = self.second_round(&mut runs, *starts, &mut rng);
                     runs.extend(run_all(&second)?);
                 }
@@ -275,6 +277,11 @@ struct Problem<'a> {
     deadline: Option<Instant>,
     cancel: Option<&'a AtomicBool>,
     evaluations: AtomicUsize,
+    /// Evaluations still to answer with a penalty instead of a stop: argmin's Nelder–Mead
+    /// unwraps the costs of its initial simplex, so a limit reached there must not be an error.
+    lenient: AtomicUsize,
+    /// The first limit reached (it ends the run even when a lenient answer hid it from argmin).
+    stopped: Mutex<Option<Stop>>,
     best: Mutex<(f64, Vec<f64>, Vec<f64>)>,
 }
 
@@ -293,20 +300,33 @@ impl std::error::Error for EarlyStop {}
 impl<'a> Problem<'a> {
     /// `start` is reported when the run ends before its first evaluation (a limit already hit).
     fn new(cost: &'a dyn Objective, start: Vec<f64>, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
-        Problem { cost, budget, deadline, cancel, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, start, vec![])) }
+        let best = Mutex::new((f64::INFINITY, start, vec![]));
+        Problem {
+            cost,
+            budget,
+            deadline,
+            cancel,
+            evaluations: AtomicUsize::new(0),
+            lenient: AtomicUsize::new(0),
+            stopped: Mutex::new(None),
+            best,
+        }
     }
 
     fn check(&self) -> std::result::Result<(), EarlyStop> {
-        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            return Err(EarlyStop(Stop::Interrupted));
+        let stop = if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            Stop::Interrupted
+        } else if self.deadline.is_some_and(|d| Instant::now() > d) {
+            Stop::TimeLimit
+        } else if self.evaluations.fetch_add(1, Ordering::Relaxed) >= self.budget {
+            Stop::EvaluationLimit
+        } else {
+            return Ok(());
+        };
+        if let Ok(mut s) = self.stopped.lock() {
+            s.get_or_insert(stop);
         }
-        if self.deadline.is_some_and(|d| Instant::now() > d) {
-            return Err(EarlyStop(Stop::TimeLimit));
-        }
-        if self.evaluations.fetch_add(1, Ordering::Relaxed) >= self.budget {
-            return Err(EarlyStop(Stop::EvaluationLimit));
-        }
-        Ok(())
+        Err(EarlyStop(stop))
     }
 
     fn record(&self, x: &[f64], c: f64) {
@@ -327,7 +347,9 @@ impl<'a> Problem<'a> {
 
     fn finish(self, outcome: std::result::Result<(), argmin::core::Error>) -> Run {
         let evaluations = self.evaluations.load(Ordering::Relaxed).min(self.budget);
+        let stopped = self.stopped.lock().ok().and_then(|s| *s);
         let stop = match outcome {
+            Ok(()) if stopped.is_some() => stopped.unwrap_or(Stop::Converged),
             // argmin's iteration cap (set to the budget) ends a run that used it all.
             Ok(()) if evaluations >= self.budget => Stop::EvaluationLimit,
             Ok(()) => Stop::Converged,
@@ -343,7 +365,11 @@ impl CostFunction for &Problem<'_> {
     type Output = f64;
 
     fn cost(&self, x: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
-        self.check()?;
+        let lenient = self.lenient.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1)).is_ok();
+        match self.check() {
+            Err(_) if lenient => return Ok(PENALTY),
+            r => r?,
+        }
         let c = self.cost.cost(&full(x));
         let c = if c.is_finite() { c } else { PENALTY };
         self.record(x, c);
@@ -399,6 +425,7 @@ fn restarted_nelder_mead(
             .with_rho(0.5)?
             .with_sigma(1.0 - 1.0 / nf)?;
         let iterations = (40 * n).min(budget) as u64;
+        p.lenient.store(n + 1, Ordering::Relaxed);
         Executor::new(p, solver).configure(|s| s.max_iters(iterations)).run()?;
         let (best, x) = p.best();
         if !(best < last * (1.0 - 1e-3) && last - best > tolerance) {
@@ -741,6 +768,41 @@ mod tests {
                 let d: f64 = u.iter().zip(w).map(|(x, y)| x * y).sum();
                 assert!((d - if i == j { 1.0 } else { 0.0 }).abs() < 1e-10);
             }
+        }
+    }
+
+    /// `Σ (1 - cos(φ_i - φ_0 - t_i))`: minimum at the phases `t` (up to a common phase).
+    struct Cosines(Vec<f64>);
+
+    impl Objective for Cosines {
+        fn n_phases(&self) -> usize {
+            self.0.len()
+        }
+        fn cost(&self, p: &[f64]) -> f64 {
+            self.cost_and_gradient(p).0
+        }
+        fn cost_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
+            let d: Vec<f64> = p.iter().zip(&self.0).map(|(x, t)| x - p[0] - t).collect();
+            let mut g: Vec<f64> = d.iter().map(|v| v.sin()).collect();
+            g[0] = -g[1..].iter().sum::<f64>();
+            (d.iter().map(|v| 1.0 - v.cos()).sum(), g)
+        }
+    }
+
+    #[test]
+    fn every_method_stops_cleanly_at_any_evaluation_or_time_limit() {
+        // Limits that end a run inside Nelder-Mead's initial simplex (n + 1 = 8 evaluations),
+        // inside an L-BFGS line search or a swarm's first generation: a stop, never a panic.
+        let cost = Cosines(vec![0.0, 0.3, -0.2, 0.5, 1.0, -1.0, 0.1, 0.4]);
+        for method in [Estimator::nelder_mead(), Estimator::lbfgs(), Estimator::particle_swarm()] {
+            for budget in [1, 2, 7, 8, 9, 30] {
+                let e = method.clone().with_max_evaluations(budget).unwrap().run(&cost, None).unwrap();
+                assert!(e.evaluations <= budget && e.cost.is_finite(), "{budget}: {} evaluations", e.evaluations);
+            }
+            let e = method.clone().with_time_limit(1e-9).unwrap().run(&cost, None).unwrap();
+            assert!(matches!(e.stop, Stop::TimeLimit | Stop::Converged), "{:?}", e.stop);
+            let cancel = AtomicBool::new(true);
+            assert_eq!(method.run(&cost, Some(&cancel)).unwrap().stop, Stop::Interrupted);
         }
     }
 

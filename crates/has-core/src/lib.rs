@@ -29,6 +29,7 @@ pub mod fft;
 pub mod grid;
 pub mod has;
 pub mod medium;
+pub mod memory;
 pub mod scenario;
 pub mod simulation;
 pub mod source;

@@ -1,10 +1,21 @@
 //! Acoustic media: materials, regions (cylinder, slab) and voxel maps.
 
-use crate::error::{require_non_negative, require_positive, HasError, Result};
+use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
 use crate::grid::Grid;
 
 /// Nepers per decibel: 1 dB = ln(10)/20 Np.
 pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
+
+/// Sound speeds (m/s) the propagation accepts: from below air's 343 m/s to above diamond's
+/// 12 000 m/s. Outside it a value is a unit mistake, and near zero the wavenumber `omega/c`
+/// overflows.
+pub const SOUND_SPEED_RANGE_M_S: (f64, f64) = (100.0, 20_000.0);
+
+/// Checks a sound speed against [`SOUND_SPEED_RANGE_M_S`].
+fn require_sound_speed(name: &str, c: f64) -> Result<()> {
+    let (lo, hi) = SOUND_SPEED_RANGE_M_S;
+    require_in_range(name, c, lo, hi, "m/s, from gases to diamond")
+}
 
 /// A homogeneous material. Attenuation follows `a(f) = a0 · (f / 1 MHz)^y` in dB/cm and is taken to
 /// be all absorption (it drives the radiation force).
@@ -32,7 +43,7 @@ impl Material {
     /// Checks every field, naming the material in the error.
     pub fn validate(&self) -> Result<()> {
         let p = |k: &str| format!("material '{}'.{k}", self.name);
-        require_positive(&p("sound_speed_m_s"), self.sound_speed)?;
+        require_sound_speed(&p("sound_speed_m_s"), self.sound_speed)?;
         require_positive(&p("density_kg_m3"), self.density)?;
         require_non_negative(&p("attenuation_db_cm_mhz"), self.attenuation_db_cm_mhz)?;
         require_non_negative(&p("attenuation_power"), self.attenuation_power)?;
@@ -157,10 +168,10 @@ impl VoxelMap {
         for (i, s) in self.spacing.iter().enumerate() {
             require_positive(&format!("voxels.spacing[{i}]"), *s)?;
         }
-        let bad = |v: &[f64], strict: bool| v.iter().position(|x| !x.is_finite() || (strict && *x <= 0.0) || *x < 0.0);
-        if let Some(i) = bad(&self.sound_speed, true) {
-            return Err(HasError::invalid("voxels.sound_speed", format!("voxel {i} is {} (need > 0)", self.sound_speed[i])));
+        for (i, c) in self.sound_speed.iter().enumerate() {
+            require_sound_speed(&format!("voxels.sound_speed[{i}]"), *c)?;
         }
+        let bad = |v: &[f64], strict: bool| v.iter().position(|x| !x.is_finite() || (strict && *x <= 0.0) || *x < 0.0);
         if let Some(i) = bad(&self.density, true) {
             return Err(HasError::invalid("voxels.density", format!("voxel {i} is {} (need > 0)", self.density[i])));
         }
@@ -326,5 +337,16 @@ mod tests {
     fn negative_sound_speed_is_rejected_by_name() {
         let e = Material::new("skull", -1.0, 1900.0, 0.0).unwrap_err();
         assert!(e.to_string().contains("skull"), "{e}");
+    }
+
+    #[test]
+    fn sound_speeds_outside_gases_to_diamond_are_rejected() {
+        for c in [1e-300, 5e-324, 99.0, 20_001.0, 1e300] {
+            let e = Material::new("brain", c, 1000.0, 0.5).unwrap_err();
+            assert!(e.to_string().contains("sound_speed_m_s"), "{c}: {e}");
+        }
+        for c in [100.0, 343.0, 1500.0, 12_000.0, 20_000.0] {
+            assert!(Material::new("m", c, 1000.0, 0.5).is_ok(), "{c}");
+        }
     }
 }

@@ -5,15 +5,13 @@ use crate::error::{HasError, Result};
 use crate::grid::{fft_friendly, Grid};
 use crate::has::{HasOptions, HasPlan, RecordSpec, Recording};
 use crate::medium::{Material, Medium};
+use crate::memory;
 use crate::scenario::{Resolved, Scenario};
 use crate::source::{source_plane_z, SourceModel};
 use crate::steering::steering_phases;
 use crate::transducer::Transducer;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
-
-/// Memory a simulation may plan to use before it refuses (bytes).
-pub const MEMORY_LIMIT: u64 = 8 << 30;
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).
@@ -291,8 +289,9 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
     }
     let nz = ((z_end - z0) / dz).ceil() as usize + 1;
     let bytes = (n * n) as u64 * 16 * 8;
-    if bytes > MEMORY_LIMIT || nz > 100_000 {
-        return Err(HasError::TooLarge { what: format!("a {n} x {n} x {nz} grid"), bytes, limit: MEMORY_LIMIT });
+    if nz > 100_000 {
+        return Err(HasError::invalid("grid.step_mm", format!("{nz} planes to the last one; use a larger step or grid.z_max_mm")));
     }
+    memory::check(|| format!("a {n} x {n} grid"), bytes, "use a coarser grid.spacing_mm or a smaller grid.lateral_size_mm")?;
     Grid::new(n, n, dx, dx, nz, dz, z0)
 }

@@ -29,7 +29,7 @@ fn run(model: &Simulation, image: &Array2<f64>) -> Diagnosis {
 
 fn run_all(model: &Simulation, measurements: &[Measurement], options: &DiagnoseOptions) -> Diagnosis {
     let t = std::time::Instant::now();
-    let d = diagnose(model, measurements, options).expect("diagnose");
+    let d = diagnose(model, measurements, options, None).expect("diagnose");
     let params: Vec<_> = d
         .steps
         .iter()
@@ -42,7 +42,10 @@ fn run_all(model: &Simulation, measurements: &[Measurement], options: &DiagnoseO
 /// Images with `effects` hidden: the first with no known phases, the others with seeded random
 /// known group phases (diversity), each with 0.02 rad noise.
 fn hidden(effects: &Effects, images: usize, seed: u64) -> Vec<Measurement> {
-    let s = sim();
+    hidden_in(sim(), effects, images, seed)
+}
+
+fn hidden_in(s: &Simulation, effects: &Effects, images: usize, seed: u64) -> Vec<Measurement> {
     let knowns: Vec<Vec<f64>> = (0..images as u64)
         .map(|k| {
             if k == 0 {
@@ -92,6 +95,12 @@ fn param(d: &Diagnosis, name: &str) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
+/// Seeds per case: `ci` in the default run, `full` with `ARFI_FULL_SWEEPS=1` set (CI time); the
+/// hit rates of issue 4 come from the full runs and from examples/hidden_effects.rs (10 seeds).
+fn seeds(ci: u64, full: u64) -> std::ops::RangeInclusive<u64> {
+    1..=if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { full } else { ci }
+}
+
 /// The gap at the end: residual RMS over the noise floor (required ≤ 1.2).
 fn gap(d: &Diagnosis) -> f64 {
     d.residual_rms().1 / d.noise_floor
@@ -129,11 +138,15 @@ fn a_hidden_registration_shift_is_named_and_measured() {
 
 #[test]
 fn noise_only_names_nothing() {
-    // Issue 4: on noise-only data no effect is named in at least 95 % of 20 seeds.
+    // Issue 4: on noise-only data no effect is named in at least 95 % of 20 seeds (the full
+    // run); the default run takes the first 5 and allows none.
     let s = sim();
-    let named: Vec<(u64, Vec<&str>)> =
-        (100..120).map(|seed| (seed, names(&run(s, &s.noisy_arfi_image(&[], NOISE, seed).unwrap())))).filter(|r| !r.1.is_empty()).collect();
-    assert!(named.len() <= 1, "effects named on noise only: {named:?}");
+    let n = seeds(5, 20).count() as u64;
+    let named: Vec<(u64, Vec<&str>)> = (100..100 + n)
+        .map(|seed| (seed, names(&run(s, &s.noisy_arfi_image(&[], NOISE, seed).unwrap()))))
+        .filter(|r| !r.1.is_empty())
+        .collect();
+    assert!(named.len() as f64 <= 0.05 * n as f64, "effects named on noise only: {named:?}");
 }
 
 #[test]
@@ -153,7 +166,7 @@ fn a_hidden_slice_offset_is_named_and_measured() {
 #[test]
 fn hidden_amplitude_broadening_and_anisotropy_over_seeds() {
     let s = sim();
-    for seed in 1..=2u64 {
+    for seed in seeds(1, 2) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         // Amplitude: ±8–20 % (a miscalibrated force-to-phase scale); within 2 %.
         let mut e = Effects::none(s);
@@ -181,7 +194,7 @@ fn hidden_amplitude_broadening_and_anisotropy_over_seeds() {
 #[test]
 fn hidden_background_slice_offset_and_dropout_over_seeds() {
     let s = sim();
-    for seed in 1..=2u64 {
+    for seed in seeds(1, 2) {
         let mut rng = ChaCha8Rng::seed_from_u64(10 + seed);
         // Background phase: 0.02–0.05 rad offset, ramps up to 5e-4 rad/mm (0.05 rad over the FOV).
         let mut e = Effects::none(s);
@@ -211,6 +224,46 @@ fn hidden_background_slice_offset_and_dropout_over_seeds() {
 }
 
 #[test]
+fn an_image_through_the_beam_axis_names_attenuation_sound_speed_and_dropout() {
+    // In an xz image the focal material's attenuation tilts the force along the beam
+    // (exp(-2·alpha·z)), its sound speed moves the focus along z, and a dead group reshapes the
+    // side lobes: none of them acts as a scale or a defocus any more, so each is named alone
+    // (the sweep of examples/hidden_effects.rs: every library effect 10/10 on such images).
+    let mut scenario = Scenario::default();
+    scenario.mr.plane = "xz".into();
+    let s = Simulation::new(&scenario).expect("xz scenario");
+    let none = Effects::none(&s);
+    let mut rng = ChaCha8Rng::seed_from_u64(40);
+    let mut e = none.clone();
+    e.field.attenuation_db_cm_mhz *= 1.0 + strength(&mut rng, 0.2, 0.5);
+    let d = run_all(&s, &hidden_in(&s, &e, 1, 1), &DiagnoseOptions::default());
+    assert_eq!(names(&d), ["attenuation"]);
+    assert!((param(&d, "attenuation_db_cm_mhz") - e.field.attenuation_db_cm_mhz).abs() < 0.03 && gap(&d) < 1.2);
+    let mut e = none.clone();
+    e.field.sound_speed += strength(&mut rng, 80.0, 120.0);
+    let d = run_all(&s, &hidden_in(&s, &e, 1, 2), &DiagnoseOptions::default());
+    // Named first. Sound speed and an axial registration shift both move the pattern along the
+    // beam, so the workflow may add a sub-millimetre axial shift second and the speed then
+    // shares the focal move with it: within 25 m/s (measured 2026-11-23: 1435 m/s fitted for
+    // 1417 m/s hidden, with a 0.69 mm axial shift beside it; the gap closes either way).
+    assert_eq!(d.steps[0].effect, Effect::SoundSpeed, "{:?}", names(&d));
+    let c = param(&d, "sound_speed_m_per_s");
+    assert!((c - e.field.sound_speed).abs() < 25.0 && gap(&d) < 1.2, "{c} m/s against {}", e.field.sound_speed);
+    let mut e = none;
+    e.field.dead_groups = vec![rng.random_range(0..16)];
+    let d = run_all(&s, &hidden_in(&s, &e, 1, 3), &DiagnoseOptions::default());
+    assert_eq!(names(&d), ["element_dropout"]);
+    // The group, or its mirror image across the xz plane (the same image: y -> -y symmetry).
+    let Value::Indices(named) = &d.steps[0].params[0].1 else { panic!("dead_groups is a list of indices") };
+    let mut m = e.clone();
+    m.field.dead_groups = named.clone();
+    let (a, b) = (effect_images(&s, &[vec![]], &e).unwrap(), effect_images(&s, &[vec![]], &m).unwrap());
+    let differ = (&a[0] - &b[0]).iter().fold(0.0f64, |x, v| x.max(v.abs()));
+    assert!(differ < 1e-3 * NOISE, "group {named:?} for {:?}: images differ by {differ} rad", e.field.dead_groups);
+    assert!(gap(&d) < 1.2);
+}
+
+#[test]
 fn hidden_attenuation_and_sound_speed_are_identified_up_to_what_the_image_can_tell() {
     // In one focal-plane image a change of the focal material's attenuation (force ∝ alpha·I)
     // or sound speed (force ∝ 1/c², the focus hardly moves at these strengths) acts almost as
@@ -220,7 +273,7 @@ fn hidden_attenuation_and_sound_speed_are_identified_up_to_what_the_image_can_te
     let s = sim();
     let a0 = Effects::none(s).field.attenuation_db_cm_mhz;
     let c0 = Effects::none(s).field.sound_speed;
-    for seed in 1..=2u64 {
+    for seed in seeds(1, 2) {
         let mut rng = ChaCha8Rng::seed_from_u64(20 + seed);
         let mut e = Effects::none(s);
         e.field.attenuation_db_cm_mhz = a0 * (1.0 + strength(&mut rng, 0.2, 0.5));

@@ -38,7 +38,7 @@ fn element_basis_images_gradient_and_estimate() {
     let n = sim.n_elements();
     assert_eq!(n, 256);
     let (truth, ms) = study(&sim, 4);
-    let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, None).unwrap();
+    let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
     let basis = &model.cost.basis;
 
     // The basis reproduces the direct HAS image: single-precision storage of the fields bounds
