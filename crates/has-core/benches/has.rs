@@ -13,7 +13,8 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use has_core::aberration::SkullScreen;
-use has_core::cost::{build_model, Measurement, Model};
+use has_core::basis::build_element_model;
+use has_core::cost::{build_model, Measurement, Model, Objective};
 use has_core::estimate::{condense, Estimator};
 use has_core::fft::{multiply, Fft2};
 use has_core::has::RecordSpec;
@@ -146,6 +147,45 @@ fn model(sim: &Simulation, measurements: &[Measurement]) -> Model {
     build_model(sim, measurements, sim.mask_fraction, 3).unwrap()
 }
 
+/// One HAS slab step on 180 x 180: transmission, FFT, propagator, inverse FFT, screen
+/// ([`Fft2::filter`]), the unit of every march.
+fn bench_has_step(c: &mut Criterion) {
+    let (nx, ny) = (180, 180);
+    let fft = Fft2::new(nx, ny);
+    let input = pseudo_random_field(nx * ny);
+    let transmission: Vec<f64> = input.iter().map(|v| 1.0 + 0.01 * v.re).collect();
+    let propagator = pseudo_random_field(nx * ny);
+    let screen = pseudo_random_field(nx * ny);
+    let mut g = c.benchmark_group("has_step_180x180");
+    g.sample_size(50).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+    for parallel in [false, true] {
+        let mut ws = fft.workspace(parallel);
+        let name = if parallel { "filter_parallel" } else { "filter_serial" };
+        g.bench_function(name, |b| {
+            b.iter_batched_ref(
+                || input.clone(),
+                |field| fft.filter(field, &mut ws, Some(&transmission), &propagator, &screen),
+                BatchSize::PerIteration,
+            )
+        });
+    }
+    g.finish();
+}
+
+/// Cost and cost + gradient for 1024 groups (one per element): the field-basis model of
+/// `arfi estimate --groups 1024` (its build, about 50 s and 750 MB, is not timed).
+fn bench_estimation_1024(c: &mut Criterion) {
+    let sim = Simulation::new(&Scenario::default()).unwrap();
+    let meas = aberrated_measurement(&sim);
+    let m = build_element_model(&sim, &meas, sim.mask_fraction, 0, None, None).unwrap();
+    let x: Vec<f64> = (0..sim.transducer.elements.len()).map(|e| 0.3 * (e as f64).sin()).collect();
+    let mut g = c.benchmark_group("estimation_1024");
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(8));
+    g.bench_function("cost_1024_elements", |b| b.iter(|| m.cost.cost(black_box(&x))));
+    g.bench_function("cost_and_gradient_1024_elements", |b| b.iter(|| m.cost.cost_and_gradient(black_box(&x))));
+    g.finish();
+}
+
 fn bench_estimation(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     assert_eq!(sim.n_groups, 16);
@@ -180,5 +220,15 @@ fn bench_estimation(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_build, bench_single_run, bench_group_fields, bench_fft, bench_breakdown, bench_estimation);
+criterion_group!(
+    benches,
+    bench_build,
+    bench_single_run,
+    bench_group_fields,
+    bench_fft,
+    bench_has_step,
+    bench_breakdown,
+    bench_estimation,
+    bench_estimation_1024
+);
 criterion_main!(benches);

@@ -18,7 +18,7 @@
 //! is `exp(+i·k·z)`.
 
 use crate::error::{HasError, Result};
-use crate::fft::{multiply, Fft2, FftWorkspace};
+use crate::fft::{Fft2, FftWorkspace};
 use crate::grid::Grid;
 use crate::medium::{Medium, SliceProperties};
 use num_complex::Complex64 as C64;
@@ -212,7 +212,7 @@ impl HasPlan {
             if step == 0 {
                 record_plane(grid, &current, 0, &field, spec, &mut rec);
             }
-            apply_step(&fft, &s, &mut field, &mut ws, true);
+            apply_step(&fft, &s, &mut field, &mut ws);
             steps.push(s);
             record_plane(grid, &current, step + 1, &field, spec, &mut rec);
             prev = current;
@@ -283,7 +283,7 @@ impl HasPlan {
         let mut reflected: Vec<(usize, Vec<C64>)> = Vec::new();
         for n in 0..=last {
             if n > 0 {
-                apply_step(&self.fft, &self.steps[n - 1], &mut field, &mut ws, parallel);
+                apply_step(&self.fft, &self.steps[n - 1], &mut field, &mut ws);
             }
             record_plane(g, self.slab_properties(n), n, &field, spec, &mut rec);
             if spec.reflections {
@@ -293,7 +293,7 @@ impl HasPlan {
             }
         }
         if let Some(&(top, _)) = reflected.last() {
-            self.march_back(top, &mut reflected, spec, &mut rec, &mut ws, parallel);
+            self.march_back(top, &mut reflected, spec, &mut rec, &mut ws);
         }
         rec
     }
@@ -306,7 +306,6 @@ impl HasPlan {
         spec: &RecordSpec,
         rec: &mut Recording,
         ws: &mut FftWorkspace,
-        parallel: bool,
     ) {
         let g = &self.grid;
         let mut back = vec![C64::new(0.0, 0.0); g.lateral_len()];
@@ -347,10 +346,7 @@ impl HasPlan {
             if m > 0 {
                 // Through slab m - 1 towards -z: the same propagator and screen, no transmission.
                 let s = &self.steps[m - 1];
-                self.fft.forward(&mut back, ws);
-                multiply(&mut ws.spectrum, &s.propagator, parallel);
-                self.fft.inverse(ws, &mut back);
-                multiply(&mut back, &s.screen, parallel);
+                self.fft.filter(&mut back, ws, None, &s.propagator, &s.screen);
             }
         }
     }
@@ -375,14 +371,8 @@ fn record_plane(g: &Grid, slab: &SliceProperties, n: usize, field: &[C64], spec:
     }
 }
 
-fn apply_step(fft: &Fft2, s: &Step, field: &mut [C64], ws: &mut FftWorkspace, parallel: bool) {
-    if let Some(t) = &s.transmission {
-        multiply(field, t, parallel);
-    }
-    fft.forward(field, ws);
-    multiply(&mut ws.spectrum, &s.propagator, parallel);
-    fft.inverse(ws, field);
-    multiply(field, &s.screen, parallel);
+fn apply_step(fft: &Fft2, s: &Step, field: &mut [C64], ws: &mut FftWorkspace) {
+    fft.filter(field, ws, s.transmission.as_ref().map(|t| t.as_slice()), &s.propagator, &s.screen);
 }
 
 /// Runs `f` on a rayon worker: the parallel loops of every step then stay inside the pool
