@@ -57,6 +57,13 @@ def timed(fn: Callable[[], Any], repeats: int) -> tuple[list[float], Any]:
     return times, out
 
 
+def median_time(fn: Callable[[], Any], repeats: int) -> float:
+    """Median wall-clock seconds of `repeats` calls of `fn`, after one untimed call (thread pool
+    start, page faults)."""
+    fn()
+    return statistics.median(timed(fn, repeats)[0])
+
+
 def group_fields_cargo(repeats: int) -> dict[str, Any]:
     cargo = shutil.which("cargo")
     if cargo is None:

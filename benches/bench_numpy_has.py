@@ -24,7 +24,6 @@ import datetime as _dt
 import json
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -33,20 +32,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy_has  # noqa: E402
+from bench_core import median_time  # noqa: E402
 
 import arfi  # noqa: E402
 
 TOLERANCE = 1e-6
 TARGET_RATIO = 3.0
-
-
-def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def main(argv: list[str] | None = None) -> int:

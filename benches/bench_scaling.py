@@ -31,23 +31,14 @@ import math
 import os
 import platform
 import resource
-import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from bench_core import median_time
+
 SPACING_MM = 0.6818181818181819  # the default scenario's lateral spacing (lambda/4 in water at 550 kHz)
-
-
-def median_time(fn, repeats: int) -> float:
-    fn()  # warm-up: the thread pool, page faults
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def scenario(grid: dict[str, float]) -> str:
