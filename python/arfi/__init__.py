@@ -13,11 +13,12 @@ Quick start::
 """
 
 from arfi.scenario import Scenario
+from arfi.cost import CostModel, CostTerm
 from arfi.simulation import Field, Simulation
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 
-__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult"]
+__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm"]
 
 try:
     from importlib.metadata import version as _version

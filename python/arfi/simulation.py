@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
@@ -275,6 +276,16 @@ class Simulation:
         d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress))
         return Estimate(**d)
+
+    def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
+                   fit_amplitude: bool = False) -> CostModel:
+        """The hybrid cost (paper Eq. 4) that ``estimate`` minimises, for one MR-ARFI image or a
+        list of them, each taken with its ``known`` added phases (rad, per element or group; None
+        = none): the same masks (``mask_fraction`` of each image's maximum, connected to it) and
+        per-pixel group kernels. ``fit_amplitude`` fits one amplitude scale for all images at each
+        evaluation. At most 128 groups."""
+        imgs, knowns = self._image_list(images, known)
+        return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 
     def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,

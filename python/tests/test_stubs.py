@@ -3,11 +3,16 @@ import inspect
 from arfi import _core
 
 
-def test_stub_lists_every_public_method_of_the_extension():
-    # The .pyi ships with the package; every method the extension exposes must be declared.
+def test_stub_lists_every_public_name_of_the_extension():
+    # The .pyi ships with the package; every function, class, method and property the extension
+    # exposes must be declared in it.
     stub = (inspect.getfile(_core).rsplit("/", 1)[0] + "/_core.pyi")
     text = open(stub, encoding="utf-8").read()
-    names = [n for n in dir(_core.CoreSimulation) if not n.startswith("_")]
-    names += [n for n in dir(_core) if not n.startswith("_") and callable(getattr(_core, n)) and n != "CoreSimulation"]
-    missing = [n for n in names if f"def {n}(" not in text]
+    classes = [c for c in dir(_core) if isinstance(getattr(_core, c), type)]
+    assert {"CoreSimulation", "CoreCostModel"} <= set(classes)
+    missing = [c for c in classes if f"class {c}:" not in text]
+    for c in classes:
+        missing += [f"{c}.{n}" for n in dir(getattr(_core, c)) if not n.startswith("_") and f"def {n}(" not in text]
+    missing += [n for n in dir(_core) if not n.startswith("_") and n not in classes and callable(getattr(_core, n))
+                and f"def {n}(" not in text]
     assert not missing, missing

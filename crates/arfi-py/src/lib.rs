@@ -6,7 +6,7 @@ use error::to_py;
 use has_core::aberration::SkullScreen;
 use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
-use has_core::cost::{build_model, Measurement};
+use has_core::cost::{build_model, HybridCost, Measurement};
 use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Value};
 use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
@@ -18,6 +18,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 fn parse_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Scenario> {
     let base = base_dir.map(Path::new);
@@ -551,6 +552,25 @@ impl CoreSimulation {
         Ok(d)
     }
 
+    /// The hybrid cost (paper Eq. 4) of images, each with its known added phases, on the per-pixel
+    /// group kernels `estimate` minimises (at most 128 groups).
+    #[pyo3(signature = (images, known, fit_scale=false))]
+    fn cost_model(
+        &self,
+        py: Python<'_>,
+        images: Vec<PyReadonlyArray2<'_, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+        fit_scale: bool,
+    ) -> PyResult<CoreCostModel> {
+        let measurements = measurements(images, known)?;
+        let sim = &self.inner;
+        let cancel = AtomicBool::new(false);
+        let model = run_interruptible(py, &cancel, || build_model(sim, &measurements, sim.mask_fraction, 3))?.map_err(to_py)?;
+        let mut cost = model.cost;
+        cost.fit_scale = fit_scale;
+        Ok(CoreCostModel { cost: Arc::new(cost), noise: model.noise })
+    }
+
     /// The source-plane pressure (Pa), shape (ny, nx), for added phases.
     #[pyo3(signature = (phases=None))]
     fn source_field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>) -> PyResult<Bound<'py, PyArray2<C64>>> {
@@ -559,6 +579,87 @@ impl CoreSimulation {
         let f = py.detach(|| self.inner.source_field(&phases)).map_err(to_py)?;
         let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
         Ok(a.into_pyarray(py))
+    }
+}
+
+/// The hybrid cost of a set of images, for users' own optimisers and for checking it in NumPy.
+#[pyclass(module = "arfi._core", frozen)]
+struct CoreCostModel {
+    cost: Arc<HybridCost>,
+    noise: f64,
+}
+
+impl CoreCostModel {
+    /// The phases, checked: one finite value per group.
+    fn phases(&self, phases: PyReadonlyArray1<'_, f64>) -> PyResult<Vec<f64>> {
+        let p = phases.as_array().to_vec();
+        if p.len() != self.cost.n_groups {
+            return Err(PyValueError::new_err(format!("phases: has {} values for {} groups", p.len(), self.cost.n_groups)));
+        }
+        if let Some(x) = p.iter().find(|x| !x.is_finite()) {
+            return Err(PyValueError::new_err(format!("phases: must be finite, got {x}")));
+        }
+        Ok(p)
+    }
+}
+
+#[pymethods]
+impl CoreCostModel {
+    #[getter]
+    fn n_groups(&self) -> usize {
+        self.cost.n_groups
+    }
+
+    #[getter]
+    fn n_pixels(&self) -> usize {
+        self.cost.n_pixels()
+    }
+
+    #[getter]
+    fn fit_scale(&self) -> bool {
+        self.cost.fit_scale
+    }
+
+    #[getter]
+    fn noise_rad(&self) -> f64 {
+        self.noise
+    }
+
+    /// `J(phases)`, phases in rad, one per group.
+    fn cost(&self, py: Python<'_>, phases: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
+        let p = self.phases(phases)?;
+        Ok(py.detach(|| self.cost.cost(&p)))
+    }
+
+    /// `(J, ∂J/∂phases)`.
+    fn cost_and_gradient<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<(f64, Bound<'py, PyArray1<f64>>)> {
+        let p = self.phases(phases)?;
+        let (j, g) = py.detach(|| self.cost.cost_and_gradient(&p));
+        Ok((j, g.into_pyarray(py)))
+    }
+
+    /// The amplitude scale at `phases` (1 unless `fit_scale`).
+    fn scale(&self, py: Python<'_>, phases: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
+        let p = self.phases(phases)?;
+        Ok(py.detach(|| self.cost.scale(&p)))
+    }
+
+    /// Per image: the kernels of its masked pixels (`diagonal` (n, G), `upper` (n, G(G-1)/2)
+    /// complex, row by row), `measured_rad` (n,) and `offset_rad` (G,).
+    fn terms<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.cost
+            .terms
+            .iter()
+            .map(|t| {
+                let (diag, upper) = t.kernel.kernels_at(&t.mask).map_err(to_py)?;
+                let d = PyDict::new(py);
+                d.set_item("diagonal", diag.into_pyarray(py))?;
+                d.set_item("upper", upper.into_pyarray(py))?;
+                d.set_item("measured_rad", t.measured.clone().into_pyarray(py))?;
+                d.set_item("offset_rad", t.offset.clone().into_pyarray(py))?;
+                Ok(d)
+            })
+            .collect()
     }
 }
 
@@ -590,6 +691,7 @@ fn run_interruptible<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl Fn
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CoreSimulation>()?;
+    m.add_class::<CoreCostModel>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
