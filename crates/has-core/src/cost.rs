@@ -436,6 +436,75 @@ mod tests {
         assert!(k.kernels_at(&[2]).is_err());
     }
 
+    /// Pseudo-random numbers in [-1, 1) (a fixed linear congruential sequence).
+    fn numbers(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn cost_and_gradient_match_dense_hermitian_forms_with_any_thread_count() {
+        // 40 groups x 300 pixels = 234 000 multiply-adds: above PARALLEL_WORK, so the pixels are
+        // split across threads. The reference builds each pixel's dense G x G Hermitian K_i and
+        // evaluates d_i = v^H K_i v and ∂J/∂phi = Σ_i 2 r_i · 2 Im(conj(v) ∘ K_i v) directly.
+        let (g, n_pix) = (40, 300);
+        let n_up = g * (g - 1) / 2;
+        let diag = numbers(n_pix * g, 1);
+        let (re, im) = (numbers(n_pix * n_up, 2), numbers(n_pix * n_up, 3));
+        let row = Blocked::len(n_up);
+        let mut upper = vec![0.0; n_pix * row];
+        for p in 0..n_pix {
+            for k in 0..n_up {
+                Blocked::set(&mut upper[p * row..(p + 1) * row], k, C64::new(re[p * n_up + k], im[p * n_up + k]));
+            }
+        }
+        assert!(n_pix * n_up >= PARALLEL_WORK);
+        let kernel = std::sync::Arc::new(ArfiKernel { n_groups: g, pixels: [0..15, 0..20], diag: diag.clone(), upper });
+        let measured: Vec<f64> = numbers(n_pix, 4).iter().map(|m| 10.0 * m).collect();
+        let term = Term { kernel, mask: (0..n_pix).collect(), measured: measured.clone(), offset: numbers(g, 5) };
+        let cost = HybridCost::new(vec![term.clone()]).unwrap();
+        let phases = numbers(g, 6).iter().map(|p| 3.0 * p).collect::<Vec<_>>();
+
+        let v: Vec<C64> = phases.iter().zip(&term.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
+        let (mut j_ref, mut grad_ref) = (0.0, vec![0.0; g]);
+        for p in 0..n_pix {
+            let mut k_mat = vec![C64::new(0.0, 0.0); g * g];
+            let mut q = 0;
+            for a in 0..g {
+                k_mat[a * g + a] = C64::new(diag[p * g + a], 0.0);
+                for b in a + 1..g {
+                    let c = C64::new(re[p * n_up + q], im[p * n_up + q]);
+                    (k_mat[a * g + b], k_mat[b * g + a]) = (c, c.conj());
+                    q += 1;
+                }
+            }
+            let kv: Vec<C64> = (0..g).map(|a| (0..g).map(|b| k_mat[a * g + b] * v[b]).sum()).collect();
+            let d: f64 = (0..g).map(|a| (v[a].conj() * kv[a]).re).sum();
+            let r = d - measured[p];
+            j_ref += r * r;
+            for a in 0..g {
+                grad_ref[a] += 2.0 * r * 2.0 * (v[a].conj() * kv[a]).im;
+            }
+        }
+
+        let run =
+            |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cost.cost_and_gradient(&phases));
+        let (j1, grad1) = run(1);
+        let (j2, grad2) = run(2);
+        assert_eq!(j1.to_bits(), j2.to_bits());
+        assert!(grad1.iter().zip(&grad2).all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert_eq!(cost.cost(&phases).to_bits(), j1.to_bits());
+        // Sums of ~800 terms of size ~1 in another order: agreement to 1e-10 relative.
+        assert!((j1 - j_ref).abs() <= 1e-10 * j_ref, "{j1} vs {j_ref}");
+        let norm = grad_ref.iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!(grad1.iter().zip(&grad_ref).all(|(a, b)| (a - b).abs() <= 1e-10 * norm));
+    }
+
     #[test]
     fn upper_index_enumerates_pairs_in_order() {
         let g = 5;
