@@ -101,3 +101,15 @@ def test_estimate_per_element_on_a_small_array(tmp_path):
                        (["--groups", "200"], "groups: 200 groups")):
         r = run("estimate", "--scenario", str(scen), "--image", str(image), *bad)
         assert r.returncode == 2 and match in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_every_verb_has_help_with_an_example(capsys):
+    from arfi.cli import build_parser
+
+    verbs = list(build_parser()._subparsers._group_actions[0].choices)  # type: ignore[union-attr]
+    assert {"scenario", "field", "dicom", "simulate", "calibrate", "estimate", "diagnose", "reproduce"} <= set(verbs)
+    for verb in verbs:
+        with pytest.raises(SystemExit) as e:
+            main([verb, "--help"])
+        text = capsys.readouterr().out
+        assert e.value.code == 0 and f"example: arfi {verb} " in text and "--json" in text, verb
