@@ -109,6 +109,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         sidecar["applied_phases_rad"] = known
     write_arfi_image(out, image, sim.mr_affine_mm, sim.mr_volume_shape, sidecar)
     peak, pos = image_peak(sim, image)
+    if args.report:
+        from arfi.report import image_report
+
+        image_report(args.report, sim, "simulate", image, {"out": out, "focal_arfi_rad": peak, "noise_rad": noise, "seed": args.seed},
+                     total)
     print(
         f"simulate: {image.shape[0]} x {image.shape[1]} MR-ARFI image, focal ARFI phase {peak:.3f} rad at "
         f"({pos[0]:.1f}, {pos[1]:.1f}, {pos[2]:.1f}) mm, noise {noise:g} rad -> {out}"
@@ -164,6 +169,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     sim = Simulation(_scenario(args))
     image, known = _read_image(sim, args.image)
     c = sim.calibrate(image, known, args.max_width_mm)
+    if args.report:
+        from arfi.report import fit_report
+
+        model = sim.with_calibration(c.broadening_width_mm, c.amplitude).arfi_image(known)
+        fit_report(args.report, sim, "calibrate", image, model, {"image": args.image, **c.to_dict()})
     print(f"calibrate: broadening width W = {c.broadening_width_mm:.3f} mm, amplitude {c.amplitude:.4e} rad·m³/N "
           f"({c.n_pixels} pixels, noise {c.noise_rad:.4f} rad)")
     _finish(args, {**c.to_dict(), "scenario": sim.scenario.name, "frequency_hz": sim.scenario.to_dict()["frequency_hz"],
@@ -197,6 +207,13 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         with_atomic_npy(args.out_phases, e.phases_rad)
     if args.suggest:
         with_atomic_npy(args.suggest, e.suggested_phases_rad)
+    if args.report:
+        from arfi.report import fit_report
+
+        image, known = pairs[0]
+        model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
+        fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
+                   "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
     _finish(args, {**e.to_dict(), "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
     return 0
 
@@ -299,6 +316,22 @@ def cmd_dicom(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from arfi.sweep import run_sweep, trials, write_results
+
+    points = trials(args.noise_levels, args.images, args.methods, args.seeds, args.case, args.seed)
+    scenario = Scenario.load(args.scenario) if args.scenario else None
+    t = time.perf_counter()
+    rows = run_sweep(points, scenario, args.scheduler, args.workers)
+    result = write_results(rows, Path(args.out))
+    for s in result["summary"]:
+        print(f"sweep: {s['method']:>11}, {s['images']} image(s), noise {s['noise_rad']:g} rad: recovered "
+              f"{s['recovered_fraction_mean']:.2f} ± {s['recovered_fraction_std']:.2f} ({s['trials']} trials)")
+    print(f"sweep: {len(rows)} trials in {time.perf_counter() - t:.0f} s -> {args.out}/sweep.csv, summary.csv, sweep.png")
+    _finish(args, {**result, "seconds": time.perf_counter() - t})
+    return 0
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the embedded phantom experiment)")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
@@ -340,6 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--out", required=True, metavar="M.nii.gz")
+    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
     p.set_defaults(run=cmd_simulate)
 
     p = sub.add_parser("dicom", help="MR-ARFI image (NIfTI) from the scanner's two phase series (DICOM)",
@@ -369,6 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--image", required=True, metavar="C.nii.gz")
     p.add_argument("--max-width-mm", type=float, default=10.0, dest="max_width_mm", help="largest W searched (default 10)")
+    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad) and report.html to DIR")
     p.set_defaults(run=cmd_calibrate)
 
     p = sub.add_parser("estimate", help="hybrid estimation of the phase aberration",
@@ -394,6 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fit a free amplitude scale too (absorbs a uniform focal loss)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
+    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
     p.set_defaults(run=cmd_estimate)
 
     p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing (SPEC §7)",
@@ -413,6 +449,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit-s", type=float, dest="time_limit_s",
                    help="stop after this many seconds and report the effects added so far")
     p.set_defaults(run=cmd_diagnose)
+
+    p = sub.add_parser("sweep", help="Monte-Carlo study on dask.distributed: noise x images x methods x seeds",
+                       description="Run the paper's study (calibrate, estimate, correct) for every combination of ARFI noise "
+                       "level, number of images (the aberrated one plus diversity images with seeded random known group "
+                       "phases), estimator and seed, on a dask.distributed cluster: a local one by default, or an existing "
+                       "one with --scheduler (its workers need arfi installed). Writes sweep.csv (one row per trial: "
+                       "recovered_fraction, gain, phase_error_rad, ambiguous, ...), summary.csv and sweep.png (recovered "
+                       "fraction against noise and images).",
+                       epilog="example: arfi sweep --noise-rad 0.01 0.02 0.05 --images 1 2 3 --methods lbfgs --seeds 5 --out sweep")
+    _add_common(p)
+    p.add_argument("--noise-rad", dest="noise_levels", type=float, nargs="+", default=[0.02], metavar="S",
+                   help="ARFI noise levels (rad; default 0.02)")
+    p.add_argument("--images", type=int, nargs="+", default=[1], metavar="K", help="images per trial (default 1, the paper's)")
+    p.add_argument("--methods", nargs="+", default=["lbfgs"], metavar="M", help="nelder-mead, pso, lbfgs (default lbfgs)")
+    p.add_argument("--seeds", type=int, default=3, help="trials per combination (seeds --seed, --seed+1, ...; default 3)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--case", type=int, choices=[16, 1024], default=16, help="16 group or 1024 element aberrations (default 16)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per CPU)")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(run=cmd_sweep)
 
     p = sub.add_parser("reproduce", help="re-run the paper's study in simulation (Table 1, Figures 2-10, HTML)",
                        description="Re-run the paper's phantom study in simulation with seeded skull-like aberrations: "

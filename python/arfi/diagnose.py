@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import base64
 import html
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,7 +67,7 @@ class Diagnosis:
         the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
         self-contained ``report.html``; returns the HTML path."""
         from arfi.io import atomic_write_text
-        from arfi.reproduce import _extent, _save
+        from arfi.report import axis_labels, figure_html, image_extent_mm, save_figure
 
         import matplotlib
 
@@ -82,7 +81,7 @@ class Diagnosis:
         for k, e in enumerate(self.effects):
             nxt = self.effects[k + 1]["candidates"] if k + 1 < len(self.effects) else self.rejected
             stages.append((f"after adding {e['name']}", e["models"], nxt))
-        ext = _extent(sim, images[0])
+        ext = image_extent_mm(sim, images[0])
         lim = max(float(np.max(np.abs(images[0]))), 1e-12)
         for k, (title, models, candidates) in enumerate(stages):
             residual = images[0] - models[0]
@@ -90,7 +89,7 @@ class Diagnosis:
             for a, img, name, vmax in ((ax[0], images[0], "measured", lim), (ax[1], models[0], "model", lim),
                                        (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12))):
                 im = a.imshow(img.T, origin="lower", extent=ext, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
-                a.set(title=name, xlabel="x (mm)", ylabel="y (mm)")
+                a.set(title=name, **axis_labels(sim))
                 fig.colorbar(im, ax=a, label="ARFI phase (rad)")
             rms = float(np.sqrt(np.mean(residual ** 2)))
             ax[2].set_title(f"residual (RMS {rms:.4f} rad, noise {self.noise_floor:.4f} rad)")
@@ -101,7 +100,7 @@ class Diagnosis:
             ax[3].set(xlabel="evidence (BIC gain / sigma²)", title="next candidates" if k < len(stages) - 1 else "rejected")
             ax[3].set_xscale("symlog")
             fig.suptitle(f"step {k}: {title}")
-            figures.append((f"step {k}: {title}", _save(fig, out / f"diagnose_step{k}.png")))
+            figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
         fig, ax = plt.subplots(figsize=(6, 3.8))
         rms = [self.residual_rms_initial] + [e["residual_rms_after"] for e in self.effects]
         ax.plot(range(len(rms)), rms, "o-", label="residual RMS")
@@ -109,15 +108,13 @@ class Diagnosis:
         ax.set_xticks(range(len(rms)), ["model"] + [f"+{e['name']}" for e in self.effects], rotation=20)
         ax.set(ylabel="rad", title="the gap shrinking")
         ax.legend()
-        figures.append(("gap", _save(fig, out / "diagnose_gap.png")))
+        figures.append(("gap", save_figure(fig, out / "diagnose_gap.png")))
         rows = "".join(
             f"<tr><td>{k}</td><td>{html.escape(e['name'])}</td><td>{html.escape(_params(e['params']))}</td>"
             f"<td>{e['cost_before']:.4g}</td><td>{e['cost_after']:.4g}</td><td>{e['evidence']:.1f}</td>"
             f"<td>{e['residual_rms_after']:.4f}</td><td>{html.escape(', '.join(e['equivalent']) or '-')}</td></tr>"
             for k, e in enumerate(self.effects, 1))
-        imgs = "".join(
-            f"<figure><img src='data:image/png;base64,{base64.b64encode((out / name).read_bytes()).decode()}' "
-            f"alt='{html.escape(cap)}'><figcaption>{html.escape(cap)}</figcaption></figure>" for cap, name in figures)
+        imgs = figure_html(out, figures)
         verdict = ("no effect missing: the residual is consistent with the noise" if not self.effects
                    else "effects added: " + ", ".join(self.names))
         page = f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi diagnose</title>

@@ -10,10 +10,8 @@ ones the method sees.
 
 from __future__ import annotations
 
-import base64
 import datetime as _dt
 import html
-import io
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -22,9 +20,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from arfi.estimation import Estimate, gain, phase_error, recovered_fraction
-from arfi.io import atomic_path, atomic_write_text, write_json
+from arfi.estimation import gain, phase_error, recovered_fraction
+from arfi.io import atomic_write_text, write_json
 from arfi.loop import loop2
+from arfi.report import figure_html, image_extent_mm, save_figure
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -61,6 +60,27 @@ def _progress(enabled: bool) -> Callable[[str], None]:
     return say
 
 
+def study_aberration(sim: Simulation, case: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seeded skull-like aberration of one repeat: per element, condensed to the groups, and
+    the one applied (the group phases on their elements for case 16, the element phases for 1024)."""
+    elements = sim.skull_phases(seed)
+    groups_truth = sim.condense(elements)
+    return elements, groups_truth, groups_truth[sim.groups] if case == 16 else elements
+
+
+def study_images(sim: Simulation, applied: np.ndarray, noise: float, seed: int, diversity: int) -> tuple[list[np.ndarray], list[Any]]:
+    """The noisy aberrated image of one repeat and ``diversity`` more, each with seeded random
+    known group phases added; returns (images, known phases or None per image)."""
+    images: list[np.ndarray] = [sim.arfi_image(applied, noise_rad=noise, seed=20_000 + seed)]
+    known: list[Any] = [None]
+    rng = np.random.default_rng(40_000 + seed)
+    for k in range(diversity):
+        d = rng.uniform(-np.pi, np.pi, sim.n_groups)
+        images.append(sim.arfi_image(applied + d[sim.groups], noise_rad=noise, seed=50_000 + 100 * seed + k))
+        known.append(d)
+    return images, known
+
+
 def run_study(case: int, repeats: int, out: Path, seed: int = 0, method: str = "nelder-mead",
               noise_rad: float | None = None, diversity: int = 0, loop2_iterations: int = 0,
               progress: bool | None = None) -> dict[str, Any]:
@@ -90,17 +110,10 @@ def run_study(case: int, repeats: int, out: Path, seed: int = 0, method: str = "
         say(f"repeat {r + 1}/{repeats}: calibrating")
         cal = sim.calibrate(sim.arfi_image(noise_rad=noise, seed=10_000 + s))
         model = sim.with_calibration(cal.broadening_width_mm, cal.amplitude)
-        elements = sim.skull_phases(s)
-        groups_truth = sim.condense(elements)
-        applied = groups_truth[sim.groups] if case == 16 else elements
-        measured = sim.arfi_image(applied, noise_rad=noise, seed=20_000 + s)
+        elements, groups_truth, applied = study_aberration(sim, case, s)
         say(f"repeat {r + 1}/{repeats}: estimating ({method})")
-        images, known = [measured], [None]
-        rng = np.random.default_rng(40_000 + s)
-        for k in range(diversity):
-            d = rng.uniform(-np.pi, np.pi, sim.n_groups)
-            images.append(sim.arfi_image(applied + d[sim.groups], noise_rad=noise, seed=50_000 + 100 * s + k))
-            known.append(d)
+        images, known = study_images(sim, applied, noise, s, diversity)
+        measured = images[0]
         if loop2_iterations:
             count = [0]
 
@@ -159,25 +172,6 @@ def _write_table(path: Path, rows: list[Row]) -> None:
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _save(fig: Any, path: Path) -> str:
-    import matplotlib.pyplot as plt
-
-    if fig.get_layout_engine() is None:
-        fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
-    plt.close(fig)
-    return path.name
-
-
-def _extent(sim: Simulation, image: np.ndarray) -> list[float]:
-    a = sim.mr_affine_mm
-    nu, nv = image.shape
-    x0, y0 = a[0, 3], a[1, 3]
-    dx, dy = a[0, 0], a[1, 1]
-    return [x0 - dx / 2, x0 + (nu - 0.5) * dx, y0 - dy / 2, y0 + (nv - 0.5) * dy]
-
-
 def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, Any]], ideal: np.ndarray,
              out: Path, method: str) -> dict[str, str]:
     import matplotlib
@@ -187,8 +181,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
 
     figs: dict[str, str] = {}
     run0 = runs[0]
-    est0: Estimate = run0["estimate"]
-    ext = _extent(sim, ideal)
+    ext = image_extent_mm(sim, ideal)
     zoom = 20.0
     a = sim.mr_affine_mm
     xs = a[0, 3] + a[0, 0] * np.arange(ideal.shape[0])
@@ -212,7 +205,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     ax[1, 1].set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="normalised", title="(d) with Gaussian filtering")
     for k in range(2):
         ax[1, k].legend()
-    figs["fig2"] = _save(fig, out / "fig2_calibration.png")
+    figs["fig2"] = save_figure(fig, out / "fig2_calibration.png")
 
     # Figure 3: optimisation example — noise-free image, estimated vs applied group phases.
     truth = sim.condense(sim.skull_phases(999))
@@ -227,7 +220,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     ax[1].plot(g, ex.phases_rad, "rx--", label=f"estimated ({method})")
     ax[1].set(xlabel="group", ylabel="phase (rad)", title=f"(b) phase error {phase_error(ex.phases_rad, truth):.3f} rad")
     ax[1].legend()
-    figs["fig3"] = _save(fig, out / "fig3_optimisation_example.png")
+    figs["fig3"] = save_figure(fig, out / "fig3_optimisation_example.png")
 
     # Figure 4c/d: the applied aberration on the element map.
     pos = sim.element_positions_mm
@@ -236,7 +229,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
         sc = ax[k].scatter(pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s")
         ax[k].set(aspect="equal", xlabel="x (mm)", ylabel="y (mm)", title=title)
         fig.colorbar(sc, ax=ax[k], label="phase (rad)")
-    figs["fig4"] = _save(fig, out / "fig4_aberrations.png")
+    figs["fig4"] = save_figure(fig, out / "fig4_aberrations.png")
 
     # Figure 5: simulated radiation force in the plane containing the beam (x-z), normalised to ideal.
     xz = Scenario.default().to_dict()
@@ -251,7 +244,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
         cs = ax[k].contourf(p / pats[0].max(), levels=np.linspace(0, 1, 11), extent=zext, cmap="viridis")
         ax[k].set(xlabel="z, along the beam (mm)", ylabel="x (mm)", title=title)
     fig.colorbar(cs, ax=list(ax), label="radiation force / ideal maximum")
-    figs["fig5"] = _save(fig, out / "fig5_beam_patterns.png")
+    figs["fig5"] = save_figure(fig, out / "fig5_beam_patterns.png")
 
     # Figure 6: ideal, aberrated and corrected MR-ARFI images (what the scanner would show).
     vmax = float(ideal.max())
@@ -261,7 +254,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
         im = ax[k].imshow(img.T, origin="lower", extent=ext, cmap="viridis", vmin=-0.05, vmax=vmax)
         ax[k].set(xlim=(-zoom, zoom), ylim=(-zoom, zoom), xlabel="x (mm)", ylabel="y (mm)", title=title)
         fig.colorbar(im, ax=ax[k], label="ARFI phase (rad)")
-    figs["fig6"] = _save(fig, out / "fig6_images.png")
+    figs["fig6"] = save_figure(fig, out / "fig6_images.png")
 
     # Figure 7: transverse focal profiles.
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -270,7 +263,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     ax.plot(xs, run0["corrected"][:, jy], "k-", label="corrected")
     ax.set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="ARFI phase (rad)", title="transverse focal profile")
     ax.legend()
-    figs["fig7"] = _save(fig, out / "fig7_profiles.png")
+    figs["fig7"] = save_figure(fig, out / "fig7_profiles.png")
 
     # Figure 8: convergence.
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -279,7 +272,7 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
         ax.semilogy(np.arange(1, len(h) + 1), h, label=f"repeat {k + 1}")
     ax.set(xlabel="cost evaluation", ylabel="best cost J (rad²)", title=f"convergence ({method})")
     ax.legend()
-    figs["fig8"] = _save(fig, out / "fig8_convergence.png")
+    figs["fig8"] = save_figure(fig, out / "fig8_convergence.png")
 
     # Figure 9: applied vs estimated phases.
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -293,14 +286,14 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     ax.plot(np.arange(len(t0)) + 0.5, c0, "rx--", label="estimated (the correction applied)")
     ax.set(xlabel="group", ylabel="phase (rad)", title=f"phase error {rows[0].phase_error_rad:.2f} rad")
     ax.legend()
-    figs["fig9"] = _save(fig, out / "fig9_phases.png")
+    figs["fig9"] = save_figure(fig, out / "fig9_phases.png")
 
     # Figure 10: focal ARFI, mean ± s.d. over repeats.
     vals = np.array([[r.focal_ideal_rad, r.focal_aberrated_rad, r.focal_corrected_rad] for r in rows])
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.bar(["ideal", "aberrated", "corrected"], vals.mean(axis=0), yerr=vals.std(axis=0), color=["0.8", "0.5", "0.2"], capsize=5)
     ax.set(ylabel="focal ARFI phase (rad)", title=f"{case}-aberration, {len(rows)} repeats")
-    figs["fig10"] = _save(fig, out / "fig10_focal.png")
+    figs["fig10"] = save_figure(fig, out / "fig10_focal.png")
     return figs
 
 
@@ -315,10 +308,7 @@ def _html(summary: dict[str, Any], out: Path) -> str:
 
     table = "<tr>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr>\n" + "\n".join(
         "<tr>" + "".join(f"<td>{fmt(r[c])}</td>" for c in cols) + "</tr>" for r in rows)
-    imgs = []
-    for key, name in summary["figures"].items():
-        data = base64.b64encode((out / name).read_bytes()).decode()
-        imgs.append(f"<figure><img src='data:image/png;base64,{data}' alt='{key}'><figcaption>{html.escape(name)}</figcaption></figure>")
+    imgs = figure_html(out, [(name, name) for name in summary["figures"].values()])
     p = summary["paper"]
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi reproduce: {summary['case']}-aberration</title>
 <style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
@@ -331,5 +321,5 @@ method itself flags: clearly different solutions fit that image within the noise
 <p>Mean recovered fraction <b>{summary['mean_recovered_fraction']:.2f}</b> (paper {p['recovered_fraction']}), mean gain
 <b>{summary['mean_gain']:+.0%}</b> (paper {p['gain']:+.0%}), mean phase error <b>{summary['mean_phase_error_rad']:.2f} rad</b>
 (paper {p['phase_error_rad']} rad). Focal values are taken on noise-free simulated images.</p>
-<h2>Table 1</h2><table>{table}</table><h2>Figures</h2>{''.join(imgs)}</body></html>
+<h2>Table 1</h2><table>{table}</table><h2>Figures</h2>{imgs}</body></html>
 """

@@ -190,6 +190,11 @@ class Simulation:
         return self._core.mr_affine_mm
 
     @property
+    def mr_plane(self) -> str:
+        """The MR image plane: ``"xy"``, ``"xz"`` or ``"yz"`` (image axes u, v in that order)."""
+        return str(self._core.mr_plane)
+
+    @property
     def mr_volume_shape(self) -> tuple[int, int, int]:
         return tuple(self._core.mr_volume_shape)
 

@@ -113,3 +113,32 @@ def test_every_verb_has_help_with_an_example(capsys):
             main([verb, "--help"])
         text = capsys.readouterr().out
         assert e.value.code == 0 and f"example: arfi {verb} " in text and "--json" in text, verb
+
+
+def test_reports_of_simulate_calibrate_and_estimate(tmp_path):
+    phases = tmp_path / "ab.npy"
+    np.save(phases, np.random.default_rng(3).uniform(-2, 2, 16))
+    image = tmp_path / "a.nii.gz"
+    assert main(["simulate", "--phases", str(phases), "--out", str(image), "--report", str(tmp_path / "sim")]) == 0
+    assert main(["calibrate", "--image", str(image), "--report", str(tmp_path / "cal")]) == 0
+    assert main(["estimate", "--image", str(image), "--method", "lbfgs", "--report", str(tmp_path / "est")]) == 0
+    expected = {"sim": ["simulate.png"], "cal": ["calibrate_images.png"], "est": ["estimate_images.png", "estimate_elements.png"]}
+    for folder, pngs in expected.items():
+        page = (tmp_path / folder / "report.html").read_text()
+        # Self-contained: every figure embedded, none linked.
+        assert page.count("data:image/png;base64,") == len(pngs) and "src='" + pngs[0] not in page
+        for png in pngs:
+            assert (tmp_path / folder / png).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_image_axes_follow_the_mr_plane():
+    from types import SimpleNamespace
+
+    from arfi.report import axis_labels, image_extent_mm
+
+    a = np.eye(4)
+    a[0, 0], a[2, 2], a[0, 3], a[2, 3] = 2.0, 0.5, -10.0, 80.0  # xz image: u along x, v along z
+    sim = SimpleNamespace(mr_plane="xz", mr_affine_mm=a)
+    assert axis_labels(sim) == {"xlabel": "x (mm)", "ylabel": "z (mm)"}
+    # Pixel edges: first centre minus half a pixel, last centre plus half a pixel.
+    assert image_extent_mm(sim, np.zeros((11, 41))) == [-11.0, 11.0, 79.75, 100.25]

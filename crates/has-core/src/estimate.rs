@@ -1,7 +1,7 @@
 //! Hybrid estimation of the phase aberration (paper loop 1, and its multi-image extension).
 //!
 //! Estimators are values configured with validated `with_*` builders and run through argmin on
-//! the [`HybridCost`]: Nelder–Mead (the paper's), particle swarm, and multi-start L-BFGS with
+//! the [`HybridCost`](crate::cost::HybridCost): Nelder–Mead (the paper's), particle swarm, and multi-start L-BFGS with
 //! the analytic gradient, on any [`Objective`] (group kernels or the per-element basis). The common phase is unobservable, so group 0 is held at zero during
 //! the search; reported phases have zero circular mean. Every run has an evaluation limit and an
 //! optional time limit; a non-finite cost is replaced by a large finite penalty.

@@ -1,0 +1,37 @@
+"""Progress on a terminal, silence in pipes and CI (SPEC §5)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+
+class Progress:
+    """A one-line bar, ``label [#####.....] done/total unit, elapsed``, redrawn in place on
+    ``stream`` (stderr) when that is a terminal; with ``enabled=False``, or when the stream is not
+    a terminal, nothing is written."""
+
+    WIDTH = 30
+
+    def __init__(self, label: str, total: int, unit: str = "", enabled: bool | None = None, stream: TextIO | None = None):
+        self.label, self.total, self.unit = label, max(int(total), 0), unit
+        self.stream = sys.stderr if stream is None else stream
+        self.enabled = self.stream.isatty() if enabled is None else bool(enabled)
+        self.start = time.perf_counter()
+        self.done = 0
+
+    def update(self, done: int) -> None:
+        """Shows ``done`` of ``total``; the line ends once all are done."""
+        self.done = min(int(done), self.total)
+        if not self.enabled:
+            return
+        filled = self.WIDTH * self.done // self.total if self.total else self.WIDTH
+        bar = "#" * filled + "." * (self.WIDTH - filled)
+        unit = f" {self.unit}" if self.unit else ""
+        end = "\n" if self.done >= self.total else ""
+        self.stream.write(f"\r{self.label} [{bar}] {self.done}/{self.total}{unit}, {time.perf_counter() - self.start:.0f} s{end}")
+        self.stream.flush()
+
+    def advance(self, n: int = 1) -> None:
+        self.update(self.done + n)

@@ -1,0 +1,133 @@
+"""Figures (PNG) and self-contained HTML reports: MR-ARFI images with axes in mm on the scenario's
+MR plane and colour bars in rad, and the transducer's element map coloured by phase (as the
+paper's Figure 4c/4d)."""
+
+from __future__ import annotations
+
+import base64
+import html
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from arfi.io import atomic_path, atomic_write_text
+
+STYLE = ("body{font-family:sans-serif;max-width:1300px;margin:auto}table{border-collapse:collapse}"
+         "td,th{border:1px solid #999;padding:3px 6px}img{max-width:100%}")
+
+
+def pyplot() -> Any:
+    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: Path) -> str:
+    """Writes ``fig`` as PNG (atomically), closes it and returns the file name."""
+    plt = pyplot()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
+    plt.close(fig)
+    return path.name
+
+
+def image_extent_mm(sim: Any, image: NDArray[np.float64]) -> list[float]:
+    """``imshow`` extent (mm) of an MR image shown as ``image.T`` with ``origin="lower"``: its u
+    axis across, v axis up (the frame axes of the scenario's MR plane)."""
+    a = sim.mr_affine_mm
+    u, v = ("xyz".index(c) for c in sim.mr_plane)
+    nu, nv = image.shape
+    du, dv = a[u, u], a[v, v]
+    return [a[u, 3] - du / 2, a[u, 3] + (nu - 0.5) * du, a[v, 3] - dv / 2, a[v, 3] + (nv - 0.5) * dv]
+
+
+def axis_labels(sim: Any) -> dict[str, str]:
+    """``xlabel``/``ylabel`` for images of the scenario's MR plane."""
+    return {"xlabel": f"{sim.mr_plane[0]} (mm)", "ylabel": f"{sim.mr_plane[1]} (mm)"}
+
+
+def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: str, signed: bool = False) -> None:
+    """An MR-ARFI phase image (rad) on its plane, axes in mm, with a colour bar in rad;
+    ``signed`` centres the colour map on zero (residuals)."""
+    lim = max(float(np.max(np.abs(image))), 1e-12)
+    kw = {"cmap": "RdBu_r", "vmin": -lim, "vmax": lim} if signed else {"cmap": "viridis"}
+    im = ax.imshow(image.T, origin="lower", extent=image_extent_mm(sim, image), **kw)
+    ax.set(title=title, **axis_labels(sim))
+    fig.colorbar(im, ax=ax, label="ARFI phase (rad)")
+
+
+def element_map(fig: Any, ax: Any, sim: Any, phases: Sequence[float], title: str) -> None:
+    """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π]);
+    ``phases`` per element or per group."""
+    per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
+    pos = sim.element_positions_mm
+    sc = ax.scatter(pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * per_element)), cmap="twilight", vmin=-np.pi, vmax=np.pi,
+                    s=9, marker="s")
+    ax.set(title=title, xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
+    fig.colorbar(sc, ax=ax, label="phase (rad)")
+
+
+def figure_html(out: Path, figures: Sequence[tuple[str, str]]) -> str:
+    """``<figure>`` elements with the PNGs (``(caption, file name in out)``) embedded."""
+    return "".join(
+        f"<figure><img src='data:image/png;base64,{base64.b64encode((out / name).read_bytes()).decode()}' "
+        f"alt='{html.escape(cap)}'><figcaption>{html.escape(cap)}</figcaption></figure>" for cap, name in figures)
+
+
+def write_html(path: Path, title: str, body: str) -> Path:
+    """One self-contained HTML page."""
+    atomic_write_text(path, f"<!doctype html><html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+                            f"<style>{STYLE}</style></head>\n<body><h1>{html.escape(title)}</h1>\n{body}</body></html>\n")
+    return path
+
+
+def table_html(rows: dict[str, Any]) -> str:
+    """A two-column table of named values."""
+    def fmt(v: Any) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
+
+    return "<table>" + "".join(f"<tr><th>{html.escape(k)}</th><td>{fmt(v)}</td></tr>" for k, v in rows.items()) + "</table>"
+
+
+def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
+               values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
+    """Report of a fit (``calibrate``, ``estimate``, ``simulate``): the measured image, the model,
+    their residual and, with ``phases`` (rad, the estimated aberration), the element maps of the
+    aberration and of its correction (paper Fig. 4c/4d). ``values`` go in a table."""
+    plt = pyplot()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
+    show_image(fig, ax[0], sim, measured, "measured")
+    show_image(fig, ax[1], sim, model, "model")
+    residual = measured - model
+    show_image(fig, ax[2], sim, residual, f"residual (RMS {float(np.sqrt(np.mean(residual ** 2))):.4f} rad)", signed=True)
+    figures = [("measured, model and residual MR-ARFI images", save_figure(fig, out / f"{verb}_images.png"))]
+    if phases is not None:
+        fig, ax = plt.subplots(1, 2, figsize=(11, 4.6))
+        element_map(fig, ax[0], sim, phases, "estimated aberration")
+        element_map(fig, ax[1], sim, -np.asarray(phases), "correction (subtracted)")
+        figures.append(("element maps coloured by phase", save_figure(fig, out / f"{verb}_elements.png")))
+    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
+
+
+def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],
+                 phases: Sequence[float] | None = None) -> Path:
+    """Report of a simulated image, with the element map of the phases added to the steering."""
+    plt = pyplot()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 2 if phases is not None else 1, figsize=(11 if phases is not None else 6, 4.4), squeeze=False)
+    show_image(fig, ax[0][0], sim, image, "MR-ARFI image")
+    if phases is not None:
+        element_map(fig, ax[0][1], sim, phases, "phases added to the steering")
+    figures = [("simulated image", save_figure(fig, out / f"{verb}.png"))]
+    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))

@@ -1,0 +1,191 @@
+"""``arfi sweep``: Monte-Carlo studies of the hybrid estimate on a dask.distributed cluster.
+
+Every trial is one repeat of the paper's study (``arfi.reproduce``) at one noise level, number
+of images (the aberrated one plus diversity images with seeded random known group phases),
+estimator and seed: calibrate on a noisy no-aberration image, estimate, correct, and score the
+corrected focus with the SPEC §6 metrics on noise-free images. Trials are independent and fully
+seeded, so a result does not depend on which worker ran it, nor on how many threads it had.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import os
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from arfi.estimation import gain, phase_error, recovered_fraction
+from arfi.io import atomic_path, atomic_write_text, write_json
+from arfi.progress import Progress
+from arfi.reproduce import study_aberration, study_images
+from arfi.scenario import Scenario
+from arfi.simulation import Simulation
+
+METHODS = ("nelder-mead", "pso", "lbfgs")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One point of the sweep."""
+
+    noise_rad: float
+    images: int
+    """Images fitted jointly: the aberrated one and ``images - 1`` diversity images."""
+    method: str
+    seed: int
+    case: int = 16
+    """16 group aberrations or 1024 element aberrations (estimated on 16 groups)."""
+
+
+@lru_cache(maxsize=4)
+def _simulation(scenario_toml: str | None) -> Simulation:
+    """One simulation per scenario per process (a worker runs many trials)."""
+    return Simulation(None if scenario_toml is None else Scenario.from_toml(scenario_toml))
+
+
+def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
+    """Runs one trial (in whatever process calls it) and returns its row."""
+    sim = _simulation(scenario_toml)
+    s = trial.seed
+    cal = sim.calibrate(sim.arfi_image(noise_rad=trial.noise_rad, seed=10_000 + s))
+    model = sim.with_calibration(cal.broadening_width_mm, cal.amplitude)
+    _, groups_truth, applied = study_aberration(sim, trial.case, s)
+    images, known = study_images(sim, applied, trial.noise_rad, s, trial.images - 1)
+    est = model.estimate(images, known, method=trial.method, seed=s)
+    focal_ideal = float(sim.arfi_image().max())
+    focal_aberrated = float(sim.arfi_image(applied).max())
+    focal_corrected = float(sim.arfi_image(applied - est.phases_rad[sim.groups]).max())
+    return {
+        **asdict(trial),
+        "recovered_fraction": recovered_fraction(focal_corrected, focal_ideal),
+        "gain": gain(focal_corrected, focal_aberrated),
+        "phase_error_rad": phase_error(est.phases_rad, groups_truth),
+        "ambiguous": bool(est.ambiguous),
+        "evaluations": int(est.evaluations),
+        "seconds": float(est.seconds),
+        "broadening_width_mm": float(cal.broadening_width_mm),
+    }
+
+
+def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: Sequence[str], seeds: int, case: int = 16,
+           first_seed: int = 0) -> list[Trial]:
+    """Every combination, checked (ValueError naming the parameter)."""
+    if not noise_levels or any(not (np.isfinite(n) and n >= 0) for n in noise_levels):
+        raise ValueError(f"noise_rad: need finite levels >= 0, got {list(noise_levels)}")
+    if not image_counts or any(not 1 <= int(k) <= 33 for k in image_counts):
+        raise ValueError(f"images: need counts between 1 and 33, got {list(image_counts)}")
+    if not methods or any(m not in METHODS for m in methods):
+        raise ValueError(f"methods: each must be one of {', '.join(METHODS)}, got {list(methods)}")
+    if not 1 <= seeds <= 10_000:
+        raise ValueError(f"seeds: must be between 1 and 10000, got {seeds}")
+    if case not in (16, 1024):
+        raise ValueError(f"case: must be 16 or 1024, got {case}")
+    return [Trial(float(n), int(k), m, first_seed + s, case)
+            for n, k, m, s in itertools.product(noise_levels, image_counts, methods, range(seeds))]
+
+
+def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
+    """A client on the cluster at ``scheduler``, or on a new local cluster of ``workers``
+    single-threaded worker processes (each runs arfi on one thread: trials are the parallelism)."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s"), None
+        except (OSError, TimeoutError) as e:
+            raise ValueError(f"scheduler: cannot connect to {scheduler} ({e})") from None
+    if not 1 <= workers <= 256:
+        raise ValueError(f"workers: must be between 1 and 256, got {workers}")
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           env={"RAYON_NUM_THREADS": "1"})
+    return Client(cluster), cluster
+
+
+def run_sweep(points: Sequence[Trial], scenario: Scenario | None = None, scheduler: str | None = None, workers: int | None = None,
+              progress: bool | None = None) -> list[dict[str, Any]]:
+    """Runs the trials on dask.distributed (an existing cluster at ``scheduler``, or a local one)
+    and returns their rows in the order of ``points``."""
+    from dask.distributed import as_completed
+
+    toml = None if scenario is None else scenario.to_toml()
+    client, cluster = _client(scheduler, workers or os.cpu_count() or 1)
+    bar = Progress("sweep", len(points), "trials", enabled=progress)
+    try:
+        futures = client.map(run_trial, list(points), scenario_toml=toml, pure=False)
+        index = {f.key: k for k, f in enumerate(futures)}
+        rows: list[dict[str, Any] | None] = [None] * len(points)
+        for f in as_completed(futures):
+            rows[index[f.key]] = f.result()
+            bar.advance()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return [r for r in rows if r is not None]
+
+
+def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Mean and standard deviation of the metrics per (method, images, noise)."""
+    groups: dict[tuple[str, int, float], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["method"], r["images"], r["noise_rad"]), []).append(r)
+    out = []
+    for (method, images, noise), rs in sorted(groups.items()):
+        rec = np.array([r["recovered_fraction"] for r in rs])
+        out.append({"method": method, "images": images, "noise_rad": noise, "trials": len(rs),
+                    "recovered_fraction_mean": float(rec.mean()), "recovered_fraction_std": float(rec.std()),
+                    "gain_mean": float(np.mean([r["gain"] for r in rs])),
+                    "phase_error_rad_mean": float(np.mean([r["phase_error_rad"] for r in rs])),
+                    "ambiguous_fraction": float(np.mean([r["ambiguous"] for r in rs]))})
+    return out
+
+
+def _csv(rows: Sequence[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
+    """Recovered fraction against noise, one line per number of images, one panel per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = sorted({s["method"] for s in summary})
+    fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), squeeze=False, sharey=True)
+    for ax, method in zip(axes[0], methods):
+        for images in sorted({s["images"] for s in summary}):
+            pts = sorted((s["noise_rad"], s["recovered_fraction_mean"], s["recovered_fraction_std"]) for s in summary
+                         if s["method"] == method and s["images"] == images)
+            x, y, e = (np.array(v) for v in zip(*pts))
+            ax.errorbar(x, y, yerr=e, marker="o", capsize=3, label=f"{images} image{'s' if images > 1 else ''}")
+        ax.set(title=method, xlabel="ARFI noise σ (rad)", ylim=(0, 1.05))
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("recovered fraction of the ideal focus")
+    axes[0][-1].legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
+    """``sweep.csv`` (one row per trial), ``summary.csv``, ``sweep.png`` and ``sweep.json`` in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarise(rows)
+    atomic_write_text(out / "sweep.csv", _csv(rows))
+    atomic_write_text(out / "summary.csv", _csv(summary))
+    plot(summary, out / "sweep.png")
+    result = {"trials": list(rows), "summary": summary, "files": ["sweep.csv", "summary.csv", "sweep.png"]}
+    write_json(out / "sweep.json", result)
+    return result
