@@ -8,8 +8,8 @@ slices, the number of groups and the number of threads, each configuration in it
   table gives the lengths used); ``Simulation()`` (plan build: one march of the reference beam)
   and ``sim.field()`` (one march over all planes), compared with ``N²·log N`` from 128²;
 - slices: the default grid with ``[grid] step_mm`` 0.68, 0.34, 0.17 mm (189 … ~750 planes);
-- groups: ``Simulation(groups=G)`` for 16, 32, 64, 128 (the most the group kernels take) and, with
-  ``--elements``, 1024 (one per element, the field-basis estimator):
+- groups: ``Simulation(groups=G)`` for 16, 32, 64, 128, 256 (the most the group kernels take)
+  and, with ``--elements``, 1024 (one per element, the field-basis estimator, L-BFGS only):
   the group fields and model, then the time per evaluation of ``sim.estimate``: cost and
   gradient (L-BFGS) and cost alone (Nelder–Mead), the optimiser's own seconds over its
   evaluations;
@@ -17,7 +17,10 @@ slices, the number of groups and the number of threads, each configuration in it
 
 Usage::
 
-    python benches/bench_scaling.py [--repeats 3] [--elements] [--png scaling.png] [--json FILE]
+    python benches/bench_scaling.py [--repeats 3] [--elements] [--parts groups ...] [--png scaling.png] [--json FILE]
+
+``--parts`` runs only some of ``lateral slices groups threads``; with ``--json FILE`` naming an
+existing file, the other parts are kept from it (the table and plot show them all).
 
 Prints Markdown tables with the date and the machine.
 """
@@ -65,7 +68,8 @@ def one(config: dict) -> dict:
     else:  # groups, threads_estimate
         sim = arfi.Simulation(groups=config["groups"])
         image = sim.arfi_image(sim.skull_phases(1), noise_rad=0.02, seed=1)
-        for method, key in (("lbfgs", "gradient"), ("nelder-mead", "cost")):
+        per_element = config["groups"] == sim.n_elements  # Nelder-Mead is not offered per element
+        for method, key in (("lbfgs", "gradient"),) + ((("nelder-mead", "cost"),) if not per_element else ()):
             t = time.perf_counter()
             est = sim.estimate(image, method=method, max_evaluations=config["evaluations"])
             wall = time.perf_counter() - t
@@ -111,7 +115,8 @@ def plot(results: dict, path: Path) -> None:
     ax[1].set(xlabel="planes", ylabel="sim.field() time (s)", title="slices (180 x 180)")
     gr = results["groups"]
     g = [r["groups"] for r in gr]
-    ax[2].loglog(g, [r["cost_per_evaluation_s"] * 1e3 for r in gr], "o-", label="cost (ms)")
+    nm = [r for r in gr if "cost_per_evaluation_s" in r]
+    ax[2].loglog([r["groups"] for r in nm], [r["cost_per_evaluation_s"] * 1e3 for r in nm], "o-", label="cost (ms)")
     ax[2].loglog(g, [r["gradient_per_evaluation_s"] * 1e3 for r in gr], "^-", label="cost + gradient (ms)")
     ax[2].loglog(g, [r["model_s"] for r in gr], "s-", label="group fields + model (s)")
     ax[2].set(xlabel="groups", title="estimation")
@@ -125,10 +130,14 @@ def plot(results: dict, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+PARTS = ("lateral", "slices", "groups", "threads")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--elements", action="store_true", help="also 1024 groups (per element; ~1 min of basis build)")
+    ap.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     ap.add_argument("--png", type=Path, default=Path("scaling.png"))
     ap.add_argument("--json", type=Path)
     ap.add_argument("--one", help=argparse.SUPPRESS)
@@ -137,14 +146,22 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(one(json.loads(args.one))))
         return 0
     rep = args.repeats
-    results: dict = {"date": _dt.date.today().isoformat(), "machine": f"{platform.machine()}, {os.cpu_count()} cpus"}
-    results["lateral"] = [run({"kind": "lateral", "repeats": rep, "grid": {"lateral_size_mm": n * SPACING_MM}})
-                          for n in (128, 256, 512, 1024)]
-    results["slices"] = [run({"kind": "slices", "repeats": rep, "grid": {"step_mm": dz}}) for dz in (0.68, 0.34, 0.17)]
-    groups = (16, 32, 64, 128, 1024) if args.elements else (16, 32, 64, 128)
-    results["groups"] = [run({"kind": "groups", "repeats": 1, "groups": g, "evaluations": 400}) for g in groups]
-    results["threads"] = [run({"kind": kind, "repeats": rep, "groups": 16, "evaluations": 400}, threads=t)
-                          for kind in ("threads_field", "threads_estimate") for t in (1, 2)]
+    results: dict = json.loads(args.json.read_text()) if args.json and args.json.is_file() else {}
+    results.update({"machine": f"{platform.machine()}, {os.cpu_count()} cpus"})
+    for part in args.parts:
+        results.setdefault("dates", {})[part] = _dt.date.today().isoformat()
+    if "lateral" in args.parts:
+        results["lateral"] = [run({"kind": "lateral", "repeats": rep, "grid": {"lateral_size_mm": n * SPACING_MM}})
+                              for n in (128, 256, 512, 1024)]
+    if "slices" in args.parts:
+        results["slices"] = [run({"kind": "slices", "repeats": rep, "grid": {"step_mm": dz}}) for dz in (0.68, 0.34, 0.17)]
+    if "groups" in args.parts:
+        groups = (16, 32, 64, 128, 256) + ((1024,) if args.elements else ())
+        results["groups"] = [run({"kind": "groups", "repeats": 1, "groups": g, "evaluations": 400}) for g in groups]
+    if "threads" in args.parts:
+        results["threads"] = [run({"kind": kind, "repeats": rep, "groups": 16, "evaluations": 400}, threads=t)
+                              for kind in ("threads_field", "threads_estimate") for t in (1, 2)]
+    results["date"] = max(results["dates"].values()) if "dates" in results else _dt.date.today().isoformat()
 
     print(f"Scaling, {results['date']}, {results['machine']}\n")
     print("| lateral grid | planes | `Simulation()` (s) | `sim.field()` (s) | field / N²logN from 128² | peak memory (MiB) |")
@@ -162,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| groups | group fields + model (s) | cost (µs) | cost + gradient (µs) | L-BFGS estimate (s) | peak memory (MiB) |")
     print("| --- | --- | --- | --- | --- | --- |")
     for r in results["groups"]:
-        print(f"| {r['groups']} | {r['model_s']:.2f} | {r['cost_per_evaluation_s'] * 1e6:.0f} "
+        cost = f"{r['cost_per_evaluation_s'] * 1e6:.0f}" if "cost_per_evaluation_s" in r else "-"
+        print(f"| {r['groups']} | {r['model_s']:.2f} | {cost} "
               f"| {r['gradient_per_evaluation_s'] * 1e6:.0f} | {r['gradient_estimate_s']:.2f} | {r['peak_rss_mib']:.0f} |")
     th = {(r["kind"], r["threads"]): r for r in results["threads"]}
     f1, f2 = th[("threads_field", 1)]["field_s"], th[("threads_field", 2)]["field_s"]

@@ -72,6 +72,10 @@ def cmd_field(args: argparse.Namespace) -> int:
         f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm; axis peak "
         f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {args.out}"
     )
+    if args.report:
+        from arfi.report import field_report
+
+        field_report(args.report, sim, f, {"out": args.out, **focus}, _phases(args.phases, "--phases"))
     _finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
                    "seconds": time.perf_counter() - t})
     return 0
@@ -360,6 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
     p.add_argument("--out", required=True, metavar="F.npz")
+    p.add_argument("--report", metavar="DIR", help="write PNG figures (|p| in MPa on the plane in mm, the axis profile) and report.html to DIR")
     p.set_defaults(run=cmd_field)
 
     p = sub.add_parser("simulate", help="simulated MR-ARFI image (NIfTI)",

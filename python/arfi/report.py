@@ -131,3 +131,25 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
         element_map(fig, ax[0][1], sim, phases, "phases added to the steering")
     figures = [("simulated image", save_figure(fig, out / f"{verb}.png"))]
     return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
+
+
+def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
+    """Report of a simulated field: |p| (MPa) on the plane, axes in mm; |p| along the beam axis;
+    with ``phases``, the element map of the phases added to the steering."""
+    plt = pyplot()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 3 if phases is not None else 2, figsize=(17 if phases is not None else 11, 4.4))
+    x, y = field.x_mm, field.y_mm
+    dx, dy = x[1] - x[0], y[1] - y[0]
+    im = ax[0].imshow(np.abs(field.pressure) / 1e6, origin="lower", cmap="inferno",
+                      extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2])
+    ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm", xlabel="x (mm)", ylabel="y (mm)")
+    fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)")
+    ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)
+    ax[1].axvline(field.z_mm, color="0.5", ls="--", lw=0.8)
+    ax[1].set(title="|p| on the beam axis", xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
+    if phases is not None:
+        element_map(fig, ax[2], sim, phases, "phases added to the steering")
+    figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
+    return write_html(out / "report.html", "arfi field", table_html(values) + figure_html(out, figures))

@@ -288,7 +288,7 @@ class Simulation:
         list of them, each taken with its ``known`` added phases (rad, per element or group; None
         = none): the same masks (``mask_fraction`` of each image's maximum, connected to it) and
         per-pixel group kernels. ``fit_amplitude`` fits one amplitude scale for all images at each
-        evaluation. At most 128 groups."""
+        evaluation. At most 256 groups."""
         imgs, knowns = self._image_list(images, known)
         return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 

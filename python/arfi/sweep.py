@@ -23,6 +23,7 @@ import numpy as np
 from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_path, atomic_write_text, write_json
 from arfi.progress import Progress
+from arfi.report import figure_html, write_html
 from arfi.reproduce import study_aberration, study_images
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
@@ -180,12 +181,19 @@ def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
 
 
 def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
-    """``sweep.csv`` (one row per trial), ``summary.csv``, ``sweep.png`` and ``sweep.json`` in ``out``."""
+    """``sweep.csv`` (one row per trial), ``summary.csv``, ``sweep.png``, ``report.html`` and
+    ``sweep.json`` in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
     atomic_write_text(out / "sweep.csv", _csv(rows))
     atomic_write_text(out / "summary.csv", _csv(summary))
     plot(summary, out / "sweep.png")
-    result = {"trials": list(rows), "summary": summary, "files": ["sweep.csv", "summary.csv", "sweep.png"]}
+    table = "<table><tr>" + "".join(f"<th>{k}</th>" for k in summary[0]) + "</tr>" + "".join(
+        "<tr>" + "".join(f"<td>{v:.3g}</td>" if isinstance(v, float) else f"<td>{v}</td>" for v in s.values()) + "</tr>"
+        for s in summary) + "</table>"
+    write_html(out / "report.html", "arfi sweep", f"<p>{len(rows)} trials; recovered fraction of the ideal focus (SPEC §6) per "
+               f"method, number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
+               + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]))
+    result = {"trials": list(rows), "summary": summary, "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"]}
     write_json(out / "sweep.json", result)
     return result

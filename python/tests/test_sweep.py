@@ -24,6 +24,7 @@ def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):
     summary = list(csv.DictReader((out / "summary.csv").open()))
     assert len(summary) == 4 and {s["trials"] for s in summary} == {"1"}
     assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / "report.html").read_text().count("data:image/png;base64,") == 1
     d = json.loads((tmp_path / "s.json").read_text())
     # A trial's result does not depend on the worker process that ran it.
     here = run_trial(Trial(0.05, 2, "lbfgs", 0))

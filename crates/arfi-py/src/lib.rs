@@ -6,7 +6,7 @@ use error::to_py;
 use has_core::aberration::SkullScreen;
 use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
-use has_core::cost::{build_model, HybridCost, Measurement};
+use has_core::cost::{build_model, HybridCost, Measurement, MAX_KERNEL_GROUPS};
 use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Value};
 use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
@@ -472,9 +472,9 @@ impl CoreSimulation {
         let sim = &self.inner;
         let cancel = AtomicBool::new(false);
         let per_element = sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g);
-        if sim.n_groups > 128 && !per_element {
+        if sim.n_groups > MAX_KERNEL_GROUPS && !per_element {
             return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "groups: {} groups; the group kernels take at most 128, or one group per element ({}) for per-element estimation",
+                "groups: {} groups; the group kernels take at most {MAX_KERNEL_GROUPS}, or one group per element ({}) for per-element estimation",
                 sim.n_groups,
                 sim.n_elements()
             )));
@@ -553,7 +553,7 @@ impl CoreSimulation {
     }
 
     /// The hybrid cost (paper Eq. 4) of images, each with its known added phases, on the per-pixel
-    /// group kernels `estimate` minimises (at most 128 groups).
+    /// group kernels `estimate` minimises (at most 256 groups).
     #[pyo3(signature = (images, known, fit_scale=false))]
     fn cost_model(
         &self,

@@ -83,6 +83,13 @@ impl ArfiKernel {
             return Err(HasError::invalid("groups", "need at least two groups"));
         }
         let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
+        // At the peak of the build the pair maps (re and im per pair) and the kernels coexist.
+        let (n_pix, n_pairs) = ((u.len() * v.len()) as u64, (g_count * (g_count + 1) / 2) as u64);
+        crate::memory::check(
+            || format!("the {g_count}-group kernels of {n_pix} pixels"),
+            n_pix * n_pairs * 8 * 2 + n_pix * (g_count as u64 + Blocked::len(g_count * (g_count - 1) / 2) as u64) * 8,
+            "estimate fewer groups, or lower the mask fraction's reach (a tighter focus, fewer pixels)",
+        )?;
         let sources = sim.group_sources(groups, known)?;
         let recordings = sim.record_window(&sources)?;
         let fields: Vec<Vec<C64>> = recordings.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
@@ -536,6 +543,10 @@ pub struct Model {
     pub noise: f64,
 }
 
+/// Most groups the per-pixel kernels take: their size and build time grow as G² (256 groups:
+/// 32 640 pairs per pixel, about 0.5 MB per pixel).
+pub const MAX_KERNEL_GROUPS: usize = 256;
+
 /// Largest |pixel| of a measured image (rad): far beyond any unwrapped MR-ARFI phase, small
 /// enough that squared residuals summed over every pixel stay finite.
 pub const MAX_PHASE: f64 = 1e6;
@@ -593,8 +604,8 @@ pub fn build_model(sim: &Simulation, measurements: &[Measurement], mask_fraction
         return Err(HasError::invalid("images", "need at least one image"));
     }
     let g = sim.n_groups;
-    if g > 128 {
-        return Err(HasError::invalid("groups", format!("{g} groups: the per-pixel kernels are limited to 128 groups")));
+    if g > MAX_KERNEL_GROUPS {
+        return Err(HasError::invalid("groups", format!("{g} groups: the per-pixel kernels are limited to {MAX_KERNEL_GROUPS} groups")));
     }
     let MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
     let base = std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &[], u.clone(), v.clone())?);
