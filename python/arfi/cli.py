@@ -310,13 +310,12 @@ def cmd_dicom(args: argparse.Namespace) -> int:
                              f"center_mm {np.round(m['center_mm'], 3).tolist()}, fov_mm {np.round(m['fov_mm'], 3).tolist()}, "
                              f"matrix {m['matrix']}); run without --scenario to print the matching [mr] section")
     write_arfi_image(out, measured.image_rad, measured.affine_mm, measured.volume_shape, sidecar)
-    m = measured.mr
-    print(f"dicom: {m['matrix'][0]} x {m['matrix'][1]} MR-ARFI image on the {m['plane']} plane, "
-          f"|Δφ| up to {float(np.max(np.abs(measured.image_rad))):.3f} rad -> {out}")
+    m, peak = measured.mr, float(np.max(np.abs(measured.image_rad)))
+    print(f"dicom: {m['matrix'][0]} x {m['matrix'][1]} MR-ARFI image on the {m['plane']} plane, |Δφ| up to {peak:.3f} rad -> {out}")
     if not args.scenario:
         print(f"dicom: the scenario's MR geometry for this image:\n{measured.mr_toml()}", end="")
     _finish(args, {"out": out, "mr": m, "echo_time_ms": measured.echo_time_ms, "plus": measured.sources[0], "minus": measured.sources[1],
-                   "max_abs_arfi_rad": float(np.max(np.abs(measured.image_rad)))})
+                   "max_abs_arfi_rad": peak})
     return 0
 
 

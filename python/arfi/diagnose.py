@@ -67,12 +67,9 @@ class Diagnosis:
         the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
         self-contained ``report.html``; returns the HTML path."""
         from arfi.io import atomic_write_text
-        from arfi.report import axis_labels, figure_html, image_extent_mm, save_figure
+        from arfi.report import axis_labels, figure_html, image_extent_mm, pyplot, save_figure
 
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)

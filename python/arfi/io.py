@@ -7,11 +7,13 @@ failed or interrupted run leaves no partial file and never clobbers a good one.
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -144,6 +146,15 @@ def read_phases(path: str | os.PathLike[str], name: str = "phases") -> NDArray[n
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: {p}: contains NaN or infinite values")
     return a
+
+
+def csv_text(rows: Sequence[dict[str, Any]]) -> str:
+    """Rows of one dict each as CSV text, with a header of the first row's keys."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
 
 
 def write_npz(path: str | os.PathLike[str], arrays: dict[str, Any]) -> None:

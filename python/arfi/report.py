@@ -89,12 +89,30 @@ def write_html(path: Path, title: str, body: str) -> Path:
     return path
 
 
+def _cell(v: Any) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
+
+
 def table_html(rows: dict[str, Any]) -> str:
     """A two-column table of named values."""
-    def fmt(v: Any) -> str:
-        return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
+    return "<table>" + "".join(f"<tr><th>{html.escape(k)}</th><td>{_cell(v)}</td></tr>" for k, v in rows.items()) + "</table>"
 
-    return "<table>" + "".join(f"<tr><th>{html.escape(k)}</th><td>{fmt(v)}</td></tr>" for k, v in rows.items()) + "</table>"
+
+def rows_table_html(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
+    """A table with one row per dict and the given columns."""
+    head = "<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in columns) + "</tr>\n"
+    return "<table>" + head + "\n".join("<tr>" + "".join(f"<td>{_cell(r[c])}</td>" for c in columns) + "</tr>" for r in rows) + "</table>"
+
+
+def _report_dir(out: str | Path) -> Path:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[tuple[str, str]]) -> Path:
+    """``out/report.html`` for a verb: its values as a table, then its figures."""
+    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
 
 
 def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
@@ -103,8 +121,7 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
     their residual and, with ``phases`` (rad, the estimated aberration), the element maps of the
     aberration and of its correction (paper Fig. 4c/4d). ``values`` go in a table."""
     plt = pyplot()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _report_dir(out)
     fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
     show_image(fig, ax[0], sim, measured, "measured")
     show_image(fig, ax[1], sim, model, "model")
@@ -116,29 +133,26 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
         element_map(fig, ax[0], sim, phases, "estimated aberration")
         element_map(fig, ax[1], sim, -np.asarray(phases), "correction (subtracted)")
         figures.append(("element maps coloured by phase", save_figure(fig, out / f"{verb}_elements.png")))
-    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
+    return _verb_page(out, verb, values, figures)
 
 
 def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],
                  phases: Sequence[float] | None = None) -> Path:
     """Report of a simulated image, with the element map of the phases added to the steering."""
     plt = pyplot()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _report_dir(out)
     fig, ax = plt.subplots(1, 2 if phases is not None else 1, figsize=(11 if phases is not None else 6, 4.4), squeeze=False)
     show_image(fig, ax[0][0], sim, image, "MR-ARFI image")
     if phases is not None:
         element_map(fig, ax[0][1], sim, phases, "phases added to the steering")
-    figures = [("simulated image", save_figure(fig, out / f"{verb}.png"))]
-    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
+    return _verb_page(out, verb, values, [("simulated image", save_figure(fig, out / f"{verb}.png"))])
 
 
 def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
     """Report of a simulated field: |p| (MPa) on the plane, axes in mm; |p| along the beam axis;
     with ``phases``, the element map of the phases added to the steering."""
     plt = pyplot()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _report_dir(out)
     fig, ax = plt.subplots(1, 3 if phases is not None else 2, figsize=(17 if phases is not None else 11, 4.4))
     x, y = field.x_mm, field.y_mm
     dx, dy = x[1] - x[0], y[1] - y[0]
@@ -151,5 +165,4 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     ax[1].set(title="|p| on the beam axis", xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
     if phases is not None:
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
-    figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
-    return write_html(out / "report.html", "arfi field", table_html(values) + figure_html(out, figures))
+    return _verb_page(out, "field", values, [("pressure amplitude", save_figure(fig, out / "field.png"))])

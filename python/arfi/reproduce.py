@@ -21,9 +21,9 @@ from typing import Any, Callable
 import numpy as np
 
 from arfi.estimation import gain, phase_error, recovered_fraction
-from arfi.io import atomic_write_text, write_json
+from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.loop import loop2
-from arfi.report import figure_html, image_extent_mm, save_figure
+from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -167,18 +167,12 @@ def run_study(case: int, repeats: int, out: Path, seed: int = 0, method: str = "
 
 
 def _write_table(path: Path, rows: list[Row]) -> None:
-    fields = list(asdict(rows[0]).keys())
-    lines = [",".join(fields)] + [",".join(str(v) for v in asdict(r).values()) for r in rows]
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    atomic_write_text(path, csv_text([asdict(r) for r in rows]))
 
 
 def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, Any]], ideal: np.ndarray,
              out: Path, method: str) -> dict[str, str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     figs: dict[str, str] = {}
     run0 = runs[0]
     ext = image_extent_mm(sim, ideal)
@@ -303,11 +297,7 @@ def _html(summary: dict[str, Any], out: Path) -> str:
             "focal_aberrated_rad", "focal_corrected_rad", "recovered_fraction", "gain", "phase_error_rad", "ambiguous",
             "images", "loop2_kept"]
 
-    def fmt(v: Any) -> str:
-        return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
-
-    table = "<tr>" + "".join(f"<th>{c}</th>" for c in cols) + "</tr>\n" + "\n".join(
-        "<tr>" + "".join(f"<td>{fmt(r[c])}</td>" for c in cols) + "</tr>" for r in rows)
+    table = rows_table_html(rows, cols)
     imgs = figure_html(out, [(name, name) for name in summary["figures"].values()])
     p = summary["paper"]
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi reproduce: {summary['case']}-aberration</title>
@@ -321,5 +311,5 @@ method itself flags: clearly different solutions fit that image within the noise
 <p>Mean recovered fraction <b>{summary['mean_recovered_fraction']:.2f}</b> (paper {p['recovered_fraction']}), mean gain
 <b>{summary['mean_gain']:+.0%}</b> (paper {p['gain']:+.0%}), mean phase error <b>{summary['mean_phase_error_rad']:.2f} rad</b>
 (paper {p['phase_error_rad']} rad). Focal values are taken on noise-free simulated images.</p>
-<h2>Table 1</h2><table>{table}</table><h2>Figures</h2>{imgs}</body></html>
+<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
 """

@@ -9,8 +9,6 @@ seeded, so a result does not depend on which worker ran it, nor on how many thre
 
 from __future__ import annotations
 
-import csv
-import io
 import itertools
 import os
 from dataclasses import asdict, dataclass
@@ -21,9 +19,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from arfi.estimation import gain, phase_error, recovered_fraction
-from arfi.io import atomic_path, atomic_write_text, write_json
+from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.progress import Progress
-from arfi.report import figure_html, write_html
+from arfi.report import figure_html, pyplot, rows_table_html, save_figure, write_html
 from arfi.reproduce import study_aberration, study_images
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
@@ -147,21 +145,9 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def _csv(rows: Sequence[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    return buf.getvalue()
-
-
 def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
     """Recovered fraction against noise, one line per number of images, one panel per method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     methods = sorted({s["method"] for s in summary})
     fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), squeeze=False, sharey=True)
     for ax, method in zip(axes[0], methods):
@@ -174,10 +160,7 @@ def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("recovered fraction of the ideal focus")
     axes[0][-1].legend(fontsize=8)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
@@ -185,12 +168,10 @@ def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
     ``sweep.json`` in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
-    atomic_write_text(out / "sweep.csv", _csv(rows))
-    atomic_write_text(out / "summary.csv", _csv(summary))
+    atomic_write_text(out / "sweep.csv", csv_text(rows))
+    atomic_write_text(out / "summary.csv", csv_text(summary))
     plot(summary, out / "sweep.png")
-    table = "<table><tr>" + "".join(f"<th>{k}</th>" for k in summary[0]) + "</tr>" + "".join(
-        "<tr>" + "".join(f"<td>{v:.3g}</td>" if isinstance(v, float) else f"<td>{v}</td>" for v in s.values()) + "</tr>"
-        for s in summary) + "</table>"
+    table = rows_table_html(summary, list(summary[0]))
     write_html(out / "report.html", "arfi sweep", f"<p>{len(rows)} trials; recovered fraction of the ideal focus (SPEC §6) per "
                f"method, number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
                + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]))
