@@ -44,7 +44,7 @@ def _finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
 
 
 def cmd_scenario(args: argparse.Namespace) -> int:
-    sys.stdout.write(_scenario(args).to_toml())
+    sys.stdout.write(_scenario(args).to_toml(chosen_grid=True))
     return 0
 
 
@@ -70,14 +70,16 @@ def cmd_field(args: argparse.Namespace) -> int:
     print(
         f"field: plane z = {f.z_mm:.2f} mm, peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
         f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm; axis peak "
-        f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {args.out}"
+        f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {args.out}\n"
+        f"field: {sim.propagation_summary()}"
     )
     if args.report:
         from arfi.report import field_report
 
-        field_report(args.report, sim, f, {"out": args.out, **focus}, _phases(args.phases, "--phases"))
+        field_report(args.report, sim, f, {"out": args.out, **focus, "propagation": sim.propagation_summary()},
+                     _phases(args.phases, "--phases"))
     _finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
-                   "seconds": time.perf_counter() - t})
+                   "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0
 
 
@@ -349,7 +351,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     p = sub.add_parser("scenario", help="print a scenario as TOML with every default written out",
-                       description="Print the scenario (default: the embedded one) as complete TOML.",
+                       description="Print the scenario (default: the embedded one) as complete TOML, with the [grid] "
+                                   "it resolves to (spacing, step, lateral size, last plane, absorbing layer, "
+                                   "reflections, interface model). Delete [grid] keys after editing the frequency, "
+                                   "transducer or focus to have them chosen again.",
                        epilog="example: arfi scenario --default > phantom.toml")
     _add_common(p)
     p.add_argument("--default", action="store_true", help="print the embedded default scenario")

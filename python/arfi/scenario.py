@@ -59,9 +59,13 @@ class Scenario:
         s._toml = _core.normalize_scenario(text, "json", s._base_dir)
         return s
 
-    def to_toml(self) -> str:
-        """The scenario as TOML with every default written out."""
-        return self._toml
+    def to_toml(self, chosen_grid: bool = False) -> str:
+        """The scenario as TOML with every default written out. With ``chosen_grid``, the
+        ``[grid]`` the simulation resolves it to is written out too (spacing, step, lateral size,
+        last plane, absorbing layer, reflections, interface model): a template that simulates
+        exactly as this scenario does; delete those keys to have them chosen from the wavelength,
+        the aperture and the focus again after editing."""
+        return _core.scenario_toml_with_grid(self._toml, self._base_dir) if chosen_grid else self._toml
 
     def to_dict(self) -> dict[str, Any]:
         """The scenario as a dict with every default written out."""

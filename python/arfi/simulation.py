@@ -176,6 +176,27 @@ class Simulation:
         return float(self._core.amplitude)
 
     @property
+    def propagation(self) -> dict[str, Any]:
+        """How changes of medium are crossed: ``interfaces`` (``"angular"``: plane-wave
+        coefficients of every angular-spectrum component, exact at planar interfaces, with total
+        reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
+        pixel), ``reflections`` (waves sent back towards the source added) and ``reverberation``
+        (``None``, or the z of the first and last interface between which the waves bouncing
+        inside layers are added, and the round trips added)."""
+        return dict(self._core.propagation)
+
+    def propagation_summary(self) -> str:
+        """:attr:`propagation` in one sentence, for reports."""
+        p = self.propagation
+        text = ("angle-dependent interface transmission (plane-wave coefficients on the angular spectrum)"
+                if p["interfaces"] == "angular" else "normal-incidence interface transmission (T = 2·Z2/(Z1+Z2) per pixel)")
+        r = p["reverberation"]
+        if r is not None:
+            text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
+                     f"({r['round_trips']} round trips)")
+        return text + (", reflections towards the source added" if p["reflections"] else "")
+
+    @property
     def noise_rad(self) -> float:
         return float(self._core.noise_rad)
 

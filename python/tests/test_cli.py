@@ -13,10 +13,58 @@ def run(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "arfi", *args], capture_output=True, text=True, timeout=300)
 
 
-def test_scenario_default_prints_complete_toml():
+def test_scenario_default_prints_complete_toml_with_the_grid_it_uses():
     r = run("scenario", "--default")
     assert r.returncode == 0
-    assert arfi.Scenario.from_toml(r.stdout) == arfi.Scenario.default()
+    printed = arfi.Scenario.from_toml(r.stdout)
+    grid = printed.to_dict()["grid"]
+    assert set(grid) == {"spacing_mm", "step_mm", "lateral_size_mm", "z_max_mm", "sponge_width_mm", "reflections", "interfaces"}
+    assert grid["interfaces"] == "angular" and grid["reflections"] is False
+    # The written grid is the one the default resolves to, and nothing else differs.
+    assert arfi.Simulation(printed).grid == arfi.Simulation().grid
+    d = printed.to_dict()
+    d["grid"] = {}
+    assert arfi.Scenario.from_dict(d) == arfi.Scenario.default()
+
+
+WATER_BOWL = """
+frequency_hz = 550000.0
+[transducer]
+kind = "bowl"
+radius_of_curvature_mm = 85.0
+aperture_diameter_mm = 80.0
+[medium]
+background = "water"
+[[material]]
+name = "water"
+sound_speed_m_s = 1500.0
+density_kg_m3 = 1000.0
+attenuation_db_cm_mhz = 0.0
+"""
+
+
+def test_field_in_lossless_water_needs_no_mr_model(tmp_path):
+    # A hydrophone-tank scenario: no attenuation anywhere, so no radiation force in the MR slice.
+    scenario = tmp_path / "water.toml"
+    scenario.write_text(WATER_BOWL)
+    out, js = tmp_path / "f.npz", tmp_path / "f.json"
+    r = run("field", "--scenario", str(scenario), "--out", str(out), "--json", str(js))
+    assert r.returncode == 0, r.stderr
+    assert "angle-dependent interface transmission" in r.stdout
+    result = json.loads(js.read_text())
+    assert result["propagation"] == {"interfaces": "angular", "reflections": False, "reverberation": None}
+    # The bowl focuses near its centre of curvature (O'Neil: the peak lies ~2 mm before it).
+    assert 80.0 < result["axis_peak_z_mm"] < 85.5
+    # Only the verbs that need MR-ARFI images refuse it, with the reason and exit 2.
+    r = run("simulate", "--scenario", str(scenario), "--out", str(tmp_path / "m.nii.gz"))
+    assert r.returncode == 2
+    assert "no radiation force in the MR slice" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "m.nii.gz").exists()
+    sim = arfi.Simulation(arfi.Scenario.from_toml(WATER_BOWL))
+    with pytest.raises(ValueError, match="no radiation force"):
+        sim.amplitude
+    with pytest.raises(ValueError, match="no radiation force"):
+        sim.arfi_image()
 
 
 def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):

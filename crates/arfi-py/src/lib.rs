@@ -45,6 +45,15 @@ fn normalize_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyRes
     s.to_toml().map_err(to_py)
 }
 
+/// Parses and validates a scenario, returning it as complete TOML with the `[grid]` it resolves
+/// to written out.
+#[pyfunction]
+#[pyo3(signature = (text, base_dir=None))]
+fn scenario_toml_with_grid(text: &str, base_dir: Option<&str>) -> PyResult<String> {
+    let s = parse_scenario(text, "toml", base_dir)?;
+    has_core::simulation::with_chosen_grid(&s).and_then(|s| s.to_toml()).map_err(to_py)
+}
+
 /// Parses and validates a scenario, returning it as complete JSON (for `Scenario.to_dict`).
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None))]
@@ -142,13 +151,36 @@ impl CoreSimulation {
     fn n_default_groups(&self) -> usize {
         self.inner.transducer.default_groups().iter().max().map_or(0, |m| m + 1)
     }
+    /// Scale from broadened force density to ARFI phase (rad·m³/N); a ValueError says why a
+    /// scenario has none (no radiation force in the MR slice).
     #[getter]
-    fn amplitude(&self) -> f64 {
-        self.inner.amplitude
+    fn amplitude(&self) -> PyResult<f64> {
+        self.inner.amplitude().map_err(to_py)
     }
     #[getter]
     fn frequency_hz(&self) -> f64 {
         self.inner.frequency
+    }
+    /// How changes of medium are crossed: dict with `interfaces` ("angular" or
+    /// "normal-incidence"), `reflections` (bool) and `reverberation` (None, or dict with
+    /// `first_interface_z_mm`, `last_interface_z_mm`, `round_trips`).
+    #[getter]
+    fn propagation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.inner.propagation();
+        let d = PyDict::new(py);
+        d.set_item("interfaces", p.interfaces)?;
+        d.set_item("reflections", p.reflections)?;
+        match p.reverberation {
+            None => d.set_item("reverberation", py.None())?,
+            Some((a, b, n)) => {
+                let r = PyDict::new(py);
+                r.set_item("first_interface_z_mm", a * 1e3)?;
+                r.set_item("last_interface_z_mm", b * 1e3)?;
+                r.set_item("round_trips", n)?;
+                d.set_item("reverberation", r)?;
+            }
+        }
+        Ok(d)
     }
     #[getter]
     fn noise_rad(&self) -> f64 {
@@ -194,18 +226,18 @@ impl CoreSimulation {
     /// MR geometry: affine (4x4, mm), volume shape, plane.
     #[getter]
     fn mr_affine_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let a = self.inner.sampler.geometry.affine_mm();
+        let a = self.inner.mr.affine_mm();
         let rows: Vec<Vec<f64>> = a.iter().map(|r| r.to_vec()).collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
     #[getter]
     fn mr_volume_shape(&self) -> (usize, usize, usize) {
-        let s = self.inner.sampler.geometry.volume_shape();
+        let s = self.inner.mr.volume_shape();
         (s[0], s[1], s[2])
     }
     #[getter]
     fn mr_plane(&self) -> &'static str {
-        self.inner.sampler.geometry.plane.name()
+        self.inner.mr.plane.name()
     }
 
     /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
@@ -695,5 +727,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
     Ok(())
 }

@@ -51,7 +51,7 @@ fn bench_build(c: &mut Criterion) {
 fn bench_single_run(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     let source = sim.source_field(&[]).unwrap();
-    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), ..Default::default() };
+    let spec = RecordSpec { window: Some(sim.sampler().unwrap().window.clone()), ..Default::default() };
     let mut g = c.benchmark_group("single_run");
     g.sample_size(20).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
     // Target: ≤ 0.5 s. Source plane + march to the end of the MR slab + force image.
@@ -119,7 +119,7 @@ fn bench_breakdown(c: &mut Criterion) {
     g.bench_function("source_field_all_elements", |b| b.iter(|| sim.source.field(black_box(&drive)).unwrap()));
     // Window samples → MR image (force, slab average, broadening, pixel sampling).
     let rec = sim.record_window(std::slice::from_ref(&source)).unwrap().remove(0);
-    g.bench_function("force_image", |b| b.iter(|| sim.sampler.force_image(black_box(&rec.window)).unwrap()));
+    g.bench_function("force_image", |b| b.iter(|| sim.sampler().unwrap().force_image(black_box(&rec.window)).unwrap()));
     // Whole-grid march (all nz planes, on-axis samples only) for the per-step cost.
     let to_end = RecordSpec { axis: true, ..Default::default() };
     g.bench_function("propagate_all_planes", |b| b.iter(|| sim.plan.propagate(black_box(&source), &to_end).unwrap()));

@@ -71,9 +71,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         march_s.push(t);
         let recs = recs?;
         let (t, kern) = secs(|| -> Result<ArfiKernel, Box<dyn std::error::Error>> {
-            let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
-            let fields: Vec<Vec<C64>> = recs.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
-            Ok(ArfiKernel::from_fields(&sampler, &fields, sim.amplitude, [u.clone(), v.clone()])?)
+            let sampler = sim.sampler()?.restrict(u.clone(), v.clone())?;
+            let window = &sim.sampler()?.window;
+            let fields: Vec<Vec<C64>> = recs.iter().map(|r| window.extract(&r.window, &sampler.window)).collect();
+            Ok(ArfiKernel::from_fields(&sampler, &fields, sim.amplitude()?, [u.clone(), v.clone()])?)
         });
         kernel_s.push(t);
         kern?;

@@ -51,7 +51,7 @@ impl FieldBasis {
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<Self> {
-        let sampler = sim.sampler.restrict(u, v)?;
+        let sampler = sim.sampler()?.restrict(u, v)?;
         let n = sim.n_elements();
         let s_len = sampler.window.len();
         let bytes = (s_len * n) as u64 * 8;
@@ -86,7 +86,7 @@ impl FieldBasis {
                 f(end, n);
             }
         }
-        Ok(FieldBasis { sampler, amplitude: sim.amplitude, re, im })
+        Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im })
     }
 
     /// Number of elements (columns of `B`).

@@ -34,14 +34,14 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
     require_positive("max_width_mm", max_width)?;
-    let spec = RecordSpec { window: Some(sim.sampler.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
+    let spec = RecordSpec { window: Some(sim.sampler()?.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
     let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal
     // still constrain the width through the tails.
     let zone = mask_pixels(image, mask_fraction);
-    let m = sim.sampler.geometry.matrix;
-    let px = sim.sampler.geometry.pixel_size();
+    let m = sim.mr.matrix;
+    let px = sim.mr.pixel_size();
     let reach = [(0.5 * max_width / px[0]).ceil() as usize, (0.5 * max_width / px[1]).ceil() as usize];
     let (u0, u1) = (zone.iter().map(|p| p.0).min().unwrap_or(0), zone.iter().map(|p| p.0).max().unwrap_or(0) + 1);
     let (v0, v1) = (zone.iter().map(|p| p.1).min().unwrap_or(0), zone.iter().map(|p| p.1).max().unwrap_or(0) + 1);
@@ -52,7 +52,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
     let measured: Vec<f64> = mask.iter().map(|&ij| image[ij]).collect();
     let fit = |w: f64| -> Result<(f64, f64)> {
-        let f = sim.sampler.with_broadening(w)?.apply(&power)?;
+        let f = sim.sampler()?.with_broadening(w)?.apply(&power)?;
         let model: Vec<f64> = mask.iter().map(|&ij| f[ij]).collect();
         let ff: f64 = model.iter().map(|x| x * x).sum();
         let fm: f64 = model.iter().zip(&measured).map(|(x, y)| x * y).sum();

@@ -82,7 +82,7 @@ impl ArfiKernel {
         if g_count < 2 {
             return Err(HasError::invalid("groups", "need at least two groups"));
         }
-        let sampler = sim.sampler.restrict(u.clone(), v.clone())?;
+        let sampler = sim.sampler()?.restrict(u.clone(), v.clone())?;
         // At the peak of the build the pair maps (re and im per pair) and the kernels coexist.
         let (n_pix, n_pairs) = ((u.len() * v.len()) as u64, (g_count * (g_count + 1) / 2) as u64);
         crate::memory::check(
@@ -92,8 +92,9 @@ impl ArfiKernel {
         )?;
         let sources = sim.group_sources(groups, known)?;
         let recordings = sim.record_window(&sources)?;
-        let fields: Vec<Vec<C64>> = recordings.iter().map(|r| sim.sampler.window.extract(&r.window, &sampler.window)).collect();
-        Self::from_fields(&sampler, &fields, sim.amplitude, [u, v])
+        let window = &sim.sampler()?.window;
+        let fields: Vec<Vec<C64>> = recordings.iter().map(|r| window.extract(&r.window, &sampler.window)).collect();
+        Self::from_fields(&sampler, &fields, sim.amplitude()?, [u, v])
     }
 
     /// Kernels from group fields already recorded on `sampler.window`.
@@ -553,7 +554,7 @@ pub const MAX_PHASE: f64 = 1e6;
 
 /// Checks a measured image against the scenario's MR geometry.
 pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
-    let m = sim.sampler.geometry.matrix;
+    let m = sim.mr.matrix;
     if image.dim() != (m[0], m[1]) {
         return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
     }
@@ -645,7 +646,7 @@ pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fracti
     if measurements.is_empty() {
         return Err(HasError::invalid("images", "need at least one image"));
     }
-    let m = sim.sampler.geometry.matrix;
+    let m = sim.mr.matrix;
     let masks: Vec<Vec<(usize, usize)>> = measurements
         .iter()
         .enumerate()

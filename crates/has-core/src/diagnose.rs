@@ -155,7 +155,7 @@ impl View {
     pub fn of(sim: &Simulation) -> Self {
         View {
             scale: 1.0,
-            broadening_width_mm: sim.sampler.broadening.width * 1e3,
+            broadening_width_mm: sim.sampler.as_ref().map_or(0.0, |s| s.broadening.width) * 1e3, // no sampler: the forward model refuses
             broadening_anisotropy_mm: 0.0,
             shift_mm: [0.0; 2],
             background_offset_rad: 0.0,
@@ -309,8 +309,9 @@ const CACHED: usize = 6;
 
 impl<'a> Forward<'a> {
     fn new(sim: &'a Simulation, knowns: &[Vec<f64>]) -> Result<Self> {
-        let g = &sim.sampler.geometry;
-        let window = extended_window(sim);
+        let sampler = sim.sampler()?;
+        let g = &sampler.geometry;
+        let window = extended_window(sim, sampler);
         let material = focal_material(sim);
         let grid = &sim.grid;
         let mut in_material = Vec::with_capacity(window.len());
@@ -397,9 +398,9 @@ impl<'a> Forward<'a> {
         if !(dz_mm.abs() <= SLICE_REACH_MM) {
             return Err(HasError::invalid("dz_mm", format!("slice offsets are fitted within ±{SLICE_REACH_MM} mm")));
         }
-        let mut geometry = s.sampler.geometry.clone();
+        let mut geometry = s.sampler()?.geometry.clone();
         geometry.center[geometry.plane.axes()[2]] += dz_mm * 1e-3;
-        let sampler = MrSampler::new(&s.grid, &s.medium, s.frequency, &geometry, s.sampler.broadening)?;
+        let sampler = MrSampler::new(&s.grid, &s.medium, s.frequency, &geometry, s.sampler()?.broadening)?;
         let w = &sampler.window;
         let inside = |a: &std::ops::Range<usize>, b: &std::ops::Range<usize>| a.start >= b.start && a.end <= b.end;
         if !(inside(&w.planes, &self.window.planes) && inside(&w.rows, &self.window.rows) && inside(&w.cols, &self.window.cols)) {
@@ -414,7 +415,7 @@ impl<'a> Forward<'a> {
         let v = &e.view;
         let slice = self.slice(v.slice_offset_mm)?;
         let sampler = slice.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|s| s * 1e-3))?;
-        power.iter().map(|p| Ok(sampler.apply(&self.window.extract(p, &slice.window))? * self.sim.amplitude)).collect()
+        power.iter().map(|p| Ok(sampler.apply(&self.window.extract(p, &slice.window))? * self.sim.amplitude()?)).collect()
     }
 
     /// The model image of every image.
@@ -975,8 +976,8 @@ impl Context<'_> {
         let mut sim = sim.into_owned();
         let v = &current.view;
         let slice = self.forward.slice(v.slice_offset_mm)?;
-        sim.sampler = slice.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|x| x * 1e-3))?;
-        sim.amplitude = s.amplitude * v.scale * ratio;
+        sim.sampler = Ok(slice.with_view(v.widths_mm().map(|w| w * 1e-3), v.shift_mm.map(|x| x * 1e-3))?);
+        sim.amplitude = Ok(s.amplitude()? * v.scale * ratio);
         let background = self.forward.images(&Effects { view: View { scale: 0.0, ..*v }, field: f.clone() })?;
         let measurements = self
             .measured
@@ -1134,15 +1135,15 @@ fn brent(f: impl Fn(f64) -> f64, lo: f64, hi: f64, tol: f64) -> (f64, f64) {
 
 /// The MR window extended by [`SLICE_REACH_MM`] plus the slice half-thickness and a sample on each
 /// side along the slice normal, within the grid.
-fn extended_window(sim: &Simulation) -> Window {
+fn extended_window(sim: &Simulation, sampler: &MrSampler) -> Window {
     let g = &sim.grid;
-    let mut w = sim.sampler.window.clone();
-    let (range, step, n) = match sim.sampler.geometry.plane.axes()[2] {
+    let mut w = sampler.window.clone();
+    let (range, step, n) = match sampler.geometry.plane.axes()[2] {
         0 => (&mut w.cols, g.dx, g.nx),
         1 => (&mut w.rows, g.dy, g.ny),
         _ => (&mut w.planes, g.dz, g.nz),
     };
-    let extra = ((SLICE_REACH_MM * 1e-3 + sim.sampler.geometry.slice_thickness) / step).ceil() as usize + 1;
+    let extra = ((SLICE_REACH_MM * 1e-3 + sampler.geometry.slice_thickness) / step).ceil() as usize + 1;
     *range = range.start.saturating_sub(extra)..(range.end + extra).min(n);
     w
 }

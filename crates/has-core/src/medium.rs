@@ -239,6 +239,49 @@ impl Medium {
         Ok(())
     }
 
+    /// Checks that `grid` resolves every region: each must reach into the grid (a region wholly
+    /// beyond it would have no effect) and be at least one step thick along z (the march samples
+    /// each slab at its midpoint, so a thinner layer would vanish or count as a whole step;
+    /// thicker layers are rounded to whole steps).
+    pub fn check_on_grid(&self, grid: &Grid) -> Result<()> {
+        let (z_lo, z_hi) = (grid.z0, grid.z(grid.nz - 1));
+        let (x_half, y_half) = (grid.x(grid.nx - 1).max(-grid.x(0)), grid.y(grid.ny - 1).max(-grid.y(0)));
+        for (i, r) in self.regions.iter().enumerate() {
+            let name = format!("region[{i}] ({})", self.materials[r.material].name);
+            let (z_min, z_max, lateral_miss) = match r.shape {
+                Shape::Slab { z_min, z_max } => (z_min, z_max, false),
+                Shape::Cylinder { radius, z_min, z_max, center } => {
+                    (z_min, z_max, center[0].abs() - radius > x_half || center[1].abs() - radius > y_half)
+                }
+            };
+            if z_max < z_lo || z_min > z_hi || lateral_miss {
+                return Err(HasError::invalid(
+                    name,
+                    format!(
+                        "lies outside the simulation grid (z {:.2} to {:.2} mm, |x| <= {:.1} mm, |y| <= {:.1} mm): it would have no \
+                         effect; move it, or extend grid.z_max_mm / grid.lateral_size_mm",
+                        z_lo * 1e3,
+                        z_hi * 1e3,
+                        x_half * 1e3,
+                        y_half * 1e3
+                    ),
+                ));
+            }
+            if z_max - z_min < grid.dz {
+                return Err(HasError::invalid(
+                    name,
+                    format!(
+                        "is {:.3} mm thick, less than one grid step ({:.3} mm): the march would miss it or make it a whole step; \
+                         set grid.step_mm below its thickness",
+                        (z_max - z_min) * 1e3,
+                        grid.dz * 1e3
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Index of the material at a point (last region containing it, else the background).
     pub fn material_at(&self, x: f64, y: f64, z: f64) -> usize {
         self.regions.iter().rev().find(|r| r.shape.contains(x, y, z)).map_or(self.background, |r| r.material)

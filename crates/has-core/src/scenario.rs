@@ -5,6 +5,7 @@
 
 use crate::arfi::{MrGeometry, MrPlane};
 use crate::error::{require_non_negative, require_positive, HasError, Result};
+use crate::has::InterfaceModel;
 use crate::medium::{Material, Medium, Region, Shape};
 use crate::transducer::{ElementShape, Transducer};
 use serde::{Deserialize, Serialize};
@@ -158,6 +159,23 @@ pub struct GridSpec {
     /// Add the waves reflected at changes of impedance (a backward pass; default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reflections: Option<bool>,
+    /// How changes of medium are crossed: `"angular"` (default: plane-wave coefficients of
+    /// every angular-spectrum component, with the reverberation of strongly reflecting layers)
+    /// or `"normal-incidence"` (the original HAS coefficient per pixel, one way).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interfaces: Option<String>,
+}
+
+impl GridSpec {
+    /// The interface model named by `interfaces` (default: angular).
+    pub fn interface_model(&self) -> Result<InterfaceModel> {
+        match self.interfaces.as_deref() {
+            None => Ok(InterfaceModel::default()),
+            Some(name) => InterfaceModel::parse(name).ok_or_else(|| {
+                HasError::invalid("grid.interfaces", format!("must be \"angular\" or \"normal-incidence\", got \"{name}\""))
+            }),
+        }
+    }
 }
 
 /// `[mr]`.
@@ -415,6 +433,7 @@ impl Scenario {
         if let Some(v) = self.grid.sponge_width_mm {
             require_non_negative("grid.sponge_width_mm", v)?;
         }
+        self.grid.interface_model()?;
         Ok(Resolved {
             name: self.name.clone(),
             frequency: f,

@@ -1,12 +1,16 @@
 //! A scenario made ready to simulate: grid, steered source, HAS plan and MR sampler.
+//!
+//! Fields need no MR model: where the MR slice cannot be sampled (outside the grid) or the ideal
+//! beam exerts no radiation force there (lossless water), the simulation still gives fields and
+//! only the ARFI images, fits and diagnoses report why they cannot be made.
 
-use crate::arfi::{add_noise, Broadening, MrSampler};
+use crate::arfi::{add_noise, Broadening, MrGeometry, MrSampler};
 use crate::error::{HasError, Result};
 use crate::grid::{fft_friendly, Grid};
 use crate::has::{HasOptions, HasPlan, RecordSpec, Recording};
 use crate::medium::{Material, Medium};
 use crate::memory;
-use crate::scenario::{Resolved, Scenario};
+use crate::scenario::{GridSpec, Resolved, Scenario};
 use crate::source::{source_plane_z, SourceModel};
 use crate::steering::steering_phases;
 use crate::transducer::Transducer;
@@ -30,12 +34,27 @@ pub struct Simulation {
     pub n_groups: usize,
     pub source: SourceModel,
     pub plan: HasPlan,
-    pub sampler: MrSampler,
-    /// Scale from broadened force density (N/m³) to ARFI phase (rad).
-    pub amplitude: f64,
+    /// The MR image geometry of the scenario.
+    pub mr: MrGeometry,
+    /// The MR sampler, or why there is none (see [`Simulation::sampler`]).
+    pub(crate) sampler: Result<MrSampler>,
+    /// Scale from broadened force density (N/m³) to ARFI phase (rad), or why there is none.
+    pub(crate) amplitude: Result<f64>,
     pub mask_fraction: f64,
     pub noise: f64,
     /// Whether marches add the reflected waves (scenario `[grid] reflections`).
+    pub reflections: bool,
+}
+
+/// How the simulation crosses changes of medium: the model, and the reverberation zone if any.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Propagation {
+    /// `"angular"` or `"normal-incidence"` (see [`crate::has::InterfaceModel`]).
+    pub interfaces: &'static str,
+    /// z (m) of the first and last interface between which reverberation is added, and the round
+    /// trips added; `None` where no two interfaces reflect strongly enough.
+    pub reverberation: Option<(f64, f64, usize)>,
+    /// Whether waves reflected back towards the source are added.
     pub reflections: bool,
 }
 
@@ -60,29 +79,40 @@ impl Simulation {
     pub fn new(scenario: &Scenario) -> Result<Self> {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
+        r.medium.check_on_grid(&grid)?;
         let steering = steering_phases(&r.transducer, &r.medium, r.frequency, r.focus)?;
         let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
         let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
         let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
         let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
-        let options = HasOptions { sponge_width: r.grid.sponge_width_mm.map_or(10e-3, |w| w * 1e-3), ..HasOptions::default() };
-        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width })?;
+        let options = HasOptions {
+            sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
+            interfaces: r.grid.interface_model()?,
+            ..HasOptions::default()
+        };
+        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
         let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
         let reference = source.field(&drive)?;
-        let spec = RecordSpec { window: Some(sampler.window.clone()), ..RecordSpec::default() };
+        // The ideal image comes from the plan's own march of the reference beam when it sets the
+        // amplitude (free without reverberation; one more march with it).
+        let window = sampler.as_ref().ok().filter(|_| r.amplitude.is_none()).map(|s| s.window.clone());
+        let spec = RecordSpec { window, ..RecordSpec::default() };
         let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
-        let amplitude = match r.amplitude {
-            Some(a) => a,
-            None => {
+        let amplitude = match (r.amplitude, &sampler) {
+            (Some(a), _) => Ok(a),
+            (None, Err(e)) => Err(e.clone()),
+            (None, Ok(sampler)) => {
                 let peak = sampler.force_image(&ideal.window)?.iter().copied().fold(0.0, f64::max);
-                if !(peak > 0.0) {
-                    return Err(HasError::invalid(
+                if peak > 0.0 {
+                    Ok(r.ideal_focal_phase / peak)
+                } else {
+                    Err(HasError::invalid(
                         "mr",
-                        "the ideal beam exerts no radiation force in the MR slice (no attenuating material there?)",
-                    ));
+                        "the ideal beam exerts no radiation force in the MR slice (no attenuating material there?): \
+                         fields can be simulated, MR-ARFI images cannot",
+                    ))
                 }
-                r.ideal_focal_phase / peak
             }
         };
         let groups = r.transducer.default_groups();
@@ -99,6 +129,7 @@ impl Simulation {
             n_groups,
             source,
             plan,
+            mr: r.mr,
             sampler,
             amplitude,
             mask_fraction: r.mask_fraction,
@@ -112,9 +143,21 @@ impl Simulation {
     pub fn with_calibration(&self, broadening_width: f64, amplitude: f64) -> Result<Self> {
         crate::error::require_positive("amplitude", amplitude)?;
         let mut s = self.clone();
-        s.sampler = self.sampler.with_broadening(broadening_width)?;
-        s.amplitude = amplitude;
+        s.sampler = Ok(self.sampler()?.with_broadening(broadening_width)?);
+        s.amplitude = Ok(amplitude);
         Ok(s)
+    }
+
+    /// The MR sampler (the map from `|p|²` on the MR window to the image without its amplitude),
+    /// or why this scenario has none (the MR slice lies outside the simulation grid).
+    pub fn sampler(&self) -> Result<&MrSampler> {
+        self.sampler.as_ref().map_err(Clone::clone)
+    }
+
+    /// The scale (rad·m³/N) from broadened force density to ARFI phase, or why this scenario has
+    /// none (no radiation force in the MR slice, e.g. lossless water, and none given).
+    pub fn amplitude(&self) -> Result<f64> {
+        self.amplitude.clone()
     }
 
     /// The same simulation (steering, groups, amplitude and sampler window kept: the device is
@@ -132,9 +175,10 @@ impl Simulation {
         let reference = self.source.field(&drive)?;
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
         let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &reference, &self.plan.options, &spec)?;
-        let sampler = MrSampler::new(&self.grid, &medium, self.frequency, &self.sampler.geometry, self.sampler.broadening)?
-            .with_view([self.sampler.broadening.width; 2], self.sampler.shift)?;
-        Ok(Simulation { medium, plan, sampler, ..self.clone() })
+        let old = self.sampler()?;
+        let sampler = MrSampler::new(&self.grid, &medium, self.frequency, &old.geometry, old.broadening)?
+            .with_view([old.broadening.width; 2], old.shift)?;
+        Ok(Simulation { medium, plan, sampler: Ok(sampler), ..self.clone() })
     }
 
     /// Replaces the element → group map (every group from 0 to G-1 must have an element).
@@ -151,6 +195,15 @@ impl Simulation {
         self.groups = groups;
         self.n_groups = n_groups;
         Ok(())
+    }
+
+    /// The interface model and reverberation this simulation uses.
+    pub fn propagation(&self) -> Propagation {
+        Propagation {
+            interfaces: self.plan.options.interfaces.name(),
+            reverberation: self.plan.reverberation().map(|(a, b, n)| (self.grid.z(a), self.grid.z(b), n)),
+            reflections: self.reflections,
+        }
     }
 
     /// Number of elements.
@@ -229,7 +282,7 @@ impl Simulation {
     /// The noise-free MR-ARFI phase image (rad), `(n_u, n_v)`, for added phases.
     pub fn arfi_image(&self, added: &[f64]) -> Result<Array2<f64>> {
         let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
-        Ok(self.sampler.force_image(&rec.window)? * self.amplitude)
+        Ok(self.sampler()?.force_image(&rec.window)? * self.amplitude()?)
     }
 
     /// An MR-ARFI image with seeded Gaussian noise of `noise` rad added.
@@ -241,9 +294,28 @@ impl Simulation {
 
     /// Marches several sources in one batch, keeping the MR window.
     pub fn record_window(&self, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
-        let spec = RecordSpec { window: Some(self.sampler.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
+        let spec = RecordSpec { window: Some(self.sampler()?.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         self.plan.propagate_batch(sources, &spec)
     }
+}
+
+/// The scenario with the `[grid]` it resolves to written out (spacing, step, lateral size, last
+/// plane, absorbing layer, reflections, interface model): a template that simulates as the
+/// scenario does (the spacings to the rounding of their mm values).
+pub fn with_chosen_grid(scenario: &Scenario) -> Result<Scenario> {
+    let r = scenario.resolve()?;
+    let g = choose_grid(&r)?;
+    let mut s = scenario.clone();
+    s.grid = GridSpec {
+        spacing_mm: Some(g.dx * 1e3),
+        step_mm: Some(g.dz * 1e3),
+        lateral_size_mm: Some(g.nx as f64 * g.dx * 1e3),
+        z_max_mm: Some(g.z(g.nz - 1) * 1e3),
+        sponge_width_mm: Some(r.grid.sponge_width_mm.unwrap_or(HasOptions::default().sponge_width * 1e3)),
+        reflections: Some(r.grid.reflections.unwrap_or(false)),
+        interfaces: Some(r.grid.interface_model()?.name().to_string()),
+    };
+    Ok(s)
 }
 
 /// The grid for a scenario: spacing λ_min/4 unless given (refused above λ_min/2), a square
@@ -280,18 +352,43 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
     };
     let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
     let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
-    let n = fft_friendly((size / dx).ceil() as usize);
+    // (1e-9 of a sample below an integer counts as that integer, so that the size and last plane
+    // written out by `with_chosen_grid` give back the same grid.)
+    let n = fft_friendly((size / dx - 1e-9).ceil() as usize);
     let ax = r.mr.plane.axes();
     let mr_z_end = if ax[1] == 2 { r.mr.center[2] + 0.5 * r.mr.fov[1] } else { r.mr.center[2] + r.mr.slice_thickness };
     let z_end = r.grid.z_max_mm.map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);
     if z_end <= z0 + dz {
         return Err(HasError::invalid("grid.z_max_mm", format!("must lie beyond the source plane at {:.1} mm", z0 * 1e3)));
     }
-    let nz = ((z_end - z0) / dz).ceil() as usize + 1;
+    let nz = ((z_end - z0) / dz - 1e-9).ceil() as usize + 1;
     let bytes = (n * n) as u64 * 16 * 8;
     if nz > 100_000 {
         return Err(HasError::invalid("grid.step_mm", format!("{nz} planes to the last one; use a larger step or grid.z_max_mm")));
     }
     memory::check(|| format!("a {n} x {n} grid"), bytes, "use a coarser grid.spacing_mm or a smaller grid.lateral_size_mm")?;
     Grid::new(n, n, dx, dx, nz, dz, z0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `arfi scenario` writes the chosen grid; read back, it must give the very same grid (sizes
+    /// within 1e-9 of a sample of an integer count are that count).
+    #[test]
+    fn the_written_grid_resolves_to_the_same_grid() {
+        let bowl = "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 64.0\n\
+                    aperture_diameter_mm = 64.0\n[focus]\nposition_mm = [0.0, 0.0, 64.0]\n[grid]\nspacing_mm = 0.375\n";
+        for s in [Scenario::default(), Scenario::from_toml(bowl, None).unwrap()] {
+            let written = Scenario::from_toml(&with_chosen_grid(&s).unwrap().to_toml().unwrap(), None).unwrap();
+            assert!(written.grid.step_mm.is_some() && written.grid.interfaces.as_deref() == Some("angular"));
+            let (a, b) = (choose_grid(&written.resolve().unwrap()).unwrap(), choose_grid(&s.resolve().unwrap()).unwrap());
+            assert_eq!((a.nx, a.ny, a.nz), (b.nx, b.ny, b.nz));
+            // Spacings pass through mm in the file: equal to the last bit or two.
+            for (x, y) in [(a.dx, b.dx), (a.dy, b.dy), (a.dz, b.dz), (a.z0, b.z0)] {
+                assert!((x - y).abs() <= 1e-14 * x.abs().max(y.abs()), "{x} vs {y}");
+            }
+        }
+    }
 }

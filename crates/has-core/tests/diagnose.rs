@@ -111,7 +111,7 @@ fn the_papers_story_a_model_without_broadening_meets_w_2_7_mm() {
     // Data: the scenario's W = 2.7 mm; model: no broadening, same amplitude (paper Fig. 2).
     let s = sim();
     let image = s.noisy_arfi_image(&[], NOISE, 1).unwrap();
-    let model = s.with_calibration(0.0, s.amplitude).unwrap();
+    let model = s.with_calibration(0.0, s.amplitude().unwrap()).unwrap();
     let d = run(&model, &image);
     assert_eq!(names(&d), ["broadening"], "{:?}", d.steps);
     // Tolerance 0.2 mm (issue 4); the fit of W on a 0.02 rad image is good to about 0.05 mm.
@@ -126,7 +126,7 @@ fn a_hidden_registration_shift_is_named_and_measured() {
     let shifted = Simulation::new(&Scenario::from_toml("[mr]\ncenter_mm = [1.1, -0.7, 85.0]\n", None).unwrap()).unwrap();
     // The scenario sets the amplitude so that its ideal image peaks at 0.6 rad, which depends on
     // where the pixels fall; keep the model's amplitude so that only the shift is hidden.
-    let shifted = shifted.with_calibration(s.sampler.broadening.width, s.amplitude).unwrap();
+    let shifted = shifted.with_calibration(s.sampler().unwrap().broadening.width, s.amplitude().unwrap()).unwrap();
     // The slice centred at (1.1, -0.7) mm images the focus at (-1.1, +0.7) mm of its own frame.
     let image = shifted.noisy_arfi_image(&[], NOISE, 2).unwrap();
     let d = run(s, &image);
@@ -154,7 +154,7 @@ fn a_hidden_slice_offset_is_named_and_measured() {
     // The image is taken 4 mm deeper than the model's slice (amplitude pinned, as for the shift).
     let s = sim();
     let deeper = Simulation::new(&Scenario::from_toml("[mr]\ncenter_mm = [0.0, 0.0, 89.0]\n", None).unwrap()).unwrap();
-    let deeper = deeper.with_calibration(s.sampler.broadening.width, s.amplitude).unwrap();
+    let deeper = deeper.with_calibration(s.sampler().unwrap().broadening.width, s.amplitude().unwrap()).unwrap();
     let d = run(s, &deeper.noisy_arfi_image(&[], NOISE, 6).unwrap());
     assert_eq!(names(&d), ["slice_offset"], "{:?}", d.steps);
     // Tolerance 1 mm: the focal depth of field is about 20 mm, so the image changes slowly with

@@ -1,0 +1,275 @@
+//! Changes of medium between two slabs: the pressure reflection and transmission of each plane
+//! wave of the angular spectrum.
+//!
+//! For a plane wave of transverse wavenumber `kt` crossing a planar interface from medium `a`
+//! into medium `b` (densities `rho`, complex wavenumbers `k = omega/c + i·alpha`), with
+//! `kz = sqrt(k² - kt²)` (the root with `Im kz >= 0`, so evanescent waves decay):
+//!
+//! `R_ab(kt) = (rho_b·kz_a - rho_a·kz_b) / (rho_b·kz_a + rho_a·kz_b)`,  `T_ab = 1 + R_ab`
+//!
+//! (pressure continuity and continuity of the normal particle velocity; e.g. Brekhovskikh,
+//! *Waves in Layered Media*, 1980, §2). This is exact at a planar interface, including total
+//! reflection beyond the critical angle; a wave crossing back from `b` to `a` sees
+//! `R_ba = -R_ab`. At normal incidence `R = (Z_b - Z_a) / (Z_a + Z_b)`.
+//!
+//! Where the interface varies across the slice, the field is decomposed by material pair as in
+//! the wave-propagation method (Brenner & Singer, Appl Opt 32(26), 1993): the reflected wave is
+//! `Σ_pairs M_ab(x, y) · IFFT(R_ab · FFT(p))`, with `M_ab` the pixels where slab `n - 1` holds
+//! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
+//! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
+
+use crate::fft::{Fft2, FftWorkspace};
+use crate::grid::Grid;
+use crate::medium::SliceProperties;
+use num_complex::Complex64 as C64;
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// How a change of medium between slabs is applied.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum InterfaceModel {
+    /// Plane-wave coefficients of every angular-spectrum component (angle-dependent, with total
+    /// reflection beyond the critical angle), and the reverberation between interfaces that
+    /// reflect strongly (thin layers such as bone plates).
+    #[default]
+    Angular,
+    /// The normal-incidence coefficient `T = 2·Z_b / (Z_a + Z_b)` pixel by pixel, one way (the
+    /// original HAS step; overestimates the transmission of oblique waves).
+    NormalIncidence,
+}
+
+impl InterfaceModel {
+    /// Parses `"angular"` or `"normal-incidence"`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "angular" => Some(InterfaceModel::Angular),
+            "normal-incidence" => Some(InterfaceModel::NormalIncidence),
+            _ => None,
+        }
+    }
+
+    /// The name used in scenario files.
+    pub fn name(&self) -> &'static str {
+        match self {
+            InterfaceModel::Angular => "angular",
+            InterfaceModel::NormalIncidence => "normal-incidence",
+        }
+    }
+}
+
+/// More distinct material pairs than this on one interface plane: normal incidence per pixel.
+pub const MAX_SPECTRAL_PAIRS: usize = 8;
+
+/// At most this many distinct material pairs get a spectral coefficient in one plan (each is a
+/// full spectrum, 16 bytes per grid sample); interfaces needing more use normal incidence per
+/// pixel (a voxel map of continuously varying properties).
+pub const MAX_PLAN_PAIRS: usize = 64;
+
+/// Spectral coefficients shared by every interface of a plan, by material pair.
+#[derive(Default)]
+pub(crate) struct Coefficients(HashMap<(Key, Key), Arc<Vec<C64>>>);
+
+/// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one.
+pub(crate) struct Interface {
+    /// Largest normal-incidence `|R|` on the plane (how strongly it reflects).
+    pub strength: f64,
+    kind: Kind,
+}
+
+enum Kind {
+    /// `R(x, y)` applied pixel by pixel.
+    Pointwise(Vec<f64>),
+    /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
+    Spectral(Vec<Pair>),
+}
+
+struct Pair {
+    /// The pixels of this pair; `None`: every pixel.
+    pixels: Option<Vec<u32>>,
+    /// `R_ab(kx, ky) / (nx·ny)` in the transposed spectrum layout `(nx, ny)`.
+    coefficient: Arc<Vec<C64>>,
+}
+
+/// Properties of one pixel as exact bits (equal bits: the same material).
+type Key = [u64; 3];
+
+/// A material pair's first pixel and all its pixels.
+type PairPixels = (usize, Vec<u32>);
+
+fn key(s: &SliceProperties, i: usize) -> Key {
+    [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits()]
+}
+
+impl Interface {
+    /// The interface from slab `from` into slab `to`, or `None` where they are equal.
+    pub fn new(
+        grid: &Grid,
+        from: &SliceProperties,
+        to: &SliceProperties,
+        omega: f64,
+        model: InterfaceModel,
+        shared: &mut Coefficients,
+    ) -> Option<Self> {
+        if from == to {
+            return None;
+        }
+        let n = from.sound_speed.len();
+        let normal: Vec<f64> = (0..n)
+            .map(|i| {
+                let (za, zb) = (from.density[i] * from.sound_speed[i], to.density[i] * to.sound_speed[i]);
+                (zb - za) / (za + zb)
+            })
+            .collect();
+        let strength = normal.iter().fold(0.0, |m: f64, r| m.max(r.abs()));
+        let pointwise = || Some(Interface { strength, kind: Kind::Pointwise(normal.clone()) });
+        if model == InterfaceModel::NormalIncidence {
+            return pointwise();
+        }
+        let mut pairs: HashMap<(Key, Key), PairPixels> = HashMap::new();
+        for i in 0..n {
+            let (a, b) = (key(from, i), key(to, i));
+            if a != b {
+                let e = pairs.entry((a, b)).or_insert_with(|| (i, Vec::new()));
+                e.1.push(i as u32);
+            }
+            if pairs.len() > MAX_SPECTRAL_PAIRS {
+                return pointwise();
+            }
+        }
+        let new_pairs = pairs.keys().filter(|k| !shared.0.contains_key(k)).count();
+        if shared.0.len() + new_pairs > MAX_PLAN_PAIRS {
+            return pointwise();
+        }
+        // In order of each pair's first pixel, so the sum is the same on every run.
+        let mut pairs: Vec<((Key, Key), PairPixels)> = pairs.into_iter().collect();
+        pairs.sort_unstable_by_key(|p| p.1 .0);
+        let pairs = pairs
+            .into_iter()
+            .map(|(k, (first, pixels))| Pair {
+                coefficient: shared
+                    .0
+                    .entry(k)
+                    .or_insert_with(|| Arc::new(spectral_reflection(grid, omega, medium_at(from, first), medium_at(to, first))))
+                    .clone(),
+                pixels: (pixels.len() < n).then_some(pixels),
+            })
+            .collect();
+        Some(Interface { strength, kind: Kind::Spectral(pairs) })
+    }
+
+    /// `out ← R ⊛ p`: the wave reflected by this interface from the incident wave `p` (for a
+    /// wave crossing in the other direction, the reflection is `-R ⊛ p`). `out` and `work` are
+    /// as long as `p`; `work` is overwritten.
+    pub fn reflect(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
+        match &self.kind {
+            Kind::Pointwise(r) => out.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r),
+            Kind::Spectral(pairs) => {
+                work.copy_from_slice(p);
+                fft.forward(work, ws);
+                let spectrum = ws.spectrum.clone();
+                out.fill(C64::new(0.0, 0.0));
+                for pair in pairs {
+                    ws.spectrum.iter_mut().zip(&spectrum).zip(pair.coefficient.iter()).for_each(|((s, a), r)| *s = a * r);
+                    fft.inverse(ws, work);
+                    match &pair.pixels {
+                        None => out.iter_mut().zip(work.iter()).for_each(|(o, w)| *o += w),
+                        Some(px) => px.iter().for_each(|&i| out[i as usize] += work[i as usize]),
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// (density, complex wavenumber at `omega`) of pixel `i`.
+fn medium_at(s: &SliceProperties, i: usize) -> (f64, f64, f64) {
+    (s.density[i], s.sound_speed[i], s.attenuation[i])
+}
+
+/// `kz = sqrt(k² - kt²)` for the complex wavenumber `k = omega/c + i·alpha`, the root with
+/// `Im kz >= 0`.
+pub(crate) fn axial_wavenumber(k: C64, kt2: f64) -> C64 {
+    let kz = (k * k - kt2).sqrt();
+    if kz.im < 0.0 {
+        -kz
+    } else {
+        kz
+    }
+}
+
+/// The plane-wave pressure reflection coefficient from `a` into `b`, each `(rho, c, alpha)`.
+pub fn reflection_coefficient(omega: f64, a: (f64, f64, f64), b: (f64, f64, f64), kt2: f64) -> C64 {
+    let kza = axial_wavenumber(C64::new(omega / a.1, a.2), kt2);
+    let kzb = axial_wavenumber(C64::new(omega / b.1, b.2), kt2);
+    let (num, den) = (b.0 * kza - a.0 * kzb, b.0 * kza + a.0 * kzb);
+    if den.norm_sqr() > 0.0 {
+        num / den
+    } else {
+        C64::new(0.0, 0.0)
+    }
+}
+
+/// `R_ab(kx, ky) / (nx·ny)` on the transposed spectrum layout `(nx, ny)`.
+fn spectral_reflection(g: &Grid, omega: f64, a: (f64, f64, f64), b: (f64, f64, f64)) -> Vec<C64> {
+    let norm = 1.0 / g.lateral_len() as f64;
+    let mut r = Vec::with_capacity(g.lateral_len());
+    for i in 0..g.nx {
+        let kx = Grid::wavenumber(i, g.nx, g.dx);
+        for j in 0..g.ny {
+            let ky = Grid::wavenumber(j, g.ny, g.dy);
+            r.push(reflection_coefficient(omega, a, b, kx * kx + ky * ky) * norm);
+        }
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    const WATER: (f64, f64, f64) = (1000.0, 1500.0, 0.0);
+    const BONE: (f64, f64, f64) = (1850.0, 2800.0, 0.0);
+
+    #[test]
+    fn normal_incidence_gives_the_impedance_formula() {
+        let omega = 2.0 * PI * 5e5;
+        let r = reflection_coefficient(omega, WATER, BONE, 0.0);
+        let (za, zb) = (1.5e6, 1850.0 * 2800.0);
+        assert!((r - C64::new((zb - za) / (za + zb), 0.0)).norm() < 1e-14);
+        // The reverse crossing reflects with the opposite sign at every angle.
+        for s in [0.0, 0.3, 0.6, 0.9, 1.2] {
+            let kt2 = (s * omega / 1500.0).powi(2);
+            let sum = reflection_coefficient(omega, WATER, BONE, kt2) + reflection_coefficient(omega, BONE, WATER, kt2);
+            assert!(sum.norm() < 1e-12, "{s}: {sum}");
+        }
+    }
+
+    #[test]
+    fn beyond_the_critical_angle_the_reflection_is_total() {
+        // Critical angle asin(1500/2800) = 32.4°: |R| = 1 beyond it (lossless), < 1 before.
+        let omega = 2.0 * PI * 5e5;
+        let k = omega / 1500.0;
+        for deg in [33.0_f64, 45.0, 60.0, 80.0] {
+            let r = reflection_coefficient(omega, WATER, BONE, (k * deg.to_radians().sin()).powi(2));
+            assert!((r.norm() - 1.0).abs() < 1e-12, "{deg}°: |R| = {}", r.norm());
+        }
+        let r = reflection_coefficient(omega, WATER, BONE, (k * 30f64.to_radians().sin()).powi(2));
+        assert!(r.norm() < 0.999, "30°: |R| = {}", r.norm());
+    }
+
+    #[test]
+    fn energy_flux_is_conserved_at_oblique_incidence() {
+        // Lossless media below the critical angle: |R|² + |T|²·(rho_a·kz_b)/(rho_b·kz_a) = 1.
+        let omega = 2.0 * PI * 5e5;
+        for deg in [0.0_f64, 10.0, 20.0, 30.0] {
+            let kt2 = (omega / 1500.0 * deg.to_radians().sin()).powi(2);
+            let r = reflection_coefficient(omega, WATER, BONE, kt2);
+            let t = r + 1.0;
+            let kz = |c: f64| axial_wavenumber(C64::new(omega / c, 0.0), kt2).re;
+            let (kza, kzb) = (kz(1500.0), kz(2800.0));
+            let flux = r.norm_sqr() + t.norm_sqr() * (WATER.0 * kzb) / (BONE.0 * kza);
+            assert!((flux - 1.0).abs() < 1e-12, "{deg}°: {flux}");
+        }
+    }
+}

@@ -1,0 +1,413 @@
+//! Hybrid Angular Spectrum propagation (Vyas & Christensen, IEEE TUFFC 59(6), 2012).
+//!
+//! Each step of length `dz` from plane `n` to plane `n + 1`:
+//! 1. at a change of medium, the interface (see [`interface`]): by default the plane-wave
+//!    pressure coefficients of every angular-spectrum component (angle-dependent, total
+//!    reflection beyond the critical angle), or the normal-incidence `T = 2·Z2 / (Z1 + Z2)` per
+//!    pixel ([`InterfaceModel::NormalIncidence`]);
+//! 2. an angular-spectrum step in a homogeneous medium of complex wavenumber `k̄ + i·ᾱ`:
+//!    `P(kx, ky) ← P · exp(i·kz·dz + ᾱ·dz)`, `kz = sqrt((k̄ + i·ᾱ)² - kx² - ky²)` (`Im kz >= 0`:
+//!    evanescent components decay; the `ᾱ·dz` leaves normal incidence to the screen, so only
+//!    the extra attenuation of oblique waves, `ᾱ·(1/cos θ - 1)`, is applied here);
+//! 3. a space-domain screen for the slab's deviation from `k̄` and its attenuation:
+//!    `p ← p · exp(i·(k(x, y) - k̄)·dz - (alpha(x, y) + sigma(x, y))·dz)`,
+//!    where `sigma` is an absorbing layer at the lateral edges (it does not count as absorption
+//!    for the radiation force).
+//!
+//! `k̄` and `ᾱ` of each slab are means of `k(x, y)` and `alpha(x, y)` weighted by the pressure
+//! magnitude of a *reference beam* (the steered, unaberrated source), fixed when the plan is
+//! built. Fixing them makes every later propagation linear in the source, so group fields add up
+//! to the field of the whole array exactly. Screens, interfaces and propagators are built once
+//! per distinct slab and shared by every source of a batch. Time convention `exp(-i·omega·t)`: a
+//! wave travelling to +z is `exp(+i·k·z)`.
+//!
+//! Between the first and the last interface whose round trip with the most strongly reflecting
+//! one returns at least [`ROUND_TRIP_THRESHOLD`] of the amplitude (normal-incidence
+//! `|R_i|·|R_max|`; water/bone/water: 0.3, water/phantom/water: 0.001), the angular model adds
+//! the waves reverberating between interfaces (a Bremmer series: alternate backward and forward sweeps through that
+//! zone, each fed by the reflections of the previous one). The number of round trips is fixed
+//! when the plan is built (until the reference beam's next round trip is below
+//! [`REVERBERATION_TOLERANCE`] of its incident amplitude), so marches stay linear. Waves
+//! reflected back towards the source are added in front of the zone only when
+//! [`RecordSpec::reflections`] asks for them.
+
+mod interface;
+mod march;
+
+pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
+pub use march::{RecordSpec, Recording, Window};
+
+use crate::error::{HasError, Result};
+use crate::fft::Fft2;
+use crate::grid::Grid;
+use crate::medium::{Medium, SliceProperties};
+use interface::{axial_wavenumber, Coefficients, Interface};
+use num_complex::Complex64 as C64;
+use std::collections::HashMap;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+/// An interface takes part in the reverberation when a round trip between it and the most
+/// strongly reflecting interface (normal incidence) returns at least this fraction of the
+/// amplitude.
+pub const ROUND_TRIP_THRESHOLD: f64 = 0.01;
+
+/// Round trips are added until the next one would carry less than this fraction of the incident
+/// amplitude (root-mean-square over the zone's entry plane) of the reference beam.
+pub const REVERBERATION_TOLERANCE: f64 = 1e-3;
+
+/// At most this many round trips (a layer with near-total reflection and no loss).
+pub const MAX_ROUND_TRIPS: usize = 32;
+
+/// Options of the propagation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HasOptions {
+    /// Width of the absorbing layer at each lateral edge (m); 0 disables it.
+    pub sponge_width: f64,
+    /// Attenuation (Np) the layer applies to a wave crossing it along z over a distance equal to
+    /// its width; the profile is quadratic, `sigma = 3·strength/width · (depth/width)²`.
+    pub sponge_strength: f64,
+    /// How changes of medium between slabs are applied.
+    pub interfaces: InterfaceModel,
+}
+
+impl Default for HasOptions {
+    fn default() -> Self {
+        HasOptions { sponge_width: 10e-3, sponge_strength: 6.9, interfaces: InterfaceModel::default() }
+    }
+}
+
+#[derive(Clone)]
+struct Step {
+    /// Index into `HasPlan::slabs` of the slab between plane n and n + 1.
+    slab: usize,
+    /// The change of medium at plane n (from slab n - 1, or the source's medium, into slab n).
+    interface: Option<Arc<Interface>>,
+    /// exp(i·kz·dz + ᾱ·dz) / (nx·ny), transposed layout (nx, ny).
+    propagator: Arc<Vec<C64>>,
+    screen: Arc<Vec<C64>>,
+    mean_wavenumber: f64,
+    mean_attenuation: f64,
+}
+
+/// The planes bounding the reverberation, and the round trips added.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Zone {
+    first: usize,
+    last: usize,
+    round_trips: usize,
+}
+
+/// A propagation plan: grid, FFT plans and per-step operators for one medium and frequency
+/// (cloning shares the operators).
+#[derive(Clone)]
+pub struct HasPlan {
+    pub grid: Grid,
+    pub frequency: f64,
+    /// The options it was built with.
+    pub options: HasOptions,
+    fft: Fft2,
+    slabs: Vec<Arc<SliceProperties>>,
+    steps: Vec<Step>,
+    zone: Option<Zone>,
+}
+
+impl HasPlan {
+    /// Builds the plan, marching `reference` (the steered source on plane 0) through the medium
+    /// to fix each slab's mean wavenumber, and returns what `spec` asks of that beam. The medium
+    /// half a step before plane 0 is the one the source radiates from.
+    pub fn build(
+        grid: &Grid,
+        medium: &Medium,
+        frequency: f64,
+        reference: &[C64],
+        options: &HasOptions,
+        spec: &RecordSpec,
+    ) -> Result<(Self, Recording)> {
+        let mut out = Err(HasError::invalid("plan", "not built"));
+        march::in_pool(|| out = Self::build_here(grid, medium, frequency, reference, options, spec));
+        out
+    }
+
+    fn build_here(
+        grid: &Grid,
+        medium: &Medium,
+        frequency: f64,
+        reference: &[C64],
+        options: &HasOptions,
+        spec: &RecordSpec,
+    ) -> Result<(Self, Recording)> {
+        let n = grid.lateral_len();
+        if reference.len() != n {
+            return Err(HasError::invalid("reference", format!("has {} samples, grid has {n}", reference.len())));
+        }
+        let omega = 2.0 * PI * frequency;
+        let Layout { slabs, slab_of_step, interfaces } = layout(grid, medium, frequency, options.interfaces);
+        let fft = Fft2::new(grid.nx, grid.ny);
+        let sponge = sponge_map(grid, options);
+        let mut propagator_cache: HashMap<[u64; 2], Arc<Vec<C64>>> = HashMap::new();
+        let mut screen_cache: HashMap<(usize, u64), Arc<Vec<C64>>> = HashMap::new();
+        // k̄ and ᾱ are rounded to 1e-4 of k: far below any medium contrast, so slabs of one
+        // material share one propagator and screen (the screen uses the rounded values, so the
+        // sum stays exact).
+        let quantum = omega / medium.min_sound_speed() * 1e-4;
+        let mut plan = HasPlan {
+            grid: grid.clone(),
+            frequency,
+            options: options.clone(),
+            fft,
+            slabs,
+            steps: Vec::with_capacity(grid.nz - 1),
+            zone: None,
+        };
+        // March the reference one way (single transmission at each interface) to fix the means;
+        // without reverberation or reflections that march is the recording asked for.
+        let mut recorder = march::Recorder::new(grid, spec, spec.last_plane(grid.nz));
+        let mut field = reference.to_vec();
+        let mut ws = plan.fft.workspace(true);
+        let mut work = vec![C64::new(0.0, 0.0); n];
+        let mut reflected = vec![C64::new(0.0, 0.0); n];
+        for (step, (slab, interface)) in slab_of_step.into_iter().zip(interfaces).enumerate() {
+            let arriving = plan.steps.last().map_or(slab, |s| s.slab);
+            recorder.add(step, &field);
+            recorder.power(step, &plan.slabs[arriving], &field);
+            if let Some(i) = &interface {
+                i.reflect(&plan.fft, &field, &mut reflected, &mut work, &mut ws);
+                field.iter_mut().zip(&reflected).for_each(|(f, r)| *f += r);
+            }
+            let props = &plan.slabs[slab];
+            let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
+            let bits = [k_mean.to_bits(), a_mean.to_bits()];
+            let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, k_mean, a_mean))).clone();
+            let screen =
+                screen_cache.entry((slab, bits[0])).or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, grid.dz))).clone();
+            let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
+            plan.fft.filter(&mut field, &mut ws, None, &s.propagator, &s.screen);
+            plan.steps.push(s);
+        }
+        let last = grid.nz - 1;
+        recorder.add(last, &field);
+        recorder.power(last, plan.slab_properties(last), &field);
+        plan.zone = plan.reverberation_zone();
+        if let Some(z) = plan.zone {
+            plan.zone = Some(Zone { round_trips: plan.round_trips_needed(reference, z), ..z });
+        }
+        let rec = if plan.zone.is_some() || spec.reflections { plan.propagate_here(reference, spec) } else { recorder.finish() };
+        Ok((plan, rec))
+    }
+
+    /// The first and last interfaces of the reverberation (see [`ROUND_TRIP_THRESHOLD`]), if there
+    /// are two (angular model only).
+    fn reverberation_zone(&self) -> Option<Zone> {
+        if self.options.interfaces != InterfaceModel::Angular {
+            return None;
+        }
+        let strength = |n: usize| self.steps[n].interface.as_ref().map_or(0.0, |i| i.strength);
+        let strongest = (0..self.steps.len()).map(strength).fold(0.0, f64::max);
+        let strong: Vec<usize> =
+            (0..self.steps.len()).filter(|&n| strength(n) > 0.0 && strength(n) * strongest >= ROUND_TRIP_THRESHOLD).collect();
+        match (strong.first(), strong.last()) {
+            (Some(&first), Some(&last)) if last > first => Some(Zone { first, last, round_trips: 0 }),
+            _ => None,
+        }
+    }
+
+    /// The mean wavenumber `k̄` (rad/m) used for the slab after each plane.
+    pub fn mean_wavenumbers(&self) -> Vec<f64> {
+        self.steps.iter().map(|s| s.mean_wavenumber).collect()
+    }
+
+    /// The mean attenuation `ᾱ` (Np/m) used for the slab after each plane.
+    pub fn mean_attenuations(&self) -> Vec<f64> {
+        self.steps.iter().map(|s| s.mean_attenuation).collect()
+    }
+
+    /// Round trips of the reverberation added between the first and last strongly reflecting
+    /// interfaces, with those planes (`None`: no such pair of interfaces, or normal incidence).
+    pub fn reverberation(&self) -> Option<(usize, usize, usize)> {
+        self.zone.map(|z| (z.first, z.last, z.round_trips))
+    }
+
+    /// Properties of the slab the beam crossed to reach plane `n` (the first slab for plane 0).
+    pub fn slab_properties(&self, plane: usize) -> &SliceProperties {
+        let s = plane.max(1).min(self.steps.len()) - 1;
+        &self.slabs[self.steps[s].slab]
+    }
+
+    /// Marches one source from plane 0, keeping what `spec` asks for. Rows of each FFT are spread
+    /// over the rayon pool.
+    pub fn propagate(&self, source: &[C64], spec: &RecordSpec) -> Result<Recording> {
+        self.check(source, spec)?;
+        let mut rec = Recording::default();
+        march::in_pool(|| rec = self.propagate_here(source, spec));
+        Ok(rec)
+    }
+
+    fn propagate_here(&self, source: &[C64], spec: &RecordSpec) -> Recording {
+        self.march(source.to_vec(), spec, true, march::RoundTrips::Fixed).0
+    }
+
+    /// Marches many sources through the same steps (one source per rayon task). The result is
+    /// the same as calling [`HasPlan::propagate`] on each.
+    pub fn propagate_batch(&self, sources: &[Vec<C64>], spec: &RecordSpec) -> Result<Vec<Recording>> {
+        use rayon::prelude::*;
+        for s in sources {
+            self.check(s, spec)?;
+        }
+        if sources.len() == 1 {
+            return Ok(vec![self.propagate(&sources[0], spec)?]);
+        }
+        Ok(sources.par_iter().map(|s| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0).collect())
+    }
+
+    fn check(&self, source: &[C64], spec: &RecordSpec) -> Result<()> {
+        let g = &self.grid;
+        if source.len() != g.lateral_len() {
+            return Err(HasError::invalid("source", format!("has {} samples, grid has {}", source.len(), g.lateral_len())));
+        }
+        if source.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()) {
+            return Err(HasError::invalid("source", "contains NaN or infinite values"));
+        }
+        if let Some(&p) = spec.planes.iter().find(|&&p| p >= g.nz) {
+            return Err(HasError::invalid("planes", format!("plane {p} is beyond the grid ({} planes)", g.nz)));
+        }
+        if let Some(w) = &spec.window {
+            if w.planes.end > g.nz || w.rows.end > g.ny || w.cols.end > g.nx {
+                return Err(HasError::invalid("window", "reaches beyond the grid"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The medium along the march: distinct property maps, the slab of each step, and the interface
+/// at each step's first plane (the medium half a step before plane 0 is the one the source
+/// radiates from).
+struct Layout {
+    slabs: Vec<Arc<SliceProperties>>,
+    slab_of_step: Vec<usize>,
+    interfaces: Vec<Option<Arc<Interface>>>,
+}
+
+fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -> Layout {
+    let omega = 2.0 * PI * frequency;
+    let mut slabs: Vec<Arc<SliceProperties>> = Vec::new();
+    let mut slab_of_step = Vec::with_capacity(grid.nz - 1);
+    let mut interfaces = Vec::with_capacity(grid.nz - 1);
+    let mut prev = Arc::new(medium.slice(grid, grid.z0 - 0.5 * grid.dz, frequency));
+    let mut interface_cache: HashMap<(usize, usize), Option<Arc<Interface>>> = HashMap::new();
+    let mut shared = Coefficients::default();
+    let mut prev_slab = usize::MAX;
+    let mut prev_key = None;
+    for step in 0..grid.nz - 1 {
+        let z = grid.z(step) + 0.5 * grid.dz;
+        let key = medium.slice_key(z);
+        let slab = match slabs.last() {
+            Some(_) if key.is_some() && key == prev_key => slabs.len() - 1,
+            last => {
+                let props = medium.slice(grid, z, frequency);
+                if last.is_some_and(|l| **l == props) {
+                    slabs.len() - 1
+                } else {
+                    slabs.push(Arc::new(props));
+                    slabs.len() - 1
+                }
+            }
+        };
+        prev_key = key;
+        let current = &slabs[slab];
+        let interface = if step == 0 {
+            Interface::new(grid, &prev, current, omega, model, &mut shared).map(Arc::new)
+        } else if slab == prev_slab {
+            None
+        } else {
+            interface_cache
+                .entry((prev_slab, slab))
+                .or_insert_with(|| Interface::new(grid, &prev, current, omega, model, &mut shared).map(Arc::new))
+                .clone()
+        };
+        interfaces.push(interface);
+        slab_of_step.push(slab);
+        prev = current.clone();
+        prev_slab = slab;
+    }
+    Layout { slabs, slab_of_step, interfaces }
+}
+
+/// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (sequential sums: identical with any
+/// number of threads), rounded to multiples of `quantum` so slabs of equal medium share one
+/// propagator.
+fn mean_wavenumber(field: &[C64], props: &SliceProperties, omega: f64, quantum: f64) -> (f64, f64) {
+    let (mut k_sum, mut a_sum, mut den) = (0.0, 0.0, 0.0);
+    for ((p, c), a) in field.iter().zip(&props.sound_speed).zip(&props.attenuation) {
+        let w = p.norm_sqr().sqrt(); // |p| without hypot's overflow care: 2x faster here
+        k_sum += w * omega / c;
+        a_sum += w * a;
+        den += w;
+    }
+    let (k, a) = if den > 0.0 {
+        (k_sum / den, a_sum / den)
+    } else {
+        let n = props.sound_speed.len() as f64;
+        (props.sound_speed.iter().map(|c| omega / c).sum::<f64>() / n, props.attenuation.iter().sum::<f64>() / n)
+    };
+    ((k / quantum).round() * quantum, (a / quantum).round() * quantum)
+}
+
+/// `exp(i·kz·dz + ᾱ·dz) / (nx·ny)` with `kz = sqrt((k̄ + i·ᾱ)² - kt²)` on the transposed spectrum
+/// layout `(nx, ny)`; with `ᾱ = 0` the plain `exp(i·kz·dz)`.
+fn propagator(g: &Grid, k: f64, alpha: f64) -> Vec<C64> {
+    let norm = 1.0 / (g.nx * g.ny) as f64;
+    let mut h = Vec::with_capacity(g.lateral_len());
+    for i in 0..g.nx {
+        let kx = Grid::wavenumber(i, g.nx, g.dx);
+        for j in 0..g.ny {
+            let ky = Grid::wavenumber(j, g.ny, g.dy);
+            let kt2 = kx * kx + ky * ky;
+            h.push(if alpha == 0.0 {
+                let kz2 = k * k - kt2;
+                if kz2 >= 0.0 {
+                    C64::from_polar(norm, kz2.sqrt() * g.dz)
+                } else {
+                    C64::new(norm * (-(-kz2).sqrt() * g.dz).exp(), 0.0)
+                }
+            } else {
+                let kz = axial_wavenumber(C64::new(k, alpha), kt2);
+                (C64::i() * kz * g.dz + alpha * g.dz).exp() * norm
+            });
+        }
+    }
+    h
+}
+
+/// `exp(i·(k - k̄)·dz - (alpha + sigma)·dz)` per pixel.
+fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, dz: f64) -> Vec<C64> {
+    props
+        .sound_speed
+        .iter()
+        .zip(&props.attenuation)
+        .zip(sponge)
+        .map(|((c, a), s)| C64::from_polar((-(a + s) * dz).exp(), (omega / c - k_mean) * dz))
+        .collect()
+}
+
+/// The absorbing layer sigma(x, y) (Np/m): quadratic in the depth into the layer.
+fn sponge_map(g: &Grid, o: &HasOptions) -> Vec<f64> {
+    let w = o.sponge_width;
+    let mut s = vec![0.0; g.lateral_len()];
+    if w <= 0.0 {
+        return s;
+    }
+    let depth = |i: usize, n: usize, d: f64| {
+        let from_edge = (i.min(n - 1 - i) as f64) * d;
+        ((w - from_edge) / w).max(0.0)
+    };
+    let peak = 3.0 * o.sponge_strength / w;
+    for j in 0..g.ny {
+        for i in 0..g.nx {
+            let e = depth(i, g.nx, g.dx).max(depth(j, g.ny, g.dy));
+            s[j * g.nx + i] = peak * e * e;
+        }
+    }
+    s
+}
