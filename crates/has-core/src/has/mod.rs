@@ -1,7 +1,7 @@
 //! Hybrid Angular Spectrum propagation (Vyas & Christensen, IEEE TUFFC 59(6), 2012).
 //!
 //! Each step of length `dz` from plane `n` to plane `n + 1`:
-//! 1. at a change of medium, the interface (see [`interface`]): by default the plane-wave
+//! 1. at a change of medium, the interface (see [`InterfaceModel`] and [`reflection_coefficient`]): by default the plane-wave
 //!    pressure coefficients of every angular-spectrum component (angle-dependent, total
 //!    reflection beyond the critical angle), or the normal-incidence `T = 2·Z2 / (Z1 + Z2)` per
 //!    pixel ([`InterfaceModel::NormalIncidence`]);
