@@ -11,6 +11,11 @@ ratio, and their agreement (|p| correlation and peak ratio on the plane), then `
 to end (simulation built, focal plane and axis marched) against the NumPy sum taken directly to
 the focal plane and the axis (what a user without HAS would do).
 
+``--case elements``: the same bowl as 256 flat disc elements (5 mm, facing the centre of
+curvature; the sunflower layout of ``kind = "bowl"`` with ``elements``): arfi sums every
+element's quadrature points at every pixel in single precision (no symmetry to use); NumPy sums
+the same discs in 0.5 mm patches. Printed as for ``bowl``.
+
 ``--case plate``: ``arfi field`` end to end for a 500 kHz F-number-1 bowl (R 64 mm) through a
 6.5 mm cortical plate on a 0.375 mm grid (target: 5 s on 2 cores, 1 GiB), with its peak memory
 (run each case in its own process: the peak is the process's).
@@ -18,6 +23,7 @@ the focal plane and the axis (what a user without HAS would do).
 Usage::
 
     python benches/bench_curved_source.py --case bowl [--patch-mm 0.5] [--json FILE]
+    python benches/bench_curved_source.py --case elements [--patch-mm 0.5] [--json FILE]
     python benches/bench_curved_source.py --case plate [--json FILE]
 """
 
@@ -101,6 +107,27 @@ def cap_patches(radius: float, aperture: float, patch: float) -> tuple[np.ndarra
     return np.concatenate(pos), np.concatenate(area)
 
 
+def disc_patches(centres: np.ndarray, radius: float, diameter: float, patch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Midpoint patches (about ``patch`` wide, the disc's area shared equally) of flat discs of
+    ``diameter`` centred at ``centres`` (n, 3) and facing the centre of curvature (0, 0, radius)."""
+    m = int(np.ceil(diameter / patch))
+    s = -0.5 * diameter + (np.arange(m) + 0.5) * diameter / m
+    uu, vv = np.meshgrid(s, s)
+    inside = uu**2 + vv**2 <= 0.25 * diameter**2
+    uu, vv = uu[inside], vv[inside]
+    pos = []
+    for c in centres:
+        n = np.array([0.0, 0.0, radius]) - c
+        n /= np.linalg.norm(n)
+        ey = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        u = np.cross(ey, n)
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        pos.append(c + uu[:, None] * u + vv[:, None] * v)
+    area = np.pi * diameter**2 / 4 / len(uu)
+    return np.concatenate(pos), np.full(len(uu) * len(centres), area)
+
+
 def rayleigh(targets: np.ndarray, pos: np.ndarray, area: np.ndarray, k: float, p_face: float, block: int = 256) -> np.ndarray:
     """Direct Rayleigh sum at ``targets`` (n, 3), in blocks of targets."""
     out = np.empty(len(targets), dtype=np.complex128)
@@ -117,8 +144,11 @@ def timed(f: Any) -> tuple[float, Any]:
     return time.perf_counter() - t, v
 
 
-def bowl(patch_mm: float) -> dict[str, Any]:
-    sim_s, sim = timed(lambda: arfi.Simulation(arfi.Scenario.from_toml(BOWL)))
+ELEMENTS = BOWL.replace('aperture_diameter_mm = 80.0', 'aperture_diameter_mm = 80.0\nelements = 256\nelement_size_mm = 5.0')
+
+
+def bowl(patch_mm: float, elements: bool) -> dict[str, Any]:
+    sim_s, sim = timed(lambda: arfi.Simulation(arfi.Scenario.from_toml(ELEMENTS if elements else BOWL)))
     field_s, field = timed(sim.field)
     plane = sim.source_field()
     g = sim.grid
@@ -127,7 +157,10 @@ def bowl(patch_mm: float) -> dict[str, Any]:
     y = (np.arange(g["ny"]) - g["ny"] // 2) * g["dy_mm"] * 1e-3
     xx, yy = np.meshgrid(x, y)
     p_face = float(field.surface_pressure_pa)
-    pos, area = cap_patches(85e-3, 80e-3, patch_mm * 1e-3)
+    if elements:
+        pos, area = disc_patches(sim.element_positions_mm * 1e-3, 85e-3, 5e-3, patch_mm * 1e-3)
+    else:
+        pos, area = cap_patches(85e-3, 80e-3, patch_mm * 1e-3)
     source_targets = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, g["z0_mm"] * 1e-3)], axis=1)
     numpy_source_s, numpy_plane = timed(lambda: rayleigh(source_targets, pos, area, k, p_face).reshape(xx.shape))
     a, b = np.abs(plane).ravel(), np.abs(numpy_plane).ravel()
@@ -138,7 +171,7 @@ def bowl(patch_mm: float) -> dict[str, Any]:
     numpy_focal_s, numpy_focal = timed(lambda: rayleigh(focal_targets, pos, area, k, p_face))
     nf = np.abs(numpy_focal[:xx.size])
     return {
-        "case": "85 mm bowl, aperture 80 mm, 550 kHz, lossless water",
+        "case": "85 mm bowl, aperture 80 mm, 550 kHz, lossless water" + (", 256 disc elements of 5 mm" if elements else ""),
         "grid": f"{g['nx']} x {g['ny']} x {g['nz']}, dx {g['dx_mm']:.3f} mm",
         "patches": len(pos), "patch_mm": patch_mm,
         "arfi_simulation_s": sim_s, "arfi_field_s": field_s,
@@ -169,15 +202,15 @@ def plate() -> dict[str, Any]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--case", choices=["bowl", "plate"], required=True)
+    ap.add_argument("--case", choices=["bowl", "elements", "plate"], required=True)
     ap.add_argument("--patch-mm", type=float, default=0.5, dest="patch_mm")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
-    r = bowl(args.patch_mm) if args.case == "bowl" else plate()
+    r = plate() if args.case == "plate" else bowl(args.patch_mm, args.case == "elements")
     r.update(date=_dt.date.today().isoformat(), machine=f"{platform.machine()}, {os.cpu_count()} cores")
     for key, value in r.items():
         print(f"{key:32s} {value:.4g}" if isinstance(value, float) else f"{key:32s} {value}")
-    if args.case == "bowl":
+    if args.case != "plate":
         print(f"{'projection: NumPy / arfi (upper bound: arfi simulation includes one march)':32s} "
               f"{r['numpy_source_plane_s'] / r['arfi_simulation_s']:.1f}x")
         print(f"{'field: NumPy to focal plane + axis / arfi simulation + field':32s} "

@@ -16,6 +16,7 @@ use crate::steering::steering_phases;
 use crate::transducer::Transducer;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
+use std::sync::Arc;
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).
@@ -33,6 +34,9 @@ pub struct Simulation {
     pub groups: Vec<usize>,
     pub n_groups: usize,
     pub source: SourceModel,
+    /// The source plane of the steered array (no added phases), kept: projecting curved
+    /// elements is the costly part of a field.
+    steered_source: Arc<Vec<C64>>,
     pub plan: HasPlan,
     /// The MR image geometry of the scenario.
     pub mr: MrGeometry,
@@ -99,6 +103,7 @@ impl Simulation {
         let window = sampler.as_ref().ok().filter(|_| r.amplitude.is_none()).map(|s| s.window.clone());
         let spec = RecordSpec { window, ..RecordSpec::default() };
         let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
+        let steered_source = Arc::new(reference);
         let amplitude = match (r.amplitude, &sampler) {
             (Some(a), _) => Ok(a),
             (None, Err(e)) => Err(e.clone()),
@@ -128,6 +133,7 @@ impl Simulation {
             groups,
             n_groups,
             source,
+            steered_source,
             plan,
             mr: r.mr,
             sampler,
@@ -171,10 +177,8 @@ impl Simulation {
         let changed = Material { sound_speed, attenuation_db_cm_mhz, ..m.clone() };
         changed.validate()?;
         medium.materials[material] = changed;
-        let drive: Vec<C64> = self.steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
-        let reference = self.source.field(&drive)?;
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
-        let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &reference, &self.plan.options, &spec)?;
+        let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &self.steered_source, &self.plan.options, &spec)?;
         let old = self.sampler()?;
         let sampler = MrSampler::new(&self.grid, &medium, self.frequency, &old.geometry, old.broadening)?
             .with_view([old.broadening.width; 2], old.shift)?;
@@ -231,9 +235,17 @@ impl Simulation {
         }
     }
 
-    /// Source plane for the steering plus `added` phases (per element or per group; empty = none).
+    /// Source plane for the steering plus `added` phases (per element or per group; empty or all
+    /// zero = none, the kept steered plane).
     pub fn source_field(&self, added: &[f64]) -> Result<Vec<C64>> {
-        let extra = if added.is_empty() { vec![0.0; self.n_elements()] } else { self.element_phases(added)? };
+        crate::error::require_finite("phases", added)?;
+        if added.iter().all(|&a| a == 0.0) {
+            if !added.is_empty() {
+                self.element_phases(added)?; // the length is still checked
+            }
+            return Ok(self.steered_source.to_vec());
+        }
+        let extra = self.element_phases(added)?;
         let drive: Vec<C64> = self.steering.iter().zip(&extra).map(|(s, a)| C64::from_polar(1.0, s + a)).collect();
         self.source.field(&drive)
     }

@@ -13,6 +13,7 @@
 
 use crate::error::{HasError, Result};
 use crate::grid::Grid;
+use crate::rayleigh::Sources;
 use crate::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
 use num_complex::Complex64 as C64;
 use rayon::prelude::*;
@@ -113,40 +114,18 @@ impl SourceModel {
         Ok(out)
     }
 
-    /// Adds `-(i·k/2·pi) · Σ a · exp((i·k - alpha)·R) / R · dA` at every pixel of the plane.
-    ///
-    /// One rayon task per row of pixels; inside it the points are the outer loop and the row the
-    /// inner one, so the compact point list is streamed once per row and the row's accumulators
-    /// stay in cache (the sum is the same, in a different order).
+    /// Adds the Rayleigh integral of `points` (drive `a`) at every pixel of the plane: one rayon
+    /// task per row, each a single-precision blocked sum ([`crate::rayleigh`]).
     fn add_rayleigh(&self, points: &[(SurfacePoint, C64)], out: &mut [C64]) {
         let g = &self.grid;
-        let sources: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
+        let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
+        let sources = Sources::new(&weighted, g.z0, self.wavenumber, self.attenuation);
         let xs: Vec<f64> = (0..g.nx).map(|i| g.x(i)).collect();
         out.par_chunks_mut(g.nx).enumerate().for_each(|(j, row)| {
-            for (v, a) in row.iter_mut().zip(self.rayleigh_row(&sources, &xs, g.y(j))) {
+            for (v, a) in row.iter_mut().zip(sources.row(&xs, g.y(j))) {
                 *v += a;
             }
         });
-    }
-
-    /// The Rayleigh integral of `sources` (position, drive × area) at `(x, y, z0)` for each x.
-    fn rayleigh_row(&self, sources: &[([f64; 3], C64)], xs: &[f64], y: f64) -> Vec<C64> {
-        let (k, alpha, z0) = (self.wavenumber, self.attenuation, self.grid.z0);
-        let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
-        let mut acc = vec![C64::new(0.0, 0.0); xs.len()];
-        for (p, w) in sources {
-            let (dy, dz) = (y - p[1], z0 - p[2]);
-            let d2 = dy * dy + dz * dz;
-            for (v, x) in acc.iter_mut().zip(xs) {
-                let dx = x - p[0];
-                let r = (dx * dx + d2).sqrt();
-                let (s, c) = (k * r).sin_cos();
-                let f = if alpha > 0.0 { (-alpha * r).exp() / r } else { 1.0 / r };
-                *v += w * C64::new(c * f, s * f);
-            }
-        }
-        acc.iter_mut().for_each(|v| *v *= pre);
-        acc
     }
 
     /// The projection of an element symmetric about the z axis (unit drive): the Rayleigh
@@ -158,9 +137,10 @@ impl SourceModel {
         let h = g.dx.min(g.dy) / RADIAL_OVERSAMPLING as f64;
         let rho_max = (g.x(0).powi(2) + g.y(0).powi(2)).sqrt();
         let n = (rho_max / h).ceil() as usize + 3;
-        let sources: Vec<([f64; 3], C64)> = points.iter().map(|p| (p.position, C64::new(p.area, 0.0))).collect();
+        let weighted: Vec<([f64; 3], C64)> = points.iter().map(|p| (p.position, C64::new(p.area, 0.0))).collect();
+        let sources = Sources::new(&weighted, g.z0, self.wavenumber, self.attenuation);
         let xs: Vec<f64> = (0..n).map(|m| m as f64 * h).collect();
-        let profile: Vec<C64> = xs.par_chunks(64).flat_map_iter(|chunk| self.rayleigh_row(&sources, chunk, 0.0)).collect();
+        let profile: Vec<C64> = xs.par_chunks(64).flat_map_iter(|chunk| sources.row(chunk, 0.0)).collect();
         let at = |m: isize| profile[m.unsigned_abs()];
         (0..g.lateral_len())
             .map(|i| {
@@ -227,21 +207,22 @@ mod tests {
     #[test]
     fn symmetric_cap_projection_matches_the_direct_sum_at_every_pixel() {
         // A small bowl (R 30 mm, aperture 24 mm, 1 MHz) on a 64 x 64 grid: the radial line and
-        // interpolation against the slow obvious reference, the Rayleigh sum at every pixel.
+        // interpolation against the slow obvious reference, the double-precision Rayleigh sum at
+        // every pixel.
         // Catmull–Rom at h = λ/32 has an error of order (k·h)^4/384 relative to the profile's
         // curvature scale: a few 1e-5 of the peak; 2e-4 leaves room for the steep rim region.
         let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
         let g = Grid::new(64, 64, 0.375e-3, 0.375e-3, 2, 0.375e-3, 4e-3).unwrap();
         let bowl = Transducer::bowl(30e-3, 24e-3).unwrap();
         let fast = SourceModel::new(&bowl, &g, 1.0, k, 0.0).unwrap().field(&[C64::new(1.0, 0.0)]).unwrap();
-        let model = SourceModel::new(&bowl, &g, 1.0, k, 0.0).unwrap();
         let points: Vec<(SurfacePoint, C64)> = bowl.elements[0]
             .quadrature((2.0 * std::f64::consts::PI / k / 8.0).min(g.dx / 2.0))
             .into_iter()
             .map(|p| (p, C64::new(1.0, 0.0)))
             .collect();
-        let mut slow = vec![C64::new(0.0, 0.0); g.lateral_len()];
-        model.add_rayleigh(&points, &mut slow);
+        let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
+        let xs: Vec<f64> = (0..g.nx).map(|i| g.x(i)).collect();
+        let slow: Vec<C64> = (0..g.ny).flat_map(|j| crate::rayleigh::row_f64(&weighted, &xs, g.y(j), g.z0, k, 0.0)).collect();
         let peak = slow.iter().map(|v| v.norm()).fold(0.0, f64::max);
         let err = fast.iter().zip(&slow).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
         eprintln!("[cap projection] max error {err:.2e} of the peak (tol 2e-4)");

@@ -1,0 +1,173 @@
+//! The Rayleigh integral of a baffled velocity source, summed over quadrature points:
+//! `p(r) = -(i·k / 2·pi) · Σ_q w_q · exp((i·k - alpha)·R_q) / R_q` with `w_q` = drive × area
+//! (time convention `exp(-i·omega·t)`).
+//!
+//! [`Sources::row`] is the fast form used for projections: distances, phases and the sum run in
+//! single precision over blocks of [`BLOCK`] points (a vectorisable polynomial `sin`/`cos`,
+//! loops the compiler turns into SIMD), each block's sum added to a double-precision total.
+//! [`row_f64`] is the obvious double-precision sum it is tested against (agreement ~1e-6 of the
+//! peak: the phase `k·R` in single precision is good to ~1e-5 rad for paths up to 0.3 m at
+//! 1 MHz).
+
+use num_complex::Complex64 as C64;
+
+/// Points summed in single precision before their sum joins the double-precision total.
+pub const BLOCK: usize = 64;
+
+/// Quadrature points prepared for the sums onto the plane `z = z0`: x (single precision, m),
+/// y and the height `z0 - z` (double precision, combined once per row), and the weights.
+pub(crate) struct Sources {
+    x: Vec<f32>,
+    y: Vec<f64>,
+    height: Vec<f64>,
+    w_re: Vec<f32>,
+    w_im: Vec<f32>,
+    k: f64,
+    alpha: f64,
+}
+
+impl Sources {
+    /// `points`: position (m) and weight (drive × area); wavenumber `k` (rad/m) and attenuation
+    /// `alpha` (Np/m) of the medium; the plane `z0` (m).
+    pub fn new(points: &[([f64; 3], C64)], z0: f64, k: f64, alpha: f64) -> Self {
+        Sources {
+            x: points.iter().map(|(p, _)| p[0] as f32).collect(),
+            y: points.iter().map(|(p, _)| p[1]).collect(),
+            height: points.iter().map(|(p, _)| z0 - p[2]).collect(),
+            w_re: points.iter().map(|(_, w)| w.re as f32).collect(),
+            w_im: points.iter().map(|(_, w)| w.im as f32).collect(),
+            k,
+            alpha,
+        }
+    }
+
+    /// The integral at `(x, y, z0)` for every `x` in `xs`.
+    pub fn row(&self, xs: &[f64], y: f64) -> Vec<C64> {
+        let n = xs.len();
+        let xs32: Vec<f32> = xs.iter().map(|&x| x as f32).collect();
+        let (k, alpha) = (self.k as f32, self.alpha as f32);
+        let mut total = vec![C64::new(0.0, 0.0); n];
+        let (mut re, mut im) = (vec![0f32; n], vec![0f32; n]);
+        for start in (0..self.x.len()).step_by(BLOCK) {
+            re.fill(0.0);
+            im.fill(0.0);
+            for q in start..(start + BLOCK).min(self.x.len()) {
+                let dy = y - self.y[q];
+                let d2 = (dy * dy + self.height[q] * self.height[q]) as f32;
+                let (px, wr, wi) = (self.x[q], self.w_re[q], self.w_im[q]);
+                let lanes = re.iter_mut().zip(im.iter_mut()).zip(&xs32);
+                if alpha > 0.0 {
+                    for ((a, b), &x) in lanes {
+                        let dx = x - px;
+                        let r = (dx * dx + d2).sqrt();
+                        let (s, c) = sin_cos(k * r);
+                        let f = (-alpha * r).exp() / r;
+                        *a += f * (wr * c - wi * s);
+                        *b += f * (wr * s + wi * c);
+                    }
+                } else {
+                    for ((a, b), &x) in lanes {
+                        let dx = x - px;
+                        let r = (dx * dx + d2).sqrt();
+                        let (s, c) = sin_cos(k * r);
+                        let f = 1.0 / r;
+                        *a += f * (wr * c - wi * s);
+                        *b += f * (wr * s + wi * c);
+                    }
+                }
+            }
+            total.iter_mut().zip(re.iter().zip(&im)).for_each(|(t, (&a, &b))| *t += C64::new(a as f64, b as f64));
+        }
+        let pre = C64::new(0.0, -self.k / (2.0 * std::f64::consts::PI));
+        total.iter_mut().for_each(|v| *v *= pre);
+        total
+    }
+}
+
+/// The same integral in double precision, point by point (the slow obvious reference).
+pub fn row_f64(points: &[([f64; 3], C64)], xs: &[f64], y: f64, z0: f64, k: f64, alpha: f64) -> Vec<C64> {
+    let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
+    xs.iter()
+        .map(|&x| {
+            let sum: C64 = points
+                .iter()
+                .map(|(p, w)| {
+                    let r = ((x - p[0]).powi(2) + (y - p[1]).powi(2) + (z0 - p[2]).powi(2)).sqrt();
+                    w * C64::from_polar((-alpha * r).exp() / r, k * r)
+                })
+                .sum();
+            pre * sum
+        })
+        .collect()
+}
+
+/// `(sin x, cos x)` in single precision for `0 <= x < 2^22` (absolute error ~1e-7 plus the
+/// rounding of `x`): `x = q·pi/2 + t` with `|t| <= pi/4` (three-part Cody–Waite reduction), the
+/// Cephes minimax polynomials on `t`, and the quadrant `q mod 4` chosen with bit operations (no
+/// branch, so loops over it vectorise).
+#[inline(always)]
+fn sin_cos(x: f32) -> (f32, f32) {
+    // Adding 1.5·2^23 rounds to the nearest integer, which lands in the low mantissa bits.
+    const ROUND: f32 = 12_582_912.0;
+    let v = x * std::f32::consts::FRAC_2_PI + ROUND;
+    let quadrant = v.to_bits() & 3;
+    let q = v - ROUND;
+    let t = ((x - q * 1.570_312_5) - q * 4.837_513e-4) - q * 7.549_79e-8;
+    let t2 = t * t;
+    let s = t + t * t2 * (-1.666_665_5e-1 + t2 * (8.332_161e-3 + t2 * -1.951_529_6e-4));
+    let c = 1.0 - 0.5 * t2 + t2 * t2 * (4.166_664_6e-2 + t2 * (-1.388_731_6e-3 + t2 * 2.443_315_7e-5));
+    // Quadrants 1 and 3 swap sine and cosine; the sine is negative in 2, 3, the cosine in 1, 2.
+    let swap = 0u32.wrapping_sub(quadrant & 1);
+    let (sb, cb) = (s.to_bits(), c.to_bits());
+    let sin = (sb & !swap) | (cb & swap);
+    let cos = (cb & !swap) | (sb & swap);
+    (f32::from_bits(sin ^ ((quadrant & 2) << 30)), f32::from_bits(cos ^ (((quadrant + 1) & 2) << 30)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn single_precision_sin_cos_is_accurate_over_long_paths() {
+        // Phases up to k·R for 0.3 m at 1 MHz in water (1257 rad); error against f64 sin/cos of
+        // the same single-precision argument.
+        let mut worst: f64 = 0.0;
+        for i in 0..200_000 {
+            let x = i as f32 * 0.006_283_1;
+            let (s, c) = sin_cos(x);
+            let (es, ec) = (x as f64).sin_cos();
+            worst = worst.max((s as f64 - es).abs()).max((c as f64 - ec).abs());
+        }
+        assert!(worst < 2e-6, "worst error {worst:.2e}");
+    }
+
+    #[test]
+    fn fast_row_matches_the_double_precision_sum() {
+        // 3000 points on a tilted disc 40-80 mm before a plane, attenuating and not; the sum
+        // against the obvious one, relative to the largest value (tolerance 2e-5: single
+        // precision phases and blocked sums, see the module note).
+        let mut s = 3u64;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let points: Vec<([f64; 3], C64)> = (0..3000)
+            .map(|_| {
+                let (u, v) = (0.06 * rnd(), 0.06 * rnd());
+                ([u, v, 0.02 * u - 0.04], C64::new(1e-7 * (1.0 + rnd()), 1e-7 * rnd()))
+            })
+            .collect();
+        let xs: Vec<f64> = (0..300).map(|i| (i as f64 - 150.0) * 0.3e-3).collect();
+        let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
+        for alpha in [0.0, 5.0] {
+            for y in [-0.02, 0.0, 0.013] {
+                let fast = Sources::new(&points, 0.01, k, alpha).row(&xs, y);
+                let slow = row_f64(&points, &xs, y, 0.01, k, alpha);
+                let peak = slow.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                let err = fast.iter().zip(&slow).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
+                assert!(err < 2e-5, "alpha {alpha}, y {y}: error {err:.2e} of the peak");
+            }
+        }
+    }
+}
