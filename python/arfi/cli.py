@@ -285,7 +285,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     flagged = sum(bool(r["ambiguous"]) for r in s["table"])
     if flagged and not (args.diversity or args.loop2):
         print(f"reproduce: {flagged} of {len(s['table'])} estimates flagged ambiguous (other aberrations fit their image within "
-              f"the noise, SPEC §8); known diversity images (--diversity 3) or the paper's loop 2 (--loop2 3) resolve them")
+              f"the noise: one in-focus image hardly tells phi(u) from -phi(-u)); known diversity images (--diversity 3) or the paper's loop 2 (--loop2 3) resolve them")
     elif flagged:
         print(f"reproduce: {flagged} of {len(s['table'])} final estimates still flagged ambiguous: more images would narrow them")
     _finish(args, s)
@@ -388,7 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("dicom", help="MR-ARFI image (NIfTI) from the scanner's two phase series (DICOM)",
                        description="Read the phase images acquired with opposite motion-encoding polarity (phi+, phi-), "
                        "form the displacement phase 0.5*wrap(phi+ - phi-), carry the scanner geometry into the transducer "
-                       "frame with a rigid transform, and write the NIfTI of SPEC §4 and the matching scenario [mr] "
+                       "frame with a rigid transform, and write it as arfi's MR-ARFI NIfTI (phase in rad, affine in the transducer frame, mm) and the matching scenario [mr] "
                        "section. With --scenario, the image must match that scenario's MR geometry.",
                        epilog="example: arfi dicom --plus series_plus/ --minus series_minus/ --transform patient_to_transducer.txt "
                        "--out measured.nii.gz")
@@ -441,9 +441,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
     p.set_defaults(run=cmd_estimate)
 
-    p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing (SPEC §7)",
+    p = sub.add_parser("diagnose", help="find, name and add the effects the model is missing",
                        description="Compare measured MR-ARFI image(s) with the model, fit every candidate effect of the "
-                       "SPEC §7 library (amplitude, broadening, registration_shift, background_phase, slice_offset, "
+                       "library (amplitude, broadening, registration_shift, background_phase, slice_offset, "
                        "broadening_anisotropic, attenuation, sound_speed, element_dropout, phase_aberration), add the best "
                        "while its BIC evidence against the background noise is positive, and repeat until the residual is noise.",
                        epilog="example: arfi diagnose --image measured.nii.gz --calibration cal.json --json diagnosis.json "
