@@ -109,3 +109,49 @@ def test_reflections_option_adds_the_backward_wave_before_the_phantom(sim):
         predicted = r * (85 - z[sel].mean()) / (z[sel].mean() + 5)
         assert abs(ripple[sel].max() / predicted - 1) < 0.3, (lo, ripple[sel].max(), predicted)
     np.testing.assert_allclose(b.axis_pressure[z > 41], a.axis_pressure[z > 41], rtol=1e-12)
+
+
+PLATE = """
+frequency_hz = 500000.0
+[transducer]
+elements_per_side = 4
+[focus]
+position_mm = [0.0, 0.0, 40.0]
+[arfi]
+amplitude_rad_m3_per_n = 1.0
+[medium]
+background = "water"
+[[material]]
+name = "water"
+sound_speed_m_s = 1500.0
+density_kg_m3 = 1000.0
+[[material]]
+name = "cortical"
+sound_speed_m_s = 2800.0
+density_kg_m3 = 1850.0
+attenuation_db_cm_mhz = 4.0
+[[region]]
+material = "cortical"
+shape = "slab"
+z_min_mm = 15.0
+z_max_mm = 21.5
+"""
+
+
+def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tmp_path):
+    from arfi.cli import main
+
+    sim = arfi.Simulation(arfi.Scenario.from_toml(PLATE))
+    p = sim.propagation
+    assert p["interfaces"] == "angular" and p["reflections"] is False
+    r = p["reverberation"]
+    # Between the plate's faces (the grid puts each on the nearest plane, within one step).
+    assert abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"] and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
+    assert r["round_trips"] >= 1
+    normal = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\ninterfaces = \"normal-incidence\"\n[medium]")))
+    assert normal.propagation == {"interfaces": "normal-incidence", "reflections": False, "reverberation": None}
+    scenario = tmp_path / "plate.toml"
+    scenario.write_text(PLATE)
+    assert main(["field", "--scenario", str(scenario), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "rep")]) == 0
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "angle-dependent interface transmission" in html and "round trips" in html
