@@ -10,6 +10,9 @@
 //!
 //! Run with `cargo test --release -p has-core --test bone -- --nocapture` to see the numbers.
 
+mod common;
+
+use common::{parabolic_peak, pearson};
 use has_core::grid::Grid;
 use has_core::has::{HasOptions, HasPlan, InterfaceModel, RecordSpec};
 use has_core::scenario::Scenario;
@@ -187,30 +190,6 @@ fn exact(g: &Grid, source: &[C64], layers: &[Layer], entry: usize, plane: usize)
     let axis = (exit + 1..g.nz).map(|p| (p, on_axis(at(g.z(p))))).collect();
     let inside_axis = inside.iter().enumerate().map(|(j, v)| (entry + j, v / n)).collect();
     Exact { plane: field, axis, inside_axis }
-}
-
-/// Sub-sample peak by a parabola through the largest sample and its neighbours.
-fn parabolic_peak(y: &[f64]) -> (f64, f64) {
-    let n = (0..y.len()).fold(0, |b, i| if y[i] > y[b] { i } else { b });
-    if n == 0 || n + 1 == y.len() {
-        return (n as f64, y[n]);
-    }
-    let (a, b, c) = (y[n - 1], y[n], y[n + 1]);
-    let d = a - 2.0 * b + c;
-    let off = if d < 0.0 { 0.5 * (a - c) / d } else { 0.0 };
-    (n as f64 + off, b - 0.25 * (a - c) * off)
-}
-
-fn pearson(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt()
 }
 
 /// A 500 kHz bowl (R 64 mm, aperture 64 mm: F-number 1) in lossless water with `layers` from

@@ -8,6 +8,9 @@
 //!
 //! Conventions: time `exp(-i·omega·t)`, a wave to +z is `exp(+i·k·z)`; SI units.
 
+mod common;
+
+use common::{parabolic_peak, pearson};
 use has_core::grid::Grid;
 use has_core::has::{HasOptions, HasPlan, RecordSpec};
 use has_core::medium::{Material, Medium, Region, Shape};
@@ -43,32 +46,6 @@ fn water_scenario(transducer: &str, grid: &str) -> Scenario {
 }
 
 const PLANAR: &str = "kind = \"planar-quadrants\"";
-
-/// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
-/// neighbours: (fractional index, value).
-fn parabolic_peak(y: &[f64]) -> (f64, f64) {
-    let n = (0..y.len()).fold(0, |b, i| if y[i] > y[b] { i } else { b });
-    if n == 0 || n + 1 == y.len() {
-        return (n as f64, y[n]);
-    }
-    let (a, b, c) = (y[n - 1], y[n], y[n + 1]);
-    let d = a - 2.0 * b + c;
-    let off = if d < 0.0 { 0.5 * (a - c) / d } else { 0.0 };
-    (n as f64 + off, b - 0.25 * (a - c) * off)
-}
-
-/// Pearson correlation coefficient.
-fn pearson(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt()
-}
 
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m, x| m.max(x.abs()))

@@ -1,0 +1,28 @@
+//! Helpers shared by the integration tests (each test file is its own crate: `mod common;`).
+#![allow(dead_code)]
+
+/// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
+/// neighbours: (fractional index, value).
+pub fn parabolic_peak(y: &[f64]) -> (f64, f64) {
+    let n = (0..y.len()).fold(0, |b, i| if y[i] > y[b] { i } else { b });
+    if n == 0 || n + 1 == y.len() {
+        return (n as f64, y[n]);
+    }
+    let (a, b, c) = (y[n - 1], y[n], y[n + 1]);
+    let d = a - 2.0 * b + c;
+    let off = if d < 0.0 { 0.5 * (a - c) / d } else { 0.0 };
+    (n as f64 + off, b - 0.25 * (a - c) * off)
+}
+
+/// Pearson correlation coefficient.
+pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    sab / (saa * sbb).sqrt()
+}
