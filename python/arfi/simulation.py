@@ -172,7 +172,9 @@ class Simulation:
 
     @property
     def amplitude(self) -> float:
-        """Scale from broadened force density (N/m³) to ARFI phase (rad)."""
+        """Scale from broadened force density (N/m³) to ARFI phase (rad). ``ValueError`` says why a
+        scenario has none: no radiation force in the MR slice (e.g. lossless water) and no
+        ``[arfi] amplitude_rad_m3_per_n`` given. Fields need none."""
         return float(self._core.amplitude)
 
     @property
