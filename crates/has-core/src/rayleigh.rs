@@ -16,7 +16,7 @@ pub const BLOCK: usize = 64;
 
 /// Quadrature points prepared for the sums onto the plane `z = z0`: x (single precision, m),
 /// y and the height `z0 - z` (double precision, combined once per row), and the weights.
-pub(crate) struct Sources {
+pub struct Sources {
     x: Vec<f32>,
     y: Vec<f64>,
     height: Vec<f64>,
