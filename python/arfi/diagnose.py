@@ -1,4 +1,4 @@
-"""Results of the model-discrepancy workflow (SPEC §5 ``arfi diagnose``, §7) and its report."""
+"""Results of the model-discrepancy workflow (``arfi diagnose``) and its report."""
 
 from __future__ import annotations
 
@@ -10,12 +10,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from arfi import _core
+
 if TYPE_CHECKING:
     from arfi.simulation import Simulation
 
-#: The SPEC §7 effect library, in the order ties are broken (simpler first).
-EFFECTS = ("amplitude", "broadening", "registration_shift", "background_phase", "slice_offset", "broadening_anisotropic",
-           "attenuation", "sound_speed", "element_dropout", "phase_aberration")
+_effects, _parameters = _core.effect_library()
+
+#: The effect library, in the order ties are broken (simpler first); from the Rust core's table.
+EFFECTS: tuple[str, ...] = tuple(_effects)
+
+#: Every parameter name ``diagnose`` reports and ``Simulation.effect_images`` accepts (units in
+#: the name), with its effect and meaning: ``{name: (effect, meaning)}``.
+PARAMETERS: dict[str, tuple[str, str]] = {name: (effect, meaning) for name, effect, meaning in _parameters}
 
 
 @dataclass(frozen=True)

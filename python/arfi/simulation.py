@@ -336,11 +336,12 @@ class Simulation:
         return Diagnosis(**d)
 
     def effect_images(self, effects: dict[str, Any], known: list[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
-        """The model's MR-ARFI images (rad) with the effects of SPEC §7 applied: ``effects`` maps the
-        parameter names that ``diagnose`` reports (``scale``, ``broadening_width_mm``,
-        ``broadening_anisotropy_mm``, ``dx_mm``, ``dy_mm``, ``offset_rad``, ``slope_x_rad_per_mm``,
-        ``slope_y_rad_per_mm``, ``dz_mm``, ``sound_speed_m_per_s``, ``attenuation_db_cm_mhz``,
-        ``group_phases_rad``, ``dead_groups``) to values; one image per entry of ``known``."""
+        """The model's MR-ARFI images (rad) with effects of the diagnosis library applied:
+        ``effects`` maps parameter names, exactly as ``diagnose`` reports them, to values
+        (``arfi.diagnose.PARAMETERS`` lists them with their meaning: ``scale``,
+        ``broadening_width_mm``, ``broadening_width_u_mm`` / ``broadening_width_v_mm``,
+        ``dx_mm``, ``dz_mm``, ``group_phases_rad``, ``dead_groups``, ...); one image per entry of
+        ``known``. A diagnosis's ``params`` fed back here give its model images."""
         knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known or [None])]
         effects = dict(effects)
         for key, value in effects.items():

@@ -114,3 +114,31 @@ def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
     write_arfi_image(path, image, sim.mr_affine_mm, sim.mr_volume_shape)
     assert main(["diagnose", "--image", str(path), "--time-limit-s", "0.5"]) == 0
     assert "stopped at the time limit" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("effect, hidden", [
+    # One effect per kind of value: numbers (the anisotropic widths effect_images used to refuse),
+    # group indices and one phase per group. Every effect's round trip is tested in Rust
+    # (tests/diagnose.rs); this is the path through the bindings' dict.
+    ("broadening_anisotropic", {"broadening_width_u_mm": 2.0, "broadening_width_v_mm": 3.6}),
+    ("element_dropout", {"dead_groups": [5]}),
+    ("phase_aberration", {"group_phases_rad": list(1.2 * np.sin(0.7 * np.arange(16)))}),
+])
+def test_reported_params_fed_to_effect_images_give_the_fitted_images(sim, effect, hidden):
+    known = [None, np.linspace(-1.5, 1.5, 16)]
+    images = [im + 0.02 * np.random.default_rng(k).standard_normal(im.shape)
+              for k, im in enumerate(sim.effect_images(hidden, known))]
+    d = sim.diagnose(images, known, effects=[effect])
+    assert d.names == [effect]
+    step = d.effects[0]
+    again = sim.effect_images(step["params"], known)
+    # The same forward model both ways: only the reported form of the values separates them.
+    for a, b in zip(again, step["models"]):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+
+
+def test_effect_images_names_the_known_parameters_when_one_is_unknown(sim):
+    with pytest.raises(ValueError, match='unknown parameter "width_mm".*broadening_width_u_mm'):
+        sim.effect_images({"width_mm": 2.0})
+    assert set(arfi.diagnose.PARAMETERS) >= {"broadening_width_u_mm", "broadening_width_v_mm", "dead_groups", "group_phases_rad"}
+    assert {e for e, _ in arfi.diagnose.PARAMETERS.values()} == set(arfi.diagnose.EFFECTS)

@@ -7,7 +7,7 @@ use has_core::aberration::SkullScreen;
 use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
 use has_core::cost::{build_model, HybridCost, Measurement, MAX_KERNEL_GROUPS};
-use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Value};
+use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Parameter, Value, ValueKind, PARAMETERS};
 use has_core::estimate::{condense, point_reflection, Estimator};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
@@ -75,51 +75,29 @@ fn measurements(images: Vec<PyReadonlyArray2<'_, f64>>, known: Vec<Option<PyRead
     Ok(images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect())
 }
 
-/// [`Effects`] from a dict keyed by the parameter names `diagnose` reports (others: ValueError).
+/// [`Effects`] from a dict keyed by the parameter names `diagnose` reports (the core's table;
+/// others: ValueError).
 fn effects_from_dict(sim: &Simulation, d: &Bound<'_, PyDict>) -> PyResult<Effects> {
     let mut e = Effects::none(sim);
     for (k, v) in d.iter() {
         let key: String = k.extract()?;
-        let number = || -> PyResult<f64> {
-            let x: f64 = v.extract().map_err(|_| PyValueError::new_err(format!("effects[{key:?}]: must be a number")))?;
-            if x.is_finite() {
-                Ok(x)
-            } else {
-                Err(PyValueError::new_err(format!("effects[{key:?}]: must be finite")))
-            }
+        let p = Parameter::named(&key).map_err(to_py)?;
+        let wrong = |what: &str| PyValueError::new_err(format!("effects[{key:?}]: must be {what}"));
+        let value = match p.kind {
+            ValueKind::Number => Value::Number(v.extract().map_err(|_| wrong("a number"))?),
+            ValueKind::Numbers => Value::Numbers(v.extract().map_err(|_| wrong("a list of numbers"))?),
+            ValueKind::Indices => Value::Indices(v.extract().map_err(|_| wrong("a list of group indices"))?),
         };
-        let view = &mut e.view;
-        match key.as_str() {
-            "scale" => view.scale = number()?,
-            "broadening_width_mm" => view.broadening_width_mm = number()?,
-            "broadening_anisotropy_mm" => view.broadening_anisotropy_mm = number()?,
-            "dx_mm" => view.shift_mm[0] = number()?,
-            "dy_mm" => view.shift_mm[1] = number()?,
-            "offset_rad" => view.background_offset_rad = number()?,
-            "slope_x_rad_per_mm" => view.background_slope_rad_per_mm[0] = number()?,
-            "slope_y_rad_per_mm" => view.background_slope_rad_per_mm[1] = number()?,
-            "dz_mm" => view.slice_offset_mm = number()?,
-            "sound_speed_m_per_s" => e.field.sound_speed = number()?,
-            "attenuation_db_cm_mhz" => e.field.attenuation_db_cm_mhz = number()?,
-            "group_phases_rad" => {
-                let p: Vec<f64> =
-                    v.extract().map_err(|_| PyValueError::new_err("effects[\"group_phases_rad\"]: must be a list of numbers"))?;
-                if !p.iter().all(|x| x.is_finite()) {
-                    return Err(PyValueError::new_err("effects[\"group_phases_rad\"]: must be finite"));
-                }
-                e.field.group_phases = p;
-            }
-            "dead_groups" => {
-                let mut g: Vec<usize> =
-                    v.extract().map_err(|_| PyValueError::new_err("effects[\"dead_groups\"]: must be a list of group indices"))?;
-                g.sort_unstable();
-                g.dedup();
-                e.field.dead_groups = g;
-            }
-            _ => return Err(PyValueError::new_err(format!("effects: unknown parameter {key:?}"))),
-        }
+        e.set(&key, &value).map_err(to_py)?;
     }
     Ok(e)
+}
+
+/// The effect library: the effects in the order ties are broken, and every parameter as
+/// `(name, effect, meaning)` (the names `diagnose` reports and `effect_images` accepts).
+#[pyfunction]
+fn effect_library() -> (Vec<&'static str>, Vec<(&'static str, &'static str, &'static str)>) {
+    (Effect::ALL.iter().map(Effect::name).collect(), PARAMETERS.iter().map(|p| (p.name, p.effect.name(), p.meaning)).collect())
 }
 
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
@@ -728,5 +706,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
+    m.add_function(wrap_pyfunction!(effect_library, m)?)?;
     Ok(())
 }

@@ -33,212 +33,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+mod effects;
+
+use effects::{focal_material, params_of, STEPS};
+pub use effects::{Effect, Effects, FieldState, Parameter, Value, ValueKind, View, PARAMETERS, SLICE_REACH_MM};
+
 /// Cost returned in place of a non-finite one.
 const PENALTY: f64 = 1e300;
 
 /// Evidence difference below which two candidates explain the data equally well (BIC units:
 /// "not worth more than a bare mention", Kass & Raftery 1995).
 pub const EQUIVALENCE: f64 = 2.0;
-
-/// A candidate effect of the SPEC §7 library.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Effect {
-    /// A scale on the force-to-ARFI-phase amplitude.
-    Amplitude,
-    /// The width W of the isotropic Gaussian broadening (paper Eq. 2).
-    Broadening,
-    /// An in-plane offset of the image against the model.
-    RegistrationShift,
-    /// A constant plus a linear phase ramp across the image.
-    BackgroundPhase,
-    /// An offset of the imaged slice from the model's along its normal.
-    SliceOffset,
-    /// Different broadening widths along the two image axes.
-    BroadeningAnisotropic,
-    /// Attenuation of the material at the focus (absorbs the beam and sets the force).
-    Attenuation,
-    /// Sound speed of the material at the focus (moves and blurs the focus).
-    SoundSpeed,
-    /// A group of elements that emits nothing.
-    ElementDropout,
-    /// One phase per group added to the drive (the aberration the estimators fit).
-    PhaseAberration,
-}
-
-impl Effect {
-    /// Every effect, in a fixed order (ties go to the earlier: simpler before costlier).
-    pub const ALL: [Effect; 10] = [
-        Effect::Amplitude,
-        Effect::Broadening,
-        Effect::RegistrationShift,
-        Effect::BackgroundPhase,
-        Effect::SliceOffset,
-        Effect::BroadeningAnisotropic,
-        Effect::Attenuation,
-        Effect::SoundSpeed,
-        Effect::ElementDropout,
-        Effect::PhaseAberration,
-    ];
-
-    /// The SPEC §7 name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Effect::Amplitude => "amplitude",
-            Effect::Broadening => "broadening",
-            Effect::RegistrationShift => "registration_shift",
-            Effect::BackgroundPhase => "background_phase",
-            Effect::SliceOffset => "slice_offset",
-            Effect::BroadeningAnisotropic => "broadening_anisotropic",
-            Effect::Attenuation => "attenuation",
-            Effect::SoundSpeed => "sound_speed",
-            Effect::ElementDropout => "element_dropout",
-            Effect::PhaseAberration => "phase_aberration",
-        }
-    }
-
-    /// The effect of a name.
-    pub fn from_name(name: &str) -> Option<Effect> {
-        Effect::ALL.into_iter().find(|e| e.name() == name)
-    }
-
-    /// Indices into [`View::to_vec`] of this effect's image-space parameters (none for field
-    /// effects).
-    fn slots(&self) -> &'static [usize] {
-        match self {
-            Effect::Amplitude => &[0],
-            Effect::Broadening => &[1],
-            Effect::BroadeningAnisotropic => &[1, 2],
-            Effect::RegistrationShift => &[3, 4],
-            Effect::BackgroundPhase => &[5, 6, 7],
-            Effect::SliceOffset => &[8],
-            _ => &[],
-        }
-    }
-}
-
-/// The image-space parameters of the model, in the units of their names.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct View {
-    /// Scale on the amplitude (1 = the model's).
-    pub scale: f64,
-    /// Mean broadening width W (mm) and the difference of the widths along u and v (mm).
-    pub broadening_width_mm: f64,
-    pub broadening_anisotropy_mm: f64,
-    pub shift_mm: [f64; 2],
-    /// `offset + slope_u·u + slope_v·v` (rad, rad/mm; u, v pixel-centre coordinates in mm).
-    pub background_offset_rad: f64,
-    pub background_slope_rad_per_mm: [f64; 2],
-    /// Offset of the slice along its normal (mm), within ±[`SLICE_REACH_MM`].
-    pub slice_offset_mm: f64,
-}
-
-/// The largest slice offset fitted (mm): the extra field recorded on each side of the slice.
-pub const SLICE_REACH_MM: f64 = 8.0;
-
-/// Parameter names with units, in [`View::to_vec`] order.
-const NAMES: [&str; 9] = [
-    "scale",
-    "broadening_width_mm",
-    "broadening_anisotropy_mm",
-    "dx_mm",
-    "dy_mm",
-    "offset_rad",
-    "slope_x_rad_per_mm",
-    "slope_y_rad_per_mm",
-    "dz_mm",
-];
-/// Initial simplex steps, in [`View::to_vec`] order.
-const STEPS: [f64; 9] = [0.05, 0.5, 0.5, 0.5, 0.5, 0.01, 2e-4, 2e-4, 1.0];
-
-impl View {
-    /// The model as built: no scale, the simulation's width, nothing else.
-    pub fn of(sim: &Simulation) -> Self {
-        View {
-            scale: 1.0,
-            broadening_width_mm: sim.sampler.as_ref().map_or(0.0, |s| s.broadening.width) * 1e3, // no sampler: the forward model refuses
-            broadening_anisotropy_mm: 0.0,
-            shift_mm: [0.0; 2],
-            background_offset_rad: 0.0,
-            background_slope_rad_per_mm: [0.0; 2],
-            slice_offset_mm: 0.0,
-        }
-    }
-
-    /// The broadening widths along u and v (mm).
-    pub fn widths_mm(&self) -> [f64; 2] {
-        let (w, a) = (self.broadening_width_mm, self.broadening_anisotropy_mm);
-        [(w + 0.5 * a).abs(), (w - 0.5 * a).abs()]
-    }
-
-    fn to_vec(self) -> [f64; 9] {
-        let b = self.background_slope_rad_per_mm;
-        [
-            self.scale,
-            self.broadening_width_mm,
-            self.broadening_anisotropy_mm,
-            self.shift_mm[0],
-            self.shift_mm[1],
-            self.background_offset_rad,
-            b[0],
-            b[1],
-            self.slice_offset_mm,
-        ]
-    }
-
-    fn from_vec(v: &[f64; 9]) -> Self {
-        View {
-            scale: v[0],
-            broadening_width_mm: v[1].abs(),
-            broadening_anisotropy_mm: v[2],
-            shift_mm: [v[3], v[4]],
-            background_offset_rad: v[5],
-            background_slope_rad_per_mm: [v[6], v[7]],
-            slice_offset_mm: v[8],
-        }
-    }
-}
-
-/// The field-side parameters of the model: what the array and the medium do differently.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FieldState {
-    /// Phase (rad) added to every element of each group, on top of each image's known phases
-    /// (empty = none).
-    pub group_phases: Vec<f64>,
-    /// Groups whose elements emit nothing (sorted).
-    pub dead_groups: Vec<usize>,
-    /// Sound speed (m/s) and attenuation (dB/cm/MHz) of the material at the focus.
-    pub sound_speed: f64,
-    pub attenuation_db_cm_mhz: f64,
-}
-
-/// Every parameter of the extended model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Effects {
-    pub view: View,
-    pub field: FieldState,
-}
-
-impl Effects {
-    /// The simulation's own model: no effect added.
-    pub fn none(sim: &Simulation) -> Self {
-        let m = &sim.medium.materials[focal_material(sim)];
-        Effects {
-            view: View::of(sim),
-            field: FieldState {
-                group_phases: vec![],
-                dead_groups: vec![],
-                sound_speed: m.sound_speed,
-                attenuation_db_cm_mhz: m.attenuation_db_cm_mhz,
-            },
-        }
-    }
-}
-
-/// Index of the material at the focus.
-fn focal_material(sim: &Simulation) -> usize {
-    let f = sim.focus;
-    sim.medium.material_at(f[0], f[1], f[2])
-}
 
 /// The model images (rad) of images taken with `knowns` (per element or group; empty = none)
 /// under `effects`: the forward model with every effect of the library applied. Values so extreme
@@ -539,14 +344,6 @@ impl Default for DiagnoseOptions {
     }
 }
 
-/// One fitted value of an effect.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Value {
-    Number(f64),
-    Numbers(Vec<f64>),
-    Indices(Vec<usize>),
-}
-
 /// One candidate's fit at one step.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
@@ -758,28 +555,6 @@ fn choice_penalty(effect: Effect, groups: usize) -> f64 {
         (groups.max(1) as f64).ln()
     } else {
         0.0
-    }
-}
-
-/// The parameters an effect changed between `before` and `after`, named with units.
-fn params_of(effect: Effect, after: &Effects, before: &Effects) -> Vec<(&'static str, Value)> {
-    let f = &after.field;
-    match effect {
-        Effect::PhaseAberration => vec![("group_phases_rad", Value::Numbers(crate::estimate::centred(&f.group_phases)))],
-        Effect::ElementDropout => {
-            let new: Vec<usize> = f.dead_groups.iter().copied().filter(|g| !before.field.dead_groups.contains(g)).collect();
-            vec![("dead_groups", Value::Indices(new))]
-        }
-        Effect::SoundSpeed => vec![("sound_speed_m_per_s", Value::Number(f.sound_speed))],
-        Effect::Attenuation => vec![("attenuation_db_cm_mhz", Value::Number(f.attenuation_db_cm_mhz))],
-        Effect::BroadeningAnisotropic => {
-            let w = after.view.widths_mm();
-            vec![("broadening_width_u_mm", Value::Number(w[0])), ("broadening_width_v_mm", Value::Number(w[1]))]
-        }
-        e => {
-            let v = after.view.to_vec();
-            e.slots().iter().map(|&s| (NAMES[s], Value::Number(v[s]))).collect()
-        }
     }
 }
 
