@@ -1,20 +1,30 @@
 //! One error type for the crate: every fallible public function returns [`Result`].
 
-use std::fmt;
-
-/// What went wrong, with the name of the parameter or file it concerns.
-#[derive(Debug, Clone, PartialEq)]
+/// What went wrong, with the name of the parameter or file it concerns. New kinds may be added
+/// (`#[non_exhaustive]`): match with a wildcard arm.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum HasError {
     /// A parameter is out of range, non-finite, of the wrong length, ...
+    #[error("{name}: {reason}")]
     InvalidParameter { name: String, reason: String },
     /// A file could not be found.
+    #[error("{path}: no such file")]
     FileNotFound { path: String },
     /// A file exists but could not be read or parsed.
+    #[error("{path}: {reason}")]
     BadFile { path: String, reason: String },
     /// The request would need more memory than the budget of [`crate::memory::limit`].
+    #[error("{what} needs {:.1} GiB, more than the {:.1} GiB this machine has for it; {suggestion}", gib(*.bytes), gib(*.limit))]
     TooLarge { what: String, bytes: u64, limit: u64, suggestion: String },
     /// A long computation was stopped through its cancel flag.
+    #[error("interrupted")]
     Interrupted,
+}
+
+/// Bytes in GiB.
+fn gib(bytes: u64) -> f64 {
+    bytes as f64 / 2f64.powi(30)
 }
 
 impl HasError {
@@ -23,25 +33,6 @@ impl HasError {
         HasError::InvalidParameter { name: name.into(), reason: reason.into() }
     }
 }
-
-impl fmt::Display for HasError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            HasError::InvalidParameter { name, reason } => write!(f, "{name}: {reason}"),
-            HasError::FileNotFound { path } => write!(f, "{path}: no such file"),
-            HasError::BadFile { path, reason } => write!(f, "{path}: {reason}"),
-            HasError::TooLarge { what, bytes, limit, suggestion } => write!(
-                f,
-                "{what} needs {:.1} GiB, more than the {:.1} GiB this machine has for it; {suggestion}",
-                *bytes as f64 / 2f64.powi(30),
-                *limit as f64 / 2f64.powi(30)
-            ),
-            HasError::Interrupted => write!(f, "interrupted"),
-        }
-    }
-}
-
-impl std::error::Error for HasError {}
 
 /// Result with [`HasError`].
 pub type Result<T> = std::result::Result<T, HasError>;

@@ -23,7 +23,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 /// Cost returned in place of a non-finite one.
-const PENALTY: f64 = 1e300;
+pub(crate) const PENALTY: f64 = 1e300;
 
 /// Why a run stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -582,9 +582,10 @@ pub fn condense(element_phases: &[f64], groups: &[usize]) -> Result<Vec<f64>> {
     Ok(sums.iter().map(|s| s.arg()).collect())
 }
 
-/// A solution that fits the data about as well as the best one.
+/// A solution that fits the data about as well as the best one (a rival of the estimate, e.g.
+/// its twin).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Candidate {
+pub struct RivalSolution {
     pub phases: Vec<f64>,
     pub cost: f64,
     /// Focal ARFI of the beam corrected with the best estimate if this candidate were the truth,
@@ -600,7 +601,7 @@ pub struct Assessment {
     pub ambiguous: bool,
     /// Cost margin: `sigma² · chi²_0.95(G - 1)`.
     pub margin: f64,
-    pub candidates: Vec<Candidate>,
+    pub candidates: Vec<RivalSolution>,
     pub worst_recovery: f64,
     /// Known group phases (rad) to add for one more acquisition that best separates the
     /// candidates, and that separation (squared image difference in units of sigma²).
@@ -674,14 +675,14 @@ impl Estimate {
         }
         let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
         let ideal = focal(&model.base, &vec![0.0; g])?;
-        let mut candidates: Vec<Candidate> = Vec::new();
+        let mut candidates: Vec<RivalSolution> = Vec::new();
         for p in points.iter().filter(|p| p.cost <= best + margin) {
             if candidates.iter().any(|c| phase_error(&c.phases, &p.phases) < 0.05) {
                 continue;
             }
             let residual: Vec<f64> = p.phases.iter().zip(&self.phases).map(|(t, e)| t - e).collect();
             let predicted_recovery = focal(&model.base, &residual)? / ideal;
-            candidates.push(Candidate { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
+            candidates.push(RivalSolution { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
         }
         let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
         let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
@@ -710,7 +711,7 @@ fn focal(kernel: &crate::cost::ArfiKernel, phases: &[f64]) -> Result<f64> {
 /// Among `tries` seeded random group-phase patterns (and a quadratic defocus-like pattern when
 /// there is one candidate), the one whose added image best separates the candidates: it
 /// maximises the smallest `Σ (d_a - d_b)² / sigma²` over candidate pairs.
-pub fn propose_diversity(model: &crate::cost::Model, candidates: &[Candidate], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
+pub fn propose_diversity(model: &crate::cost::Model, candidates: &[RivalSolution], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
     let g = model.cost.n_groups;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_d17e);
     let sigma2 = model.noise.powi(2).max(1e-30);

@@ -21,7 +21,7 @@
 use crate::arfi::MrSampler;
 use crate::cost::{build_model, masks_and_box, Measurement};
 use crate::error::{HasError, Result};
-use crate::estimate::{point_reflection, Estimator, Stop};
+use crate::estimate::{point_reflection, Estimator, Stop, PENALTY};
 use crate::has::{RecordSpec, Window};
 use crate::simulation::Simulation;
 use crate::Complex64 as C64;
@@ -37,9 +37,6 @@ mod effects;
 
 use effects::{focal_material, params_of, STEPS};
 pub use effects::{Effect, Effects, FieldState, Parameter, Value, ValueKind, View, PARAMETERS, SLICE_REACH_MM};
-
-/// Cost returned in place of a non-finite one.
-const PENALTY: f64 = 1e300;
 
 /// Evidence difference below which two candidates explain the data equally well (BIC units:
 /// "not worth more than a bare mention", Kass & Raftery 1995).
@@ -576,25 +573,34 @@ struct Context<'a> {
     timed_out: AtomicBool,
 }
 
+/// Why evaluations stop early: a signal inside the search, never an error for the caller (a
+/// cancel becomes [`HasError::Interrupted`]; a time limit ends the search with the steps so far).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Halt {
+    Cancelled,
+    TimeUp,
+}
+
 impl Context<'_> {
     /// Whether the time limit has passed; `Err(Interrupted)` when cancelled.
     fn out_of_time(&self) -> Result<bool> {
         match self.halted() {
-            Err(HasError::Interrupted) => Err(HasError::Interrupted),
-            other => Ok(other.is_err()),
+            Some(Halt::Cancelled) => Err(HasError::Interrupted),
+            Some(Halt::TimeUp) => Ok(true),
+            None => Ok(false),
         }
     }
 
     /// Whether evaluations should stop: cancelled, or past the deadline.
-    fn halted(&self) -> Result<()> {
+    fn halted(&self) -> Option<Halt> {
         if self.cancel.load(Ordering::Relaxed) {
-            return Err(HasError::Interrupted);
+            return Some(Halt::Cancelled);
         }
         if self.deadline.is_some_and(|d| Instant::now() > d) {
             self.timed_out.store(true, Ordering::Relaxed);
-            return Err(HasError::invalid("time_limit_s", "reached"));
+            return Some(Halt::TimeUp);
         }
-        Ok(())
+        None
     }
 
     /// Adds effects from `allowed` to `path` one at a time, the candidate with the largest
@@ -716,7 +722,7 @@ impl Context<'_> {
     }
 
     fn cost(&self, e: &Effects) -> f64 {
-        if self.halted().is_err() {
+        if self.halted().is_some() {
             return f64::INFINITY;
         }
         self.forward.cost(e, self.measured)
@@ -799,6 +805,10 @@ impl Context<'_> {
                 .map_err(|e| HasError::invalid("diagnose", e.to_string()))?;
             res.state().best_param.clone().unwrap_or(x0)
         };
+        if self.out_of_time()? {
+            // The round this fit belongs to is dropped: no model to report.
+            return Ok((f64::INFINITY, start.clone()));
+        }
         let (c, view) = problem.evaluate(&x)?;
         if !c.is_finite() {
             return Err(HasError::invalid("diagnose", "the fitted model cannot be evaluated"));
@@ -819,7 +829,11 @@ struct ViewFit<'a> {
 impl ViewFit<'_> {
     /// The view at `x` (with its linear parameters solved) and its cost.
     fn evaluate(&self, x: &[f64]) -> Result<(f64, View)> {
-        self.ctx.halted()?;
+        match self.ctx.halted() {
+            Some(Halt::Cancelled) => return Err(HasError::Interrupted),
+            Some(Halt::TimeUp) => return Ok((f64::INFINITY, View::from_vec(&self.base))),
+            None => {}
+        }
         let mut v = self.base;
         for (&k, &xi) in self.slots.iter().zip(x) {
             v[k] += xi * STEPS[k];
