@@ -8,12 +8,12 @@
 
 use crate::cost::Objective;
 use crate::error::{HasError, Result};
+pub use crate::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
 use argmin::core::{CostFunction, Executor, Gradient};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::neldermead::NelderMead;
 use argmin::solver::particleswarm::ParticleSwarm;
 use argmin::solver::quasinewton::LBFGS;
-use num_complex::Complex64 as C64;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -545,43 +545,6 @@ fn reduced(phases: &[f64]) -> Vec<f64> {
     phases[1..].iter().map(|p| wrap(p - phases[0])).collect()
 }
 
-/// Wraps to (-pi, pi].
-pub fn wrap(p: f64) -> f64 {
-    let w = (p + PI).rem_euclid(2.0 * PI) - PI;
-    if w == -PI {
-        PI
-    } else {
-        w
-    }
-}
-
-/// Phases minus their circular mean (angle of the mean phasor), wrapped.
-pub fn centred(phases: &[f64]) -> Vec<f64> {
-    let m: C64 = phases.iter().map(|&p| C64::from_polar(1.0, p)).sum();
-    let offset = if m.norm() > 1e-12 { m.arg() } else { 0.0 };
-    phases.iter().map(|p| wrap(p - offset)).collect()
-}
-
-/// RMS of the wrapped difference `a - b` after removing the best common offset (SPEC §6).
-pub fn phase_error(a: &[f64], b: &[f64]) -> f64 {
-    let m: C64 = a.iter().zip(b).map(|(x, y)| C64::from_polar(1.0, x - y)).sum();
-    let offset = m.arg();
-    (a.iter().zip(b).map(|(x, y)| wrap(x - y - offset).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
-}
-
-/// Condenses per-element phases to per-group ones by the circular mean over each group (SPEC §2).
-pub fn condense(element_phases: &[f64], groups: &[usize]) -> Result<Vec<f64>> {
-    if element_phases.len() != groups.len() {
-        return Err(HasError::invalid("phases", format!("has {} values for {} elements", element_phases.len(), groups.len())));
-    }
-    let g = groups.iter().max().map_or(0, |m| m + 1);
-    let mut sums = vec![C64::new(0.0, 0.0); g];
-    for (&p, &k) in element_phases.iter().zip(groups) {
-        sums[k] += C64::from_polar(1.0, p);
-    }
-    Ok(sums.iter().map(|s| s.arg()).collect())
-}
-
 /// A solution that fits the data about as well as the best one (a rival of the estimate, e.g.
 /// its twin).
 #[derive(Debug, Clone, PartialEq)]
@@ -621,32 +584,6 @@ pub fn chi2_95(k: usize) -> f64 {
     let k = k.max(1) as f64;
     let z = 1.644_853_626_951_472_2;
     k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
-}
-
-/// The point-reflection pairing of groups (group centroid `c` ↔ the group nearest `-c`), when
-/// it is a permutation: for a symmetric aperture, one in-focus intensity image hardly tells
-/// `phi_g` from its twin `-phi_{sigma(g)}` (SPEC §8).
-pub fn point_reflection(positions: &[[f64; 3]], groups: &[usize]) -> Option<Vec<usize>> {
-    let g = groups.iter().max()? + 1;
-    let mut c = vec![[0.0; 2]; g];
-    let mut n = vec![0usize; g];
-    for (p, &k) in positions.iter().zip(groups) {
-        c[k][0] += p[0];
-        c[k][1] += p[1];
-        n[k] += 1;
-    }
-    c.iter_mut().zip(&n).for_each(|(c, &n)| c.iter_mut().for_each(|v| *v /= n.max(1) as f64));
-    let d = |a: [f64; 2], b: [f64; 2]| (a[0] + b[0]).hypot(a[1] + b[1]);
-    let sigma: Vec<usize> = (0..g).map(|a| (0..g).min_by(|&x, &y| d(c[a], c[x]).total_cmp(&d(c[a], c[y]))).unwrap_or(a)).collect();
-    let scale = c.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
-    let is_perm = (0..g).all(|a| sigma[sigma[a]] == a);
-    let close = (0..g).all(|a| d(c[a], c[sigma[a]]) <= 0.05 * scale.max(1e-9));
-    (is_perm && close).then_some(sigma)
-}
-
-/// The twin of group phases under a point reflection: `psi_g = -phi_{sigma(g)}`.
-pub fn twin(phases: &[f64], sigma: &[usize]) -> Vec<f64> {
-    centred(&sigma.iter().map(|&s| -phases[s]).collect::<Vec<_>>())
 }
 
 impl Estimate {

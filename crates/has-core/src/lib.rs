@@ -30,6 +30,7 @@ pub mod grid;
 pub mod has;
 pub mod medium;
 pub mod memory;
+pub mod phase;
 pub mod rayleigh;
 pub mod scenario;
 pub mod simulation;
