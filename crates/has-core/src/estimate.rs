@@ -58,7 +58,20 @@ pub enum Method {
     Lbfgs { starts: usize, memory: usize },
 }
 
-/// An estimator: a method, limits and a seed.
+/// An estimator: a method, limits and a seed, configured by `with_*` builders that validate,
+/// run on any [`Objective`] (the hybrid cost of paper Eq. 4, the per-element cost, ...).
+///
+/// ```
+/// use has_core::cost::{build_model, Measurement};
+/// use has_core::{phase::phase_error, Estimator, Scenario, Simulation};
+/// let sim = Simulation::new(&Scenario::default())?;
+/// let truth: Vec<f64> = (0..16).map(|g| 0.4 * (g as f64).sin()).collect();
+/// let image = sim.arfi_image(&truth)?; // noise-free, one image
+/// let model = build_model(&sim, &[Measurement { image, known: vec![] }], 0.05, 3)?;
+/// let estimate = Estimator::lbfgs().with_starts(4)?.run(&model.cost, None)?;
+/// assert!(phase_error(&estimate.phases, &truth) < 0.05);
+/// # Ok::<(), has_core::HasError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct Estimator {
     pub method: Method,

@@ -8,8 +8,11 @@
 //! dependence `exp(-i·omega·t)`, so a phase `phi` on an element delays its emission by
 //! `phi / (2·pi·f)` and multiplies its complex drive by `exp(+i·phi)`.
 //!
+//! The main types are re-exported here: [`Scenario`], [`Simulation`], [`Field`], [`HasPlan`],
+//! [`Estimator`], [`diagnose`].
+//!
 //! ```no_run
-//! use has_core::{scenario::Scenario, simulation::Simulation};
+//! use has_core::{Scenario, Simulation};
 //! let sim = Simulation::new(&Scenario::default()).unwrap();
 //! let image = sim.arfi_image(&[]).unwrap(); // ideal MR-ARFI image, rad
 //! ```
@@ -38,5 +41,13 @@ pub mod source;
 pub mod steering;
 pub mod transducer;
 
+pub use diagnose::{diagnose, Diagnosis};
 pub use error::{HasError, Result};
+pub use estimate::{Estimate, Estimator};
+pub use grid::Grid;
+pub use has::{HasOptions, HasPlan, InterfaceModel, RecordSpec, Recording};
+pub use medium::{Material, Medium};
 pub use num_complex::Complex64;
+pub use scenario::Scenario;
+pub use simulation::{Field, Simulation};
+pub use transducer::Transducer;

@@ -80,6 +80,13 @@ pub struct Field {
 impl Simulation {
     /// Resolves the scenario, chooses the grid, steers to the focus and builds the HAS plan (one
     /// march of the steered beam) and the MR sampler.
+    ///
+    /// ```
+    /// use has_core::{Scenario, Simulation};
+    /// let sim = Simulation::new(&Scenario::default())?; // the paper's phantom experiment
+    /// assert_eq!((sim.n_elements(), sim.n_groups), (1024, 16));
+    /// # Ok::<(), has_core::HasError>(())
+    /// ```
     pub fn new(scenario: &Scenario) -> Result<Self> {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
@@ -269,7 +276,22 @@ impl Simulation {
             .collect()
     }
 
-    /// The field on the plane nearest `z` (default: the focus) and along the axis.
+    /// The field on the plane nearest `z` (default: the focus) and along the axis, for
+    /// `added` phases (per element or per group; empty: none). Needs no MR model: works in
+    /// lossless water.
+    ///
+    /// ```
+    /// use has_core::{Scenario, Simulation};
+    /// let water = "[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 40.0\naperture_diameter_mm = 30.0\n\
+    ///              [focus]\nposition_mm = [0.0, 0.0, 40.0]\n[medium]\nbackground = \"water\"\n\
+    ///              [[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\n";
+    /// let sim = Simulation::new(&Scenario::from_toml(water, None)?)?;
+    /// let field = sim.field(&[], None)?; // the focal plane (z = 40 mm) and the axis
+    /// let peak = field.axis_pressure.iter().map(|p| p.norm()).fold(0.0, f64::max);
+    /// assert!(peak > 5.0 * field.surface_pressure); // a bowl focuses
+    /// assert!(sim.arfi_image(&[]).is_err()); // no radiation force in lossless water
+    /// # Ok::<(), has_core::HasError>(())
+    /// ```
     pub fn field(&self, added: &[f64], z: Option<f64>) -> Result<Field> {
         let g = &self.grid;
         let z = z.unwrap_or(self.focus[2]);
@@ -291,7 +313,19 @@ impl Simulation {
         })
     }
 
-    /// The noise-free MR-ARFI phase image (rad), `(n_u, n_v)`, for added phases.
+    /// The noise-free MR-ARFI phase image (rad), `(n_u, n_v)`, for added phases (per element
+    /// or per group).
+    ///
+    /// ```
+    /// use has_core::{Scenario, Simulation};
+    /// let sim = Simulation::new(&Scenario::default())?;
+    /// let ideal = sim.arfi_image(&[])?;
+    /// let peak = ideal.iter().copied().fold(0.0, f64::max);
+    /// assert!((peak - 0.6).abs() < 1e-9); // the scenario sets the ideal focal ARFI phase
+    /// let aberrated = sim.arfi_image(&[1.0, -1.0, 0.5, 2.0, 0.0, 0.3, -0.7, 1.1, 0.9, -1.4, 0.2, 0.0, 1.6, -0.2, 0.4, -0.9])?;
+    /// assert!(aberrated.iter().copied().fold(0.0, f64::max) < peak);
+    /// # Ok::<(), has_core::HasError>(())
+    /// ```
     pub fn arfi_image(&self, added: &[f64]) -> Result<Array2<f64>> {
         let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
         Ok(self.sampler()?.force_image(&rec.window)? * self.amplitude()?)

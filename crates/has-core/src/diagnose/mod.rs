@@ -421,6 +421,22 @@ struct Fitted {
 /// Runs the workflow on measured images (each with the known phases added for it), starting
 /// from the simulation's model. `cancel`, when set by another thread, ends the run promptly
 /// with [`HasError::Interrupted`].
+///
+/// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm.
+///
+/// ```
+/// use has_core::arfi::add_noise;
+/// use has_core::cost::Measurement;
+/// use has_core::diagnose::{diagnose, DiagnoseOptions, Effect};
+/// use has_core::{Scenario, Simulation};
+/// let sim = Simulation::new(&Scenario::default())?; // W = 2.7 mm
+/// let mut image = sim.arfi_image(&[])?;
+/// add_noise(&mut image, 0.02, 1)?;
+/// let unbroadened = sim.with_calibration(0.0, sim.amplitude()?)?;
+/// let d = diagnose(&unbroadened, &[Measurement { image, known: vec![] }], &DiagnoseOptions::default(), None)?;
+/// assert_eq!(d.steps[0].effect, Effect::Broadening);
+/// # Ok::<(), has_core::HasError>(())
+/// ```
 pub fn diagnose(
     sim: &Simulation,
     measurements: &[Measurement],
