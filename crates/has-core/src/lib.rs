@@ -9,7 +9,7 @@
 //! `phi / (2·pi·f)` and multiplies its complex drive by `exp(+i·phi)`.
 //!
 //! The main types are re-exported here: [`Scenario`], [`Simulation`], [`Field`], [`HasPlan`],
-//! [`Estimator`], [`diagnose`].
+//! [`Estimator`], [`diagnose()`].
 //!
 //! ```no_run
 //! use has_core::{Scenario, Simulation};
