@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from arfi.validate import as_phases
+
 
 @dataclass(frozen=True)
 class CostTerm:
@@ -76,8 +78,6 @@ class CostModel:
         return [CostTerm(**t) for t in self._core.terms()]
 
     def _phases(self, phases: ArrayLike) -> NDArray[np.float64]:
-        from arfi.simulation import as_phases
-
         p = as_phases(phases, "phases")
         assert p is not None
         return p

@@ -11,7 +11,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi.estimation import Estimate, phase_error
-from arfi.simulation import Simulation, as_phases
+from arfi.simulation import Simulation
+from arfi.validate import as_phases
 
 
 @dataclass(frozen=True)

@@ -83,12 +83,6 @@ class Scenario:
     def base_dir(self) -> str | None:
         return self._base_dir
 
-    def simulation(self) -> "Simulation":
-        """A :class:`arfi.Simulation` of this scenario."""
-        from arfi.simulation import Simulation
-
-        return Simulation(self)
-
     def __repr__(self) -> str:
         return f"Scenario(name={self.name!r})"
 

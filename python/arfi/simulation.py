@@ -13,60 +13,7 @@ from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
-
-
-def _real_array(value: Any, name: str) -> NDArray[np.float64]:
-    """``value`` as a float64 array; complex input is refused rather than cast (which drops the
-    imaginary part). Raises ValueError naming `name`."""
-    try:
-        mixed = not isinstance(value, np.ndarray) or value.dtype == object  # a list may hold one complex
-        if np.iscomplexobj(value) or (mixed and any(np.iscomplexobj(v) for v in np.ravel(np.asarray(value, dtype=object)))):
-            raise ValueError(f"{name}: must be real, got complex values")
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError) as e:
-        if str(e).startswith(name):
-            raise
-        raise ValueError(f"{name}: not numeric ({e})") from None
-
-
-def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.float64] | None:
-    """Phases (rad) as a 1-D float64 array, or None. Raises ValueError naming `name`."""
-    if phases is None:
-        return None
-    a = _real_array(phases, name)
-    if a.ndim != 1:
-        raise ValueError(f"{name}: must be one-dimensional, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
-    return np.ascontiguousarray(a)
-
-
-def as_number(value: Any, name: str, low: float = -np.inf, low_open: bool = False) -> float:
-    """A finite real number >= ``low`` (> ``low`` when ``low_open``). Raises ValueError naming `name`."""
-    try:
-        if np.iscomplexobj(value):
-            raise TypeError
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name}: must be a number, got {value!r}") from None
-    if isinstance(value, (bool, np.bool_, str, bytes)) or not np.isfinite(x) or x < low or (low_open and x == low):
-        bound = "" if low == -np.inf else f" {'>' if low_open else '>='} {low:g}"
-        raise ValueError(f"{name}: must be a finite number{bound}, got {value!r}")
-    return x
-
-
-def as_count(value: Any, name: str, low: int = 0, high: int = 2**64 - 1) -> int:
-    """An integer in [low, high]. Raises ValueError naming `name`."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not low <= int(value) <= high:
-        raise ValueError(f"{name}: must be an integer in [{low}, {high}], got {value!r}")
-    return int(value)
-
-
-def _as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
-    a = _real_array(image, name)
-    if a.ndim != 2:
-        raise ValueError(f"{name}: must be a 2-D image, got shape {a.shape}")
-    return np.ascontiguousarray(a)
+from arfi.validate import as_count, as_image, as_number, as_phases, real_array
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
@@ -259,7 +206,7 @@ class Simulation:
 
     def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
         """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
-        return Calibration(**self._core.calibrate(_as_image(image, "image"), as_phases(known, "known"), None,
+        return Calibration(**self._core.calibrate(as_image(image, "image"), as_phases(known, "known"), None,
                                                     as_number(max_width_mm, "max_width_mm", 0.0, low_open=True)))
 
     def estimate(
@@ -291,7 +238,7 @@ class Simulation:
         imgs = list(images) if stack else [images]  # type: ignore[arg-type]
         if not imgs:
             raise ValueError("images: need at least one image")
-        arrays = [_as_image(im, f"images[{k}]") for k, im in enumerate(imgs)]
+        arrays = [as_image(im, f"images[{k}]") for k, im in enumerate(imgs)]
         kn = [None] * len(arrays) if known is None else list(known)
         if len(kn) != len(arrays):
             raise ValueError(f"known: has {len(kn)} entries for {len(arrays)} images")
@@ -346,7 +293,7 @@ class Simulation:
         effects = dict(effects)
         for key, value in effects.items():
             if key != "dead_groups":
-                _real_array(value, f"effects[{key!r}]")
+                real_array(value, f"effects[{key!r}]")
         return self._core.effect_images(knowns, effects)
 
     def _image_list(self, images: ArrayLike | list[ArrayLike], known: Any) -> tuple[list[NDArray[np.float64]], list[Any]]:
@@ -354,7 +301,7 @@ class Simulation:
         # One image: a 2-D array, or a list of rows; several: a list of 2-D arrays.
         single = isinstance(images, np.ndarray) or (isinstance(images, (list, tuple)) and len(images) > 0
                                                     and not hasattr(images[0], "shape") and np.ndim(images[0]) == 1)
-        imgs = [_as_image(images, "image")] if single else [_as_image(m, f"images[{i}]") for i, m in enumerate(images)]
+        imgs = [as_image(images, "image")] if single else [as_image(m, f"images[{i}]") for i, m in enumerate(images)]
         if not imgs:
             raise ValueError("images: need at least one image")
         if known is None:
