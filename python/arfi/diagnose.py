@@ -114,7 +114,7 @@ class Diagnosis:
         ax.legend()
         figures.append(("gap", save_figure(fig, out / "diagnose_gap.png")))
         rows = "".join(
-            f"<tr><td>{k}</td><td>{html.escape(e['name'])}</td><td>{html.escape(_params(e['params']))}</td>"
+            f"<tr><td>{k}</td><td>{html.escape(e['name'])}</td><td>{html.escape(params_text(e['params']))}</td>"
             f"<td>{e['cost_before']:.4g}</td><td>{e['cost_after']:.4g}</td><td>{e['evidence']:.1f}</td>"
             f"<td>{e['residual_rms_after']:.4f}</td><td>{html.escape(', '.join(e['equivalent']) or '-')}</td></tr>"
             for k, e in enumerate(self.effects, 1))
@@ -147,7 +147,8 @@ def _alternative(d: Diagnosis) -> str:
             + ("; the data do not decide between them" if margin < 10 else "") + ").</p>")
 
 
-def _params(params: dict[str, Any]) -> str:
+def params_text(params: dict[str, Any]) -> str:
+    """An effect's fitted parameters as one line, ``name value, ...`` (4 significant digits)."""
     def fmt(v: Any) -> str:
         if isinstance(v, list):
             return "[" + ", ".join(fmt(x) for x in v) + "]"

@@ -1,0 +1,112 @@
+"""What every verb of the command line shares: usage errors, the common options, reading the
+scenario, phase vectors and MR-ARFI images, the calibrated simulation, writing results."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arfi.io import read_arfi_image, read_phases, write_json
+from arfi.scenario import Scenario
+from arfi.simulation import Simulation
+
+
+class UsageError(Exception):
+    """Bad command-line input: reported as one line, exit 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line and exit 2 (argparse prints usage too)."""
+
+    def error(self, message: str) -> None:
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    """The options every verb takes."""
+    p.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the embedded phantom experiment)")
+    p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
+
+
+def load_scenario(args: argparse.Namespace) -> Scenario:
+    """The ``--scenario`` file, or the embedded default."""
+    return Scenario.load(args.scenario) if args.scenario else Scenario.default()
+
+
+def read_optional_phases(path: str | None, name: str) -> np.ndarray | None:
+    """A phase vector file given as option ``name``, or None."""
+    return None if path is None else read_phases(path, name)
+
+
+def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
+    """Writes ``--json`` when asked."""
+    if args.json:
+        write_json(args.json, result)
+
+
+def image_peak(sim: Simulation, image: np.ndarray) -> tuple[float, list[float]]:
+    """Maximum of an ARFI image and its pixel centre (mm, transducer frame)."""
+    idx = np.unravel_index(int(np.argmax(image)), image.shape)
+    vox = np.zeros(3)
+    shape = sim.mr_volume_shape
+    axes = [a for a in range(3) if shape[a] != 1]
+    for a, i in zip(axes, idx):
+        vox[a] = i
+    pos = sim.mr_affine_mm @ np.append(vox, 1.0)
+    return float(image[idx]), [float(v) for v in pos[:3]]
+
+
+def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """An MR-ARFI image checked against the scenario's MR geometry, and its known phases."""
+    image, affine, side = read_arfi_image(path)
+    if image.shape != tuple(n for n in sim.mr_volume_shape if n != 1):
+        raise ValueError(f"image: {path}: shape {image.shape} does not match the scenario's MR matrix "
+                         f"{tuple(n for n in sim.mr_volume_shape if n != 1)}")
+    if not np.allclose(affine[:3], sim.mr_affine_mm[:3], atol=1e-3):
+        raise ValueError(f"image: {path}: its affine does not match the scenario's MR geometry "
+                         f"(plane, centre_mm, fov_mm, slice_thickness_mm)")
+    known = side.get("applied_phases_rad")
+    if known is not None:
+        try:
+            known = np.asarray(known, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers") from None
+        sizes = sorted({sim.n_elements, sim.n_groups} | ({sim.n_default_groups} if sim.n_groups == sim.n_elements else set()))
+        if known.ndim != 1 or known.size not in sizes or not np.all(np.isfinite(known)):
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must hold {' or '.join(map(str, sizes))} "
+                             f"finite values, got shape {known.shape}")
+    return image, known
+
+
+def calibrated_simulation(args: argparse.Namespace) -> Simulation:
+    """The scenario's simulation, with the calibration file applied when given."""
+    sim = Simulation(load_scenario(args), groups=getattr(args, "groups", None))
+    if getattr(args, "calibration", None):
+        path = Path(args.calibration)
+        if not path.is_file():
+            raise FileNotFoundError(f"--calibration: {path}: no such file")
+        try:
+            cal = json.loads(path.read_text(encoding="utf-8"))
+            width, amplitude = float(cal["broadening_width_mm"]), float(cal["amplitude"])
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"--calibration: {path}: not a calibration file ({e})") from None
+        if cal.get("scenario") not in (None, sim.scenario.name) or cal.get("frequency_hz") not in (None, sim.scenario.to_dict()["frequency_hz"]):
+            raise ValueError(f"--calibration: {path}: made for scenario {cal.get('scenario')!r} at {cal.get('frequency_hz')} Hz, "
+                             f"not {sim.scenario.name!r}")
+        sim = sim.with_calibration(width, amplitude)
+    return sim
+
+
+def save_npy(path: str, array: np.ndarray) -> None:
+    """Writes a .npy file atomically."""
+    from arfi.io import atomic_path
+
+    if not path.endswith(".npy"):
+        raise UsageError(f"{path}: phase vectors are written as .npy")
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, array)

@@ -1,0 +1,76 @@
+"""``arfi estimate``: hybrid estimation of the phase aberration."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any
+
+from arfi.cli.common import add_common, calibrated_simulation, finish, read_image, save_npy
+
+
+def register(sub: Any) -> None:
+    """Adds the verb to the subcommands ``sub``."""
+    p = sub.add_parser("estimate", help="hybrid estimation of the phase aberration",
+                       description="Estimate the per-group phase aberration whose simulated MR-ARFI image(s) match the "
+                       "measured one(s). Several --image options make a joint fit; each image's sidecar may hold the known "
+                       "phases added for it (applied_phases_rad). Subtract the estimate to correct.",
+                       epilog="example: arfi estimate --image aberrated.nii.gz --calibration cal.json --groups 16 "
+                       "--method lbfgs --json estimate.json")
+    add_common(p)
+    p.add_argument("--image", required=True, action="append", metavar="M.nii.gz")
+    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    p.add_argument("--groups", type=int, default=16,
+                   help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
+                   "phase per element on the element field basis (lbfgs only, about a minute of marching)")
+    p.add_argument("--method", choices=["nelder-mead", "pso", "lbfgs"], default="lbfgs",
+                   help="nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
+                   help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 500)")
+    p.add_argument("--time-limit-s", type=float, dest="time_limit_s")
+    p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
+    p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
+                   help="fit a free amplitude scale too (absorbs a uniform focal loss)")
+    p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
+    p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
+    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    t = time.perf_counter()
+    sim = calibrated_simulation(args)
+    pairs = [read_image(sim, p) for p in args.image]
+    e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
+                     time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
+                     progress=sys.stderr.isatty())
+    total = time.perf_counter() - t
+    kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
+    print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
+          f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})")
+    if e.underdetermined:
+        print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
+              f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
+    elif e.ambiguous:
+        print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
+              f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
+              f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
+    if e.model_mismatch:
+        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+              f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
+              f"the focus: check it with an image taken with the correction applied (loop 2).")
+    if args.out_phases:
+        save_npy(args.out_phases, e.phases_rad)
+    if args.suggest:
+        save_npy(args.suggest, e.suggested_phases_rad)
+    if args.report:
+        from arfi.report import fit_report
+
+        image, known = pairs[0]
+        model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
+        fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
+                   "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
+    finish(args, {**e.to_dict(), "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
+    return 0
