@@ -4,11 +4,11 @@ mod error;
 
 use error::to_py;
 use has_core::aberration::SkullScreen;
-use has_core::basis::estimate_elements;
 use has_core::calibrate::calibrate;
-use has_core::cost::{build_model, HybridCost, Measurement, MAX_KERNEL_GROUPS};
+use has_core::cost::{build_model, HybridCost, Measurement};
 use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects, Parameter, Value, ValueKind, PARAMETERS};
-use has_core::estimate::{condense, point_reflection, Estimator};
+use has_core::estimate::condense;
+use has_core::estimation::{estimate_aberration, EstimateRequest, Method};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
@@ -459,94 +459,38 @@ impl CoreSimulation {
         progress: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
-        let positions: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
-        let sigma = point_reflection(&positions, &self.inner.groups);
-        let mut est = match method {
-            "nelder-mead" => Estimator::nelder_mead(),
-            "pso" => Estimator::particle_swarm(),
-            "lbfgs" => Estimator::lbfgs().with_twins(sigma.clone()),
-            m => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!("method: must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'")))
-            }
-        }
-        .with_seed(seed);
-        if let Some(n) = max_evaluations {
-            est = est.with_max_evaluations(n).map_err(to_py)?;
-        }
-        if let Some(t) = time_limit_s {
-            est = est.with_time_limit(t).map_err(to_py)?;
-        }
-        if let Some(n) = starts {
-            est = est.with_starts(n).map_err(to_py)?;
-        }
-        let sim = &self.inner;
-        let cancel = AtomicBool::new(false);
-        let per_element = sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g);
-        if sim.n_groups > MAX_KERNEL_GROUPS && !per_element {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "groups: {} groups; the group kernels take at most {MAX_KERNEL_GROUPS}, or one group per element ({}) for per-element estimation",
-                sim.n_groups,
-                sim.n_elements()
-            )));
-        }
-        let d = PyDict::new(py);
-        let (model, e, a) = if per_element {
-            if method != "lbfgs" {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "method: per-element estimation ({} phases) runs on the gradient: use 'lbfgs', not '{method}'",
-                    sim.n_elements()
-                )));
-            }
-            // The warm start: L-BFGS on the array's default groups, with their own twin pairing.
-            let sigma_groups = point_reflection(&positions, &sim.transducer.default_groups());
-            let mut group_estimator = Estimator::lbfgs().with_twins(sigma_groups.clone()).with_seed(seed);
-            if let Some(t) = time_limit_s {
-                group_estimator = group_estimator.with_time_limit(t).map_err(to_py)?;
-            }
-            if let Some(n) = starts {
-                group_estimator = group_estimator.with_starts(n).map_err(to_py)?;
-            }
-            let budget = max_evaluations.unwrap_or(500);
-            let report = |done: usize, total: usize| {
-                if progress {
-                    eprint!("\rarfi: element fields {done}/{total}{}", if done == total { "\n" } else { "" });
-                }
-            };
-            let outcome = run_interruptible(py, &cancel, || {
-                let r = estimate_elements(sim, &measurements, &group_estimator, budget, fit_scale, Some(&cancel), Some(&report))?;
-                let a = r.group.assess(&r.group_model, sigma_groups.as_deref(), threshold, seed)?;
-                Ok::<_, has_core::HasError>((r, a))
-            })?;
-            let (r, a) = outcome.map_err(to_py)?;
-            // One image's masked pixels cannot determine more phases than they number.
-            let underdetermined = r.model.cost.n_pixels() < sim.n_elements();
-            d.set_item("n_pixels", r.model.cost.n_pixels())?;
-            d.set_item("scale", 1.0)?;
-            d.set_item("group_phases_rad", r.group.phases.clone().into_pyarray(py))?;
-            d.set_item("underdetermined", underdetermined)?;
-            let mut a = a;
-            a.ambiguous |= underdetermined;
-            (r.group_model, r.elements, a)
-        } else {
-            let outcome = run_interruptible(py, &cancel, || {
-                let mut model = build_model(sim, &measurements, sim.mask_fraction, 3)?;
-                model.cost.fit_scale = fit_scale;
-                let e = est.run(&model.cost, Some(&cancel))?;
-                let a = e.assess(&model, sigma.as_deref(), threshold, seed)?;
-                Ok((model, e, a))
-            })?;
-            let (model, e, a) = outcome.map_err(to_py)?;
-            d.set_item("n_pixels", model.cost.n_pixels())?;
-            d.set_item("scale", model.cost.scale(&e.phases))?;
-            (model, e, a)
+        let request = EstimateRequest {
+            method: Method::parse(method).map_err(to_py)?,
+            max_evaluations,
+            time_limit_s,
+            seed,
+            starts,
+            fit_scale,
+            threshold,
         };
+        let report = |done: usize, total: usize| {
+            if progress {
+                eprint!("\rarfi: element fields {done}/{total}{}", if done == total { "\n" } else { "" });
+            }
+        };
+        let cancel = AtomicBool::new(false);
+        let r = run_interruptible(py, &cancel, || estimate_aberration(&self.inner, &measurements, &request, Some(&cancel), Some(&report)))?
+            .map_err(to_py)?;
+        let (e, a, model) = (&r.estimate, &r.assessment, &r.model);
+        let d = PyDict::new(py);
+        d.set_item("n_pixels", r.n_pixels)?;
+        d.set_item("scale", r.scale)?;
+        if let Some(g) = &r.group_phases {
+            d.set_item("group_phases_rad", g.clone().into_pyarray(py))?;
+            d.set_item("underdetermined", r.underdetermined)?;
+        }
         d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
         d.set_item("cost", e.cost)?;
         d.set_item("evaluations", e.evaluations)?;
         d.set_item("seconds", e.seconds)?;
         d.set_item("ambiguous", a.ambiguous)?;
         d.set_item("stop", e.stop.name())?;
-        d.set_item("method", method)?;
+        d.set_item("method", request.method.name())?;
         d.set_item("noise_floor", model.noise)?;
         d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
         d.set_item("margin", a.margin)?;

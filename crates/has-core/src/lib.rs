@@ -28,6 +28,7 @@ pub mod cost;
 pub mod diagnose;
 pub mod error;
 pub mod estimate;
+pub mod estimation;
 pub mod fft;
 pub mod grid;
 pub mod has;
