@@ -1,7 +1,8 @@
-//! The one place where has-core errors become Python exceptions.
+//! The one place where errors become Python exceptions: has-core's, and the bindings' own
+//! conversion errors (shaped like the core's: `name: reason`).
 
 use has_core::HasError;
-use pyo3::exceptions::{PyFileNotFoundError, PyKeyboardInterrupt, PyValueError};
+use pyo3::exceptions::{PyFileNotFoundError, PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::PyErr;
 
 /// `FileNotFound` → `FileNotFoundError`; `Interrupted` → `KeyboardInterrupt`; every other
@@ -12,4 +13,14 @@ pub fn to_py(e: HasError) -> PyErr {
         HasError::Interrupted => PyKeyboardInterrupt::new_err(e.to_string()),
         _ => PyValueError::new_err(e.to_string()),
     }
+}
+
+/// A `ValueError` about parameter `name`, worded as the core words its own.
+pub fn invalid(name: impl Into<String>, reason: impl Into<String>) -> PyErr {
+    to_py(HasError::invalid(name, reason))
+}
+
+/// A worker thread of a long computation panicked: a bug of arfi's, reported as `RuntimeError`.
+pub fn worker_panicked() -> PyErr {
+    PyRuntimeError::new_err("the computation failed unexpectedly (worker thread panicked)")
 }

@@ -33,7 +33,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     if !(mask_fraction > 0.0 && mask_fraction < 1.0) {
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
-    require_positive("max_width_mm", max_width)?;
+    require_positive("max_width_mm", max_width * 1e3)?;
     let spec = RecordSpec { window: Some(sim.sampler()?.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
     let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();

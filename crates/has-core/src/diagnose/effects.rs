@@ -66,6 +66,14 @@ impl Effect {
         Effect::ALL.into_iter().find(|e| e.name() == name)
     }
 
+    /// The effect of a name, or an error listing the names.
+    pub fn named(name: &str) -> Result<Effect> {
+        Effect::from_name(name).ok_or_else(|| {
+            let known: Vec<&str> = Effect::ALL.iter().map(|e| e.name()).collect();
+            HasError::invalid("effects", format!("unknown effect {name:?} (known: {})", known.join(", ")))
+        })
+    }
+
     /// Indices into [`View::to_vec`] of this effect's image-space parameters (none for field
     /// effects).
     pub(super) fn slots(&self) -> &'static [usize] {

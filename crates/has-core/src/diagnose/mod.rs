@@ -341,6 +341,27 @@ impl Default for DiagnoseOptions {
     }
 }
 
+impl DiagnoseOptions {
+    /// Validated options: a finite `threshold`, `max_iterations > 0`, effects by name (`None`:
+    /// the whole library), a time limit in seconds (> 0).
+    pub fn new(threshold: f64, max_iterations: usize, effects: Option<&[String]>, time_limit_s: Option<f64>) -> Result<Self> {
+        if !threshold.is_finite() {
+            return Err(HasError::invalid("threshold", "must be finite"));
+        }
+        if max_iterations == 0 {
+            return Err(HasError::invalid("max_iterations", "must be > 0"));
+        }
+        let effects = match effects {
+            None => Effect::ALL.to_vec(),
+            Some(names) => names.iter().map(|n| Effect::named(n)).collect::<Result<_>>()?,
+        };
+        if let Some(t) = time_limit_s {
+            crate::error::require_positive("time_limit_s", t)?;
+        }
+        Ok(DiagnoseOptions { threshold, max_iterations, effects, time_limit: time_limit_s.map(Duration::from_secs_f64) })
+    }
+}
+
 /// One candidate's fit at one step.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {

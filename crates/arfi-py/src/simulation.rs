@@ -1,0 +1,365 @@
+//! `CoreSimulation`: a scenario made ready to simulate, and every computation on it.
+
+use crate::convert::{measurements, phases_vec};
+use crate::cost::CoreCostModel;
+use crate::diagnose::{diagnosis_dict, effects_from_dict};
+use crate::error::{invalid, to_py};
+use crate::interrupt::run_interruptible;
+use crate::scenario::parse_scenario;
+use has_core::aberration::SkullScreen;
+use has_core::calibrate::calibrate;
+use has_core::cost::build_model;
+use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions};
+use has_core::estimate::condense;
+use has_core::estimation::{estimate_aberration, EstimateRequest, Method};
+use has_core::simulation::Simulation;
+use num_complex::Complex64 as C64;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
+#[pyclass(module = "arfi._core", frozen)]
+pub(crate) struct CoreSimulation {
+    inner: Simulation,
+}
+
+#[pymethods]
+impl CoreSimulation {
+    #[new]
+    #[pyo3(signature = (text, format="toml", base_dir=None))]
+    fn new(py: Python<'_>, text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Self> {
+        let s = parse_scenario(text, format, base_dir)?;
+        let inner = py.detach(|| Simulation::new(&s)).map_err(to_py)?;
+        Ok(CoreSimulation { inner })
+    }
+
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.n_elements()
+    }
+    #[getter]
+    fn n_groups(&self) -> usize {
+        self.inner.n_groups
+    }
+    /// Number of the array's default groups (SPEC §2: 16).
+    #[getter]
+    fn n_default_groups(&self) -> usize {
+        self.inner.transducer.default_groups().iter().max().map_or(0, |m| m + 1)
+    }
+    /// Scale from broadened force density to ARFI phase (rad·m³/N); a ValueError says why a
+    /// scenario has none (no radiation force in the MR slice).
+    #[getter]
+    fn amplitude(&self) -> PyResult<f64> {
+        self.inner.amplitude().map_err(to_py)
+    }
+    #[getter]
+    fn frequency_hz(&self) -> f64 {
+        self.inner.frequency
+    }
+    /// How changes of medium are crossed: dict with `interfaces` ("angular" or
+    /// "normal-incidence"), `reflections` (bool) and `reverberation` (None, or dict with
+    /// `first_interface_z_mm`, `last_interface_z_mm`, `round_trips`).
+    #[getter]
+    fn propagation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.inner.propagation();
+        let d = PyDict::new(py);
+        d.set_item("interfaces", p.interfaces)?;
+        d.set_item("reflections", p.reflections)?;
+        match p.reverberation {
+            None => d.set_item("reverberation", py.None())?,
+            Some((a, b, n)) => {
+                let r = PyDict::new(py);
+                r.set_item("first_interface_z_mm", a * 1e3)?;
+                r.set_item("last_interface_z_mm", b * 1e3)?;
+                r.set_item("round_trips", n)?;
+                d.set_item("reverberation", r)?;
+            }
+        }
+        Ok(d)
+    }
+    #[getter]
+    fn noise_rad(&self) -> f64 {
+        self.inner.noise
+    }
+    #[getter]
+    fn mask_fraction(&self) -> f64 {
+        self.inner.mask_fraction
+    }
+    #[getter]
+    fn focus_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.focus.iter().map(|v| v * 1e3).collect::<Vec<_>>().into_pyarray(py)
+    }
+    #[getter]
+    fn steering_phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.steering.clone().into_pyarray(py)
+    }
+    #[getter]
+    fn groups<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        self.inner.groups.iter().map(|&g| g as i64).collect::<Vec<_>>().into_pyarray(py)
+    }
+    /// Element centres (mm), shape (n_elements, 3).
+    #[getter]
+    fn element_positions_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows: Vec<Vec<f64>> =
+            self.inner.transducer.elements.iter().map(|e| e.reference_point().iter().map(|v| v * 1e3).collect()).collect();
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+    /// Grid: dict with nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm.
+    #[getter]
+    fn grid<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let g = &self.inner.grid;
+        let d = PyDict::new(py);
+        d.set_item("nx", g.nx)?;
+        d.set_item("ny", g.ny)?;
+        d.set_item("nz", g.nz)?;
+        d.set_item("dx_mm", g.dx * 1e3)?;
+        d.set_item("dy_mm", g.dy * 1e3)?;
+        d.set_item("dz_mm", g.dz * 1e3)?;
+        d.set_item("z0_mm", g.z0 * 1e3)?;
+        Ok(d)
+    }
+    /// MR geometry: affine (4x4, mm), volume shape, plane.
+    #[getter]
+    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let a = self.inner.mr.affine_mm();
+        let rows: Vec<Vec<f64>> = a.iter().map(|r| r.to_vec()).collect();
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+    #[getter]
+    fn mr_volume_shape(&self) -> (usize, usize, usize) {
+        let s = self.inner.mr.volume_shape();
+        (s[0], s[1], s[2])
+    }
+    #[getter]
+    fn mr_plane(&self) -> &'static str {
+        self.inner.mr.plane.name()
+    }
+
+    /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
+    #[pyo3(signature = (phases=None, z_mm=None))]
+    fn field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>, z_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        let phases = phases_vec(phases);
+        let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
+        let d = PyDict::new(py);
+        let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
+        d.set_item("pressure", f.pressure.into_pyarray(py))?;
+        d.set_item("x_mm", mm(&f.x).into_pyarray(py))?;
+        d.set_item("y_mm", mm(&f.y).into_pyarray(py))?;
+        d.set_item("z_mm", f.z * 1e3)?;
+        d.set_item("axis_pressure", f.axis_pressure.into_pyarray(py))?;
+        d.set_item("axis_z_mm", mm(&f.axis_z).into_pyarray(py))?;
+        d.set_item("surface_pressure_pa", f.surface_pressure)?;
+        Ok(d)
+    }
+
+    /// MR-ARFI phase image (rad), shape (n_u, n_v); Gaussian noise of `noise_rad` if given.
+    #[pyo3(signature = (phases=None, noise_rad=0.0, seed=0))]
+    fn arfi_image<'py>(
+        &self,
+        py: Python<'py>,
+        phases: Option<PyReadonlyArray1<'py, f64>>,
+        noise_rad: f64,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let phases = phases_vec(phases);
+        let img = py.detach(|| self.inner.noisy_arfi_image(&phases, noise_rad, seed)).map_err(to_py)?;
+        Ok(img.into_pyarray(py))
+    }
+
+    /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
+    fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
+        let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;
+        Ok(CoreSimulation { inner })
+    }
+
+    /// The same simulation with another element → group map.
+    fn with_groups(&self, groups: PyReadonlyArray1<'_, i64>) -> PyResult<Self> {
+        let g = groups.as_array();
+        if let Some(v) = g.iter().find(|v| **v < 0) {
+            return Err(invalid("groups", format!("negative group index {v}")));
+        }
+        let mut inner = self.inner.clone();
+        inner.set_groups(g.iter().map(|&v| v as usize).collect()).map_err(to_py)?;
+        Ok(CoreSimulation { inner })
+    }
+
+    /// Skull-like per-element phases (rad), seeded (SPEC §3).
+    #[pyo3(signature = (seed, correlation_length_mm=12.0, peak_to_peak_rad=6.0, jitter_rad=0.5))]
+    fn skull_phases<'py>(
+        &self,
+        py: Python<'py>,
+        seed: u64,
+        correlation_length_mm: f64,
+        peak_to_peak_rad: f64,
+        jitter_rad: f64,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let screen = SkullScreen { correlation_length: correlation_length_mm * 1e-3, peak_to_peak: peak_to_peak_rad, jitter: jitter_rad };
+        let pos: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
+    }
+
+    /// Added phases, one per element or one per group, expanded to one per element.
+    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(to_py)?.into_pyarray(py))
+    }
+
+    /// Per-group circular means of per-element phases.
+    fn condense<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(condense(&phases.as_array().to_vec(), &self.inner.groups).map_err(to_py)?.into_pyarray(py))
+    }
+
+    /// Fits broadening width and amplitude to a no-aberration image.
+    #[pyo3(signature = (image, known=None, mask_fraction=None, max_width_mm=10.0))]
+    fn calibrate<'py>(
+        &self,
+        py: Python<'py>,
+        image: PyReadonlyArray2<'py, f64>,
+        known: Option<PyReadonlyArray1<'py, f64>>,
+        mask_fraction: Option<f64>,
+        max_width_mm: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let image = image.as_array().to_owned();
+        let known = phases_vec(known);
+        let frac = mask_fraction.unwrap_or(self.inner.mask_fraction);
+        let c = py.detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3)).map_err(to_py)?;
+        let d = PyDict::new(py);
+        d.set_item("broadening_width_mm", c.broadening_width * 1e3)?;
+        d.set_item("amplitude", c.amplitude)?;
+        d.set_item("cost", c.cost)?;
+        d.set_item("n_pixels", c.n_pixels)?;
+        d.set_item("noise_rad", c.noise)?;
+        Ok(d)
+    }
+
+    /// The model-discrepancy workflow (SPEC §7) on images, each taken with its `known` added
+    /// phases; `effects` limits the library (names of SPEC §7; default all).
+    #[pyo3(signature = (images, known, threshold=0.0, max_iterations=1500, effects=None, time_limit_s=None))]
+    #[allow(clippy::too_many_arguments)] // the Python keyword arguments
+    fn diagnose<'py>(
+        &self,
+        py: Python<'py>,
+        images: Vec<PyReadonlyArray2<'py, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
+        threshold: f64,
+        max_iterations: usize,
+        effects: Option<Vec<String>>,
+        time_limit_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let measurements = measurements(images, known)?;
+        let options = DiagnoseOptions::new(threshold, max_iterations, effects.as_deref(), time_limit_s).map_err(to_py)?;
+        let cancel = AtomicBool::new(false);
+        let r = run_interruptible(py, &cancel, || diagnose(&self.inner, &measurements, &options, Some(&cancel)))?.map_err(to_py)?;
+        diagnosis_dict(py, &r)
+    }
+
+    /// The model images of images taken with `known` phases under the effects of `effects`
+    /// (keys: the parameter names of SPEC §7 as `diagnose` reports them).
+    fn effect_images<'py>(
+        &self,
+        py: Python<'py>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
+        effects: Bound<'py, PyDict>,
+    ) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+        let knowns: Vec<Vec<f64>> = known.into_iter().map(phases_vec).collect();
+        let e = effects_from_dict(&self.inner, &effects)?;
+        let imgs = py.detach(|| effect_images(&self.inner, &knowns, &e)).map_err(to_py)?;
+        Ok(imgs.into_iter().map(|m| m.into_pyarray(py)).collect())
+    }
+
+    /// Hybrid estimation from one or more images, each with its known added phases.
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn estimate<'py>(
+        &self,
+        py: Python<'py>,
+        images: Vec<PyReadonlyArray2<'py, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
+        method: &str,
+        max_evaluations: Option<usize>,
+        time_limit_s: Option<f64>,
+        seed: u64,
+        starts: Option<usize>,
+        fit_scale: bool,
+        threshold: f64,
+        progress: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let measurements = measurements(images, known)?;
+        let request = EstimateRequest {
+            method: Method::parse(method).map_err(to_py)?,
+            max_evaluations,
+            time_limit_s,
+            seed,
+            starts,
+            fit_scale,
+            threshold,
+        };
+        let report = |done: usize, total: usize| {
+            if progress {
+                eprint!("\rarfi: element fields {done}/{total}{}", if done == total { "\n" } else { "" });
+            }
+        };
+        let cancel = AtomicBool::new(false);
+        let r = run_interruptible(py, &cancel, || estimate_aberration(&self.inner, &measurements, &request, Some(&cancel), Some(&report)))?
+            .map_err(to_py)?;
+        let (e, a, model) = (&r.estimate, &r.assessment, &r.model);
+        let d = PyDict::new(py);
+        d.set_item("n_pixels", r.n_pixels)?;
+        d.set_item("scale", r.scale)?;
+        if let Some(g) = &r.group_phases {
+            d.set_item("group_phases_rad", g.clone().into_pyarray(py))?;
+            d.set_item("underdetermined", r.underdetermined)?;
+        }
+        d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
+        d.set_item("cost", e.cost)?;
+        d.set_item("evaluations", e.evaluations)?;
+        d.set_item("seconds", e.seconds)?;
+        d.set_item("ambiguous", a.ambiguous)?;
+        d.set_item("stop", e.stop.name())?;
+        d.set_item("method", request.method.name())?;
+        d.set_item("noise_floor", model.noise)?;
+        d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
+        d.set_item("margin", a.margin)?;
+        d.set_item("worst_recovery", a.worst_recovery)?;
+        let cands: Vec<Vec<f64>> = a.candidates.iter().map(|c| c.phases.clone()).collect();
+        d.set_item("candidate_phases_rad", cands)?;
+        d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
+        d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
+        d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
+        d.set_item("suggested_separation", a.suggested_separation)?;
+        d.set_item("misfit", a.misfit)?;
+        d.set_item("model_mismatch", a.mismatch)?;
+        Ok(d)
+    }
+
+    /// The hybrid cost (paper Eq. 4) of images, each with its known added phases, on the per-pixel
+    /// group kernels `estimate` minimises (at most 256 groups).
+    #[pyo3(signature = (images, known, fit_scale=false))]
+    fn cost_model(
+        &self,
+        py: Python<'_>,
+        images: Vec<PyReadonlyArray2<'_, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+        fit_scale: bool,
+    ) -> PyResult<CoreCostModel> {
+        let measurements = measurements(images, known)?;
+        let sim = &self.inner;
+        let cancel = AtomicBool::new(false);
+        let model = run_interruptible(py, &cancel, || build_model(sim, &measurements, sim.mask_fraction, 3))?.map_err(to_py)?;
+        let mut cost = model.cost;
+        cost.fit_scale = fit_scale;
+        Ok(CoreCostModel { cost: Arc::new(cost), noise: model.noise })
+    }
+
+    /// The source-plane pressure (Pa), shape (ny, nx), for added phases.
+    #[pyo3(signature = (phases=None))]
+    fn source_field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>) -> PyResult<Bound<'py, PyArray2<C64>>> {
+        let phases = phases_vec(phases);
+        let g = &self.inner.grid;
+        let f = py.detach(|| self.inner.source_field(&phases)).map_err(to_py)?;
+        let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| invalid("field", e.to_string()))?;
+        Ok(a.into_pyarray(py))
+    }
+}
