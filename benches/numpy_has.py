@@ -1,5 +1,5 @@
 """The Hybrid Angular Spectrum march of arfi, written again in plain NumPy (numpy.fft) for the
-side-by-side benchmark (``bench_numpy_has.py``). It follows ``crates/has-core/src/has.rs`` step
+side-by-side benchmark (``bench_numpy_has.py``). It follows ``crates/has-core/src/physics/propagation`` step
 for step, so the two must agree to rounding:
 
 1. at a change of medium, ``p <- p · T`` with ``T = 2·Z2 / (Z1 + Z2)`` per pixel;

@@ -1,7 +1,7 @@
 //! NumPy inputs copied into the core's owned types (before any work leaves the GIL).
 
 use crate::error::invalid;
-use has_core::cost::Measurement;
+use has_core::inverse::cost::Measurement;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 

@@ -1,7 +1,7 @@
 //! The hybrid cost (paper Eq. 4) as a Python object.
 
 use crate::error::{invalid, to_py};
-use has_core::cost::HybridCost;
+use has_core::inverse::cost::HybridCost;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;

@@ -2,7 +2,7 @@
 //! library itself, and a diagnosis as a dict.
 
 use crate::error::{invalid, to_py};
-use has_core::diagnose::{Diagnosis, Effect, Effects, Parameter, Value, ValueKind, PARAMETERS};
+use has_core::inverse::diagnose::{Diagnosis, Effect, Effects, Parameter, Value, ValueKind, PARAMETERS};
 use has_core::simulation::Simulation;
 use numpy::{IntoPyArray, PyArray2};
 use pyo3::prelude::*;
@@ -35,7 +35,7 @@ pub(crate) fn effect_library() -> (Vec<&'static str>, Vec<(&'static str, &'stati
 
 /// The diagnosis as the dict `Diagnosis` reads (the JSON of `arfi diagnose`).
 pub(crate) fn diagnosis_dict<'py>(py: Python<'py>, r: &Diagnosis) -> PyResult<Bound<'py, PyDict>> {
-    let candidates = |cands: &[has_core::diagnose::Candidate]| -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let candidates = |cands: &[has_core::inverse::diagnose::Candidate]| -> PyResult<Vec<Bound<'py, PyDict>>> {
         cands
             .iter()
             .map(|c| {

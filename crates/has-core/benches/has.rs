@@ -12,12 +12,12 @@
 //! to the last plane) so a regression can be located without a profiler.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use has_core::aberration::SkullScreen;
-use has_core::basis::build_element_model;
-use has_core::cost::{build_model, Measurement, Model, Objective};
-use has_core::estimate::{condense, Estimator};
-use has_core::fft::{multiply, Fft2};
-use has_core::has::RecordSpec;
+use has_core::inverse::basis::build_element_model;
+use has_core::inverse::cost::{build_model, Measurement, Model, Objective};
+use has_core::inverse::estimate::{condense, Estimator};
+use has_core::physics::aberration::SkullScreen;
+use has_core::physics::fft::{multiply, Fft2};
+use has_core::physics::propagation::RecordSpec;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use has_core::Complex64 as C64;

@@ -8,9 +8,9 @@
 //! runs Nelder–Mead and 20-start L-BFGS (evaluations, stop, seconds, evaluations per second) and
 //! the ambiguity assessment that `arfi estimate` / `Simulation.estimate` add after the search.
 
-use has_core::aberration::SkullScreen;
-use has_core::cost::{build_model, mask_pixels, ArfiKernel, Measurement};
-use has_core::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::inverse::cost::{build_model, mask_pixels, ArfiKernel, Measurement};
+use has_core::inverse::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use has_core::Complex64 as C64;

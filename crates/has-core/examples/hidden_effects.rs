@@ -8,11 +8,11 @@
 //! `ARFI_PLANE` = `xz` or `yz` images a plane through the beam axis instead of the default
 //! `xy` focal plane; `ARFI_FIRST_SEED` (default 1) continues a sweep.
 
-use has_core::aberration::SkullScreen;
-use has_core::arfi::add_noise;
-use has_core::cost::Measurement;
-use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects};
-use has_core::estimate::condense;
+use has_core::inverse::cost::Measurement;
+use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects};
+use has_core::inverse::estimate::condense;
+use has_core::physics::aberration::SkullScreen;
+use has_core::physics::mr::add_noise;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use rand::{Rng, SeedableRng};

@@ -1,9 +1,9 @@
 //! A quick estimation study on the default scenario, without Python:
 //! `cargo run --release -p has-core --example study [seed] [noise_rad]`.
 
-use has_core::aberration::SkullScreen;
-use has_core::cost::{build_model, Measurement};
-use has_core::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::inverse::cost::{build_model, Measurement};
+use has_core::inverse::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use std::time::Instant;

@@ -20,35 +20,20 @@
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod aberration;
-pub mod arfi;
-pub mod basis;
-pub mod calibrate;
-pub mod cost;
-pub mod diagnose;
 pub mod error;
-pub mod estimate;
-pub mod estimation;
-pub mod fft;
-pub mod grid;
-pub mod has;
-pub mod medium;
+pub mod inverse;
 pub mod memory;
-pub mod phase;
-pub mod rayleigh;
+pub mod physics;
 pub mod scenario;
 pub mod simulation;
-pub mod source;
-pub mod steering;
-pub mod transducer;
 
-pub use diagnose::{diagnose, Diagnosis};
 pub use error::{HasError, Result};
-pub use estimate::{Estimate, Estimator};
-pub use grid::Grid;
-pub use has::{HasOptions, HasPlan, InterfaceModel, RecordSpec, Recording};
-pub use medium::{Material, Medium};
+pub use inverse::diagnose::{diagnose, Diagnosis};
+pub use inverse::estimate::{Estimate, Estimator};
 pub use num_complex::Complex64;
+pub use physics::grid::Grid;
+pub use physics::medium::{Material, Medium};
+pub use physics::propagation::{HasOptions, HasPlan, InterfaceModel, RecordSpec, Recording};
+pub use physics::transducer::Transducer;
 pub use scenario::Scenario;
 pub use simulation::{Field, Simulation};
-pub use transducer::Transducer;

@@ -3,11 +3,11 @@
 //! Parsing rejects unknown keys. [`Scenario`] holds the file's values in file units (mm, Hz,
 //! dB/cm/MHz); [`Scenario::resolve`] turns them into validated SI objects.
 
-use crate::arfi::{MrGeometry, MrPlane};
 use crate::error::{require_non_negative, require_positive, HasError, Result};
-use crate::has::InterfaceModel;
-use crate::medium::{Material, Medium, Region, Shape};
-use crate::transducer::{ElementShape, Transducer};
+use crate::physics::medium::{Material, Medium, Region, Shape};
+use crate::physics::mr::{MrGeometry, MrPlane};
+use crate::physics::propagation::InterfaceModel;
+use crate::physics::transducer::{ElementShape, Transducer};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

@@ -4,16 +4,16 @@
 //! beam exerts no radiation force there (lossless water), the simulation still gives fields and
 //! only the ARFI images, fits and diagnoses report why they cannot be made.
 
-use crate::arfi::{add_noise, Broadening, MrGeometry, MrSampler};
 use crate::error::{HasError, Result};
-use crate::grid::{fft_friendly, Grid};
-use crate::has::{HasOptions, HasPlan, RecordSpec, Recording};
-use crate::medium::{Material, Medium};
 use crate::memory;
+use crate::physics::grid::{fft_friendly, Grid};
+use crate::physics::medium::{Material, Medium};
+use crate::physics::mr::{add_noise, Broadening, MrGeometry, MrSampler};
+use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec, Recording};
+use crate::physics::source::{source_plane_z, SourceModel};
+use crate::physics::steering::steering_phases;
+use crate::physics::transducer::Transducer;
 use crate::scenario::{GridSpec, Resolved, Scenario};
-use crate::source::{source_plane_z, SourceModel};
-use crate::steering::steering_phases;
-use crate::transducer::Transducer;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
 use std::sync::Arc;
@@ -53,7 +53,7 @@ pub struct Simulation {
 /// How the simulation crosses changes of medium: the model, and the reverberation zone if any.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Propagation {
-    /// `"angular"` or `"normal-incidence"` (see [`crate::has::InterfaceModel`]).
+    /// `"angular"` or `"normal-incidence"` (see [`crate::physics::propagation::InterfaceModel`]).
     pub interfaces: &'static str,
     /// z (m) of the first and last interface between which reverberation is added, and the round
     /// trips added; `None` where no two interfaces reflect strongly enough.

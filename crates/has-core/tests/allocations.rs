@@ -9,9 +9,9 @@
 //! to the loop, and does not happen when the caller is a worker (the batch path, and any caller
 //! that wraps its work in `install`).
 
-use has_core::grid::Grid;
-use has_core::has::{HasOptions, HasPlan, RecordSpec, Window};
-use has_core::medium::{Material, Medium};
+use has_core::physics::grid::Grid;
+use has_core::physics::medium::{Material, Medium};
+use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec, Window};
 use has_core::Complex64 as C64;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};

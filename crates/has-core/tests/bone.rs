@@ -13,11 +13,11 @@
 mod common;
 
 use common::{parabolic_peak, pearson};
-use has_core::grid::Grid;
-use has_core::has::{HasOptions, HasPlan, InterfaceModel, RecordSpec};
+use has_core::physics::grid::Grid;
+use has_core::physics::propagation::{HasOptions, HasPlan, InterfaceModel, RecordSpec};
+use has_core::physics::source::SourceModel;
 use has_core::scenario::Scenario;
 use has_core::simulation::choose_grid;
-use has_core::source::SourceModel;
 use has_core::Complex64 as C64;
 use std::f64::consts::PI;
 use std::time::Instant;

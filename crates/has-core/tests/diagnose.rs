@@ -4,11 +4,11 @@
 //! slice offset are simulated independently of the workflow's forward model (a simulation with
 //! the MR slice moved); the other effects through `effect_images`.
 
-use has_core::aberration::SkullScreen;
-use has_core::arfi::add_noise;
-use has_core::cost::Measurement;
-use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Diagnosis, Effect, Effects, Value};
-use has_core::estimate::{condense, phase_error};
+use has_core::inverse::cost::Measurement;
+use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions, Diagnosis, Effect, Effects, Value};
+use has_core::inverse::estimate::{condense, phase_error};
+use has_core::physics::aberration::SkullScreen;
+use has_core::physics::mr::add_noise;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;

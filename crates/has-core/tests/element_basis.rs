@@ -1,10 +1,10 @@
 //! Per-element estimation on the field basis (issue 3: `--groups` = number of elements), on a
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
-use has_core::aberration::SkullScreen;
-use has_core::basis::build_element_model;
-use has_core::cost::{build_model, Measurement, Objective};
-use has_core::estimate::{condense, Estimator};
+use has_core::inverse::basis::build_element_model;
+use has_core::inverse::cost::{build_model, Measurement, Objective};
+use has_core::inverse::estimate::{condense, Estimator};
+use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;

@@ -1,10 +1,10 @@
 //! Hybrid estimation on synthetic data from the default scenario (issue 3 acceptance).
 //! Every check is against the known applied aberration; tolerances are stated where used.
 
-use has_core::aberration::SkullScreen;
-use has_core::calibrate::calibrate;
-use has_core::cost::{build_model, ArfiKernel, Measurement};
-use has_core::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::inverse::calibrate::calibrate;
+use has_core::inverse::cost::{build_model, ArfiKernel, Measurement};
+use has_core::inverse::estimate::{condense, phase_error, point_reflection, Estimator};
+use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
@@ -258,7 +258,7 @@ fn estimation_is_deterministic() {
 /// rad, the L-BFGS tolerance), and the requests it refuses, each naming the parameter.
 #[test]
 fn the_estimation_workflow_estimates_per_group_and_names_what_it_refuses() {
-    use has_core::estimation::{estimate_aberration, EstimateRequest, Method};
+    use has_core::inverse::estimation::{estimate_aberration, EstimateRequest, Method};
     let s = sim();
     let truth = group_truth(3);
     let m = measurements(&truth, 0.0, 2, 3);

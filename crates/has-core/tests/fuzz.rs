@@ -2,10 +2,10 @@
 //! phase vectors, effect parameters): any input gives a value or an `Err`, never a panic.
 //! Fixed seeds, so a run is repeatable; the case counts keep the file under a minute.
 
-use has_core::calibrate::calibrate;
-use has_core::cost::{build_model, Measurement};
-use has_core::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects};
-use has_core::estimate::Estimator;
+use has_core::inverse::calibrate::calibrate;
+use has_core::inverse::cost::{build_model, Measurement};
+use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions, Effect, Effects};
+use has_core::inverse::estimate::Estimator;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;

@@ -11,13 +11,13 @@
 mod common;
 
 use common::{parabolic_peak, pearson};
-use has_core::grid::Grid;
-use has_core::has::{HasOptions, HasPlan, RecordSpec};
-use has_core::medium::{Material, Medium, Region, Shape};
+use has_core::physics::grid::Grid;
+use has_core::physics::medium::{Material, Medium, Region, Shape};
+use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec};
+use has_core::physics::source::SourceModel;
+use has_core::physics::transducer::Surface;
 use has_core::scenario::Scenario;
 use has_core::simulation::{choose_grid, Simulation};
-use has_core::source::SourceModel;
-use has_core::transducer::Surface;
 use has_core::Complex64 as C64;
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -584,9 +584,9 @@ fn group_fields_add_up_to_the_array_field() {
 /// so the only error is rounding (tolerance 1e-9).
 #[test]
 fn reflections_at_a_flat_interface_match_the_analytic_standing_wave() {
-    use has_core::grid::Grid;
-    use has_core::has::{HasOptions, HasPlan, RecordSpec};
-    use has_core::medium::{Material, Medium, Region, Shape};
+    use has_core::physics::grid::Grid;
+    use has_core::physics::medium::{Material, Medium, Region, Shape};
+    use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec};
     use num_complex::Complex64 as C64;
     let f = 1e6;
     let dz = 0.25e-3;
@@ -624,7 +624,7 @@ fn reflections_at_a_flat_interface_match_the_analytic_standing_wave() {
 /// tolerance 1e-12 of the peak for rounding).
 #[test]
 fn voxel_map_reproduces_the_region_description() {
-    use has_core::medium::VoxelMap;
+    use has_core::physics::medium::VoxelMap;
     use has_core::scenario::Scenario;
     use has_core::simulation::Simulation;
     let regions = Simulation::new(&Scenario::default()).unwrap();
@@ -658,8 +658,9 @@ fn voxel_map_reproduces_the_region_description() {
     medium.validate().unwrap();
     let drive: Vec<num_complex::Complex64> = regions.steering.iter().map(|&p| num_complex::Complex64::from_polar(1.0, p)).collect();
     let reference = regions.source.field(&drive).unwrap();
-    let spec = has_core::has::RecordSpec { axis: true, ..Default::default() };
-    let (plan, _) = has_core::has::HasPlan::build(&g, &medium, regions.frequency, &reference, &Default::default(), &spec).unwrap();
+    let spec = has_core::physics::propagation::RecordSpec { axis: true, ..Default::default() };
+    let (plan, _) =
+        has_core::physics::propagation::HasPlan::build(&g, &medium, regions.frequency, &reference, &Default::default(), &spec).unwrap();
     voxel.plan = plan;
     let a = regions.field(&[], None).unwrap();
     let b = voxel.field(&[], None).unwrap();

@@ -1,14 +1,14 @@
 //! Hybrid estimation of the phase aberration (paper loop 1, and its multi-image extension).
 //!
 //! Estimators are values configured with validated `with_*` builders and run through argmin on
-//! the [`HybridCost`](crate::cost::HybridCost): Nelder–Mead (the paper's), particle swarm, and multi-start L-BFGS with
+//! the [`HybridCost`](crate::inverse::cost::HybridCost): Nelder–Mead (the paper's), particle swarm, and multi-start L-BFGS with
 //! the analytic gradient, on any [`Objective`] (group kernels or the per-element basis). The common phase is unobservable, so group 0 is held at zero during
 //! the search; reported phases have zero circular mean. Every run has an evaluation limit and an
 //! optional time limit; a non-finite cost is replaced by a large finite penalty.
 
-use crate::cost::Objective;
 use crate::error::{HasError, Result};
-pub use crate::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
+use crate::inverse::cost::Objective;
+pub use crate::inverse::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
 use argmin::core::{CostFunction, Executor, Gradient};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::neldermead::NelderMead;
@@ -62,8 +62,8 @@ pub enum Method {
 /// run on any [`Objective`] (the hybrid cost of paper Eq. 4, the per-element cost, ...).
 ///
 /// ```
-/// use has_core::cost::{build_model, Measurement};
-/// use has_core::{phase::phase_error, Estimator, Scenario, Simulation};
+/// use has_core::inverse::cost::{build_model, Measurement};
+/// use has_core::{inverse::phase::phase_error, Estimator, Scenario, Simulation};
 /// let sim = Simulation::new(&Scenario::default())?;
 /// let truth: Vec<f64> = (0..16).map(|g| 0.4 * (g as f64).sin()).collect();
 /// let image = sim.arfi_image(&truth)?; // noise-free, one image
@@ -604,7 +604,7 @@ impl Estimate {
     /// start, a 24-start L-BFGS exploration of its own (from the estimate, random points and
     /// twins) and the refined twin of the estimate; each within the chi² margin of the best cost
     /// is a candidate, scored by the focus its truth would leave after the estimate's correction.
-    pub fn assess(&self, model: &crate::cost::Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
+    pub fn assess(&self, model: &crate::inverse::cost::Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
         let g = model.cost.n_groups;
         let margin = model.noise.powi(2) * chi2_95(g - 1);
         let mut points: Vec<Minimum> = self.minima.clone();
@@ -654,14 +654,19 @@ impl Estimate {
 }
 
 /// The largest value of the kernel's image (the focal ARFI) for group phases.
-fn focal(kernel: &crate::cost::ArfiKernel, phases: &[f64]) -> Result<f64> {
+fn focal(kernel: &crate::inverse::cost::ArfiKernel, phases: &[f64]) -> Result<f64> {
     Ok(kernel.image(phases)?.iter().copied().fold(f64::MIN, f64::max))
 }
 
 /// Among `tries` seeded random group-phase patterns (and a quadratic defocus-like pattern when
 /// there is one candidate), the one whose added image best separates the candidates: it
 /// maximises the smallest `Σ (d_a - d_b)² / sigma²` over candidate pairs.
-pub fn propose_diversity(model: &crate::cost::Model, candidates: &[RivalSolution], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
+pub fn propose_diversity(
+    model: &crate::inverse::cost::Model,
+    candidates: &[RivalSolution],
+    tries: usize,
+    seed: u64,
+) -> Result<(Vec<f64>, f64)> {
     let g = model.cost.n_groups;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_d17e);
     let sigma2 = model.noise.powi(2).max(1e-30);

@@ -7,8 +7,8 @@
 //! `O(P·G²)` for `P` pixels, and the gradient is analytic:
 //! `∂d_i/∂phi_g = 2·Im(conj(v_g)·(K_i v)_g)`.
 
-use crate::arfi::MrSampler;
 use crate::error::{HasError, Result};
+use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use std::ops::Range;
 
 /// What an estimator minimises: a cost over phases (rad), one per group or element, and its
-/// gradient. Implemented by [`HybridCost`] and [`crate::basis::ElementCost`].
+/// gradient. Implemented by [`HybridCost`] and [`crate::inverse::basis::ElementCost`].
 pub trait Objective: Sync {
     /// Number of phases.
     fn n_phases(&self) -> usize;
@@ -661,7 +661,7 @@ pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fracti
     let lo_v = all.clone().map(|p| p.1).min().unwrap_or(0).saturating_sub(margin);
     let hi_v = (all.map(|p| p.1).max().unwrap_or(0) + margin + 1).min(m[1]);
     let (u, v) = (lo_u..hi_u, lo_v..hi_v);
-    let noise2: f64 = measurements.iter().map(|meas| crate::arfi::noise_floor(&meas.image, &[u.clone(), v.clone()]).powi(2)).sum();
+    let noise2: f64 = measurements.iter().map(|meas| crate::physics::mr::noise_floor(&meas.image, &[u.clone(), v.clone()]).powi(2)).sum();
     Ok(MaskedBox { masks, pixels: [u, v], noise: (noise2 / measurements.len() as f64).sqrt() })
 }
 
@@ -671,7 +671,7 @@ fn group_constant(per_element: &[f64], groups: &[usize], g: usize) -> Option<Vec
     for (&p, &k) in per_element.iter().zip(groups) {
         match value[k] {
             None => value[k] = Some(p),
-            Some(q) if (crate::phase::wrap(p - q)).abs() < 1e-12 => {}
+            Some(q) if (crate::inverse::phase::wrap(p - q)).abs() < 1e-12 => {}
             Some(_) => return None,
         }
     }

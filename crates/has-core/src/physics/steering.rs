@@ -1,8 +1,8 @@
 //! Geometric steering: per-element phases that focus the array through the medium.
 
 use crate::error::{HasError, Result};
-use crate::medium::Medium;
-use crate::transducer::Transducer;
+use crate::physics::medium::Medium;
+use crate::physics::transducer::Transducer;
 use std::f64::consts::PI;
 
 /// Time of flight (s) along the straight segment from `a` to `b`: `∫ ds / c(s)` by the midpoint
@@ -38,7 +38,7 @@ pub fn steering_phases(transducer: &Transducer, medium: &Medium, frequency: f64,
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::medium::Material;
+    use crate::physics::medium::Material;
 
     #[test]
     fn steering_equalises_arrival_times_in_water() {

@@ -1,6 +1,6 @@
 //! The per-element field basis for estimation with many phases (SPEC §8, e.g. G = 1024).
 //!
-//! For G in the thousands the per-pixel G x G kernels of [`crate::cost::ArfiKernel`] are too
+//! For G in the thousands the per-pixel G x G kernels of [`crate::inverse::cost::ArfiKernel`] are too
 //! large. Instead keep the field of every element on the window samples that the box of pixels
 //! depends on, `B` (S samples x G elements), and per image with drives `v_k`:
 //! `p = B·v_k`, `d = A·S(|p|²)` (the sampler's linear map `S`, amplitude `A`). The gradient is
@@ -10,10 +10,10 @@
 //! at once are real matrix products over fixed blocks of samples (deterministic for any number
 //! of threads).
 
-use crate::arfi::MrSampler;
-use crate::cost::{masks_and_box, Measurement, Objective};
 use crate::error::{HasError, Result};
+use crate::inverse::cost::{masks_and_box, Measurement, Objective};
 use crate::memory;
+use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
 use ndarray::{s, Array2};
 use num_complex::Complex64 as C64;
@@ -60,7 +60,11 @@ impl FieldBasis {
             bytes,
             "estimate fewer groups, or give the MR slice a smaller field of view or matrix",
         )?;
-        let spec = crate::has::RecordSpec { window: Some(sampler.window.clone()), reflections: sim.reflections, ..Default::default() };
+        let spec = crate::physics::propagation::RecordSpec {
+            window: Some(sampler.window.clone()),
+            reflections: sim.reflections,
+            ..Default::default()
+        };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
         for start in (0..n).step_by(BATCH) {
@@ -185,7 +189,7 @@ pub struct ElementTerm {
 }
 
 /// The joint cost of paper Eq. 4 over images, on the per-element basis: the same `J` as
-/// [`crate::cost::HybridCost`] with one phase per element.
+/// [`crate::inverse::cost::HybridCost`] with one phase per element.
 #[derive(Debug, Clone)]
 pub struct ElementCost {
     pub basis: Arc<FieldBasis>,
@@ -239,7 +243,7 @@ impl ElementCost {
         if !self.fit_scale {
             return 1.0;
         }
-        crate::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
+        crate::inverse::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
     }
 
     /// Number of masked pixels over all images.
@@ -309,7 +313,7 @@ pub struct ElementModel {
     pub noise: f64,
 }
 
-/// Builds the per-element cost of `measurements` as [`crate::cost::build_model`] does for groups
+/// Builds the per-element cost of `measurements` as [`crate::inverse::cost::build_model`] does for groups
 /// (same masks, pixel box and noise level), on one basis: the known phases of each image (per
 /// element or per group) only offset its drives, so no image needs a march of its own.
 pub fn build_element_model(
@@ -320,7 +324,7 @@ pub fn build_element_model(
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
     cancel: Option<&AtomicBool>,
 ) -> Result<ElementModel> {
-    let crate::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
+    let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
     let mut terms = Vec::with_capacity(measurements.len());
     for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
         let offset =
@@ -365,10 +369,10 @@ pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
 /// model, for the ambiguity assessment) and the per-element estimate.
 #[derive(Debug, Clone)]
 pub struct ElementEstimate {
-    pub group_model: crate::cost::Model,
-    pub group: crate::estimate::Estimate,
+    pub group_model: crate::inverse::cost::Model,
+    pub group: crate::inverse::estimate::Estimate,
     pub model: ElementModel,
-    pub elements: crate::estimate::Estimate,
+    pub elements: crate::inverse::estimate::Estimate,
 }
 
 /// Per-element estimation (one phase per element, SPEC §5 `--groups 1024`): `group_estimator`
@@ -378,7 +382,7 @@ pub struct ElementEstimate {
 pub fn estimate_elements(
     sim: &Simulation,
     measurements: &[Measurement],
-    group_estimator: &crate::estimate::Estimator,
+    group_estimator: &crate::inverse::estimate::Estimator,
     max_evaluations: usize,
     fit_scale: bool,
     cancel: Option<&AtomicBool>,
@@ -386,13 +390,13 @@ pub fn estimate_elements(
 ) -> Result<ElementEstimate> {
     let mut grouped = sim.clone();
     grouped.set_groups(sim.transducer.default_groups())?;
-    let mut group_model = crate::cost::build_model(&grouped, measurements, sim.mask_fraction, 3)?;
+    let mut group_model = crate::inverse::cost::build_model(&grouped, measurements, sim.mask_fraction, 3)?;
     group_model.cost.fit_scale = fit_scale;
     let group = group_estimator.run(&group_model.cost, cancel)?;
     let start = grouped.element_phases(&group.phases)?;
     let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
     model.cost.fit_scale = fit_scale;
-    let elements = crate::estimate::Estimator::lbfgs()
+    let elements = crate::inverse::estimate::Estimator::lbfgs()
         .with_starts(1)?
         .with_max_evaluations(max_evaluations)?
         .with_time_limit_opt(group_estimator.time_limit)

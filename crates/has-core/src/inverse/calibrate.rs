@@ -5,10 +5,10 @@
 //! measured maximum connected to it) dilated by half the largest width searched, and W minimises
 //! the remaining squared difference (a scan, then golden-section refinement).
 
-use crate::arfi::noise_floor;
-use crate::cost::{check_image, mask_pixels};
 use crate::error::{require_positive, HasError, Result};
-use crate::has::RecordSpec;
+use crate::inverse::cost::{check_image, mask_pixels};
+use crate::physics::mr::noise_floor;
+use crate::physics::propagation::RecordSpec;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 

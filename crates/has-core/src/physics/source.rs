@@ -12,9 +12,9 @@
 //! kept, so every later source plane of that transducer is a multiplication.
 
 use crate::error::{HasError, Result};
-use crate::grid::Grid;
-use crate::rayleigh::Sources;
-use crate::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
+use crate::physics::grid::Grid;
+use crate::physics::rayleigh::Sources;
+use crate::physics::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
 use num_complex::Complex64 as C64;
 use rayon::prelude::*;
 
@@ -115,7 +115,7 @@ impl SourceModel {
     }
 
     /// Adds the Rayleigh integral of `points` (drive `a`) at every pixel of the plane: one rayon
-    /// task per row, each a single-precision blocked sum ([`crate::rayleigh`]).
+    /// task per row, each a single-precision blocked sum ([`crate::physics::rayleigh`]).
     fn add_rayleigh(&self, points: &[(SurfacePoint, C64)], out: &mut [C64]) {
         let g = &self.grid;
         let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
@@ -202,7 +202,7 @@ fn rasterise(e: &Surface, g: &Grid) -> Vec<(u32, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::transducer::Transducer;
+    use crate::physics::transducer::Transducer;
 
     #[test]
     fn symmetric_cap_projection_matches_the_direct_sum_at_every_pixel() {
@@ -222,7 +222,7 @@ mod tests {
             .collect();
         let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
         let xs: Vec<f64> = (0..g.nx).map(|i| g.x(i)).collect();
-        let slow: Vec<C64> = (0..g.ny).flat_map(|j| crate::rayleigh::row_f64(&weighted, &xs, g.y(j), g.z0, k, 0.0)).collect();
+        let slow: Vec<C64> = (0..g.ny).flat_map(|j| crate::physics::rayleigh::row_f64(&weighted, &xs, g.y(j), g.z0, k, 0.0)).collect();
         let peak = slow.iter().map(|v| v.norm()).fold(0.0, f64::max);
         let err = fast.iter().zip(&slow).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
         eprintln!("[cap projection] max error {err:.2e} of the peak (tol 2e-4)");

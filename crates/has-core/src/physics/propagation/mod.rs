@@ -38,9 +38,9 @@ pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_
 pub use march::{RecordSpec, Recording, Window};
 
 use crate::error::{HasError, Result};
-use crate::fft::Fft2;
-use crate::grid::Grid;
-use crate::medium::{Medium, SliceProperties};
+use crate::physics::fft::Fft2;
+use crate::physics::grid::Grid;
+use crate::physics::medium::{Medium, SliceProperties};
 use interface::{axial_wavenumber, Coefficients, Interface};
 use num_complex::Complex64 as C64;
 use std::collections::HashMap;

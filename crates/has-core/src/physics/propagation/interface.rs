@@ -18,9 +18,9 @@
 //! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
 //! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
 
-use crate::fft::{Fft2, FftWorkspace};
-use crate::grid::Grid;
-use crate::medium::SliceProperties;
+use crate::physics::fft::{Fft2, FftWorkspace};
+use crate::physics::grid::Grid;
+use crate::physics::medium::SliceProperties;
 use num_complex::Complex64 as C64;
 use std::collections::HashMap;
 use std::sync::Arc;

@@ -1,7 +1,7 @@
 //! Acoustic media: materials, regions (cylinder, slab) and voxel maps.
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
-use crate::grid::Grid;
+use crate::physics::grid::Grid;
 
 /// Nepers per decibel: 1 dB = ln(10)/20 Np.
 pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;

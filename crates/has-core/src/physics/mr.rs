@@ -6,9 +6,9 @@
 //! map from `|p|²` samples to the image is one fixed operator, [`MrSampler`].
 
 use crate::error::{require_non_negative, require_positive, HasError, Result};
-use crate::grid::Grid;
-use crate::has::Window;
-use crate::medium::Medium;
+use crate::physics::grid::Grid;
+use crate::physics::medium::Medium;
+use crate::physics::propagation::Window;
 use ndarray::Array2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -18,11 +18,11 @@
 //! slice normal; field effects (`phase_aberration`, `element_dropout`, `sound_speed`,
 //! `attenuation` of the material at the focus) march the field again.
 
-use crate::arfi::MrSampler;
-use crate::cost::{build_model, masks_and_box, Measurement};
 use crate::error::{HasError, Result};
-use crate::estimate::{point_reflection, Estimator, Stop, PENALTY};
-use crate::has::{RecordSpec, Window};
+use crate::inverse::cost::{build_model, masks_and_box, Measurement};
+use crate::inverse::estimate::{point_reflection, Estimator, Stop, PENALTY};
+use crate::physics::mr::MrSampler;
+use crate::physics::propagation::{RecordSpec, Window};
 use crate::simulation::Simulation;
 use crate::Complex64 as C64;
 use argmin::core::{CostFunction, Executor};
@@ -184,7 +184,7 @@ impl<'a> Forward<'a> {
             return Ok((std::borrow::Cow::Borrowed(self.sim), 1.0));
         }
         let sim = self.sim.with_material(self.material, state.sound_speed, state.attenuation_db_cm_mhz)?;
-        let coef = |m: &crate::medium::Material| m.properties(self.sim.frequency).force_coefficient();
+        let coef = |m: &crate::physics::medium::Material| m.properties(self.sim.frequency).force_coefficient();
         let ratio = coef(&sim.medium.materials[self.material]) / coef(model);
         Ok((std::borrow::Cow::Owned(sim), ratio))
     }
@@ -446,9 +446,9 @@ struct Fitted {
 /// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm.
 ///
 /// ```
-/// use has_core::arfi::add_noise;
-/// use has_core::cost::Measurement;
-/// use has_core::diagnose::{diagnose, DiagnoseOptions, Effect};
+/// use has_core::physics::mr::add_noise;
+/// use has_core::inverse::cost::Measurement;
+/// use has_core::inverse::diagnose::{diagnose, DiagnoseOptions, Effect};
 /// use has_core::{Scenario, Simulation};
 /// let sim = Simulation::new(&Scenario::default())?; // W = 2.7 mm
 /// let mut image = sim.arfi_image(&[])?;

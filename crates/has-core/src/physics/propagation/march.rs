@@ -6,9 +6,9 @@
 //! after it by pressure continuity.
 
 use super::HasPlan;
-use crate::fft::FftWorkspace;
-use crate::grid::Grid;
-use crate::medium::SliceProperties;
+use crate::physics::fft::FftWorkspace;
+use crate::physics::grid::Grid;
+use crate::physics::medium::SliceProperties;
 use num_complex::Complex64 as C64;
 use std::ops::Range;
 

@@ -3,11 +3,11 @@
 //! default groups), apply the limits, and assess the answer (ambiguity, misfit). What the CLI,
 //! the Python API and Rust users run.
 
-use crate::basis::estimate_elements;
-use crate::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
 use crate::error::{HasError, Result};
-use crate::estimate::{Assessment, Estimate, Estimator};
-use crate::phase::point_reflection;
+use crate::inverse::basis::estimate_elements;
+use crate::inverse::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
+use crate::inverse::estimate::{Assessment, Estimate, Estimator};
+use crate::inverse::phase::point_reflection;
 use crate::simulation::Simulation;
 use std::sync::atomic::AtomicBool;
 

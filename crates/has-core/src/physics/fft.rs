@@ -2,7 +2,7 @@
 //!
 //! Planned once ([`Fft2::new`]); every transform takes a caller-owned [`FftWorkspace`], so the
 //! propagation loop does not allocate. No normalisation is applied: a forward then an inverse
-//! transform multiplies by `nx·ny`. Frequencies are in FFT order (see [`crate::grid::Grid::wavenumber`]).
+//! transform multiplies by `nx·ny`. Frequencies are in FFT order (see [`crate::physics::grid::Grid::wavenumber`]).
 
 use num_complex::Complex64 as C64;
 use rayon::prelude::*;

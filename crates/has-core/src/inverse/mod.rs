@@ -1,0 +1,10 @@
+//! The inverse layer: phase arithmetic, the hybrid cost and its per-element field basis, the
+//! estimators and the estimation workflow, calibration, and the model-discrepancy workflow.
+
+pub mod basis;
+pub mod calibrate;
+pub mod cost;
+pub mod diagnose;
+pub mod estimate;
+pub mod estimation;
+pub mod phase;

@@ -1,0 +1,14 @@
+//! The physics layer: the simulation grid, media, transducers and their steering, the source
+//! plane (Rayleigh projection of curved elements), the FFTs, Hybrid Angular Spectrum
+//! propagation, and the MR-ARFI forward model after the pressure field.
+
+pub mod aberration;
+pub mod fft;
+pub mod grid;
+pub mod medium;
+pub mod mr;
+pub mod propagation;
+pub mod rayleigh;
+pub mod source;
+pub mod steering;
+pub mod transducer;
