@@ -1,5 +1,5 @@
-//! Criterion benchmarks of the HAS core on the embedded default scenario (SPEC §3: 180 x 180 x 188
-//! grid, 1024 elements in 16 groups, MR window around the focal slab).
+//! Criterion benchmarks of the HAS core on the embedded default scenario, the paper's phantom
+//! experiment (180 x 180 x 188 grid, 1024 elements in 16 groups, MR window around the focal slab).
 //!
 //! Run with `cargo bench -p has-core` (a few minutes on 2 cores); filter with
 //! `cargo bench -p has-core -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal

@@ -7,16 +7,38 @@
 pub enum HasError {
     /// A parameter is out of range, non-finite, of the wrong length, ...
     #[error("{name}: {reason}")]
-    InvalidParameter { name: String, reason: String },
+    InvalidParameter {
+        /// The parameter, as named in scenario files or the API (e.g. `grid.spacing_mm`).
+        name: String,
+        /// What is wrong with it and what is allowed.
+        reason: String,
+    },
     /// A file could not be found.
     #[error("{path}: no such file")]
-    FileNotFound { path: String },
+    FileNotFound {
+        /// The path as given.
+        path: String,
+    },
     /// A file exists but could not be read or parsed.
     #[error("{path}: {reason}")]
-    BadFile { path: String, reason: String },
+    BadFile {
+        /// The path as given.
+        path: String,
+        /// The reader's or parser's message, on one line.
+        reason: String,
+    },
     /// The request would need more memory than the budget of [`crate::memory::limit`].
     #[error("{what} needs {:.1} GiB, more than the {:.1} GiB this machine has for it; {suggestion}", gib(*.bytes), gib(*.limit))]
-    TooLarge { what: String, bytes: u64, limit: u64, suggestion: String },
+    TooLarge {
+        /// The request, e.g. `a 2048 x 2048 grid`.
+        what: String,
+        /// Memory it would need, bytes.
+        bytes: u64,
+        /// The budget, bytes.
+        limit: u64,
+        /// How to make the request smaller.
+        suggestion: String,
+    },
     /// A long computation was stopped through its cancel flag.
     #[error("interrupted")]
     Interrupted,

@@ -17,6 +17,7 @@
 //! let image = sim.arfi_image(&[]).unwrap(); // ideal MR-ARFI image, rad
 //! ```
 
+#![warn(missing_docs)]
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 

@@ -22,21 +22,31 @@ use std::sync::Arc;
 /// HAS operators).
 #[derive(Clone)]
 pub struct Simulation {
+    /// The scenario's name.
     pub name: String,
+    /// Driving frequency f, Hz.
     pub frequency: f64,
+    /// The grid the beam is marched on.
     pub grid: Grid,
+    /// The acoustic medium: materials, background, regions and any voxel map.
     pub medium: Medium,
+    /// The array (element number = index).
     pub transducer: Transducer,
+    /// The steering target in the transducer frame, m.
     pub focus: [f64; 3],
-    /// Steering phases per element (rad), SPEC §2 sign.
+    /// Steering phases per element (rad): a phase `phi` delays that element's emission by
+    /// `phi / (2·pi·f)`.
     pub steering: Vec<f64>,
     /// Element → group (default: 16 groups of contiguous elements).
     pub groups: Vec<usize>,
+    /// Number of groups G (groups are numbered 0 to G-1).
     pub n_groups: usize,
+    /// The map from element drives to the pressure on the source plane (plane 0).
     pub source: SourceModel,
     /// The source plane of the steered array (no added phases), kept: projecting curved
     /// elements is the costly part of a field.
     steered_source: Arc<Vec<C64>>,
+    /// The HAS plan through the medium, built with the steered beam as reference.
     pub plan: HasPlan,
     /// The MR image geometry of the scenario.
     pub mr: MrGeometry,
@@ -44,7 +54,11 @@ pub struct Simulation {
     pub(crate) sampler: Result<MrSampler>,
     /// Scale from broadened force density (N/m³) to ARFI phase (rad), or why there is none.
     pub(crate) amplitude: Result<f64>,
+    /// Focal-zone level (paper Eq. 4): fits use the pixels above this fraction of each image's
+    /// maximum that are connected to it.
     pub mask_fraction: f64,
+    /// Standard deviation of the Gaussian noise the scenario assumes on ARFI phase images
+    /// (`[arfi] noise_rad`), rad.
     pub noise: f64,
     /// Whether marches add the reflected waves (scenario `[grid] reflections`).
     pub reflections: bool,
@@ -67,11 +81,15 @@ pub struct Propagation {
 pub struct Field {
     /// Complex pressure amplitude (Pa), `(ny, nx)`.
     pub pressure: Array2<C64>,
+    /// x of each column of `pressure`, m.
     pub x: Vec<f64>,
+    /// y of each row of `pressure`, m.
     pub y: Vec<f64>,
     /// z of the plane (m).
     pub z: f64,
+    /// Complex pressure amplitude (Pa) on the beam axis (x = y = 0), one per grid plane.
     pub axis_pressure: Vec<C64>,
+    /// z of each sample of `axis_pressure`, m.
     pub axis_z: Vec<f64>,
     /// Pressure amplitude on every element face (Pa).
     pub surface_pressure: f64,

@@ -23,13 +23,13 @@ fn peak(img: &Array2<f64>) -> f64 {
     img.iter().copied().fold(f64::MIN, f64::max)
 }
 
-/// Skull-like 16-group aberration (SPEC §3) for a seed.
+/// Skull-like 16-group aberration (smooth over the array, several radians peak to peak) for a seed.
 fn group_truth(seed: u64) -> Vec<f64> {
     let s = sim();
     condense(&SkullScreen::default().phases(&positions(s), seed).unwrap(), &s.groups).unwrap()
 }
 
-/// Recovered fraction: focal ARFI after subtracting the estimate, over the ideal (SPEC §6).
+/// Recovered fraction: focal ARFI after subtracting the estimate, over the ideal focal ARFI.
 fn recovered(truth: &[f64], estimate: &[f64]) -> f64 {
     let s = sim();
     let corrected: Vec<f64> = if truth.len() == estimate.len() {

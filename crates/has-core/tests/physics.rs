@@ -165,7 +165,8 @@ fn rayleigh_sommerfeld(sim: &Simulation, m: usize, targets: &[[f64; 3]]) -> Vec<
     for (e, phi) in sim.transducer.elements.iter().zip(&sim.steering) {
         let Surface::Flat { center, size, .. } = *e else { panic!("a planar array was expected") };
         let h = size / m as f64;
-        // Element drive: face pressure · exp(+i·phi) (SPEC §2: a phase delays the emission).
+        // Element drive: face pressure · exp(+i·phi) (time dependence exp(-i·omega·t): a phase phi
+        // delays the emission by phi / (2·pi·f)).
         let w = C64::from_polar(sim.source.face_pressure * h * h / (2.0 * PI), *phi);
         for a in 0..m {
             for b in 0..m {
@@ -195,8 +196,9 @@ fn rayleigh_sommerfeld(sim: &Simulation, m: usize, targets: &[[f64; 3]]) -> Vec<
     })
 }
 
-/// SPEC §3 array (1024 elements) steered to (0, 0, 85) mm in water: the HAS focal plane against the
-/// direct Rayleigh–Sommerfeld sum on a ±10 mm square of grid samples.
+/// The paper's planar array (4 quadrants of 16 x 16 elements, pitch 2.5 mm) steered to
+/// (0, 0, 85) mm in water: the HAS focal plane against the direct Rayleigh–Sommerfeld sum on a
+/// ±10 mm square of grid samples.
 #[test]
 fn planar_array_focal_plane_matches_rayleigh_sommerfeld() {
     // Reference: 10 x 10 cells per element. Its own quadrature error, from runs with 5, 8, 12 and
@@ -325,7 +327,7 @@ fn power_is_conserved_in_lossless_water() {
     let k = k_water();
     let z_skip = 5e-3;
 
-    // (a) The SPEC array, steered to 85 mm, on a periodic grid (no absorbing layer), 0 to 127.5 mm.
+    // (a) The paper's planar array, steered to 85 mm, on a periodic grid (no absorbing layer), 0 to 127.5 mm.
     // Its pitch (2.5 mm = 0.92 λ) gives grating lobes at 40–90° off axis that leave any grid of
     // practical width (measured: 20 % of the power has reached the layer of a 250 mm grid by
     // z = 127 mm), so "nothing hits the layer" is obtained by having no layer: the lateral
@@ -342,7 +344,7 @@ fn power_is_conserved_in_lossless_water() {
     let propagating = propagating_power(&src, g, k, z_water);
     let last = *p.last().unwrap();
     eprintln!(
-        "[power] SPEC array, periodic {}x{} grid: P(0) = {:.4} W (direct sum {:.4} W; nominal 70 W over the element area), \
+        "[power] paper's planar array, periodic {}x{} grid: P(0) = {:.4} W (direct sum {:.4} W; nominal 70 W over the element area), \
          P({:.0} mm) = {:.4} W, P({:.1} mm) = {last:.4} W\n[power]   max |P(z)/P(5 mm) - 1| over 5–127.5 mm: {:.2e} (tol 1 %); \
          propagating part of the source plane (Parseval): {propagating:.4} W, P(end) / that - 1 = {:+.2e} (tol 1 %)",
         g.nx,
@@ -379,12 +381,12 @@ fn power_is_conserved_in_lossless_water() {
     eprintln!("[power] Gaussian focused beam, 10 mm absorbing layer: max |P(z)/P(0) - 1| = {dev_b:.2e} (tol 1 %)");
     assert!(dev_b < 0.01, "power of a beam clear of the layer changed by {:.3} %", 100.0 * dev_b);
 
-    // (c) Reported: the SPEC array with the default layer on the default grid, i.e. what the layer
+    // (c) Reported: the paper's array with the default layer on the default grid, i.e. what the layer
     // removes (grating lobes and near-grazing components) by the focus and by the end.
     let (_, rec) = HasPlan::build(g, &sim.medium, F, &src, &HasOptions::default(), &spec).unwrap();
     let at = |z: f64| rec.power[g.plane_index(z)];
     eprintln!(
-        "[power] SPEC array with the default 10 mm layer on the default {:.0} mm grid: P(5 mm) = {:.3} W, P(85 mm) = {:.3} W ({:+.1} %), \
+        "[power] paper's planar array with the default 10 mm layer on the default {:.0} mm grid: P(5 mm) = {:.3} W, P(85 mm) = {:.3} W ({:+.1} %), \
          P(127 mm) = {:.3} W ({:+.1} %)",
         g.nx as f64 * g.dx * 1e3,
         at(5e-3),

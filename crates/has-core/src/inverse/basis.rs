@@ -1,4 +1,5 @@
-//! The per-element field basis for estimation with many phases (SPEC §8, e.g. G = 1024).
+//! The per-element field basis for estimation with many phases (e.g. one per element of a
+//! 1024-element array, the paper's clinical case).
 //!
 //! For G in the thousands the per-pixel G x G kernels of [`crate::inverse::cost::ArfiKernel`] are too
 //! large. Instead keep the field of every element on the window samples that the box of pixels
@@ -192,7 +193,9 @@ pub struct ElementTerm {
 /// [`crate::inverse::cost::HybridCost`] with one phase per element.
 #[derive(Debug, Clone)]
 pub struct ElementCost {
+    /// The fields of every element in the MR window.
     pub basis: Arc<FieldBasis>,
+    /// One term per measured image.
     pub terms: Vec<ElementTerm>,
     /// Fit one least-squares amplitude scale for all images (see `HybridCost::fit_scale`).
     pub fit_scale: bool,
@@ -309,7 +312,9 @@ impl Objective for ElementCost {
 /// The per-element cost of `measurements` and the background noise level (rad).
 #[derive(Debug, Clone)]
 pub struct ElementModel {
+    /// The per-element cost of paper Eq. 4.
     pub cost: ElementCost,
+    /// Noise standard deviation of the image backgrounds (rad).
     pub noise: f64,
 }
 
@@ -341,7 +346,7 @@ pub fn build_element_model(
 }
 
 /// Known phases per element from values per element, per group of `sim`, or per default group
-/// of the array (the 16 groups of SPEC §2; empty = none).
+/// of the array (16 groups of contiguous element numbers, the paper's; empty = none).
 pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
     let n = sim.n_elements();
     if known.is_empty() {
@@ -369,13 +374,17 @@ pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
 /// model, for the ambiguity assessment) and the per-element estimate.
 #[derive(Debug, Clone)]
 pub struct ElementEstimate {
+    /// The group cost that warm-started the per-element search.
     pub group_model: crate::inverse::cost::Model,
+    /// The group estimate (its phases spread over each group's elements are the start).
     pub group: crate::inverse::estimate::Estimate,
+    /// The per-element cost and noise level.
     pub model: ElementModel,
+    /// The per-element estimate: one phase per element (rad), zero circular mean.
     pub elements: crate::inverse::estimate::Estimate,
 }
 
-/// Per-element estimation (one phase per element, SPEC §5 `--groups 1024`): `group_estimator`
+/// Per-element estimation (one phase per element, the CLI's `--groups 1024`): `group_estimator`
 /// fits the array's default groups, its estimate expanded to elements warm-starts L-BFGS on the
 /// element basis with at most `max_evaluations` evaluations. `fit_scale` and the estimator's time
 /// limit apply to each stage.

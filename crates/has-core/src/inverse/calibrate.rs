@@ -21,6 +21,7 @@ pub struct Calibration {
     pub amplitude: f64,
     /// Final squared difference over the mask (rad²) and its pixel count.
     pub cost: f64,
+    /// Number of masked pixels the cost sums over.
     pub n_pixels: usize,
     /// Noise level of the image background (rad).
     pub noise: f64,

@@ -46,12 +46,14 @@ impl Method {
 /// What to estimate with: the method and its limits (each `None`: the method's default).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EstimateRequest {
+    /// The search method and its settings.
     pub method: Method,
     /// Evaluation limit (defaults: Nelder–Mead and particle swarm 8000, L-BFGS 40 000 over all
     /// starts, per element 500 on the element basis).
     pub max_evaluations: Option<usize>,
     /// Wall-clock limit per stage (s).
     pub time_limit_s: Option<f64>,
+    /// Seed of the random starts, the swarm and the ambiguity assessment.
     pub seed: u64,
     /// L-BFGS starts (default 20).
     pub starts: Option<usize>,

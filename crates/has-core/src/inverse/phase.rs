@@ -82,5 +82,14 @@ mod tests {
         let b: Vec<f64> = a.iter().map(|x| x + 1.3).collect();
         assert!(phase_error(&a, &b) < 1e-12);
         assert_eq!(condense(&[0.2, 0.2, -1.0, -1.0], &[0, 0, 1, 1]).unwrap().len(), 2);
+        // The error is the RMS of the centred difference: ±0.5 rad about a common zero.
+        assert!((phase_error(&[0.0, 0.0], &[0.5, -0.5]) - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn condense_takes_the_circular_mean() {
+        let c = condense(&[PI - 0.1, -PI + 0.1, 0.0, 0.2], &[0, 0, 1, 1]).unwrap();
+        assert!((c[0].abs() - PI).abs() < 1e-12);
+        assert!((c[1] - 0.1).abs() < 1e-12);
     }
 }

@@ -1,8 +1,11 @@
-//! Seeded skull-like phase aberrations for simulation studies (SPEC §3).
+//! Seeded skull-like phase aberrations for simulation studies.
 //!
 //! A smooth Gaussian random phase screen over the aperture (shot noise of Gaussian bumps of width
 //! `correlation_length` with random signs and centres, about four bumps per correlation area),
-//! scaled to `peak_to_peak` over the elements, plus independent per-element jitter.
+//! scaled to `peak_to_peak` over the elements, plus independent per-element jitter. The defaults
+//! (12 mm, 6 rad) lie in the skull-like range the studies assume (correlation length of order
+//! 10–15 mm, several radians peak to peak); a per-group case is the group condensation of such a
+//! screen.
 
 use crate::error::{require_non_negative, require_positive, Result};
 use rand::{Rng, SeedableRng};
@@ -12,8 +15,11 @@ use rand_distr::{Distribution, Normal};
 /// Parameters of the screen (SI: metres, radians).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SkullScreen {
+    /// Correlation length of the smooth screen (width of its Gaussian bumps), m.
     pub correlation_length: f64,
+    /// Peak-to-peak range of the smooth screen over the elements, rad.
     pub peak_to_peak: f64,
+    /// Standard deviation of the independent per-element jitter, rad.
     pub jitter: f64,
 }
 

@@ -12,7 +12,9 @@ use std::sync::Arc;
 /// Row-major `(ny, nx)` 2-D FFT plans; the spectrum is left transposed, `(nx, ny)`.
 #[derive(Clone)]
 pub struct Fft2 {
+    /// Samples along x (row length).
     pub nx: usize,
+    /// Samples along y (number of rows).
     pub ny: usize,
     fwd_x: Arc<dyn Fft<f64>>,
     inv_x: Arc<dyn Fft<f64>>,

@@ -9,12 +9,19 @@ use crate::error::{require_positive, HasError, Result};
 /// stored row-major with shape `(ny, nx)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid {
+    /// Lateral samples along x.
     pub nx: usize,
+    /// Lateral samples along y.
     pub ny: usize,
+    /// Lateral spacing along x, m.
     pub dx: f64,
+    /// Lateral spacing along y, m.
     pub dy: f64,
+    /// Number of planes along the beam.
     pub nz: usize,
+    /// Step between planes along z, m.
     pub dz: f64,
+    /// z of plane 0 (the source plane), m.
     pub z0: f64,
 }
 

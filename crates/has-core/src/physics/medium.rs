@@ -21,6 +21,7 @@ fn require_sound_speed(name: &str, c: f64) -> Result<()> {
 /// be all absorption (it drives the radiation force).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Material {
+    /// Name that regions and scenario files refer to it by.
     pub name: String,
     /// Sound speed c (m/s).
     pub sound_speed: f64,
@@ -64,8 +65,11 @@ impl Material {
 /// Acoustic properties at a point, SI: c (m/s), rho (kg/m³), alpha (Np/m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Properties {
+    /// Sound speed c, m/s.
     pub sound_speed: f64,
+    /// Density rho, kg/m³.
     pub density: f64,
+    /// Amplitude attenuation coefficient alpha at the frequency asked for, Np/m.
     pub attenuation: f64,
 }
 
@@ -85,10 +89,24 @@ impl Properties {
 /// The geometry of a region (metres, transducer frame).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shape {
-    /// `(x-cx)² + (y-cy)² <= r²` and `z_min <= z <= z_max`.
-    Cylinder { radius: f64, z_min: f64, z_max: f64, center: [f64; 2] },
-    /// `z_min <= z <= z_max`, all x, y.
-    Slab { z_min: f64, z_max: f64 },
+    /// `(x-cx)² + (y-cy)² <= r²` and `z_min <= z <= z_max`: a cylinder about the beam direction.
+    Cylinder {
+        /// Radius r, m.
+        radius: f64,
+        /// Lower bound along z, m.
+        z_min: f64,
+        /// Upper bound along z, m.
+        z_max: f64,
+        /// Axis position `(cx, cy)`, m.
+        center: [f64; 2],
+    },
+    /// `z_min <= z <= z_max`, all x, y: a layer perpendicular to the beam.
+    Slab {
+        /// Lower bound along z, m.
+        z_min: f64,
+        /// Upper bound along z, m.
+        z_max: f64,
+    },
 }
 
 impl Shape {
@@ -129,6 +147,7 @@ impl Shape {
 pub struct Region {
     /// Index into [`Medium::materials`].
     pub material: usize,
+    /// Where the material lies.
     pub shape: Shape,
 }
 
@@ -142,10 +161,13 @@ pub struct VoxelMap {
     pub spacing: [f64; 3],
     /// Shape (nz, ny, nx).
     pub shape: [usize; 3],
-    /// Row-major (z, y, x) maps: sound speed (m/s), density (kg/m³), attenuation (dB/cm/MHz^y).
+    /// Sound speed c per voxel, m/s; row-major (z, y, x).
     pub sound_speed: Vec<f64>,
+    /// Density rho per voxel, kg/m³; row-major (z, y, x).
     pub density: Vec<f64>,
+    /// Attenuation coefficient a0 per voxel, dB/cm/MHz^y; row-major (z, y, x).
     pub attenuation_db_cm_mhz: Vec<f64>,
+    /// Frequency exponent y of the power law `a0·(f / 1 MHz)^y`, shared by every voxel.
     pub attenuation_power: f64,
 }
 
@@ -203,10 +225,13 @@ impl VoxelMap {
 /// The medium: materials, a background, regions and optional voxel maps.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Medium {
+    /// The materials, referred to by index.
     pub materials: Vec<Material>,
-    /// Index of the background material.
+    /// Index of the background material (wherever no region or voxel map applies).
     pub background: usize,
+    /// Regions in order; later ones override earlier ones where they overlap.
     pub regions: Vec<Region>,
+    /// Voxel-by-voxel properties, overriding the regions and background inside their box.
     pub voxels: Option<VoxelMap>,
 }
 
@@ -346,8 +371,11 @@ impl Medium {
 /// Property maps of one lateral slice, row-major `(ny, nx)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SliceProperties {
+    /// Sound speed c, m/s.
     pub sound_speed: Vec<f64>,
+    /// Density rho, kg/m³.
     pub density: Vec<f64>,
+    /// Amplitude attenuation coefficient alpha at the slice's frequency, Np/m.
     pub attenuation: Vec<f64>,
 }
 

@@ -58,10 +58,15 @@ impl MrPlane {
 /// `center + (-fov/2 + (i + 0.5)·fov_u/n_u, -fov/2 + (j + 0.5)·fov_v/n_v)` along the image axes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MrGeometry {
+    /// Orientation of the slice.
     pub plane: MrPlane,
+    /// Centre of the slice in the transducer frame, m.
     pub center: [f64; 3],
+    /// Field of view along image axes u and v, m.
     pub fov: [f64; 2],
+    /// Pixels along u and v.
     pub matrix: [usize; 2],
+    /// Slice thickness along the normal, m; the force is averaged over it (a boxcar profile).
     pub slice_thickness: f64,
 }
 
@@ -116,7 +121,7 @@ impl MrGeometry {
     }
 }
 
-/// The broadening and scale from force to ARFI phase.
+/// The Gaussian broadening of the force map before pixel averaging (paper Eq. 2–3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Broadening {
     /// Width W (m) of the Gaussian `exp(-(x² + y²) / (2·W²))` (normalised to unit integral); 0 = none.
@@ -129,7 +134,9 @@ pub struct Broadening {
 /// image axis. A sampler may cover only a box of pixels ([`MrSampler::restrict`]).
 #[derive(Debug, Clone)]
 pub struct MrSampler {
+    /// The image geometry it samples onto.
     pub geometry: MrGeometry,
+    /// The Gaussian broadening applied before pixel averaging.
     pub broadening: Broadening,
     /// The grid window to record.
     pub window: Window,

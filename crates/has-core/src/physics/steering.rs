@@ -22,8 +22,8 @@ pub fn time_of_flight(medium: &Medium, frequency: f64, a: [f64; 3], b: [f64; 3],
 }
 
 /// Steering phases (rad) focusing at `target`: element `e` is delayed by `t_max - t_e`, so every
-/// element's wave arrives at the target at the same time (`phi_e = 2·pi·f·(t_max - t_e)`,
-/// SPEC §2 sign: a positive phase delays the emission). Straight-line time of flight through the
+/// element's wave arrives at the target at the same time (`phi_e = 2·pi·f·(t_max - t_e)`; a
+/// positive phase delays the emission by `phi / (2·pi·f)`). Straight-line time of flight through the
 /// regions from each element's centre.
 pub fn steering_phases(transducer: &Transducer, medium: &Medium, frequency: f64, target: [f64; 3]) -> Result<Vec<f64>> {
     if !target.iter().all(|v| v.is_finite()) {

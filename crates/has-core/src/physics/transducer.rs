@@ -16,16 +16,33 @@ pub enum ElementShape {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Surface {
     /// A flat element centred at `center` facing `normal` (unit).
-    Flat { center: [f64; 3], normal: [f64; 3], size: f64, shape: ElementShape },
+    Flat {
+        /// Centre of the element face, m.
+        center: [f64; 3],
+        /// Unit normal, pointing into the medium.
+        normal: [f64; 3],
+        /// Side of a square or diameter of a disc, m.
+        size: f64,
+        /// Outline of the face.
+        shape: ElementShape,
+    },
     /// A whole spherical cap: apex at the origin, centre of curvature at (0, 0, radius).
-    Cap { radius: f64, aperture_diameter: f64 },
+    Cap {
+        /// Radius of curvature R, m.
+        radius: f64,
+        /// Diameter of the cap's rim (chord across the aperture), m.
+        aperture_diameter: f64,
+    },
 }
 
 /// A quadrature point on a radiating surface: position, unit normal, area (m²).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfacePoint {
+    /// Position on the surface, m.
     pub position: [f64; 3],
+    /// Unit normal there, pointing into the medium.
     pub normal: [f64; 3],
+    /// Surface area the point stands for, m².
     pub area: f64,
 }
 
@@ -137,16 +154,19 @@ fn cap_quadrature(r: f64, d: f64, spacing: f64) -> Vec<SurfacePoint> {
     pts
 }
 
-/// A transducer: an ordered list of elements (element number = index) and their grouping.
+/// A transducer: an ordered list of elements (element number = index); groups of elements are
+/// chosen elsewhere ([`Transducer::default_groups`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transducer {
+    /// The elements' radiating surfaces; the index is the element number.
     pub elements: Vec<Surface>,
 }
 
 impl Transducer {
-    /// The paper's planar array (SPEC §2–3): four quadrants of `n x n` square elements in z = 0,
-    /// numbered `e = n²·q + n·r + c`, quadrants clockwise from the top-left (q=0: x<0, y>0), row 0
-    /// of largest y, column 0 of smallest x. Element centres at `±(gap/2 + pitch/2 + pitch·i)`.
+    /// The paper's planar array: four quadrants of `n x n` square elements in z = 0, numbered
+    /// `e = n²·q + n·r + c` as in the paper, quadrants clockwise from the top-left (q=0: x<0, y>0),
+    /// row 0 of largest y, column 0 of smallest x. Element centres at `±(gap/2 + pitch/2 + pitch·i)`
+    /// (m). The paper's phantom experiment: n = 16, pitch 2.5 mm, elements 2.3 mm, gap 1 mm.
     pub fn planar_quadrants(n: usize, pitch: f64, element_size: f64, gap: f64) -> Result<Self> {
         if n == 0 || n > 256 {
             return Err(HasError::invalid("transducer.elements_per_side", format!("must be 1..=256, got {n}")));

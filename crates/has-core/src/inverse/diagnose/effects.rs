@@ -94,12 +94,16 @@ impl Effect {
 pub struct View {
     /// Scale on the amplitude (1 = the model's).
     pub scale: f64,
-    /// Mean broadening width W (mm) and the difference of the widths along u and v (mm).
+    /// Mean broadening width W (mm).
     pub broadening_width_mm: f64,
+    /// Difference of the broadening widths along u and v (mm).
     pub broadening_anisotropy_mm: f64,
+    /// Registration shift of the image along u and v (mm).
     pub shift_mm: [f64; 2],
-    /// `offset + slope_u·u + slope_v·v` (rad, rad/mm; u, v pixel-centre coordinates in mm).
+    /// Background phase `offset + slope_u·u + slope_v·v`: the offset (rad; u, v pixel-centre
+    /// coordinates in mm).
     pub background_offset_rad: f64,
+    /// The background's slopes along u and v (rad/mm).
     pub background_slope_rad_per_mm: [f64; 2],
     /// Offset of the slice along its normal (mm), within ±[`SLICE_REACH_MM`].
     pub slice_offset_mm: f64,
@@ -179,15 +183,18 @@ pub struct FieldState {
     pub group_phases: Vec<f64>,
     /// Groups whose elements emit nothing (sorted).
     pub dead_groups: Vec<usize>,
-    /// Sound speed (m/s) and attenuation (dB/cm/MHz) of the material at the focus.
+    /// Sound speed of the material at the focus (m/s).
     pub sound_speed: f64,
+    /// Attenuation of the material at the focus (dB/cm/MHz).
     pub attenuation_db_cm_mhz: f64,
 }
 
 /// Every parameter of the extended model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Effects {
+    /// Image-space parameters: applied to the recorded `|p|²` window.
     pub view: View,
+    /// Field parameters: change the HAS field (a new march).
     pub field: FieldState,
 }
 
@@ -228,9 +235,13 @@ pub enum ValueKind {
 /// accepts (units in the name), the effect it belongs to, its kind and meaning.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Parameter {
+    /// The name `diagnose` reports and [`Effects::set`] accepts (unit in the name).
     pub name: &'static str,
+    /// The effect it belongs to.
     pub effect: Effect,
+    /// Whether it is one number, a list, or group indices.
     pub kind: ValueKind,
+    /// What it means, for reports and `--help`.
     pub meaning: &'static str,
 }
 
@@ -328,8 +339,11 @@ impl Effects {
 /// One fitted value of an effect.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Value {
+    /// One number (e.g. a width in mm).
     Number(f64),
+    /// A list of numbers (e.g. a shift along u and v, or group phases).
     Numbers(Vec<f64>),
+    /// Indices (e.g. the dead groups).
     Indices(Vec<usize>),
 }
 

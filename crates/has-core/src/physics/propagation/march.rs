@@ -33,8 +33,11 @@ pub struct RecordSpec {
 /// A box of the grid: plane indices, rows (y) and columns (x).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Window {
+    /// Plane indices n (along z).
     pub planes: Range<usize>,
+    /// Row indices j (along y).
     pub rows: Range<usize>,
+    /// Column indices i (along x).
     pub cols: Range<usize>,
 }
 
@@ -65,10 +68,14 @@ impl Window {
 /// What was kept (see [`RecordSpec`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Recording {
+    /// Complex pressure (Pa) of the planes asked for, `(ny, nx)` each, in increasing plane order
+    /// (duplicates kept once).
     pub planes: Vec<Vec<C64>>,
+    /// On-axis complex pressure (Pa), one per plane from 0 to the last one marched.
     pub axis: Vec<C64>,
-    /// Window samples, row-major (plane, row, column).
+    /// Window complex pressure (Pa), row-major (plane, row, column).
     pub window: Vec<C64>,
+    /// Power of the forward wave (W), one per plane from 0 to the last one marched.
     pub power: Vec<f64>,
 }
 

@@ -102,7 +102,9 @@ struct Zone {
 /// (cloning shares the operators).
 #[derive(Clone)]
 pub struct HasPlan {
+    /// The grid it marches on.
     pub grid: Grid,
+    /// Frequency, Hz.
     pub frequency: f64,
     /// The options it was built with.
     pub options: HasOptions,

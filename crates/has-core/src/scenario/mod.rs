@@ -1,13 +1,16 @@
-//! Scenario files (SPEC §4): TOML (or JSON) with the paper's phantom experiment as defaults.
+//! Scenario files: TOML (or JSON) with the paper's phantom experiment as defaults.
 //!
-//! Parsing rejects unknown keys. [`Scenario`] holds the file's values in file units (mm, Hz,
-//! dB/cm/MHz); [`Scenario::resolve`] turns them into validated SI objects.
+//! Every key is optional; parsing rejects unknown keys. [`Scenario`] holds the file's values in
+//! file units (mm, Hz, dB/cm/MHz: the unit is in each key's name) and reads and writes them; a
+//! file that names any `[[material]]` or `[[region]]` replaces the default medium whole.
+//! [`Scenario::resolve`] validates them and turns them into SI objects ([`Resolved`]).
 
-use crate::error::{require_non_negative, require_positive, HasError, Result};
-use crate::physics::medium::{Material, Medium, Region, Shape};
-use crate::physics::mr::{MrGeometry, MrPlane};
+mod resolve;
+
+pub use resolve::Resolved;
+
+use crate::error::{HasError, Result};
 use crate::physics::propagation::InterfaceModel;
-use crate::physics::transducer::{ElementShape, Transducer};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -15,27 +18,38 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
+    /// Name of the scenario (default `"vyas2014-phantom"`).
     #[serde(default = "d::name")]
     pub name: String,
+    /// Driving frequency, Hz (default 550 kHz).
     #[serde(default = "d::frequency")]
     pub frequency_hz: f64,
     /// Total acoustic power (W); every element face gets the same pressure amplitude.
     #[serde(default = "d::power")]
     pub acoustic_power_w: f64,
+    /// `[transducer]`: the array (default: the paper's planar quadrant array).
     #[serde(default)]
     pub transducer: TransducerSpec,
+    /// `[focus]`: the steering target.
     #[serde(default)]
     pub focus: FocusSpec,
+    /// `[[material]]`: the materials of a custom medium. Naming any material or region replaces
+    /// the default medium (water, then the phantom cylinder from z = 40 mm) whole.
     #[serde(default, rename = "material", skip_serializing_if = "Option::is_none")]
     pub materials: Option<Vec<MaterialSpec>>,
+    /// `[medium]`: which material fills the space outside every region.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub medium: Option<MediumSpec>,
+    /// `[[region]]`: where the materials lie; later regions override earlier ones.
     #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
     pub regions: Option<Vec<RegionSpec>>,
+    /// `[grid]`: sampling and propagation options.
     #[serde(default)]
     pub grid: GridSpec,
+    /// `[mr]`: the MR-ARFI image geometry.
     #[serde(default)]
     pub mr: MrSpec,
+    /// `[arfi]`: broadening, focal-zone mask, noise and amplitude of the ARFI phase image.
     #[serde(default)]
     pub arfi: ArfiSpec,
     /// Folder that relative paths (the elements CSV) are resolved against.
@@ -48,22 +62,33 @@ pub struct Scenario {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TransducerSpec {
+    /// `"planar-quadrants"` (default), `"bowl"` or `"elements"`.
     #[serde(default = "d::kind")]
     pub kind: String,
+    /// Planar quadrants: elements per side of each square quadrant (default 16).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub elements_per_side: Option<usize>,
+    /// Planar quadrants: centre-to-centre element spacing, mm (default 2.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pitch_mm: Option<f64>,
+    /// Side of a square planar element, mm (default 2.3); or diameter of a bowl's disc elements,
+    /// mm (default: 80 % of the centre spacing of equal-area cells on the cap).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub element_size_mm: Option<f64>,
+    /// Planar quadrants: extra spacing between adjacent quadrants, mm (default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quadrant_gap_mm: Option<f64>,
+    /// Bowl: radius of curvature R, mm (required); apex at the origin, centre at (0, 0, R).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius_of_curvature_mm: Option<f64>,
+    /// Bowl: diameter of the cap's rim, mm (required).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aperture_diameter_mm: Option<f64>,
+    /// Bowl: number of flat disc elements on the cap (absent: one continuous cap).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub elements: Option<usize>,
+    /// Elements: CSV with header `x_mm,y_mm,z_mm,nx,ny,nz,size_mm`, one row per element in
+    /// element order; a relative path is taken from the scenario file's folder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<String>,
     /// `"square"` (default) or `"disc"`, for `kind = "elements"`.
@@ -92,6 +117,8 @@ impl Default for TransducerSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FocusSpec {
+    /// Steering target in the transducer frame, mm (default (0, 0, 85)); the array is steered
+    /// geometrically (straight-line time of flight).
     #[serde(default = "d::focus")]
     pub position_mm: [f64; 3],
 }
@@ -106,9 +133,13 @@ impl Default for FocusSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
+    /// Name that `[medium] background` and `[[region]] material` refer to.
     pub name: String,
+    /// Sound speed c, m/s.
     pub sound_speed_m_s: f64,
+    /// Density rho, kg/m³.
     pub density_kg_m3: f64,
+    /// Attenuation a0 in `a0·(f / 1 MHz)^y` dB/cm, all taken as absorption (default 0).
     #[serde(default)]
     pub attenuation_db_cm_mhz: f64,
     /// Exponent y of `a0·f^y` (default 1: linear in frequency).
@@ -120,6 +151,7 @@ pub struct MaterialSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MediumSpec {
+    /// Material outside every region (absent: `"water"` if named, else the first material).
     pub background: String,
 }
 
@@ -127,12 +159,18 @@ pub struct MediumSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegionSpec {
+    /// Name of the material filling the region.
     pub material: String,
+    /// `"cylinder"` (about an axis parallel to z) or `"slab"` (all x, y).
     pub shape: String,
+    /// Cylinder: radius, mm (required).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius_mm: Option<f64>,
+    /// Lower bound along z, mm.
     pub z_min_mm: f64,
+    /// Upper bound along z, mm.
     pub z_max_mm: f64,
+    /// Cylinder: axis position (x, y), mm (default (0, 0), the beam axis).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub center_mm: Option<[f64; 2]>,
 }
@@ -182,15 +220,20 @@ impl GridSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MrSpec {
+    /// Slice orientation: `"xy"` (default, perpendicular to the beam), `"xz"` or `"yz"`
+    /// (containing the beam axis).
     #[serde(default = "d::plane")]
     pub plane: String,
     /// Centre of the slice (default: the focus).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub center_mm: Option<[f64; 3]>,
+    /// Field of view along the image axes, mm (default 180 x 135).
     #[serde(default = "d::fov")]
     pub fov_mm: [f64; 2],
+    /// Pixels along the image axes (default 128 x 96).
     #[serde(default = "d::matrix")]
     pub matrix: [usize; 2],
+    /// Slice thickness, mm (default 3); the force is averaged over it.
     #[serde(default = "d::thickness")]
     pub slice_thickness_mm: f64,
 }
@@ -205,10 +248,15 @@ impl Default for MrSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ArfiSpec {
+    /// Width W of the Gaussian broadening filter `exp(-(x²+y²)/(2W²))` applied to the force map
+    /// (paper Eq. 2), mm (default 2.7).
     #[serde(default = "d::width")]
     pub broadening_width_mm: f64,
+    /// Focal-zone level (paper Eq. 4): fits use the pixels above this fraction of each image's
+    /// maximum that are connected to it (default 0.05).
     #[serde(default = "d::mask")]
     pub mask_fraction: f64,
+    /// Standard deviation of the Gaussian noise on the ARFI phase image, rad (default 0.02).
     #[serde(default = "d::noise")]
     pub noise_rad: f64,
     /// Focal ARFI phase of the ideal (unaberrated) beam; sets the amplitude unless given.
@@ -231,7 +279,9 @@ impl Default for ArfiSpec {
     }
 }
 
-/// Defaults of SPEC §3.
+/// Defaults: the paper's phantom experiment (550 kHz, 70 W, focus at 85 mm; MR slice
+/// perpendicular to the beam through the focus, 180 x 135 mm, 128 x 96 pixels, 3 mm thick;
+/// broadening W = 2.7 mm scaled to an ideal focal phase of 0.6 rad; noise 0.02 rad).
 mod d {
     pub fn name() -> String {
         "vyas2014-phantom".into()
@@ -296,7 +346,9 @@ impl Default for Scenario {
     }
 }
 
-/// The default medium: water below z = 40 mm, the CIRS phantom cylinder above (SPEC §3).
+/// The default medium, the paper's phantom experiment: water (1500 m/s, 1000 kg/m³, no
+/// attenuation) below z = 40 mm, and above it the CIRS phantom (1533 m/s, 1040 kg/m³,
+/// 0.46 dB/cm/MHz) as a cylinder of radius 60 mm about the beam axis up to z = 160 mm.
 fn default_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
     let materials = vec![
         MaterialSpec {
@@ -323,24 +375,6 @@ fn default_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
         center_mm: None,
     }];
     (materials, MediumSpec { background: "water".into() }, regions)
-}
-
-/// The scenario in SI units, validated.
-#[derive(Debug, Clone)]
-pub struct Resolved {
-    pub name: String,
-    pub frequency: f64,
-    pub acoustic_power: f64,
-    pub transducer: Transducer,
-    pub focus: [f64; 3],
-    pub medium: Medium,
-    pub grid: GridSpec,
-    pub mr: MrGeometry,
-    pub broadening_width: f64,
-    pub mask_fraction: f64,
-    pub noise: f64,
-    pub ideal_focal_phase: f64,
-    pub amplitude: Option<f64>,
 }
 
 impl Scenario {
@@ -393,206 +427,6 @@ impl Scenario {
         }
         s
     }
-
-    /// Validates every value and converts to SI objects.
-    pub fn resolve(&self) -> Result<Resolved> {
-        let f = self.frequency_hz;
-        require_positive("frequency_hz", f)?;
-        require_positive("acoustic_power_w", self.acoustic_power_w)?;
-        let focus = mm3(self.focus.position_mm, "focus.position_mm")?;
-        let medium = self.medium_si()?;
-        let transducer = self.transducer_si()?;
-        let mr = MrGeometry {
-            plane: MrPlane::parse(&self.mr.plane)?,
-            center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
-            fov: [self.mr.fov_mm[0] * 1e-3, self.mr.fov_mm[1] * 1e-3],
-            matrix: self.mr.matrix,
-            slice_thickness: self.mr.slice_thickness_mm * 1e-3,
-        };
-        mr.validate()?;
-        let a = &self.arfi;
-        require_non_negative("arfi.broadening_width_mm", a.broadening_width_mm)?;
-        require_non_negative("arfi.noise_rad", a.noise_rad)?;
-        require_positive("arfi.ideal_focal_phase_rad", a.ideal_focal_phase_rad)?;
-        if !(a.mask_fraction.is_finite() && a.mask_fraction > 0.0 && a.mask_fraction < 1.0) {
-            return Err(HasError::invalid("arfi.mask_fraction", format!("must lie in (0, 1), got {}", a.mask_fraction)));
-        }
-        if let Some(v) = a.amplitude_rad_m3_per_n {
-            require_positive("arfi.amplitude_rad_m3_per_n", v)?;
-        }
-        for (name, v) in [
-            ("grid.spacing_mm", self.grid.spacing_mm),
-            ("grid.step_mm", self.grid.step_mm),
-            ("grid.lateral_size_mm", self.grid.lateral_size_mm),
-            ("grid.z_max_mm", self.grid.z_max_mm),
-        ] {
-            if let Some(v) = v {
-                require_positive(name, v)?;
-            }
-        }
-        if let Some(v) = self.grid.sponge_width_mm {
-            require_non_negative("grid.sponge_width_mm", v)?;
-        }
-        self.grid.interface_model()?;
-        Ok(Resolved {
-            name: self.name.clone(),
-            frequency: f,
-            acoustic_power: self.acoustic_power_w,
-            transducer,
-            focus,
-            medium,
-            grid: self.grid.clone(),
-            mr,
-            broadening_width: a.broadening_width_mm * 1e-3,
-            mask_fraction: a.mask_fraction,
-            noise: a.noise_rad,
-            ideal_focal_phase: a.ideal_focal_phase_rad,
-            amplitude: a.amplitude_rad_m3_per_n,
-        })
-    }
-
-    fn medium_si(&self) -> Result<Medium> {
-        let (dm, db, dr) = default_medium();
-        let custom = self.materials.is_some() || self.regions.is_some();
-        let materials = if custom { self.materials.clone().unwrap_or_default() } else { dm };
-        let regions = if custom { self.regions.clone().unwrap_or_default() } else { dr };
-        if materials.is_empty() {
-            return Err(HasError::invalid("material", "a scenario with [[region]] must also name its [[material]]s"));
-        }
-        let mut mats = Vec::with_capacity(materials.len());
-        for (i, m) in materials.iter().enumerate() {
-            if materials[..i].iter().any(|o| o.name == m.name) {
-                return Err(HasError::invalid("material.name", format!("'{}' is given twice", m.name)));
-            }
-            let mut mat = Material {
-                name: m.name.clone(),
-                sound_speed: m.sound_speed_m_s,
-                density: m.density_kg_m3,
-                attenuation_db_cm_mhz: m.attenuation_db_cm_mhz,
-                attenuation_power: m.attenuation_power,
-            };
-            mat.validate()?;
-            mat.name = m.name.clone();
-            mats.push(mat);
-        }
-        let index = |name: &str, key: &str| {
-            mats.iter().position(|m| m.name == name).ok_or_else(|| HasError::invalid(key, format!("names no material: '{name}'")))
-        };
-        let background = match (&self.medium, custom) {
-            (Some(m), _) => index(&m.background, "medium.background")?,
-            (None, false) => index(&db.background, "medium.background")?,
-            (None, true) => mats.iter().position(|m| m.name == "water").unwrap_or(0),
-        };
-        let mut regs = Vec::with_capacity(regions.len());
-        for (i, r) in regions.iter().enumerate() {
-            let key = format!("region[{i}]");
-            let material = index(&r.material, &format!("{key}.material"))?;
-            let (z_min, z_max) = (r.z_min_mm * 1e-3, r.z_max_mm * 1e-3);
-            let shape = match r.shape.as_str() {
-                "cylinder" => {
-                    let radius = r.radius_mm.ok_or_else(|| HasError::invalid(format!("{key}.radius_mm"), "is required for a cylinder"))?;
-                    let c = r.center_mm.unwrap_or([0.0, 0.0]);
-                    Shape::Cylinder { radius: radius * 1e-3, z_min, z_max, center: [c[0] * 1e-3, c[1] * 1e-3] }
-                }
-                "slab" => {
-                    if r.radius_mm.is_some() || r.center_mm.is_some() {
-                        return Err(HasError::invalid(key, "a slab takes no radius_mm or center_mm"));
-                    }
-                    Shape::Slab { z_min, z_max }
-                }
-                s => return Err(HasError::invalid(format!("{key}.shape"), format!("must be \"cylinder\" or \"slab\", got \"{s}\""))),
-            };
-            regs.push(Region { material, shape });
-        }
-        let m = Medium { materials: mats, background, regions: regs, voxels: None };
-        m.validate()?;
-        Ok(m)
-    }
-
-    fn transducer_si(&self) -> Result<Transducer> {
-        let t = &self.transducer;
-        let given = |name: &str, v: bool| (name.to_string(), v);
-        let fields = [
-            given("elements_per_side", t.elements_per_side.is_some()),
-            given("pitch_mm", t.pitch_mm.is_some()),
-            given("element_size_mm", t.element_size_mm.is_some()),
-            given("quadrant_gap_mm", t.quadrant_gap_mm.is_some()),
-            given("radius_of_curvature_mm", t.radius_of_curvature_mm.is_some()),
-            given("aperture_diameter_mm", t.aperture_diameter_mm.is_some()),
-            given("elements", t.elements.is_some()),
-            given("file", t.file.is_some()),
-            given("element_shape", t.element_shape.is_some()),
-        ];
-        let allowed: &[&str] = match t.kind.as_str() {
-            "planar-quadrants" => &["elements_per_side", "pitch_mm", "element_size_mm", "quadrant_gap_mm"],
-            "bowl" => &["radius_of_curvature_mm", "aperture_diameter_mm", "elements", "element_size_mm"],
-            "elements" => &["file", "element_shape"],
-            k => {
-                return Err(HasError::invalid(
-                    "transducer.kind",
-                    format!("must be \"planar-quadrants\", \"bowl\" or \"elements\", got \"{k}\""),
-                ))
-            }
-        };
-        if let Some((name, _)) = fields.iter().find(|(n, g)| *g && !allowed.contains(&n.as_str())) {
-            return Err(HasError::invalid(format!("transducer.{name}"), format!("is not a key of kind \"{}\"", t.kind)));
-        }
-        match t.kind.as_str() {
-            "planar-quadrants" => Transducer::planar_quadrants(
-                t.elements_per_side.unwrap_or(16),
-                t.pitch_mm.unwrap_or(2.5) * 1e-3,
-                t.element_size_mm.unwrap_or(2.3) * 1e-3,
-                t.quadrant_gap_mm.unwrap_or(1.0) * 1e-3,
-            ),
-            "bowl" => {
-                let r = t
-                    .radius_of_curvature_mm
-                    .ok_or_else(|| HasError::invalid("transducer.radius_of_curvature_mm", "is required for a bowl"))?
-                    * 1e-3;
-                let a =
-                    t.aperture_diameter_mm.ok_or_else(|| HasError::invalid("transducer.aperture_diameter_mm", "is required for a bowl"))?
-                        * 1e-3;
-                match t.elements {
-                    None if t.element_size_mm.is_some() => {
-                        Err(HasError::invalid("transducer.element_size_mm", "needs transducer.elements"))
-                    }
-                    None => Transducer::bowl(r, a),
-                    Some(n) => {
-                        // Default element diameter: 80 % of the centre spacing of equal-area cells.
-                        let cap = Transducer::bowl(r, a)?.area();
-                        let size = t.element_size_mm.map(|s| s * 1e-3).unwrap_or(0.8 * (cap / n.max(1) as f64).sqrt());
-                        Transducer::bowl_elements(r, a, n, size)
-                    }
-                }
-            }
-            _ => {
-                let file = t.file.as_deref().ok_or_else(|| HasError::invalid("transducer.file", "is required for kind \"elements\""))?;
-                let path = match &self.base_dir {
-                    Some(b) if Path::new(file).is_relative() => b.join(file),
-                    _ => PathBuf::from(file),
-                };
-                let shape = match t.element_shape.as_deref().unwrap_or("square") {
-                    "square" => ElementShape::Square,
-                    "disc" => ElementShape::Disc,
-                    s => return Err(HasError::invalid("transducer.element_shape", format!("must be \"square\" or \"disc\", got \"{s}\""))),
-                };
-                let p = path.display().to_string();
-                let text = std::fs::read_to_string(&path).map_err(|e| match e.kind() {
-                    std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-                    _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
-                })?;
-                Transducer::from_csv(&text, &p, shape)
-            }
-        }
-    }
-}
-
-fn mm3(v: [f64; 3], name: &str) -> Result<[f64; 3]> {
-    if v.iter().all(|x| x.is_finite()) {
-        Ok([v[0] * 1e-3, v[1] * 1e-3, v[2] * 1e-3])
-    } else {
-        Err(HasError::invalid(name, "must be finite"))
-    }
 }
 
 /// Parser messages span several lines (with a source excerpt); keep one line.
@@ -624,12 +458,5 @@ mod tests {
         assert!(e.to_string().contains("frequncy"), "{e}");
         let e = Scenario::from_toml("[transducer]\nkind = \"bowl\"\npitch_mm = 2\n", None).unwrap().resolve().unwrap_err();
         assert!(e.to_string().contains("pitch_mm"), "{e}");
-    }
-
-    #[test]
-    fn negative_sound_speed_is_named() {
-        let t = "[[material]]\nname = \"w\"\nsound_speed_m_s = -1500\ndensity_kg_m3 = 1000\n";
-        let e = Scenario::from_toml(t, None).unwrap().resolve().unwrap_err();
-        assert!(e.to_string().contains("sound_speed_m_s"), "{e}");
     }
 }

@@ -1,11 +1,5 @@
-//! The hybrid cost (paper Eq. 4) on a precomputed quadratic model of the image.
-//!
-//! The forward model after the pressure field is linear in `|p|²`, and the field is linear in the
-//! group drives `v_g = exp(i·phi_g)`. So each pixel of the image is a Hermitian form
-//! `d_i(phi) = v^H K_i v` with `K_i[g, h] = A · S_i(conj(W_g)·W_h)`, where `W_g` is the field of
-//! group `g` in the MR window and `S_i` the MR sampling of pixel `i` (SPEC §8). An evaluation costs
-//! `O(P·G²)` for `P` pixels, and the gradient is analytic:
-//! `∂d_i/∂phi_g = 2·Im(conj(v_g)·(K_i v)_g)`.
+//! Per-pixel Hermitian kernels of the MR-ARFI image over group drives (the quadratic model the
+//! hybrid cost evaluates), stored as blocked upper triangles for streaming dot products.
 
 use crate::error::{HasError, Result};
 use crate::physics::mr::MrSampler;
@@ -15,20 +9,10 @@ use num_complex::Complex64 as C64;
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// What an estimator minimises: a cost over phases (rad), one per group or element, and its
-/// gradient. Implemented by [`HybridCost`] and [`crate::inverse::basis::ElementCost`].
-pub trait Objective: Sync {
-    /// Number of phases.
-    fn n_phases(&self) -> usize;
-    /// The cost at `phases`.
-    fn cost(&self, phases: &[f64]) -> f64;
-    /// The cost and its gradient with respect to each phase.
-    fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>);
-}
-
 /// Per-pixel Hermitian kernels over a box of MR pixels: the image for any group phases.
 #[derive(Debug, Clone)]
 pub struct ArfiKernel {
+    /// Number of groups `G`.
     pub n_groups: usize,
     /// The pixel box (ranges along u and v of the full image).
     pub pixels: [Range<usize>; 2],
@@ -216,7 +200,7 @@ impl ArfiKernel {
 
     /// `R = Σ_i r_i · K_i` over the pixels `which`, as `[diagonal (G) | upper (blocked)]`: per
     /// chunk of [`PIXEL_CHUNK`] pixels, then the chunks in order.
-    fn weighted_sum(&self, which: &[usize], r: &[f64]) -> Vec<f64> {
+    pub(super) fn weighted_sum(&self, which: &[usize], r: &[f64]) -> Vec<f64> {
         let g = self.n_groups;
         let n = g + Blocked::len(self.n_pairs());
         let chunk_sum = |(ps, rs): (&[usize], &[f64])| {
@@ -242,7 +226,7 @@ impl ArfiKernel {
 
     /// `(R v)_a` for the Hermitian `R` of [`Self::weighted_sum`] (stored as its diagonal and
     /// upper triangle).
-    fn hermitian_times(&self, r_mat: &[f64], v: &[C64]) -> Vec<C64> {
+    pub(super) fn hermitian_times(&self, r_mat: &[f64], v: &[C64]) -> Vec<C64> {
         let g = self.n_groups;
         let (d, upper) = r_mat.split_at(g);
         let mut rv: Vec<C64> = d.iter().zip(v).map(|(x, y)| y * x).collect();
@@ -288,136 +272,10 @@ fn upper_index(g: usize, a: usize, b: usize) -> usize {
     a * (2 * g - a - 1) / 2 + (b - a - 1)
 }
 
-/// One measured image as the cost sees it: a kernel, the measured values on the masked pixels,
-/// and the known group phase offsets added for this acquisition.
-#[derive(Debug, Clone)]
-pub struct Term {
-    pub kernel: std::sync::Arc<ArfiKernel>,
-    /// Box indices of the masked pixels (measured > mask_fraction · max).
-    pub mask: Vec<usize>,
-    /// Measured ARFI phase at the masked pixels (rad).
-    pub measured: Vec<f64>,
-    /// Known per-group phases added to the estimate for this image (rad).
-    pub offset: Vec<f64>,
-}
-
-/// The joint cost `J(phi) = Σ_k Σ_{i in mask_k} (s·d_k,i(phi + offset_k) - m_k,i)²` over images.
-/// `s = 1`, or, with `fit_scale`, the least-squares scale `s = <d, m> / <d, d>` for each `phi`
-/// (one for all images): a free amplitude that absorbs a uniform loss of focal intensity the
-/// phases cannot explain (e.g. element-level aberration within groups).
-#[derive(Debug, Clone)]
-pub struct HybridCost {
-    pub terms: Vec<Term>,
-    pub n_groups: usize,
-    pub fit_scale: bool,
-}
-
-impl HybridCost {
-    /// Checks that every term has the same number of groups.
-    pub fn new(terms: Vec<Term>) -> Result<Self> {
-        let n_groups = terms.first().map(|t| t.kernel.n_groups).ok_or_else(|| HasError::invalid("images", "need at least one image"))?;
-        for (k, t) in terms.iter().enumerate() {
-            if t.kernel.n_groups != n_groups || t.offset.len() != n_groups {
-                return Err(HasError::invalid(format!("image[{k}]"), "group count differs from the first image"));
-            }
-            if t.mask.is_empty() || t.mask.len() != t.measured.len() {
-                return Err(HasError::invalid(format!("image[{k}]"), "empty mask"));
-            }
-        }
-        Ok(HybridCost { terms, n_groups, fit_scale: false })
-    }
-
-    /// Number of masked pixels over all images.
-    pub fn n_pixels(&self) -> usize {
-        self.terms.iter().map(|t| t.mask.len()).sum()
-    }
-
-    /// Model images at the masked pixels of every term.
-    fn images(&self, phases: &[f64]) -> Vec<Vec<f64>> {
-        self.terms
-            .iter()
-            .map(|t| {
-                let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
-                let mut img = Vec::new();
-                t.kernel.image_at(&v, &t.mask, &mut img);
-                img
-            })
-            .collect()
-    }
-
-    /// The scale applied to the model images for these images (1 unless `fit_scale`).
-    fn scale_for(&self, images: &[Vec<f64>]) -> f64 {
-        if !self.fit_scale {
-            return 1.0;
-        }
-        least_squares_scale(images.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
-    }
-
-    /// The amplitude scale at `phases` (1 unless `fit_scale`).
-    pub fn scale(&self, phases: &[f64]) -> f64 {
-        self.scale_for(&self.images(phases))
-    }
-
-    /// `J` for group phases (rad).
-    pub fn cost(&self, phases: &[f64]) -> f64 {
-        let images = self.images(phases);
-        let s = self.scale_for(&images);
-        images.iter().zip(&self.terms).map(|(img, t)| img.iter().zip(&t.measured).map(|(d, m)| (s * d - m).powi(2)).sum::<f64>()).sum()
-    }
-
-    /// `J` and `∂J/∂phi_g = 4·s·Σ_k Im(conj(v_g)·(R_k v)_g)`, `R_k = Σ_i r_i·K_i`, `r = s·d - m`
-    /// (with a fitted scale the envelope theorem makes `∂s/∂phi` drop out).
-    pub fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
-        let g = self.n_groups;
-        let images = self.images(phases);
-        let s = self.scale_for(&images);
-        let mut grad = vec![0.0; g];
-        let mut total = 0.0;
-        for (t, img) in self.terms.iter().zip(&images) {
-            let v: Vec<C64> = phases.iter().zip(&t.offset).map(|(p, o)| C64::from_polar(1.0, p + o)).collect();
-            let r: Vec<f64> = img.iter().zip(&t.measured).map(|(d, m)| s * d - m).collect();
-            total += r.iter().map(|x| x * x).sum::<f64>();
-            let rv = t.kernel.hermitian_times(&t.kernel.weighted_sum(&t.mask, &r), &v);
-            for ((gr, va), rva) in grad.iter_mut().zip(&v).zip(&rv) {
-                *gr += 4.0 * s * (va.conj() * rva).im;
-            }
-        }
-        (total, grad)
-    }
-}
-
-/// The scale `s = <d, m> / <d, d>` minimising `Σ (s·d - m)²` over (model, measured) pairs; 1 when
-/// the model is all zero.
-pub(crate) fn least_squares_scale<'a>(pairs: impl Iterator<Item = (&'a [f64], &'a [f64])>) -> f64 {
-    let (mut dm, mut dd) = (0.0, 0.0);
-    for (d, m) in pairs {
-        for (x, y) in d.iter().zip(m) {
-            dm += x * y;
-            dd += x * x;
-        }
-    }
-    if dd > 0.0 {
-        dm / dd
-    } else {
-        1.0
-    }
-}
-
-impl Objective for HybridCost {
-    fn n_phases(&self) -> usize {
-        self.n_groups
-    }
-    fn cost(&self, phases: &[f64]) -> f64 {
-        HybridCost::cost(self, phases)
-    }
-    fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
-        HybridCost::cost_and_gradient(self, phases)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::inverse::cost::{HybridCost, Term};
 
     #[test]
     fn kernels_at_rebuild_the_image_by_the_documented_formula() {
@@ -524,156 +382,4 @@ mod tests {
             }
         }
     }
-}
-
-/// One measured MR-ARFI image and the known phases (rad; one per element or per group, empty =
-/// none) that were added to the steering for it.
-#[derive(Debug, Clone)]
-pub struct Measurement {
-    pub image: Array2<f64>,
-    pub known: Vec<f64>,
-}
-
-/// The cost assembled from measurements, with the kernel of the plain steering (for predictions)
-/// and the noise level estimated from the images' backgrounds.
-#[derive(Debug, Clone)]
-pub struct Model {
-    pub cost: HybridCost,
-    pub base: std::sync::Arc<ArfiKernel>,
-    /// Noise standard deviation (rad), RMS over the images.
-    pub noise: f64,
-}
-
-/// Most groups the per-pixel kernels take: their size and build time grow as G² (256 groups:
-/// 32 640 pairs per pixel, about 0.5 MB per pixel).
-pub const MAX_KERNEL_GROUPS: usize = 256;
-
-/// Largest |pixel| of a measured image (rad): far beyond any unwrapped MR-ARFI phase, small
-/// enough that squared residuals summed over every pixel stay finite.
-pub const MAX_PHASE: f64 = 1e6;
-
-/// Checks a measured image against the scenario's MR geometry.
-pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
-    let m = sim.mr.matrix;
-    if image.dim() != (m[0], m[1]) {
-        return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
-    }
-    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
-        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v}")));
-    }
-    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| v.abs() > MAX_PHASE) {
-        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v:e} rad, beyond any MR phase (|phase| <= {MAX_PHASE} rad)")));
-    }
-    if !(image.iter().copied().fold(f64::MIN, f64::max) > 0.0) {
-        return Err(HasError::invalid(name, "has no positive pixel (all-zero or inverted image?)"));
-    }
-    Ok(())
-}
-
-/// The focal zone (paper Eq. 4): the pixels above `fraction` of the image maximum that are
-/// connected (4-neighbours) to the maximum. Isolated noise spikes elsewhere are left out.
-pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
-    let (nu, nv) = image.dim();
-    let Some((peak, &max)) = image.indexed_iter().max_by(|a, b| a.1.total_cmp(b.1)) else {
-        return vec![];
-    };
-    let level = fraction * max;
-    let mut seen = Array2::from_elem((nu, nv), false);
-    let mut stack = vec![peak];
-    seen[peak] = true;
-    let mut out = Vec::new();
-    while let Some((i, j)) = stack.pop() {
-        out.push((i, j));
-        let neighbours = [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)];
-        for (a, b) in neighbours {
-            if a < nu && b < nv && !seen[[a, b]] && image[[a, b]] > level {
-                seen[[a, b]] = true;
-                stack.push((a, b));
-            }
-        }
-    }
-    out.sort_unstable();
-    out
-}
-
-/// Builds the joint cost of `measurements` for the simulation's groups: masks at `mask_fraction`
-/// of each image's maximum, one pixel box around all masks (plus `margin` pixels), kernels from
-/// one batched march per distinct known-phase pattern (patterns constant within groups reuse the
-/// plain kernel with a phase offset).
-pub fn build_model(sim: &Simulation, measurements: &[Measurement], mask_fraction: f64, margin: usize) -> Result<Model> {
-    if measurements.is_empty() {
-        return Err(HasError::invalid("images", "need at least one image"));
-    }
-    let g = sim.n_groups;
-    if g > MAX_KERNEL_GROUPS {
-        return Err(HasError::invalid("groups", format!("{g} groups: the per-pixel kernels are limited to {MAX_KERNEL_GROUPS} groups")));
-    }
-    let MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
-    let base = std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &[], u.clone(), v.clone())?);
-    let mut terms = Vec::with_capacity(measurements.len());
-    for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
-        let (kernel, offset) = if meas.known.is_empty() {
-            (base.clone(), vec![0.0; g])
-        } else {
-            let per_element =
-                sim.element_phases(&meas.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
-            match group_constant(&per_element, &sim.groups, g) {
-                Some(offset) => (base.clone(), offset),
-                None => (std::sync::Arc::new(ArfiKernel::build(sim, &sim.groups, &per_element, u.clone(), v.clone())?), vec![0.0; g]),
-            }
-        };
-        let idx: Vec<usize> = mask.iter().filter_map(|&(i, j)| kernel.pixel_index(i, j)).collect();
-        let measured: Vec<f64> = mask.iter().map(|&ij| meas.image[ij]).collect();
-        terms.push(Term { kernel, mask: idx, measured, offset });
-    }
-    Ok(Model { cost: HybridCost::new(terms)?, base, noise })
-}
-
-/// The images' masks, one pixel box around them and their noise level.
-#[derive(Debug, Clone)]
-pub struct MaskedBox {
-    /// Each image's mask ([`mask_pixels`]), full-image pixel indices.
-    pub masks: Vec<Vec<(usize, usize)>>,
-    /// The box around all masks plus a margin: ranges along u and v.
-    pub pixels: [Range<usize>; 2],
-    /// RMS over the images of the background noise level (rad).
-    pub noise: f64,
-}
-
-/// Checks the images; returns their masks, one pixel box around all masks (plus `margin`
-/// pixels) and the noise level.
-pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fraction: f64, margin: usize) -> Result<MaskedBox> {
-    if measurements.is_empty() {
-        return Err(HasError::invalid("images", "need at least one image"));
-    }
-    let m = sim.mr.matrix;
-    let masks: Vec<Vec<(usize, usize)>> = measurements
-        .iter()
-        .enumerate()
-        .map(|(k, meas)| {
-            check_image(sim, &meas.image, &format!("image[{k}]"))?;
-            Ok(mask_pixels(&meas.image, mask_fraction))
-        })
-        .collect::<Result<_>>()?;
-    let all = masks.iter().flatten();
-    let lo_u = all.clone().map(|p| p.0).min().unwrap_or(0).saturating_sub(margin);
-    let hi_u = (all.clone().map(|p| p.0).max().unwrap_or(0) + margin + 1).min(m[0]);
-    let lo_v = all.clone().map(|p| p.1).min().unwrap_or(0).saturating_sub(margin);
-    let hi_v = (all.map(|p| p.1).max().unwrap_or(0) + margin + 1).min(m[1]);
-    let (u, v) = (lo_u..hi_u, lo_v..hi_v);
-    let noise2: f64 = measurements.iter().map(|meas| crate::physics::mr::noise_floor(&meas.image, &[u.clone(), v.clone()]).powi(2)).sum();
-    Ok(MaskedBox { masks, pixels: [u, v], noise: (noise2 / measurements.len() as f64).sqrt() })
-}
-
-/// The per-group value of element phases that are constant within every group, if they are.
-fn group_constant(per_element: &[f64], groups: &[usize], g: usize) -> Option<Vec<f64>> {
-    let mut value = vec![None; g];
-    for (&p, &k) in per_element.iter().zip(groups) {
-        match value[k] {
-            None => value[k] = Some(p),
-            Some(q) if (crate::inverse::phase::wrap(p - q)).abs() < 1e-12 => {}
-            Some(_) => return None,
-        }
-    }
-    value.into_iter().collect()
 }
