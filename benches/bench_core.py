@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Timings of the arfi core on the embedded default scenario (SPEC §3), in one Python process.
+"""Timings of the arfi core on the embedded default scenario (the paper's phantom experiment), in
+one Python process.
 
 Times ``arfi.Simulation()`` (resolve + grid + steering + one HAS march to build the plan),
 ``sim.field()`` (one march over all planes; the focal plane and the axis are kept) and

@@ -7,7 +7,7 @@ and sampled onto MR pixels (Vyas, Kaye & Butts Pauly, Med Phys 41(3):032901, 201
 Quick start::
 
     import arfi
-    sim = arfi.Simulation()              # the paper's phantom experiment (SPEC §3)
+    sim = arfi.Simulation()              # the paper's phantom experiment (550 kHz, focus at 85 mm)
     image = sim.arfi_image()             # ideal MR-ARFI phase image, rad, shape (128, 96)
     field = sim.field()                  # complex pressure (Pa) on the focal plane and the axis
 """

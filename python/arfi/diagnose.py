@@ -12,6 +12,8 @@ from numpy.typing import NDArray
 
 from arfi import _core
 
+# Simulation is needed for an annotation only (Diagnosis.report). A run-time import would be a
+# cycle: simulation imports this module at run time, as Simulation.diagnose builds a Diagnosis.
 if TYPE_CHECKING:
     from arfi.simulation import Simulation
 
@@ -64,7 +66,9 @@ class Diagnosis:
         return [e["name"] for e in self.effects]
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON of SPEC §5 (without the model images)."""
+        """What ``arfi diagnose --json`` writes: ``effects`` (each ``name``, ``params``, ``cost_before``,
+        ``cost_after``, ``evidence``, ...), ``cost_initial``, ``cost_final``, ``noise_floor`` and the rest,
+        without the model images."""
         d = {k: v for k, v in self.__dict__.items() if k not in ("models_initial", "models_final")}
         d["effects"] = [{k: v for k, v in e.items() if k != "models"} for e in self.effects]
         return d

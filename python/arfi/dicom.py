@@ -4,7 +4,8 @@ The displacement phase is ``Δφ = ½·wrap(φ+ − φ−)`` (background phase, 
 the difference; ``wrap`` maps to (−π, π], so ``|Δφ| < π/2`` is recovered whatever the background
 wrapping). The image plane is carried from the scanner's patient frame (DICOM LPS, mm) into the
 transducer frame by a user-given rigid transform, and must then lie along the frame's axes
-(arfi's MR planes are ``xy``, ``xz`` and ``yz``). The result is the NIfTI of SPEC §4 and the
+(arfi's MR planes are ``xy``, ``xz`` and ``yz``). The result is arfi's MR-ARFI NIfTI (one slice,
+the displacement phase in rad, the affine mapping voxels to the transducer frame in mm) and the
 scenario's matching ``[mr]`` section.
 """
 

@@ -1,4 +1,5 @@
-"""Results of calibration and hybrid estimation (SPEC §5–§6)."""
+"""Results of calibration and hybrid estimation (what ``arfi calibrate`` and ``arfi estimate``
+report), and the metrics that score a correction: recovered fraction, gain and phase error."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+#: The estimators of ``Simulation.estimate`` (``method``).
+METHODS = ("nelder-mead", "pso", "lbfgs")
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,10 @@ class Estimate:
     """Per-element estimation only: the default-group estimate that warm-started it."""
     underdetermined: bool = False
     """Per-element estimation only: fewer masked pixels than phases (then also ``ambiguous``)."""
+    prior_used: bool = False
+    """A predicted aberration entered the estimate (the posterior optimum; ``ambiguous`` judged on the posterior)."""
+    posterior_cost: float | None = None
+    """With a prior: the minimised negative log posterior, ``cost / (2·noise_floor²) + Σ (1 - cos(phi - prior)) / prior_std_rad²``."""
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -68,12 +76,13 @@ class Estimate:
 
 
 def recovered_fraction(focal_corrected: float, focal_ideal: float) -> float:
-    """Focal ARFI of the corrected beam over that of the ideal beam (SPEC §6)."""
+    """Focal ARFI of the corrected beam over that of the ideal beam (paper: 0.83 for the
+    16-aberration case, 0.39 for 1024)."""
     return float(focal_corrected / focal_ideal)
 
 
 def gain(focal_corrected: float, focal_aberrated: float) -> float:
-    """Corrected over aberrated focal ARFI, minus one (SPEC §6)."""
+    """Corrected over aberrated focal ARFI, minus one (paper: +44 % for 16 aberrations, +52 % for 1024)."""
     return float(focal_corrected / focal_aberrated - 1.0)
 
 
@@ -84,7 +93,8 @@ def wrap(p: ArrayLike) -> NDArray[np.float64]:
 
 
 def phase_error(estimate: ArrayLike, truth: ArrayLike) -> float:
-    """RMS of the wrapped difference after removing the best common offset (SPEC §6)."""
+    """RMS of the wrapped difference estimate − truth after removing the best common offset (paper:
+    0.42 rad for 16 aberrations, 2.10 rad for 1024)."""
     d = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
     offset = np.angle(np.sum(np.exp(1j * d)))
     return float(np.sqrt(np.mean(wrap(d - offset) ** 2)))

@@ -1,4 +1,6 @@
-"""Files: MR-ARFI images (NIfTI + JSON sidecar, SPEC §4), phase vectors, field archives.
+"""Files: MR-ARFI images (one-slice NIfTI of the ARFI phase in rad, its affine in the transducer
+frame in mm, and a JSON sidecar that may hold the ``applied_phases_rad``), phase vectors, field
+archives.
 
 Every writer goes through a temporary file in the target folder and an atomic rename, so a
 failed or interrupted run leaves no partial file and never clobbers a good one.
@@ -68,6 +70,23 @@ def sidecar_path(image_path: str | os.PathLike[str]) -> Path:
     return p.with_suffix(".json")
 
 
+def arfi_image_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` if it names an MR-ARFI image file (``.nii`` or ``.nii.gz``); else ``ValueError``.
+    Callers check an output name with it before computing what they will write."""
+    p = Path(path)
+    if not p.name.endswith((".nii", ".nii.gz")):
+        raise ValueError(f"out: {p}: an MR-ARFI image must be written as .nii or .nii.gz")
+    return p
+
+
+def npz_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` if it names a field archive (``.npz``); else ``ValueError``."""
+    p = Path(path)
+    if p.suffix != ".npz":
+        raise ValueError(f"out: {p}: a field archive must be written as .npz")
+    return p
+
+
 def write_arfi_image(
     path: str | os.PathLike[str],
     image: ArrayLike,
@@ -79,9 +98,7 @@ def write_arfi_image(
     the sidecar JSON when given."""
     import nibabel as nib
 
-    p = Path(path)
-    if not (p.name.endswith(".nii") or p.name.endswith(".nii.gz")):
-        raise ValueError(f"out: {p}: an MR-ARFI image must be written as .nii or .nii.gz")
+    p = arfi_image_path(path)
     data = np.asarray(image, dtype=np.float32).reshape(volume_shape)
     img = nib.Nifti1Image(data, np.asarray(affine_mm, dtype=np.float64))
     img.set_qform(img.affine, code=1)
@@ -159,10 +176,7 @@ def csv_text(rows: Sequence[dict[str, Any]]) -> str:
 
 def write_npz(path: str | os.PathLike[str], arrays: dict[str, Any]) -> None:
     """Writes a compressed ``.npz`` atomically."""
-    p = Path(path)
-    if p.suffix != ".npz":
-        raise ValueError(f"out: {p}: a field archive must be written as .npz")
-    with atomic_path(p) as tmp:
+    with atomic_path(npz_path(path)) as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
 

@@ -22,7 +22,7 @@ class LoopStep:
     correction_rad: NDArray[np.float64]
     """Per group (or element); the image was taken with ``-correction_rad`` added to the steering."""
     focal_measured_rad: float
-    """Focal ARFI of the measured image: the maximum (SPEC §6)."""
+    """Focal ARFI of the measured image: its maximum ARFI phase (rad)."""
     focal_robust_rad: float
     """The mean of the 3 x 3 pixels around the maximum of the 3 x 3-smoothed image, the value the
     loop compares (a ninth of the noise variance, and less biased by noise than the maximum)."""
@@ -71,7 +71,8 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
 
     Each iteration estimates the aberration jointly from every image so far (``sim.estimate``
     with ``estimate_options``), calls ``acquire(added)`` for a new image with ``added =
-    -correction`` (rad, per group or element, added to the steering, as in the SPEC §4 sidecar)
+    -correction`` (rad, per group or element, added to the steering: an image sidecar's
+    ``applied_phases_rad``)
     and measures its focal ARFI. A correction replaces the kept one only if its measured focus is
     higher (:func:`robust_focal`, noise ``σ/3`` for noise floor ``σ``) by ``margin_sigma·√2·σ/3``, so noise alone rarely makes it
     switch; the loop ends early when a new estimate repeats the last correction (within 0.05 rad).

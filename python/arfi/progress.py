@@ -1,4 +1,5 @@
-"""Progress on a terminal, silence in pipes and CI (SPEC §5)."""
+"""Progress on a terminal, silence in pipes and CI: long runs show a bar only when stderr is a
+terminal, so redirected output stays clean."""
 
 from __future__ import annotations
 

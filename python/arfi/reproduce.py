@@ -3,9 +3,9 @@ simulation on the embedded phantom scenario, with seeded skull-like aberrations.
 
 Each repeat: calibrate W and the amplitude on a noisy no-aberration image; apply the aberration
 (16 group phases, or 1024 element phases); estimate 16 group phases from one noisy aberrated
-image; subtract them and image the corrected beam. Focal ARFI values (SPEC §6) are taken on the
-noise-free simulated images, so that noise maxima do not inflate them; the noisy images are the
-ones the method sees.
+image; subtract them and image the corrected beam. Focal ARFI values (image maxima) are taken on
+the noise-free simulated images, so that noise maxima do not inflate them; the noisy images are
+the ones the method sees.
 """
 
 from __future__ import annotations
@@ -26,11 +26,16 @@ from arfi.loop import loop2
 from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
+from arfi.validate import as_count, as_number
+
+#: Largest first seed of a study: each acquisition's seed is derived from it (e.g. ``60_000 + 100·seed + k``)
+#: and must stay a 64-bit seed.
+MAX_STUDY_SEED = 10**17
 
 
 @dataclass
 class Row:
-    """One line of the paper's Table 1, with the SPEC §6 metrics."""
+    """One line of the paper's Table 1, with the recovered fraction, gain and phase error."""
 
     experiment: str
     repeat: int
@@ -81,27 +86,33 @@ def study_images(sim: Simulation, applied: np.ndarray, noise: float, seed: int, 
     return images, known
 
 
-def run_study(case: int, repeats: int, out: Path, seed: int = 0, method: str = "nelder-mead",
+def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: str = "nelder-mead",
               noise_rad: float | None = None, diversity: int = 0, loop2_iterations: int = 0,
               progress: bool | None = None) -> dict[str, Any]:
     """Runs the study and writes figures, ``table.csv``, ``results.json`` and ``report.html`` to
-    ``out``. Returns the results (``table`` rows as in the paper plus SPEC §6 metrics).
+    ``out``. Returns the results (``table`` rows as in the paper plus the recovered fraction, gain
+    and phase error).
 
     ``diversity`` > 0 adds that many images per repeat, each with seeded random known group
-    phases added (phase diversity, SPEC §8), to the paper's single aberrated image."""
+    phases added (phase diversity: one in-focus image hardly tells an aberration from its twin),
+    to the paper's single aberrated image; ``loop2_iterations`` > 0 runs the paper's loop 2 with
+    that many more acquisitions per repeat. ``seed`` is the first repeat's seed (at most
+    ``MAX_STUDY_SEED``); ``noise_rad`` defaults to the scenario's ARFI noise.
+
+    Bad arguments raise ``ValueError`` naming them; ``out`` is created and written only once the
+    study has run, so a failed run leaves nothing behind."""
     if case not in (16, 1024):
         raise ValueError(f"case: must be 16 or 1024, got {case}")
-    if not 1 <= repeats <= 100:
-        raise ValueError(f"repeats: must be between 1 and 100, got {repeats}")
-    if not 0 <= diversity <= 32:
-        raise ValueError(f"diversity: must be between 0 and 32, got {diversity}")
-    if not 0 <= loop2_iterations <= 20:
-        raise ValueError(f"loop2_iterations: must be between 0 and 20, got {loop2_iterations}")
-    out.mkdir(parents=True, exist_ok=True)
+    repeats = as_count(repeats, "repeats", 1, 100)
+    seed = as_count(seed, "seed", 0, MAX_STUDY_SEED)
+    diversity = as_count(diversity, "diversity", 0, 32)
+    loop2_iterations = as_count(loop2_iterations, "loop2_iterations", 0, 20)
+    noise_rad = None if noise_rad is None else as_number(noise_rad, "noise_rad", 0.0)
+    out = Path(out)
     say = _progress(sys.stderr.isatty() if progress is None else progress)
     t_start = time.perf_counter()
     sim = Simulation()
-    noise = sim.noise_rad if noise_rad is None else float(noise_rad)
+    noise = sim.noise_rad if noise_rad is None else noise_rad
     ideal = sim.arfi_image()
     rows: list[Row] = []
     runs: list[dict[str, Any]] = []
@@ -147,6 +158,7 @@ def run_study(case: int, repeats: int, out: Path, seed: int = 0, method: str = "
                      "corrected_measured": sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
                      "calibration_image": sim.arfi_image(noise_rad=noise, seed=10_000 + s)})
     say("drawing figures")
+    out.mkdir(parents=True, exist_ok=True)
     figures = _figures(sim, case, rows, runs, ideal, out, method)
     summary = {
         "case": case, "repeats": repeats, "method": method, "noise_rad": noise, "seed": seed, "diversity_images": diversity, "loop2_iterations": loop2_iterations,
@@ -307,7 +319,8 @@ def _html(summary: dict[str, Any], out: Path) -> str:
 scenario; method {html.escape(summary['method'])}, ARFI noise {summary['noise_rad']} rad, {summary['repeats']} repeats,
 {summary['diversity_images']} added diversity images and {summary['loop2_iterations']} loop-2 acquisitions per repeat
 (loop2_kept: which acquisition's correction was kept, 0 = none measured better than no correction), {summary['date']}. Rows marked ambiguous are estimates the
-method itself flags: clearly different solutions fit that image within the noise (SPEC §8).</p>
+method itself flags: clearly different solutions fit that image within the noise (one in-focus image hardly tells
+phi(u) from -phi(-u); images with known added phases tell them apart).</p>
 <p>Mean recovered fraction <b>{summary['mean_recovered_fraction']:.2f}</b> (paper {p['recovered_fraction']}), mean gain
 <b>{summary['mean_gain']:+.0%}</b> (paper {p['gain']:+.0%}), mean phase error <b>{summary['mean_phase_error_rad']:.2f} rad</b>
 (paper {p['phase_error_rad']} rad). Focal values are taken on noise-free simulated images.</p>

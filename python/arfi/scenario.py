@@ -1,4 +1,5 @@
-"""Scenario files (SPEC §4): TOML with the paper's phantom experiment as defaults."""
+"""Scenario files: TOML, every key optional with the paper's phantom experiment as defaults, unknown
+keys an error."""
 
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ class Scenario:
 
     @classmethod
     def default(cls) -> "Scenario":
-        """The embedded default: the paper's phantom experiment (SPEC §3)."""
+        """The embedded default: the paper's phantom experiment (550 kHz planar quadrant array of
+        1024 elements focused at (0, 0, 85) mm into a cylindrical phantom in water)."""
         return cls(_core.default_scenario_toml())
 
     @classmethod

@@ -31,7 +31,8 @@ def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
 
 @dataclass(frozen=True)
 class Field:
-    """Complex pressure amplitude (Pa) on one plane and along the beam axis (SPEC §5 `field`)."""
+    """Complex pressure amplitude (Pa) on one plane and along the beam axis: the arrays ``arfi field``
+    writes to its ``.npz``."""
 
     pressure: NDArray[np.complex128]
     """Shape (ny, nx)."""
@@ -60,7 +61,7 @@ class Simulation:
     """A scenario made ready to simulate: grid chosen, beam steered to the focus, HAS plan built.
 
     Phases passed to the methods are *added* to the steering, one per element or one per group
-    (rad; a positive phase delays that element's emission, SPEC §2).
+    (rad; a positive phase ``phi`` delays that element's emission by ``phi / (2*pi*f)``).
     """
 
     def __init__(self, scenario: Scenario | None = None, groups: int | ArrayLike | None = None):
@@ -95,8 +96,9 @@ class Simulation:
 
     @property
     def n_default_groups(self) -> int:
-        """Number of the array's default groups (SPEC §2: 16); known phases may also be given per default group
-        to a per-element estimate."""
+        """Number of the array's default groups (16 on the paper's quadrant array: ``group = element // 64``,
+        a 4-row strip of one quadrant); known phases may also be given per default group to a
+        per-element estimate."""
         return int(self._core.n_default_groups)
 
     @property
@@ -183,7 +185,8 @@ class Simulation:
     def skull_phases(self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0,
                      jitter_rad: float = 0.5) -> NDArray[np.float64]:
         """Seeded skull-like per-element aberration (rad): a smooth random screen over the
-        aperture plus per-element jitter (SPEC §3)."""
+        aperture plus per-element jitter; condensed to the 16 default groups (:meth:`condense`) it is
+        the paper's 16-aberration case."""
         return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
 
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
@@ -198,7 +201,7 @@ class Simulation:
             raise ValueError(name + msg[len("phases"):] if msg.startswith("phases:") else msg) from None
 
     def condense(self, element_phases: ArrayLike) -> NDArray[np.float64]:
-        """Per-group circular means of per-element phases (SPEC §2)."""
+        """Per-group circular means (the angle of the mean phasor) of per-element phases."""
         a = as_phases(element_phases, "element_phases")
         if a is None:
             raise ValueError("element_phases: required, got None")
@@ -220,6 +223,8 @@ class Simulation:
         starts: int | None = None,
         fit_amplitude: bool = False,
         progress: bool = False,
+        prior: ArrayLike | None = None,
+        prior_std_rad: float | None = None,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
@@ -232,7 +237,16 @@ class Simulation:
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
         element, about a minute for 1024), warm-started by the estimate on the default 16 groups;
         ``max_evaluations`` (default 500) bounds that fit. ``progress`` prints the basis
-        marching to stderr."""
+        marching to stderr.
+
+        ``prior``: a predicted aberration (e.g. from a CT-based skull simulation), one phase per
+        element or per group in the sign of ``phases_rad`` (subtracting it corrects), with
+        ``prior_std_rad`` the expected error of each predicted phase. The estimate is then the
+        posterior optimum: the images' cost as a Gaussian likelihood at the measured noise floor
+        plus a von Mises prior ``(1 - cos(phi - prior)) / prior_std_rad**2`` per phase. The prior
+        fixes the common phase, rules out the twin that one image cannot, and ``ambiguous`` is
+        judged on the posterior. ``cost`` stays the images' cost (paper Eq. 4);
+        ``posterior_cost`` is the minimised negative log posterior."""
         # A list (or a 3-D stack) of images, or one image.
         stack = isinstance(images, (list, tuple)) or (isinstance(images, np.ndarray) and images.ndim == 3)
         imgs = list(images) if stack else [images]  # type: ignore[arg-type]
@@ -248,8 +262,10 @@ class Simulation:
         evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations", 1)
         limit = None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True)
         n_starts = None if starts is None else as_count(starts, "starts", 1, 10_000)
+        prior_array = as_phases(prior, "prior")
+        std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad", 0.0, low_open=True)
         d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
-                                progress=bool(progress))
+                                progress=bool(progress), prior=prior_array, prior_std_rad=std)
         return Estimate(**d)
 
     def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
@@ -265,7 +281,8 @@ class Simulation:
     def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
                  time_limit_s: float | None = None) -> Diagnosis:
-        """The model-discrepancy workflow (SPEC §7) on one MR-ARFI image or a list of them (e.g. a
+        """The model-discrepancy workflow (fit each candidate effect, add the best while the BIC
+        favours it, repeat) on one MR-ARFI image or a list of them (e.g. a
         calibration image and an aberrated one), each taken with its ``known`` added phases (rad,
         per element or group; None = none). Names the effects missing from this model, in order,
         with their fitted parameters, until the residual is consistent with the noise of the

@@ -3,8 +3,9 @@
 Every trial is one repeat of the paper's study (``arfi.reproduce``) at one noise level, number
 of images (the aberrated one plus diversity images with seeded random known group phases),
 estimator and seed: calibrate on a noisy no-aberration image, estimate, correct, and score the
-corrected focus with the SPEC §6 metrics on noise-free images. Trials are independent and fully
-seeded, so a result does not depend on which worker ran it, nor on how many threads it had.
+corrected focus (recovered fraction, gain, phase error) on noise-free images. Trials are
+independent and fully seeded, so a result does not depend on which worker ran it, nor on how many
+threads it had.
 """
 
 from __future__ import annotations
@@ -18,15 +19,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from arfi.estimation import gain, phase_error, recovered_fraction
+from arfi.estimation import METHODS, gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.progress import Progress
 from arfi.report import figure_html, pyplot, rows_table_html, save_figure, write_html
-from arfi.reproduce import study_aberration, study_images
+from arfi.reproduce import MAX_STUDY_SEED, study_aberration, study_images
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
-
-METHODS = ("nelder-mead", "pso", "lbfgs")
+from arfi.validate import as_count
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,8 @@ def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
 
 def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: Sequence[str], seeds: int, case: int = 16,
            first_seed: int = 0) -> list[Trial]:
-    """Every combination, checked (ValueError naming the parameter)."""
+    """Every combination, checked (ValueError naming the parameter); the trials' seeds are
+    ``first_seed``, ``first_seed + 1``, ... (``first_seed`` at most ``MAX_STUDY_SEED``)."""
     if not noise_levels or any(not (np.isfinite(n) and n >= 0) for n in noise_levels):
         raise ValueError(f"noise_rad: need finite levels >= 0, got {list(noise_levels)}")
     if not image_counts or any(not 1 <= int(k) <= 33 for k in image_counts):
@@ -85,6 +86,7 @@ def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: 
         raise ValueError(f"seeds: must be between 1 and 10000, got {seeds}")
     if case not in (16, 1024):
         raise ValueError(f"case: must be 16 or 1024, got {case}")
+    first_seed = as_count(first_seed, "first_seed", 0, MAX_STUDY_SEED)
     return [Trial(float(n), int(k), m, first_seed + s, case)
             for n, k, m, s in itertools.product(noise_levels, image_counts, methods, range(seeds))]
 
@@ -172,7 +174,7 @@ def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
     atomic_write_text(out / "summary.csv", csv_text(summary))
     plot(summary, out / "sweep.png")
     table = rows_table_html(summary, list(summary[0]))
-    write_html(out / "report.html", "arfi sweep", f"<p>{len(rows)} trials; recovered fraction of the ideal focus (SPEC §6) per "
+    write_html(out / "report.html", "arfi sweep", f"<p>{len(rows)} trials; recovered fraction of the ideal focus (corrected over ideal focal ARFI) per "
                f"method, number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
                + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]))
     result = {"trials": list(rows), "summary": summary, "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"]}

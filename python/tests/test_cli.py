@@ -84,7 +84,7 @@ def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):
     np.testing.assert_allclose(image, sim.arfi_image(np.linspace(-1, 1, 16)), atol=1e-6)
 
 
-def test_field_writes_the_npz_keys_of_the_spec(tmp_path):
+def test_field_writes_the_documented_npz_keys(tmp_path):
     out = tmp_path / "f.npz"
     assert main(["field", "--z-mm", "60", "--out", str(out)]) == 0
     with np.load(out) as z:
@@ -104,7 +104,7 @@ def test_field_writes_the_npz_keys_of_the_spec(tmp_path):
         ("[[material]]\nname='w'\nsound_speed_m_s=-5\ndensity_kg_m3=1\n", ["simulate", "--out", "{d}/x.nii.gz", "--scenario", "{d}/s.toml"], "sound_speed"),
         ("1\n2\n3\n", ["simulate", "--phases", "{d}/s.toml", "--out", "{d}/x.nii.gz"], "--phases: has 3 values"),
         ("nan\n" * 16, ["simulate", "--phases", "{d}/s.toml", "--out", "{d}/x.nii.gz"], "NaN"),
-        (None, ["simulate", "--noise-rad", "-1", "--out", "{d}/x.nii.gz"], "--noise-rad"),
+        (None, ["simulate", "--noise-rad", "-1", "--out", "{d}/x.nii.gz"], "noise_rad: must be a finite number >= 0"),
         (None, ["simulate", "--out", "{d}/x.png"], ".nii"),
         (None, ["field", "--z-mm", "900", "--out", "{d}/x.npz"], "z_mm"),
         (None, ["estimat"], "invalid choice"),
@@ -121,6 +121,45 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, make, args, match):
     assert match in lines[0]
     assert "Traceback" not in r.stderr and "panicked" not in r.stderr
     assert not any(p.name.startswith("x") or p.name.startswith(".x") for p in tmp_path.iterdir())
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory):
+    """A noise-free MR-ARFI image of the default scenario."""
+    path = tmp_path_factory.mktemp("measured") / "m.nii.gz"
+    sim = arfi.Simulation()
+    arfi.write_arfi_image(path, sim.arfi_image(), sim.mr_affine_mm, sim.mr_volume_shape)
+    return path
+
+
+@pytest.mark.parametrize("args, match", [
+    (["simulate", "--seed", "-1", "--out", "{d}/x.nii.gz"], "seed: must be an integer"),
+    (["simulate", "--seed", "18446744073709551616", "--out", "{d}/x.nii.gz"], "seed: must be an integer"),
+    (["simulate", "--noise-rad", "nan", "--out", "{d}/x.nii.gz"], "noise_rad: must be a finite number >= 0"),
+    (["calibrate", "--image", "{m}", "--max-width-mm", "0", "--report", "{d}/x"], "max_width_mm: must be a finite number > 0"),
+    (["calibrate", "--image", "{m}", "--max-width-mm", "inf"], "max_width_mm: must be a finite number > 0"),
+    (["estimate", "--image", "{m}", "--seed", "-1", "--out-phases", "{d}/x.npy"], "seed: must be an integer"),
+    (["estimate", "--image", "{m}", "--max-evaluations", "0", "--suggest", "{d}/x.npy"], "max_evaluations: must be an integer"),
+    (["estimate", "--image", "{m}", "--starts", "0", "--report", "{d}/x"], "starts: must be an integer"),
+    (["estimate", "--image", "{m}", "--time-limit-s", "0"], "time_limit_s: must be a finite number > 0"),
+    (["estimate", "--image", "{m}", "--out-phases", "{d}/x.npy", "--suggest", "{d}/x.txt"], "--suggest: {d}/x.txt: phase vectors are written as .npy"),
+    (["diagnose", "--image", "{m}", "--time-limit-s", "nan", "--report", "{d}/x"], "time_limit_s: must be a finite number > 0"),
+    (["reproduce", "--repeats", "0", "--out", "{d}/x"], "repeats: must be an integer in [1, 100], got 0"),
+    (["reproduce", "--repeats", "101", "--out", "{d}/x"], "repeats: must be an integer in [1, 100], got 101"),
+    (["reproduce", "--diversity", "33", "--out", "{d}/x"], "diversity: must be an integer in [0, 32]"),
+    (["reproduce", "--loop2", "21", "--out", "{d}/x"], "loop2_iterations: must be an integer in [0, 20]"),
+    (["reproduce", "--noise-rad", "-0.1", "--out", "{d}/x"], "noise_rad: must be a finite number >= 0"),
+    (["reproduce", "--seed", "-1", "--out", "{d}/x"], "seed: must be an integer"),
+    (["sweep", "--seed", "-1", "--out", "{d}/x"], "first_seed: must be an integer"),
+])
+def test_bad_options_are_refused_by_the_library_before_anything_is_written(tmp_path, capsys, measured, args, match):
+    # The CLI does not check these options itself: the library function each verb calls refuses
+    # the value (ValueError naming the parameter), which the CLI reports as one line, exit 2.
+    args = [a.format(d=tmp_path, m=measured) for a in args] + ["--json", str(tmp_path / "x.json")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("arfi: error:") and match.format(d=tmp_path) in err, err
+    assert list(tmp_path.iterdir()) == []
 
 
 SMALL_ARRAY = "[transducer]\nelements_per_side = 8\n"

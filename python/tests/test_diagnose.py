@@ -1,4 +1,5 @@
-"""``arfi diagnose`` (SPEC §5, §7): the JSON keys and the paper's broadening story end to end."""
+"""``arfi diagnose`` (the model-discrepancy workflow): the JSON keys and the paper's broadening story
+end to end."""
 
 import json
 

@@ -21,7 +21,8 @@ def test_noise_free_single_image_is_recovered(sim, ideal):
 
 
 def test_noisy_single_image_flags_a_bad_answer(sim, ideal):
-    # SPEC §8: one image at 0.02 rad often cannot decide; a poor answer must carry the flag.
+    # One image at 0.02 rad often cannot decide between an aberration and its twin (phi(u) -> -phi(-u)
+    # leaves an in-focus intensity image nearly unchanged); a poor answer must carry the flag.
     truth = sim.condense(sim.skull_phases(2))
     e = sim.estimate(sim.arfi_image(truth, noise_rad=0.02, seed=1))
     rec = sim.arfi_image(truth - e.phases_rad).max() / ideal.max()
@@ -99,7 +100,7 @@ def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path):
         ("badside", ["estimate", "--image", "{d}/badside.nii.gz"], "applied_phases_rad"),
         ("badcal", ["estimate", "--image", "{d}/good.nii.gz", "--calibration", "{d}/cal.json"], "calibration"),
         ("none", ["estimate", "--image", "{d}/x.nii.gz", "--method", "simplex"], "invalid choice"),
-        ("none", ["calibrate", "--image", "{d}/x.nii.gz", "--max-width-mm", "-1"], "--max-width-mm"),
+        ("good", ["calibrate", "--image", "{d}/good.nii.gz", "--max-width-mm", "-1"], "max_width_mm: must be a finite number > 0"),
     ],
 )
 def test_bad_estimation_input_is_one_line_exit_2(tmp_path, setup, args, match):

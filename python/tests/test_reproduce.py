@@ -3,6 +3,7 @@ import json
 import pytest
 
 from arfi.cli import main
+from arfi.reproduce import run_study
 
 
 def test_reproduce_writes_table_figures_and_report(tmp_path):
@@ -14,7 +15,7 @@ def test_reproduce_writes_table_figures_and_report(tmp_path):
     row = r["table"][0]
     for key in ("evaluations", "seconds", "final_cost", "broadening_width_mm", "recovered_fraction", "gain", "phase_error_rad"):
         assert key in row
-    # Three known diversity images at 0.02 rad decide the aberration (SPEC §8).
+    # Three known diversity images at 0.02 rad decide the aberration (one image alone hardly tells the aberration from its twin).
     assert row["recovered_fraction"] > 0.9
     assert row["broadening_width_mm"] == pytest.approx(2.7, abs=0.15)
     for name in ("fig2_calibration", "fig3_optimisation_example", "fig4_aberrations", "fig5_beam_patterns", "fig6_images",
@@ -42,3 +43,22 @@ def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path, caps
     assert row["focal_corrected_rad"] >= row["focal_aberrated_rad"] - 1e-12
     assert "loop2_kept" in (tmp_path / "study" / "table.csv").read_text().splitlines()[0]
     assert ("1 of 1 final estimates still flagged ambiguous" in capsys.readouterr().out) == row["ambiguous"]
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"repeats": 0}, "repeats"), ({"repeats": 2.5}, "repeats"), ({"diversity": -1}, "diversity"),
+    ({"loop2_iterations": 21}, "loop2_iterations"), ({"seed": -1}, "seed"), ({"seed": 2**64 - 1}, "seed"),
+    ({"noise_rad": float("nan")}, "noise_rad"), ({"noise_rad": "0.02"}, "noise_rad"), ({"case": 17}, "case"),
+])
+def test_run_study_refuses_bad_arguments_naming_them_and_writes_nothing(tmp_path, kwargs, match):
+    args = {"case": 16, "repeats": 1, **kwargs}
+    with pytest.raises(ValueError, match=f"^{match}: "):
+        run_study(args.pop("case"), args.pop("repeats"), tmp_path / "x", **args)
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_study_that_fails_midway_leaves_no_output_folder(tmp_path):
+    # The estimator is refused by the core only once the first repeat reaches it: still nothing written.
+    with pytest.raises(ValueError, match="method"):
+        run_study(16, 1, tmp_path / "x", method="gradient-descent", progress=False)
+    assert not (tmp_path / "x").exists()

@@ -5,7 +5,7 @@ import arfi
 
 
 def test_ideal_image_has_the_scenario_focal_phase_and_shape(sim, ideal):
-    # The amplitude is defined so that the ideal focal ARFI phase is 0.6 rad (SPEC §3).
+    # The amplitude is defined so that the ideal focal ARFI phase is 0.6 rad.
     assert ideal.shape == (128, 96)
     assert ideal.max() == pytest.approx(0.6, rel=1e-9)
     assert sim.mr_volume_shape == (128, 96, 1)

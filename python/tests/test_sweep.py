@@ -64,6 +64,12 @@ def test_bad_sweep_input_is_one_line_exit_2(tmp_path, capsys, args, match):
     assert not (tmp_path / "o" / "sweep.csv").exists()
 
 
+@pytest.mark.parametrize("first_seed", [-1, 2**64 - 1, 1.0, "0"])
+def test_trials_refuse_a_first_seed_the_trials_cannot_derive_their_seeds_from(first_seed):
+    with pytest.raises(ValueError, match="^first_seed: must be an integer"):
+        trials([0.02], [1], ["lbfgs"], 2, first_seed=first_seed)
+
+
 def test_trials_cover_every_combination_in_order():
     t = trials([0.01, 0.02], [1, 3], ["lbfgs", "pso"], 2)
     assert len(t) == 16 and t[0] == Trial(0.01, 1, "lbfgs", 0) and t[-1] == Trial(0.02, 3, "pso", 1)

@@ -15,7 +15,7 @@ pub(crate) fn parse_scenario(text: &str, format: &str, base_dir: Option<&str>) -
     .map_err(to_py)
 }
 
-/// The default scenario (SPEC §3) as TOML, every value written out.
+/// The default scenario (the paper's phantom experiment) as TOML, every value written out.
 #[pyfunction]
 pub(crate) fn default_scenario_toml() -> PyResult<String> {
     Scenario::default().to_toml().map_err(to_py)
@@ -25,9 +25,7 @@ pub(crate) fn default_scenario_toml() -> PyResult<String> {
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None))]
 pub(crate) fn normalize_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
-    let s = parse_scenario(text, format, base_dir)?;
-    s.resolve().map_err(to_py)?;
-    s.to_toml().map_err(to_py)
+    validated_scenario(text, format, base_dir)?.to_toml().map_err(to_py)
 }
 
 /// Parses and validates a scenario, returning it as complete TOML with the `[grid]` it resolves
@@ -43,7 +41,12 @@ pub(crate) fn scenario_toml_with_grid(text: &str, base_dir: Option<&str>) -> PyR
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None))]
 pub(crate) fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
+    validated_scenario(text, format, base_dir)?.to_json().map_err(to_py)
+}
+
+/// A parsed scenario whose values have also been checked together (`Scenario::resolve`).
+fn validated_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Scenario> {
     let s = parse_scenario(text, format, base_dir)?;
     s.resolve().map_err(to_py)?;
-    s.to_json().map_err(to_py)
+    Ok(s)
 }

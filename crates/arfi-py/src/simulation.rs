@@ -11,6 +11,7 @@ use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimation::{estimate_aberration, EstimateRequest, Method};
+use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
@@ -44,7 +45,7 @@ impl CoreSimulation {
     fn n_groups(&self) -> usize {
         self.inner.n_groups
     }
-    /// Number of the array's default groups (SPEC §2: 16).
+    /// Number of the array's default groups (16 on the paper's quadrant array: element // 64).
     #[getter]
     fn n_default_groups(&self) -> usize {
         self.inner.transducer.default_groups().iter().max().map_or(0, |m| m + 1)
@@ -186,7 +187,8 @@ impl CoreSimulation {
         Ok(CoreSimulation { inner })
     }
 
-    /// Skull-like per-element phases (rad), seeded (SPEC §3).
+    /// Skull-like per-element phases (rad), seeded: a smooth random screen over the aperture plus
+    /// per-element jitter.
     #[pyo3(signature = (seed, correlation_length_mm=12.0, peak_to_peak_rad=6.0, jitter_rad=0.5))]
     fn skull_phases<'py>(
         &self,
@@ -234,8 +236,9 @@ impl CoreSimulation {
         Ok(d)
     }
 
-    /// The model-discrepancy workflow (SPEC §7) on images, each taken with its `known` added
-    /// phases; `effects` limits the library (names of SPEC §7; default all).
+    /// The model-discrepancy workflow (fit each candidate effect, add the best while the BIC
+    /// favours it, repeat) on images, each taken with its `known` added phases; `effects` limits
+    /// the library (names as in `effect_library()`; default all).
     #[pyo3(signature = (images, known, threshold=0.0, max_iterations=1500, effects=None, time_limit_s=None))]
     #[allow(clippy::too_many_arguments)] // the Python keyword arguments
     fn diagnose<'py>(
@@ -256,7 +259,7 @@ impl CoreSimulation {
     }
 
     /// The model images of images taken with `known` phases under the effects of `effects`
-    /// (keys: the parameter names of SPEC §7 as `diagnose` reports them).
+    /// (keys: the effects' parameter names as `diagnose` reports them).
     fn effect_images<'py>(
         &self,
         py: Python<'py>,
@@ -270,7 +273,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -285,8 +288,11 @@ impl CoreSimulation {
         fit_scale: bool,
         threshold: f64,
         progress: bool,
+        prior: Option<PyReadonlyArray1<'py, f64>>,
+        prior_std_rad: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
+        let prior = Prior::from_parts(prior.map(|p| p.as_array().to_vec()), prior_std_rad).map_err(to_py)?;
         let request = EstimateRequest {
             method: Method::parse(method).map_err(to_py)?,
             max_evaluations,
@@ -295,6 +301,7 @@ impl CoreSimulation {
             starts,
             fit_scale,
             threshold,
+            prior,
         };
         let report = |done: usize, total: usize| {
             if progress {
@@ -313,7 +320,11 @@ impl CoreSimulation {
             d.set_item("underdetermined", r.underdetermined)?;
         }
         d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
-        d.set_item("cost", e.cost)?;
+        d.set_item("cost", r.image_cost)?;
+        d.set_item("prior_used", r.prior_used)?;
+        if r.prior_used {
+            d.set_item("posterior_cost", e.cost)?;
+        }
         d.set_item("evaluations", e.evaluations)?;
         d.set_item("seconds", e.seconds)?;
         d.set_item("ambiguous", a.ambiguous)?;

@@ -6,7 +6,7 @@ import argparse
 import time
 from typing import Any
 
-from arfi.cli.common import add_common, finish, load_scenario, read_image
+from arfi.cli.common import add_common, add_report, finish, load_scenario, read_image
 from arfi.simulation import Simulation
 
 
@@ -19,7 +19,7 @@ def register(sub: Any) -> None:
     add_common(p)
     p.add_argument("--image", required=True, metavar="C.nii.gz")
     p.add_argument("--max-width-mm", type=float, default=10.0, dest="max_width_mm", help="largest W searched (default 10)")
-    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad) and report.html to DIR")
+    add_report(p, "PNG figures (images in mm, colour bars in rad)")
     p.set_defaults(run=run)
 
 

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from arfi.estimation import METHODS
 from arfi.io import read_arfi_image, read_phases, write_json
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
@@ -30,6 +31,21 @@ def add_common(p: argparse.ArgumentParser) -> None:
     """The options every verb takes."""
     p.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the embedded phantom experiment)")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
+
+
+def add_calibration(p: argparse.ArgumentParser) -> None:
+    """``--calibration``, read by :func:`calibrated_simulation`."""
+    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+
+
+def add_method(p: argparse.ArgumentParser, default: str, help: str) -> None:
+    """``--method``: one of the estimators of ``Simulation.estimate``."""
+    p.add_argument("--method", choices=METHODS, default=default, help=help)
+
+
+def add_report(p: argparse.ArgumentParser, figures: str) -> None:
+    """``--report DIR``: ``figures`` (what the verb draws) and report.html."""
+    p.add_argument("--report", metavar="DIR", help=f"write {figures} and report.html to DIR")
 
 
 def load_scenario(args: argparse.Namespace) -> Scenario:
@@ -101,12 +117,18 @@ def calibrated_simulation(args: argparse.Namespace) -> Simulation:
     return sim
 
 
+def npy_path(path: str, option: str) -> str:
+    """``path``, given as ``option``, if it names a .npy file: check it before computing what
+    :func:`save_npy` will write there."""
+    if not path.endswith(".npy"):
+        raise UsageError(f"{option}: {path}: phase vectors are written as .npy")
+    return path
+
+
 def save_npy(path: str, array: np.ndarray) -> None:
-    """Writes a .npy file atomically."""
+    """Writes a .npy file atomically (``path`` checked with :func:`npy_path`)."""
     from arfi.io import atomic_path
 
-    if not path.endswith(".npy"):
-        raise UsageError(f"{path}: phase vectors are written as .npy")
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.save(f, array)

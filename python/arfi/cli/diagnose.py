@@ -6,7 +6,7 @@ import argparse
 import time
 from typing import Any
 
-from arfi.cli.common import UsageError, add_common, calibrated_simulation, finish, read_image
+from arfi.cli.common import UsageError, add_calibration, add_common, add_report, calibrated_simulation, finish, read_image
 
 
 def register(sub: Any) -> None:
@@ -21,10 +21,10 @@ def register(sub: Any) -> None:
     add_common(p)
     p.add_argument("--image", required=True, action="append", metavar="M.nii.gz",
                    help="measured image (repeat for several; each sidecar's applied_phases_rad are its known phases)")
-    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    add_calibration(p)
     p.add_argument("--threshold", type=float, default=0.0, help="evidence an effect needs (default 0: the plain BIC)")
     p.add_argument("--effects", metavar="A,B", help="comma-separated effects to try (default: the whole library)")
-    p.add_argument("--report", metavar="DIR", help="write per-step PNG figures and report.html to DIR")
+    add_report(p, "per-step PNG figures")
     p.add_argument("--time-limit-s", type=float, dest="time_limit_s",
                    help="stop after this many seconds and report the effects added so far")
     p.set_defaults(run=run)
@@ -35,12 +35,10 @@ def run(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     effects = None
-    if args.effects:
+    if args.effects is not None:  # the names are checked by Simulation.diagnose
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        unknown = [e for e in effects if e not in EFFECTS]
-        if unknown or not effects:
-            raise UsageError(f"arfi diagnose: --effects: unknown effect(s) {', '.join(unknown) or '(none given)'}; "
-                             f"known: {', '.join(EFFECTS)}")
+        if not effects:
+            raise UsageError(f"arfi diagnose: --effects: no effect named; known: {', '.join(EFFECTS)}")
     sim = calibrated_simulation(args)
     pairs = [read_image(sim, p) for p in args.image]
     images = [p[0] for p in pairs]

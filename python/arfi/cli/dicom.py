@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from arfi.cli.common import UsageError, add_common, finish, load_scenario
-from arfi.io import read_phases, write_arfi_image
+from arfi.cli.common import add_common, finish, load_scenario
+from arfi.io import arfi_image_path, read_phases, write_arfi_image
 from arfi.simulation import Simulation
 
 
@@ -39,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from arfi.dicom import read_dicom_arfi, read_transform
 
     out = args.out
-    if not (out.endswith(".nii") or out.endswith(".nii.gz")):
-        raise UsageError(f"arfi dicom: --out must end in .nii or .nii.gz, got {out}")
+    arfi_image_path(out)  # before reading the series
     transform = None if args.transform is None else read_transform(args.transform)
     measured = read_dicom_arfi(args.plus, args.minus, transform, args.phase_units)
     sidecar: dict[str, Any] = {"arfi_dicom": {"plus": measured.sources[0], "minus": measured.sources[1], "echo_time_ms": measured.echo_time_ms,

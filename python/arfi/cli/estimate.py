@@ -7,7 +7,8 @@ import sys
 import time
 from typing import Any
 
-from arfi.cli.common import add_common, calibrated_simulation, finish, read_image, save_npy
+from arfi.cli.common import (add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
+                             read_optional_phases, save_npy)
 
 
 def register(sub: Any) -> None:
@@ -20,12 +21,12 @@ def register(sub: Any) -> None:
                        "--method lbfgs --json estimate.json")
     add_common(p)
     p.add_argument("--image", required=True, action="append", metavar="M.nii.gz")
-    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    add_calibration(p)
     p.add_argument("--groups", type=int, default=16,
                    help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
                    "phase per element on the element field basis (lbfgs only, about a minute of marching)")
-    p.add_argument("--method", choices=["nelder-mead", "pso", "lbfgs"], default="lbfgs",
-                   help="nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
+    add_method(p, "lbfgs",
+               "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
                    help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 500)")
@@ -33,23 +34,33 @@ def register(sub: Any) -> None:
     p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
     p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
                    help="fit a free amplitude scale too (absorbs a uniform focal loss)")
+    p.add_argument("--prior", metavar="P", help="predicted aberration (.npy or text, one value per line; per element or per "
+                   "group, the sign of phases_rad: subtracting it corrects), e.g. from a CT-based skull simulation; the "
+                   "estimate is then the posterior optimum")
+    p.add_argument("--prior-std-rad", type=float, dest="prior_std_rad", metavar="S",
+                   help="expected error of each predicted phase (rad); required with --prior")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
-    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
+    add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    for path, option in ((args.out_phases, "--out-phases"), (args.suggest, "--suggest")):
+        if path:
+            npy_path(path, option)  # before the estimate, so that neither is written when one is wrong
     t = time.perf_counter()
+    prior = read_optional_phases(args.prior, "--prior")
     sim = calibrated_simulation(args)
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
-                     progress=sys.stderr.isatty())
+                     progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad)
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
-          f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})")
+          f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
+          + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.underdetermined:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from arfi.cli.common import UsageError, add_common, finish, load_scenario, read_optional_phases
-from arfi.io import write_npz
+from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
+from arfi.io import npz_path, write_npz
 from arfi.simulation import Simulation
 
 
@@ -23,16 +23,16 @@ def register(sub: Any) -> None:
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
     p.add_argument("--out", required=True, metavar="F.npz")
-    p.add_argument("--report", metavar="DIR", help="write PNG figures (|p| in MPa on the plane in mm, the axis profile) and report.html to DIR")
+    add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.out.endswith(".npz"):
-        raise UsageError(f"arfi field: --out must end in .npz, got {args.out}")
+    npz_path(args.out)  # before the simulation
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
-    f = sim.field(read_optional_phases(args.phases, "--phases"), args.z_mm)
+    phases = read_optional_phases(args.phases, "--phases")
+    f = sim.field(phases, args.z_mm)
     write_npz(
         args.out,
         {
@@ -55,8 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from arfi.report import field_report
 
-        field_report(args.report, sim, f, {"out": args.out, **focus, "propagation": sim.propagation_summary()},
-                     read_optional_phases(args.phases, "--phases"))
+        field_report(args.report, sim, f, {"out": args.out, **focus, "propagation": sim.propagation_summary()}, phases)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
                    "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0

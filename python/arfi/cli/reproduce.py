@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from arfi.cli.common import UsageError, add_common, finish
+from arfi.cli.common import UsageError, add_common, add_method, finish
 
 
 def register(sub: Any) -> None:
@@ -21,8 +21,7 @@ def register(sub: Any) -> None:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--method", choices=["nelder-mead", "pso", "lbfgs"], default="nelder-mead",
-                   help="estimator (default: the paper's Nelder-Mead)")
+    add_method(p, "nelder-mead", "estimator (default: the paper's Nelder-Mead)")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="ARFI noise (default: the scenario's, 0.02 rad)")
     p.add_argument("--diversity", type=int, default=0,
                    help="extra images per repeat with random known group phases (phase diversity; default 0, the paper's)")

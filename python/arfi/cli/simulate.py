@@ -6,8 +6,8 @@ import argparse
 import time
 from typing import Any
 
-from arfi.cli.common import UsageError, add_common, finish, image_peak, load_scenario, read_optional_phases
-from arfi.io import write_arfi_image
+from arfi.cli.common import add_common, add_report, finish, image_peak, load_scenario, read_optional_phases
+from arfi.io import arfi_image_path, write_arfi_image
 from arfi.simulation import Simulation
 
 
@@ -24,14 +24,13 @@ def register(sub: Any) -> None:
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--out", required=True, metavar="M.nii.gz")
-    p.add_argument("--report", metavar="DIR", help="write PNG figures (images in mm, colour bars in rad, element maps) and report.html to DIR")
+    add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     out = args.out
-    if not (out.endswith(".nii") or out.endswith(".nii.gz")):
-        raise UsageError(f"arfi simulate: --out must end in .nii or .nii.gz, got {out}")
+    arfi_image_path(out)  # before the simulation
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
     aberration = read_optional_phases(args.phases, "--phases")

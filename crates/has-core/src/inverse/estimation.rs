@@ -1,13 +1,14 @@
 //! The estimation workflow as one call: choose the method, estimate per group (on the per-pixel
 //! group kernels) or per element (on the element field basis, warm-started from the array's
-//! default groups), apply the limits, and assess the answer (ambiguity, misfit). What the CLI,
-//! the Python API and Rust users run.
+//! default groups), with or without a predicted aberration as prior, apply the limits, and assess
+//! the answer (ambiguity, misfit). What the CLI, the Python API and Rust users run.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::estimate_elements;
-use crate::inverse::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
+use crate::inverse::basis::build_element_model;
+use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
 use crate::inverse::estimate::{Assessment, Estimate, Estimator};
-use crate::inverse::phase::point_reflection;
+use crate::inverse::phase::{point_reflection, wrap};
+use crate::inverse::prior::{Posterior, Prior};
 use crate::simulation::Simulation;
 use std::sync::atomic::AtomicBool;
 
@@ -62,6 +63,10 @@ pub struct EstimateRequest {
     /// A rival solution counts as ambiguous when it would leave less than this fraction of the
     /// ideal focus after the estimate's correction.
     pub threshold: f64,
+    /// Predicted aberration (per element, or per group of the simulation; per element also
+    /// per default group of the array) and its expected error: the estimate is then the
+    /// posterior optimum (see [`crate::inverse::prior`]).
+    pub prior: Option<Prior>,
 }
 
 impl Default for EstimateRequest {
@@ -74,6 +79,7 @@ impl Default for EstimateRequest {
             starts: None,
             fit_scale: false,
             threshold: 0.9,
+            prior: None,
         }
     }
 }
@@ -97,6 +103,11 @@ pub struct EstimateReport {
     /// Fewer masked pixels than phases (one image, per element): the data cannot determine it,
     /// and the assessment is marked ambiguous.
     pub underdetermined: bool,
+    /// Whether a prior entered the estimate (then the assessment is judged on the posterior).
+    pub prior_used: bool,
+    /// The images' cost of paper Eq. 4 at the estimate (rad²): `estimate.cost` without a prior;
+    /// with one, `estimate.cost` is the negative log posterior.
+    pub image_cost: f64,
 }
 
 /// Whether the simulation's groups are its elements, one each in order.
@@ -124,7 +135,8 @@ fn estimator(request: &EstimateRequest, method: Method, sigma: Option<Vec<usize>
 /// Estimates the aberration of `sim`'s groups from `measurements` (each image with its known
 /// added phases): per group on the group kernels (at most [`MAX_KERNEL_GROUPS`] groups), or, when
 /// the groups are the elements, per element with L-BFGS on the element basis warm-started from
-/// the default groups. `cancel`, when set by another thread, ends the run with
+/// the default groups. With a prior, every stage minimises the posterior and starts from the
+/// prediction. `cancel`, when set by another thread, ends the run with
 /// [`HasError::Interrupted`]; `progress(done, total)` follows the element fields' marches.
 pub fn estimate_aberration(
     sim: &Simulation,
@@ -133,35 +145,8 @@ pub fn estimate_aberration(
     cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
     if per_element(sim) {
-        if request.method != Method::Lbfgs {
-            return Err(HasError::invalid(
-                "method",
-                format!(
-                    "per-element estimation ({} phases) runs on the gradient: use 'lbfgs', not '{}'",
-                    sim.n_elements(),
-                    request.method.name()
-                ),
-            ));
-        }
-        let sigma = point_reflection(&positions, &sim.transducer.default_groups());
-        let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
-        let r = estimate_elements(sim, measurements, &warm, request.max_evaluations.unwrap_or(500), request.fit_scale, cancel, progress)?;
-        let mut assessment = r.group.assess(&r.group_model, sigma.as_deref(), request.threshold, request.seed)?;
-        let n_pixels = r.model.cost.n_pixels();
-        // One image's masked pixels cannot determine more phases than they number.
-        let underdetermined = n_pixels < sim.n_elements();
-        assessment.ambiguous |= underdetermined;
-        return Ok(EstimateReport {
-            estimate: r.elements,
-            assessment,
-            model: r.group_model,
-            n_pixels,
-            scale: 1.0,
-            group_phases: Some(r.group.phases),
-            underdetermined,
-        });
+        return estimate_per_element(sim, measurements, request, cancel, progress);
     }
     if sim.n_groups > MAX_KERNEL_GROUPS {
         return Err(HasError::invalid(
@@ -173,22 +158,145 @@ pub fn estimate_aberration(
             ),
         ));
     }
-    let sigma = point_reflection(&positions, &sim.groups);
+    let prior = request.prior.as_ref().map(|p| group_prior(sim, p)).transpose()?;
+    let sigma = point_reflection(&positions(sim), &sim.groups);
     let mut est = estimator(request, request.method, sigma.clone())?;
     if let Some(n) = request.max_evaluations {
         est = est.with_max_evaluations(n)?;
     }
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
     model.cost.fit_scale = request.fit_scale;
-    let estimate = est.run(&model.cost, cancel)?;
-    let assessment = estimate.assess(&model, sigma.as_deref(), request.threshold, request.seed)?;
+    let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
         scale: model.cost.scale(&estimate.phases),
+        image_cost: model.cost.cost(&estimate.phases),
         estimate,
         assessment,
         model,
         group_phases: None,
         underdetermined: false,
+        prior_used: prior.is_some(),
+    })
+}
+
+/// Reference points of the elements (m).
+fn positions(sim: &Simulation) -> Vec<[f64; 3]> {
+    sim.transducer.elements.iter().map(|e| e.reference_point()).collect()
+}
+
+/// Runs `est` on the group cost of `model` (on its posterior with `prior`, from the prediction)
+/// and assesses the estimate on the same objective.
+fn fit_groups(
+    model: &Model,
+    est: Estimator,
+    prior: Option<&Prior>,
+    sigma: Option<&[usize]>,
+    request: &EstimateRequest,
+    cancel: Option<&AtomicBool>,
+) -> Result<(Estimate, Assessment)> {
+    let Some(prior) = prior else {
+        let estimate = est.run(&model.cost, cancel)?;
+        let assessment = estimate.assess(model, sigma, request.threshold, request.seed)?;
+        return Ok((estimate, assessment));
+    };
+    let posterior = Posterior::new(&model.cost, model.noise, prior)?;
+    let est = if est.start.is_some() { est } else { est.with_start(prior.mean().to_vec())? };
+    let estimate = est.run(&posterior, cancel)?;
+    let assessment = estimate.assess_posterior(&posterior, model, sigma, request.threshold, request.seed)?;
+    Ok((estimate, assessment))
+}
+
+/// The prior on `sim`'s groups: as given (one per group), or each group's circular mean of a
+/// per-element prior.
+fn group_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
+    match prior.mean().len() {
+        n if n == sim.n_groups => Ok(prior.clone()),
+        n if n == sim.n_elements() => prior.condensed(&sim.groups),
+        n => Err(HasError::invalid(
+            "prior",
+            format!("has {n} values; expected {} (one per element) or {} (one per group)", sim.n_elements(), sim.n_groups),
+        )),
+    }
+}
+
+/// The prior per element: as given, or spread from the array's default groups.
+fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
+    let default = sim.transducer.default_groups();
+    let n_default = default.iter().max().map_or(0, |m| m + 1);
+    match prior.mean().len() {
+        n if n == sim.n_elements() => Ok(prior.clone()),
+        n if n == n_default => Prior::new(default.iter().map(|&g| prior.mean()[g]).collect(), prior.std_rad()),
+        n => Err(HasError::invalid(
+            "prior",
+            format!("has {n} values; expected {} (one per element) or {n_default} (one per default group)", sim.n_elements()),
+        )),
+    }
+}
+
+/// Per-element estimation: the array's default groups are fitted first (the same method, and
+/// the prior's group means); the group estimate spread to the elements (plus, with a prior, the
+/// prediction's detail within each group) warm-starts L-BFGS on the element basis, at most
+/// `max_evaluations` (default 500). The assessment is that of the group stage.
+fn estimate_per_element(
+    sim: &Simulation,
+    measurements: &[Measurement],
+    request: &EstimateRequest,
+    cancel: Option<&AtomicBool>,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<EstimateReport> {
+    if request.method != Method::Lbfgs {
+        return Err(HasError::invalid(
+            "method",
+            format!(
+                "per-element estimation ({} phases) runs on the gradient: use 'lbfgs', not '{}'",
+                sim.n_elements(),
+                request.method.name()
+            ),
+        ));
+    }
+    let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
+    let mut grouped = sim.clone();
+    grouped.set_groups(sim.transducer.default_groups())?;
+    let group_prior = prior.as_ref().map(|p| p.condensed(&grouped.groups)).transpose()?;
+    let sigma = point_reflection(&positions(sim), &grouped.groups);
+    let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
+    let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
+    group_model.cost.fit_scale = request.fit_scale;
+    let (group, mut assessment) = fit_groups(&group_model, warm.clone(), group_prior.as_ref(), sigma.as_deref(), request, cancel)?;
+    let mut start = grouped.element_phases(&group.phases)?;
+    if let (Some(p), Some(gp)) = (&prior, &group_prior) {
+        for (e, s) in start.iter_mut().enumerate() {
+            let g = grouped.groups[e];
+            *s = wrap(*s + p.mean()[e] - gp.mean()[g]);
+        }
+    }
+    let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
+    model.cost.fit_scale = request.fit_scale;
+    let posterior = prior.as_ref().map(|p| Posterior::new(&model.cost, model.noise, p)).transpose()?;
+    let objective: &dyn Objective = match &posterior {
+        Some(p) => p,
+        None => &model.cost,
+    };
+    let elements = Estimator::lbfgs()
+        .with_starts(1)?
+        .with_max_evaluations(request.max_evaluations.unwrap_or(500))?
+        .with_time_limit_opt(warm.time_limit)
+        .with_start(start)?
+        .run(objective, cancel)?;
+    let n_pixels = model.cost.n_pixels();
+    // One image's masked pixels cannot determine more phases than they number (without a prior).
+    let underdetermined = prior.is_none() && n_pixels < sim.n_elements();
+    assessment.ambiguous |= underdetermined;
+    Ok(EstimateReport {
+        image_cost: model.cost.cost(&elements.phases),
+        estimate: elements,
+        assessment,
+        model: group_model,
+        n_pixels,
+        scale: 1.0,
+        group_phases: Some(group.phases),
+        underdetermined,
+        prior_used: prior.is_some(),
     })
 }

@@ -1,5 +1,5 @@
 //! The inverse layer: phase arithmetic, the hybrid cost and its per-element field basis, the
-//! estimators and the estimation workflow, calibration, and the model-discrepancy workflow.
+//! estimators, a predicted aberration as prior and the estimation workflow, calibration, and the model-discrepancy workflow.
 
 pub mod basis;
 pub mod calibrate;
@@ -8,3 +8,4 @@ pub mod diagnose;
 pub mod estimate;
 pub mod estimation;
 pub mod phase;
+pub mod prior;

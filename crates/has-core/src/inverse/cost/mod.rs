@@ -26,6 +26,12 @@ pub trait Objective: Sync {
     fn cost(&self, phases: &[f64]) -> f64;
     /// The cost and its gradient with respect to each phase.
     fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>);
+    /// Whether the cost depends on a phase common to all (false for images, which see only
+    /// phase differences; true once a prior anchors the phases). When false, estimators hold
+    /// phase 0 at zero and report phases with zero circular mean.
+    fn sees_common_phase(&self) -> bool {
+        false
+    }
 }
 
 /// One measured image as the cost sees it: a kernel, the measured values on the masked pixels,

@@ -2,9 +2,10 @@
 //! each would leave after the estimate's correction, the misfit against the noise expectation,
 //! and the known phases of the most informative next acquisition.
 
-use super::{centred, full, phase_error, reduced, solvers::lbfgs_run, twin, Estimate, Estimator, Minimum};
+use super::{centred, phase_error, solvers::lbfgs_run, twin, Estimate, Estimator, Frame, Minimum};
 use crate::error::Result;
-use crate::inverse::cost::{ArfiKernel, Model};
+use crate::inverse::cost::{ArfiKernel, Model, Objective};
+use crate::inverse::prior::{Posterior, MIN_NOISE_RAD};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
@@ -28,7 +29,8 @@ pub struct Assessment {
     /// True when some solution within the noise margin would leave less than `threshold` of
     /// the ideal focus after the best estimate's correction.
     pub ambiguous: bool,
-    /// Cost margin: `sigma² · chi²_0.95(G - 1)`.
+    /// Cost margin of the rivals: `sigma²·chi²_0.95(G - 1)` (rad²) on the images alone,
+    /// `chi²_0.95(G)/2` on a posterior (negative log posterior).
     pub margin: f64,
     /// The distinct solutions within the margin, the best estimate among them.
     pub candidates: Vec<RivalSolution>,
@@ -60,10 +62,39 @@ impl Estimate {
     /// Looks for clearly different solutions that fit within the noise: the end points of every
     /// start, a 24-start L-BFGS exploration of its own (from the estimate, random points and
     /// twins) and the refined twin of the estimate; each within the chi² margin of the best cost
-    /// is a candidate, scored by the focus its truth would leave after the estimate's correction.
+    /// (`sigma²·chi²_0.95(G - 1)`) is a candidate, scored by the focus its truth would leave after
+    /// the estimate's correction.
     pub fn assess(&self, model: &Model, sigma: Option<&[usize]>, threshold: f64, seed: u64) -> Result<Assessment> {
+        let margin = model.noise.powi(2) * chi2_95(model.cost.n_groups - 1);
+        self.assess_on(&model.cost, margin, model, sigma, threshold, seed)
+    }
+
+    /// [`Estimate::assess`] judged on the posterior of a prior (an estimate made with
+    /// [`Posterior`]): the candidates are the solutions within `chi²_0.95(G)/2` of the smallest
+    /// negative log posterior, so a twin the prior rules out is no rival.
+    pub fn assess_posterior(
+        &self,
+        posterior: &Posterior,
+        model: &Model,
+        sigma: Option<&[usize]>,
+        threshold: f64,
+        seed: u64,
+    ) -> Result<Assessment> {
+        self.assess_on(posterior, 0.5 * chi2_95(model.cost.n_groups), model, sigma, threshold, seed)
+    }
+
+    /// The assessment on `objective` (the image cost of `model`, or a posterior over it) with
+    /// rivals within `margin` of its best value.
+    fn assess_on(
+        &self,
+        objective: &dyn Objective,
+        margin: f64,
+        model: &Model,
+        sigma: Option<&[usize]>,
+        threshold: f64,
+        seed: u64,
+    ) -> Result<Assessment> {
         let g = model.cost.n_groups;
-        let margin = model.noise.powi(2) * chi2_95(g - 1);
         let mut points: Vec<Minimum> = self.minima.clone();
         points.push(Minimum { phases: self.phases.clone(), cost: self.cost });
         // An exploration of its own, whatever method produced the estimate: L-BFGS from the
@@ -73,12 +104,12 @@ impl Estimate {
             .with_twins(sigma.map(<[usize]>::to_vec))
             .with_seed(seed)
             .with_start(self.phases.clone())?
-            .run(&model.cost, None)?;
+            .run(objective, None)?;
         points.extend(explore.minima);
         if let Some(sig) = sigma {
-            let t = twin(&self.phases, sig);
-            let run = lbfgs_run(&model.cost, reduced(&t), 10, 3000, None, None)?;
-            points.push(Minimum { phases: centred(&full(&run.params)), cost: run.cost });
+            let frame = Frame::of(objective);
+            let run = lbfgs_run(objective, frame.search(&twin(&self.phases, sig)), 10, 3000, None, None)?;
+            points.push(Minimum { phases: frame.report(&run.params), cost: run.cost });
         }
         let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
         let ideal = focal(&model.base, &vec![0.0; g])?;
@@ -93,10 +124,12 @@ impl Estimate {
         }
         let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
         let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
+        // The best image fit among the plausible solutions (with images alone: the best cost).
+        let fit = candidates.iter().map(|c| model.cost.cost(&c.phases)).fold(f64::INFINITY, f64::min);
         let n = model.cost.n_pixels();
-        let sigma2 = model.noise.max(1e-4).powi(2);
-        let misfit = best / (n as f64 * sigma2);
-        let mismatch = best > sigma2 * chi2_95(n.saturating_sub(g - 1).max(1));
+        let sigma2 = model.noise.max(MIN_NOISE_RAD).powi(2);
+        let misfit = fit / (n as f64 * sigma2);
+        let mismatch = fit > sigma2 * chi2_95(n.saturating_sub(g - 1).max(1));
         Ok(Assessment {
             ambiguous: worst_recovery < threshold,
             margin,

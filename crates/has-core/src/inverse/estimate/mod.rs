@@ -197,10 +197,12 @@ impl Estimator {
         }
         let t0 = Instant::now();
         let deadline = self.time_limit.map(|d| t0 + d);
+        let frame = Frame::of(cost);
+        let n = frame.dims(g);
         let start = match &self.start {
             Some(s) if s.len() != g => return Err(HasError::invalid("start", format!("has {} values for {g} groups", s.len()))),
-            Some(s) => reduced(s),
-            None => vec![0.0; g - 1],
+            Some(s) => frame.search(s),
+            None => vec![0.0; n],
         };
         let runs: Vec<Run> = match &self.method {
             Method::NelderMead { step, tolerance } => {
@@ -210,7 +212,7 @@ impl Estimator {
             }
             Method::ParticleSwarm { particles } => {
                 let p = Problem::new(cost, start.clone(), self.max_evaluations, deadline, cancel);
-                let bounds = (vec![-PI; g - 1], vec![PI; g - 1]);
+                let bounds = (vec![-PI; n], vec![PI; n]);
                 let solver = ParticleSwarm::new(bounds, *particles).with_rng_generator(ChaCha8Rng::seed_from_u64(self.seed));
                 let iters = (self.max_evaluations / particles.max(&1)).max(1) as u64;
                 let outcome = Executor::new(&p, solver).configure(|s| s.max_iters(iters)).run().map(|_| ());
@@ -222,7 +224,7 @@ impl Estimator {
                 let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
                 let mut inits = vec![start.clone()];
                 for _ in 1..*starts {
-                    inits.push((0..g - 1).map(|_| rng.random_range(-PI..PI)).collect());
+                    inits.push((0..n).map(|_| rng.random_range(-PI..PI)).collect());
                 }
                 let rounds = if *starts > 1 && self.max_evaluations >= 2 * starts { 2 } else { 1 };
                 let per_start = (self.max_evaluations / (rounds * starts)).max(1);
@@ -233,7 +235,7 @@ impl Estimator {
                 // A single start only polishes it; more starts get a second round from the twins
                 // of the best distinct minima and perturbations of the best.
                 if rounds > 1 {
-                    let second = self.second_round(&mut runs, *starts, &mut rng);
+                    let second = self.second_round(&mut runs, *starts, frame, &mut rng);
                     runs.extend(run_all(&second)?);
                 }
                 runs
@@ -243,10 +245,10 @@ impl Estimator {
         let stop = runs.iter().map(|r| r.stop).find(|s| *s != Stop::Converged).unwrap_or(Stop::Converged);
         // Best over all runs; ties go to the earliest start (deterministic).
         let best = runs.iter().enumerate().min_by(|a, b| a.1.cost.total_cmp(&b.1.cost).then(a.0.cmp(&b.0))).map(|(i, _)| i).unwrap_or(0);
-        let minima: Vec<Minimum> = runs.iter().map(|r| Minimum { phases: centred(&full(&r.params)), cost: r.cost }).collect();
+        let minima: Vec<Minimum> = runs.iter().map(|r| Minimum { phases: frame.report(&r.params), cost: r.cost }).collect();
         let b = &runs[best];
         Ok(Estimate {
-            phases: centred(&full(&b.params)),
+            phases: frame.report(&b.params),
             cost: b.cost,
             evaluations,
             seconds: t0.elapsed().as_secs_f64(),
@@ -258,18 +260,18 @@ impl Estimator {
 
     /// Starts of L-BFGS's second round: twins of the best distinct minima (when a pairing is
     /// set) and seeded perturbations of the best, `starts` in all. Sorts `runs` by cost.
-    fn second_round(&self, runs: &mut [Run], starts: usize, rng: &mut ChaCha8Rng) -> Vec<Vec<f64>> {
+    fn second_round(&self, runs: &mut [Run], starts: usize, frame: Frame, rng: &mut ChaCha8Rng) -> Vec<Vec<f64>> {
         runs.sort_by(|a, b| a.cost.total_cmp(&b.cost));
         let mut second: Vec<Vec<f64>> = Vec::new();
         let mut distinct: Vec<Vec<f64>> = Vec::new();
         for r in runs.iter() {
-            let p = full(&r.params);
+            let p = frame.phases(&r.params);
             if distinct.len() < 4 && distinct.iter().all(|d| phase_error(d, &p) > 0.1) {
                 distinct.push(p);
             }
         }
         if let Some(sigma) = &self.twins {
-            second.extend(distinct.iter().map(|d| reduced(&twin(d, sigma))));
+            second.extend(distinct.iter().map(|d| frame.search(&twin(d, sigma))));
         }
         let best = runs[0].params.clone();
         while second.len() < starts {
@@ -315,14 +317,66 @@ pub(super) struct Run {
     stop: Stop,
 }
 
-/// `[0, x...]`: group 0 carries the (fixed) common phase.
-pub(super) fn full(x: &[f64]) -> Vec<f64> {
-    std::iter::once(0.0).chain(x.iter().copied()).collect()
+/// How a search parametrises the phases.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Frame {
+    /// The cost ignores a common phase: phase 0 is held at zero and the others are searched
+    /// relative to it; phases are reported with zero circular mean.
+    Relative,
+    /// The cost sees the common phase (a prior anchors it): every phase is searched, and
+    /// reported wrapped to (-pi, pi].
+    Absolute,
 }
 
-/// Phases relative to group 0.
-pub(super) fn reduced(phases: &[f64]) -> Vec<f64> {
-    phases[1..].iter().map(|p| wrap(p - phases[0])).collect()
+impl Frame {
+    /// The frame `cost` needs.
+    pub(super) fn of(cost: &dyn Objective) -> Self {
+        if cost.sees_common_phase() {
+            Frame::Absolute
+        } else {
+            Frame::Relative
+        }
+    }
+
+    /// Search dimensions for `g` phases.
+    pub(super) fn dims(self, g: usize) -> usize {
+        match self {
+            Frame::Relative => g - 1,
+            Frame::Absolute => g,
+        }
+    }
+
+    /// Search parameters of `phases`.
+    pub(super) fn search(self, phases: &[f64]) -> Vec<f64> {
+        match self {
+            Frame::Relative => phases[1..].iter().map(|p| wrap(p - phases[0])).collect(),
+            Frame::Absolute => phases.to_vec(),
+        }
+    }
+
+    /// The phases at search parameters `x` (`[0, x...]` when relative).
+    pub(super) fn phases(self, x: &[f64]) -> Vec<f64> {
+        match self {
+            Frame::Relative => std::iter::once(0.0).chain(x.iter().copied()).collect(),
+            Frame::Absolute => x.to_vec(),
+        }
+    }
+
+    /// The phases at `x` as reported.
+    pub(super) fn report(self, x: &[f64]) -> Vec<f64> {
+        match self {
+            Frame::Relative => centred(&self.phases(x)),
+            Frame::Absolute => x.iter().map(|&p| wrap(p)).collect(),
+        }
+    }
+
+    /// The gradient over the search parameters from the gradient over the phases.
+    pub(super) fn gradient(self, mut g: Vec<f64>) -> Vec<f64> {
+        if self == Frame::Relative {
+            g.remove(0);
+        }
+        g
+    }
 }
 
 

@@ -2,7 +2,7 @@
 //! run at its evaluation or time limit or on cancel, and answers a non-finite cost with
 //! [`PENALTY`].
 
-use super::{full, Run, Stop, PENALTY};
+use super::{Frame, Run, Stop, PENALTY};
 use crate::inverse::cost::Objective;
 use argmin::core::{CostFunction, Gradient};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -12,6 +12,7 @@ use std::time::Instant;
 /// The argmin problem: counts evaluations, keeps the best point, enforces the limits.
 pub(super) struct Problem<'a> {
     cost: &'a dyn Objective,
+    frame: Frame,
     budget: usize,
     deadline: Option<Instant>,
     cancel: Option<&'a AtomicBool>,
@@ -42,6 +43,7 @@ impl<'a> Problem<'a> {
         let best = Mutex::new((f64::INFINITY, start, vec![]));
         Problem {
             cost,
+            frame: Frame::of(cost),
             budget,
             deadline,
             cancel,
@@ -109,7 +111,7 @@ impl CostFunction for &Problem<'_> {
             Err(_) if lenient => return Ok(PENALTY),
             r => r?,
         }
-        let c = self.cost.cost(&full(x));
+        let c = self.cost.cost(&self.frame.phases(x));
         let c = if c.is_finite() { c } else { PENALTY };
         self.record(x, c);
         Ok(c)
@@ -122,8 +124,8 @@ impl Gradient for &Problem<'_> {
 
     fn gradient(&self, x: &Vec<f64>) -> std::result::Result<Vec<f64>, argmin::core::Error> {
         self.check()?;
-        let (c, g) = self.cost.cost_and_gradient(&full(x));
+        let (c, g) = self.cost.cost_and_gradient(&self.frame.phases(x));
         self.record(x, if c.is_finite() { c } else { PENALTY });
-        Ok(g[1..].iter().map(|v| if v.is_finite() { *v } else { 0.0 }).collect())
+        Ok(self.frame.gradient(g).into_iter().map(|v| if v.is_finite() { v } else { 0.0 }).collect())
     }
 }
