@@ -146,7 +146,8 @@ pub fn estimate_aberration(
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
     if per_element(sim) {
-        return estimate_per_element(sim, measurements, request, cancel, progress);
+        let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
+        return estimate_per_element(sim, measurements, request, prior, cancel, progress);
     }
     if sim.n_groups > MAX_KERNEL_GROUPS {
         return Err(HasError::invalid(
@@ -237,11 +238,13 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
 /// the prior's group means); the group estimate spread to the elements (plus, with a prior, the
 /// prediction's detail within each group) warm-starts L-BFGS on the element basis, at most
-/// `max_evaluations` (default 500). The assessment is that of the group stage.
+/// `max_evaluations` (default 500). The assessment is that of the group stage. `prior`: one
+/// predicted phase per element.
 fn estimate_per_element(
     sim: &Simulation,
     measurements: &[Measurement],
     request: &EstimateRequest,
+    prior: Option<Prior>,
     cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
@@ -255,7 +258,6 @@ fn estimate_per_element(
             ),
         ));
     }
-    let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
     let mut grouped = sim.clone();
     grouped.set_groups(sim.transducer.default_groups())?;
     let group_prior = prior.as_ref().map(|p| p.condensed(&grouped.groups)).transpose()?;

@@ -138,30 +138,13 @@ impl Objective for Posterior<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// `Σ (phi_i - phi_0 - t_i)²`: sees only phase differences.
-    struct Differences(Vec<f64>);
-
-    impl Objective for Differences {
-        fn n_phases(&self) -> usize {
-            self.0.len()
-        }
-        fn cost(&self, p: &[f64]) -> f64 {
-            self.cost_and_gradient(p).0
-        }
-        fn cost_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
-            let d: Vec<f64> = p.iter().zip(&self.0).map(|(x, t)| x - p[0] - t).collect();
-            let mut g: Vec<f64> = d.iter().map(|v| 2.0 * v).collect();
-            g[0] = -g[1..].iter().sum::<f64>();
-            (d.iter().map(|v| v * v).sum(), g)
-        }
-    }
+    use crate::inverse::estimate::tests::Cosines;
 
     #[test]
     fn the_gradient_matches_central_differences() {
         // Analytic gradient against (U(x + h) - U(x - h)) / 2h, h = 1e-6: agreement to 1e-6
         // relative (the truncation error is O(h²) of the third derivative, here of order 1).
-        let like = Differences(vec![0.0, 0.4, -1.1, 2.0]);
+        let like = Cosines(vec![0.0, 0.4, -1.1, 2.0]);
         let prior = Prior::new(vec![0.3, 0.9, -2.5, 3.0], 0.7).unwrap();
         let post = Posterior::new(&like, 0.5, &prior).unwrap();
         let x = [0.2, -0.3, 1.7, -2.9];
@@ -177,17 +160,17 @@ mod tests {
 
     #[test]
     fn the_posterior_is_the_precision_weighted_mean_for_one_phase_difference() {
-        // Two phases, J = (d - t)² in the difference d = phi_1 - phi_0: a Gaussian likelihood
-        // of precision 1/sigma² on d. The prior, for small angles (kappa/2)·Σ(phi_i - m_i)², with
+        // Two phases, J = 1 - cos(d - t) ≈ (d - t)²/2 in the difference d = phi_1 - phi_0: a
+        // Gaussian likelihood of precision 1/(2·sigma²) on d. The prior, for small angles (kappa/2)·Σ(phi_i - m_i)², with
         // the common phase at its optimum is (kappa/4)·(d - (m_1 - m_0))²: precision kappa/2. So
         // the optimum is the precision-weighted mean of t and m_1 - m_0. Checked by a fine scan of
         // U along d (tolerance 1e-3 rad: the scan step is 1e-4, the small-angle error at
         // |d| < 0.1 rad is below 1e-5).
         let (t, m, sigma, s) = (0.08, [0.0, 0.02], 0.1, 0.05);
-        let like = Differences(vec![0.0, t]);
+        let like = Cosines(vec![0.0, t]);
         let prior = Prior::new(m.to_vec(), s).unwrap();
         let post = Posterior::new(&like, sigma, &prior).unwrap();
-        let (kappa, lp) = (prior.kappa(), 1.0 / (sigma * sigma));
+        let (kappa, lp) = (prior.kappa(), 0.5 / (sigma * sigma));
         let expected = (lp * t + kappa / 2.0 * (m[1] - m[0])) / (lp + kappa / 2.0);
         let best = (-1000..=1000)
             .map(|i| i as f64 * 1e-4)
@@ -212,7 +195,7 @@ mod tests {
         for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(Prior::new(vec![0.0, 1.0], s).unwrap_err().to_string().contains("prior_std_rad"), "{s}");
         }
-        let like = Differences(vec![0.0, 1.0, 2.0]);
+        let like = Cosines(vec![0.0, 1.0, 2.0]);
         let prior = Prior::new(vec![0.0, 1.0], 0.5).unwrap();
         assert!(Posterior::new(&like, 0.1, &prior).is_err());
         assert!(prior.condensed(&[0, 0, 1]).is_err());

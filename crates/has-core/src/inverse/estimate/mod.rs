@@ -381,11 +381,12 @@ impl Frame {
 
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// `Σ (1 - cos(φ_i - φ_0 - t_i))`: minimum at the phases `t` (up to a common phase).
-    struct Cosines(Vec<f64>);
+    /// `Σ (1 - cos(φ_i - φ_0 - t_i))`: minimum at the phases `t` (up to a common phase), which
+    /// it does not see.
+    pub(crate) struct Cosines(pub(crate) Vec<f64>);
 
     impl Objective for Cosines {
         fn n_phases(&self) -> usize {
