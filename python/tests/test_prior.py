@@ -91,3 +91,17 @@ def test_cli_bad_priors_are_one_line_exit_2_and_nothing_written(tmp_path, files,
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("arfi: error:") and match in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
+    # A small array, one phase per element: a prior per element or per default group (16) is
+    # spread to the elements as known phases are; another length is refused naming the prior.
+    sim = arfi.Simulation(arfi.Scenario.from_toml("[transducer]\nelements_per_side = 8\n"))
+    el = sim.with_groups(sim.n_elements)
+    truth = sim.skull_phases(2)
+    images = [sim.arfi_image(truth, noise_rad=0.02, seed=2)]
+    for s, prior in ((0.3, truth), (0.5, sim.condense(truth))):
+        e = el.estimate(images, prior=prior, prior_std_rad=s, max_evaluations=50)
+        assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.underdetermined
+    with pytest.raises(ValueError, match="prior: has 5 values"):
+        el.estimate(images, prior=np.zeros(5), prior_std_rad=0.5)

@@ -4,7 +4,7 @@
 //! the answer (ambiguity, misfit). What the CLI, the Python API and Rust users run.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::build_element_model;
+use crate::inverse::basis::{build_element_model, known_per_element};
 use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
 use crate::inverse::estimate::{Assessment, Estimate, Estimator};
 use crate::inverse::phase::{point_reflection, wrap};
@@ -221,18 +221,14 @@ fn group_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
     }
 }
 
-/// The prior per element: as given, or spread from the array's default groups.
+/// The prior per element: as given, or spread from the groups (or the array's default groups)
+/// as known phases are ([`known_per_element`]).
 fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
-    let default = sim.transducer.default_groups();
-    let n_default = default.iter().max().map_or(0, |m| m + 1);
-    match prior.mean().len() {
-        n if n == sim.n_elements() => Ok(prior.clone()),
-        n if n == n_default => Prior::new(default.iter().map(|&g| prior.mean()[g]).collect(), prior.std_rad()),
-        n => Err(HasError::invalid(
-            "prior",
-            format!("has {n} values; expected {} (one per element) or {n_default} (one per default group)", sim.n_elements()),
-        )),
-    }
+    let mean = known_per_element(sim, prior.mean()).map_err(|e| match e {
+        HasError::InvalidParameter { reason, .. } => HasError::invalid("prior", reason),
+        e => e,
+    })?;
+    Prior::new(mean, prior.std_rad())
 }
 
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
