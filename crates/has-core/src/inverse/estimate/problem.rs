@@ -1,6 +1,11 @@
 //! The argmin problem every estimator runs: it counts evaluations, keeps the best point, ends a
 //! run at its evaluation or time limit or on cancel, and answers a non-finite cost with
-//! [`PENALTY`].
+//! [`PENALTY`]. For gradient searches it evaluates cost and gradient together and answers the
+//! gradient at the point it last costed from that evaluation (argmin's line search asks for
+//! both at every trial point), so one evaluation is one `cost_and_gradient`; and it ends the
+//! search as converged once [`STALL_EVALUATIONS`] evaluations in a row have not lowered the best
+//! cost by a relative [`STALL_TOLERANCE`] (on the plateau of a minimum argmin's absolute tests
+//! would otherwise spend the whole budget on rounding-level changes).
 
 use super::{Frame, Run, Stop, PENALTY};
 use crate::inverse::cost::Objective;
@@ -8,6 +13,11 @@ use argmin::core::{CostFunction, Gradient};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
+
+/// Evaluations without progress after which a gradient search counts as converged.
+pub(super) const STALL_EVALUATIONS: usize = 30;
+/// Relative lowering of the best cost that counts as progress.
+pub(super) const STALL_TOLERANCE: f64 = 1e-9;
 
 /// The argmin problem: counts evaluations, keeps the best point, enforces the limits.
 pub(super) struct Problem<'a> {
@@ -23,6 +33,12 @@ pub(super) struct Problem<'a> {
     /// The first limit reached (it ends the run even when a lenient answer hid it from argmin).
     stopped: Mutex<Option<Stop>>,
     best: Mutex<(f64, Vec<f64>, Vec<f64>)>,
+    /// Whether `cost` evaluates the gradient too (gradient searches).
+    with_gradient: bool,
+    /// The last point evaluated with its gradient, and that gradient.
+    last: Mutex<Option<(Vec<f64>, Vec<f64>)>>,
+    /// Evaluations since the best cost last made progress (gradient searches).
+    stalled: AtomicUsize,
 }
 
 /// Raised inside the cost to end a run early.
@@ -51,7 +67,35 @@ impl<'a> Problem<'a> {
             lenient: AtomicUsize::new(0),
             stopped: Mutex::new(None),
             best,
+            with_gradient: false,
+            last: Mutex::new(None),
+            stalled: AtomicUsize::new(0),
         }
+    }
+
+    /// The same problem for a gradient search: each cost evaluation also evaluates the gradient
+    /// and keeps it for the gradient call at the same point.
+    pub(super) fn with_gradient(mut self) -> Self {
+        self.with_gradient = true;
+        self
+    }
+
+    /// Cost and search-space gradient at `x` (counted, recorded, the gradient kept).
+    fn evaluate(&self, x: &[f64]) -> (f64, Vec<f64>) {
+        let (c, g) = self.cost.cost_and_gradient(&self.frame.phases(x));
+        let c = if c.is_finite() { c } else { PENALTY };
+        self.record(x, c);
+        let g: Vec<f64> = self.frame.gradient(g).into_iter().map(|v| if v.is_finite() { v } else { 0.0 }).collect();
+        if let Ok(mut last) = self.last.lock() {
+            *last = Some((x.to_vec(), g.clone()));
+        }
+        (c, g)
+    }
+
+    /// The kept gradient, if `x` is the point it was evaluated at.
+    fn kept_gradient(&self, x: &[f64]) -> Option<Vec<f64>> {
+        let last = self.last.lock().ok()?;
+        last.as_ref().filter(|(p, _)| p.as_slice() == x).map(|(_, g)| g.clone())
     }
 
     fn check(&self) -> std::result::Result<(), EarlyStop> {
@@ -61,6 +105,8 @@ impl<'a> Problem<'a> {
             Stop::TimeLimit
         } else if self.evaluations.fetch_add(1, Ordering::Relaxed) >= self.budget {
             Stop::EvaluationLimit
+        } else if self.with_gradient && self.stalled.load(Ordering::Relaxed) >= STALL_EVALUATIONS {
+            Stop::Converged
         } else {
             return Ok(());
         };
@@ -72,9 +118,15 @@ impl<'a> Problem<'a> {
 
     fn record(&self, x: &[f64], c: f64) {
         if let Ok(mut b) = self.best.lock() {
+            let progress = c < b.0 - STALL_TOLERANCE * b.0.abs();
             if c < b.0 {
                 b.0 = c;
                 b.1 = x.to_vec();
+            }
+            if progress {
+                self.stalled.store(0, Ordering::Relaxed);
+            } else {
+                self.stalled.fetch_add(1, Ordering::Relaxed);
             }
             let best = b.0;
             b.2.push(best);
@@ -111,6 +163,9 @@ impl CostFunction for &Problem<'_> {
             Err(_) if lenient => return Ok(PENALTY),
             r => r?,
         }
+        if self.with_gradient {
+            return Ok(self.evaluate(x).0);
+        }
         let c = self.cost.cost(&self.frame.phases(x));
         let c = if c.is_finite() { c } else { PENALTY };
         self.record(x, c);
@@ -123,9 +178,10 @@ impl Gradient for &Problem<'_> {
     type Gradient = Vec<f64>;
 
     fn gradient(&self, x: &Vec<f64>) -> std::result::Result<Vec<f64>, argmin::core::Error> {
+        if let Some(g) = self.kept_gradient(x) {
+            return Ok(g);
+        }
         self.check()?;
-        let (c, g) = self.cost.cost_and_gradient(&self.frame.phases(x));
-        self.record(x, if c.is_finite() { c } else { PENALTY });
-        Ok(self.frame.gradient(g).into_iter().map(|v| if v.is_finite() { v } else { 0.0 }).collect())
+        Ok(self.evaluate(x).1)
     }
 }

@@ -146,7 +146,7 @@ pub(super) fn lbfgs_run(
     deadline: Option<Instant>,
     cancel: Option<&AtomicBool>,
 ) -> Result<Run> {
-    let p = Problem::new(cost, x0.clone(), budget, deadline, cancel);
+    let p = Problem::new(cost, x0.clone(), budget, deadline, cancel).with_gradient();
     let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory)
         .with_tolerance_grad(1e-12)
         .and_then(|s| s.with_tolerance_cost(1e-14))
