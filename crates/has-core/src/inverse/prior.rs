@@ -138,7 +138,7 @@ impl Objective for Posterior<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::inverse::estimate::tests::Cosines;
+    use crate::inverse::cost::test_objectives::Cosines;
 
     #[test]
     fn the_gradient_matches_central_differences() {

@@ -381,27 +381,9 @@ impl Frame {
 
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-
-    /// `Σ (1 - cos(φ_i - φ_0 - t_i))`: minimum at the phases `t` (up to a common phase), which
-    /// it does not see.
-    pub(crate) struct Cosines(pub(crate) Vec<f64>);
-
-    impl Objective for Cosines {
-        fn n_phases(&self) -> usize {
-            self.0.len()
-        }
-        fn cost(&self, p: &[f64]) -> f64 {
-            self.cost_and_gradient(p).0
-        }
-        fn cost_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
-            let d: Vec<f64> = p.iter().zip(&self.0).map(|(x, t)| x - p[0] - t).collect();
-            let mut g: Vec<f64> = d.iter().map(|v| v.sin()).collect();
-            g[0] = -g[1..].iter().sum::<f64>();
-            (d.iter().map(|v| 1.0 - v.cos()).sum(), g)
-        }
-    }
+    use crate::inverse::cost::test_objectives::Cosines;
 
     #[test]
     fn every_method_stops_cleanly_at_any_evaluation_or_time_limit() {
