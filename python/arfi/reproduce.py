@@ -22,6 +22,7 @@ import numpy as np
 
 from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
+from arfi.ladder import EXTRA_IMAGES, Rung, climb, focus_of, new_rungs
 from arfi.loop import loop2
 from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
@@ -88,7 +89,7 @@ def study_images(sim: Simulation, applied: np.ndarray, noise: float, seed: int, 
 
 def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: str = "nelder-mead",
               noise_rad: float | None = None, diversity: int = 0, loop2_iterations: int = 0,
-              progress: bool | None = None) -> dict[str, Any]:
+              progress: bool | None = None, ladder: bool = True) -> dict[str, Any]:
     """Runs the study and writes figures, ``table.csv``, ``results.json`` and ``report.html`` to
     ``out``. Returns the results (``table`` rows as in the paper plus the recovered fraction, gain
     and phase error).
@@ -98,6 +99,10 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
     to the paper's single aberrated image; ``loop2_iterations`` > 0 runs the paper's loop 2 with
     that many more acquisitions per repeat. ``seed`` is the first repeat's seed (at most
     ``MAX_STUDY_SEED``); ``noise_rad`` defaults to the scenario's ARFI noise.
+
+    ``ladder`` (default) also runs, for the same seeds, every path to a correction side by side
+    (:mod:`arfi.ladder`: the paper's single image, loop 2, diversity images, a CT-like prediction
+    alone, and the prediction with MR-ARFI), reported as ``ladder`` and in ``fig11_ladder.png``.
 
     Bad arguments raise ``ValueError`` naming them; ``out`` is created and written only once the
     study has run, so a failed run leaves nothing behind."""
@@ -116,6 +121,8 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
     ideal = sim.arfi_image()
     rows: list[Row] = []
     runs: list[dict[str, Any]] = []
+    rungs = new_rungs(case)
+    paper_faithful = method == "nelder-mead" and not diversity and not loop2_iterations
     for r in range(repeats):
         s = seed + r
         say(f"repeat {r + 1}/{repeats}: calibrating")
@@ -126,14 +133,8 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         images, known = study_images(sim, applied, noise, s, diversity)
         measured = images[0]
         if loop2_iterations:
-            count = [0]
-
-            def acquire(added: np.ndarray, applied: np.ndarray = applied, s: int = s, count: list[int] = count) -> np.ndarray:
-                count[0] += 1
-                return sim.arfi_image(applied + np.asarray(added)[sim.groups], noise_rad=noise, seed=60_000 + 100 * s + count[0])
-
             say(f"repeat {r + 1}/{repeats}: loop 2 ({loop2_iterations} acquisitions)")
-            loop = loop2(model, measured, acquire, iterations=loop2_iterations, extra_images=images[1:],
+            loop = loop2(model, measured, _acquirer(sim, applied, noise, s), iterations=loop2_iterations, extra_images=images[1:],
                          extra_known=known[1:], method=method, seed=s)
             # The table reports the last fit (all images); the correction is the one measured best.
             est = loop.steps[-1].estimate
@@ -157,9 +158,17 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
                      "measured": measured, "aberrated": aberrated, "corrected": corrected,
                      "corrected_measured": sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
                      "calibration_image": sim.arfi_image(noise_rad=noise, seed=10_000 + s)})
+        if ladder:
+            say(f"repeat {r + 1}/{repeats}: the ladder (loop 2, diversity, prediction, prediction + MR-ARFI)")
+            paper = (rows[-1].recovered_fraction, rows[-1].ambiguous, rows[-1].seconds) if paper_faithful else None
+            climb(sim, model, case, applied, *study_images(sim, applied, noise, s, EXTRA_IMAGES), _acquirer(sim, applied, noise, s),
+                  s, focus_of(sim, applied, float(ideal.max())), rungs, paper)
     say("drawing figures")
     out.mkdir(parents=True, exist_ok=True)
     figures = _figures(sim, case, rows, runs, ideal, out, method)
+    ladder_rungs = rungs.rungs() if ladder else []
+    if ladder_rungs:
+        figures["fig11"] = _ladder_figure(ladder_rungs, case, out)
     summary = {
         "case": case, "repeats": repeats, "method": method, "noise_rad": noise, "seed": seed, "diversity_images": diversity, "loop2_iterations": loop2_iterations,
         "date": _dt.date.today().isoformat(),
@@ -170,12 +179,54 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         "paper": {"16": {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
                   "1024": {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10}}[str(case)],
         "figures": figures,
+        "ladder": [r.as_dict() for r in ladder_rungs],
         "seconds": time.perf_counter() - t_start,
     }
     _write_table(out / "table.csv", rows)
     write_json(out / "results.json", summary)
     atomic_write_text(out / "report.html", _html(summary, out))
     return summary
+
+
+def _acquirer(sim: Simulation, applied: np.ndarray, noise: float, seed: int) -> Callable[[np.ndarray], np.ndarray]:
+    """A seeded scanner for loop 2: each call images the aberration with per-group phases added
+    (noise seeds ``60_000 + 100·seed + k`` for the k-th acquisition)."""
+    count = [0]
+
+    def acquire(added: np.ndarray) -> np.ndarray:
+        count[0] += 1
+        return sim.arfi_image(applied + np.asarray(added)[sim.groups], noise_rad=noise, seed=60_000 + 100 * seed + count[0])
+
+    return acquire
+
+
+def _ladder_figure(rungs: list[Rung], case: int, out: Path) -> str:
+    """Bar chart of each rung's recovered fraction (mean, and each repeat as a dot)."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(8, 4))
+    x = np.arange(len(rungs))
+    ax.bar(x, [r.mean_recovered_fraction for r in rungs], color="0.6")
+    for i, r in enumerate(rungs):
+        ax.plot([i] * len(r.recovered_fractions), r.recovered_fractions, "k.")
+    ax.axhline({16: 0.83, 1024: 0.39}[case], color="r", ls="--", label="paper")
+    ax.set_xticks(x, [r.name.replace(" + ", "\n+ ").replace(" alone", "\nalone").replace(" (paper)", "\n(paper)") for r in rungs], fontsize=8)
+    ax.set(ylabel="recovered fraction of the ideal focus", ylim=(0, 1.1), title=f"{case}-aberration: paths to a correction")
+    ax.legend()
+    fig.tight_layout()
+    return save_figure(fig, out / "fig11_ladder.png")
+
+
+def _ladder_html(ladder: list[dict[str, Any]], paper: float) -> str:
+    """The ladder as a table (empty without one)."""
+    if not ladder:
+        return ""
+    rows = [{"path": r["name"], "what": r["what"], "recovered_fraction": r["mean_recovered_fraction"],
+             "per_repeat": " ".join(f"{v:.2f}" for v in r["recovered_fractions"]), "ambiguous": r["ambiguous"],
+             "seconds": r["seconds"]} for r in ladder]
+    return (f"<h2>Paths to a correction</h2><p>The same seeded aberrations, calibrations and noisy images for every path "
+            f"(paper's recovered fraction: {paper}). The prediction is a CT-like stand-in: the true aberration plus a seeded "
+            f"smooth error field and per-element jitter; its expected error is given to the posterior as the prior's width.</p>"
+            + rows_table_html(rows, ["path", "what", "recovered_fraction", "per_repeat", "ambiguous", "seconds"]))
 
 
 def _write_table(path: Path, rows: list[Row]) -> None:
@@ -324,5 +375,5 @@ phi(u) from -phi(-u); images with known added phases tell them apart).</p>
 <p>Mean recovered fraction <b>{summary['mean_recovered_fraction']:.2f}</b> (paper {p['recovered_fraction']}), mean gain
 <b>{summary['mean_gain']:+.0%}</b> (paper {p['gain']:+.0%}), mean phase error <b>{summary['mean_phase_error_rad']:.2f} rad</b>
 (paper {p['phase_error_rad']} rad). Focal values are taken on noise-free simulated images.</p>
-<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
+{_ladder_html(summary['ladder'], p['recovered_fraction'])}<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
 """

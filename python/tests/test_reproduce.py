@@ -3,15 +3,26 @@ import json
 import pytest
 
 from arfi.cli import main
+from arfi.ladder import RUNGS
 from arfi.reproduce import run_study
 
 
-def test_reproduce_writes_table_figures_and_report(tmp_path):
+def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):
     out = tmp_path / "study"
     js = tmp_path / "r.json"
     assert main(["reproduce", "--case", "16", "--repeats", "1", "--diversity", "3", "--method", "lbfgs",
                  "--out", str(out), "--json", str(js)]) == 0
     r = json.loads(js.read_text())
+    # The ladder: every path on the same seed, in order, each with its recovered fraction.
+    ladder = {rung["name"]: rung for rung in r["ladder"]}
+    assert list(ladder) == RUNGS and all(len(rung["recovered_fractions"]) == 1 for rung in r["ladder"])
+    frac = {name: rung["mean_recovered_fraction"] for name, rung in ladder.items()}
+    # Seed 0 (measured 2026-11-24): diversity and loop 2 near the ideal focus; the prediction's 0.8 rad error leaves
+    # less; one image with the prediction as prior never ends below the prediction alone (0.02 slack: image noise).
+    assert frac["diversity"] > 0.9 and frac["loop 2"] > 0.8
+    assert frac["prediction + MR-ARFI"] >= frac["CT-like prediction alone"] - 0.02
+    assert "recovered fraction by path: single image (paper)" in capsys.readouterr().out
+    assert (out / "fig11_ladder.png").stat().st_size > 5000
     row = r["table"][0]
     for key in ("evaluations", "seconds", "final_cost", "broadening_width_mm", "recovered_fraction", "gain", "phase_error_rad"):
         assert key in row
@@ -22,7 +33,7 @@ def test_reproduce_writes_table_figures_and_report(tmp_path):
                  "fig7_profiles", "fig8_convergence", "fig9_phases", "fig10_focal"):
         assert (out / f"{name}.png").stat().st_size > 5000
     html = (out / "report.html").read_text()
-    assert html.count("data:image/png;base64,") == 9 and "Table 1" in html
+    assert html.count("data:image/png;base64,") == 10 and "Table 1" in html and "Paths to a correction" in html
     assert (out / "table.csv").read_text().startswith("experiment,")
 
 
@@ -35,7 +46,7 @@ def test_reproduce_rejects_bad_options(tmp_path, capsys):
 
 def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path, capsys):
     js = tmp_path / "r.json"
-    assert main(["reproduce", "--case", "1024", "--repeats", "1", "--loop2", "1", "--method", "lbfgs",
+    assert main(["reproduce", "--case", "1024", "--repeats", "1", "--loop2", "1", "--method", "lbfgs", "--no-ladder",
                  "--out", str(tmp_path / "study"), "--json", str(js)]) == 0
     r = json.loads(js.read_text())
     row = r["table"][0]

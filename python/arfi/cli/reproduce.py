@@ -28,16 +28,20 @@ def register(sub: Any) -> None:
     p.add_argument("--loop2", type=int, default=0, metavar="N",
                    help="the paper's loop 2: N more acquisitions per repeat, each with the current correction applied, fitted "
                    "jointly; keeps the correction measured best, or none (default 0: loop 1 only, as in the paper)")
+    p.add_argument("--no-ladder", dest="ladder", action="store_false",
+                   help="skip the ladder (by default the same seeds also go through loop 2, diversity images, a CT-like "
+                   "prediction alone and the prediction with MR-ARFI, side by side in the report)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from arfi.ladder import summary_line
     from arfi.reproduce import run_study
 
     if args.scenario:
         raise UsageError("arfi reproduce: runs on the embedded scenario (the paper's phantom); --scenario is not taken")
     s = run_study(args.case, args.repeats, Path(args.out), seed=args.seed, method=args.method, noise_rad=args.noise_rad,
-                  diversity=args.diversity, loop2_iterations=args.loop2)
+                  diversity=args.diversity, loop2_iterations=args.loop2, ladder=args.ladder)
     print(f"reproduce: {s['case']}-aberration, {s['repeats']} repeats ({s['method']}): recovered fraction "
           f"{s['mean_recovered_fraction']:.2f} (paper {s['paper']['recovered_fraction']}), gain {s['mean_gain']:+.0%} "
           f"(paper {s['paper']['gain']:+.0%}), phase error {s['mean_phase_error_rad']:.2f} rad "
@@ -48,5 +52,7 @@ def run(args: argparse.Namespace) -> int:
               f"the noise: one in-focus image hardly tells phi(u) from -phi(-u)); known diversity images (--diversity 3) or the paper's loop 2 (--loop2 3) resolve them")
     elif flagged:
         print(f"reproduce: {flagged} of {len(s['table'])} final estimates still flagged ambiguous: more images would narrow them")
+    if s["ladder"]:
+        print("reproduce: " + summary_line(s["ladder"], s["paper"]["recovered_fraction"]))
     finish(args, s)
     return 0

@@ -1,0 +1,149 @@
+"""The ladder of ``arfi reproduce``: for the same seeded aberrations, what each path to a
+correction recovers, side by side.
+
+Rungs, each on the same repeat's aberration, calibration and noisy images:
+
+1. *single image (paper)*: the paper's loop 1, 16 group phases from one aberrated image;
+2. *loop 2*: the paper's loop 2, three more acquisitions with the current correction applied;
+3. *diversity*: three more images with seeded random known group phases (per element for the
+   1024-aberration case: one phase per element on the element field basis);
+4. *CT-like prediction alone*: a seeded prediction of the aberration with a realistic error
+   (:func:`predicted_aberration`), subtracted as it is;
+5. *prediction + MR-ARFI*: the posterior estimate from the prediction and the images (one image
+   per group for the 16-aberration case; the aberrated and three diversity images per element for
+   1024).
+
+Each rung reports the mean recovered fraction (focal ARFI of the corrected beam over the ideal,
+on noise-free images), how many estimates the method flagged ambiguous, and the seconds spent.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from arfi.estimation import recovered_fraction
+from arfi.loop import loop2
+from arfi.simulation import Simulation
+
+#: The prediction's error model: a smooth field over the aperture (15 mm correlation length,
+#: 3 rad peak to peak) plus independent per-element jitter (0.3 rad), about 0.8 rad RMS: CT-based
+#: skull simulations predict the smooth part of the aberration (skull thickness and sound speed
+#: vary over centimetres) and miss element-scale detail.
+PREDICTION_ERROR = {"correlation_length_mm": 15.0, "peak_to_peak_rad": 3.0, "jitter_rad": 0.3}
+#: The expected error per predicted phase that the posterior is given (rad).
+PREDICTION_STD_RAD = 0.8
+#: Extra acquisitions per repeat for the loop-2 and diversity rungs.
+EXTRA_IMAGES = 3
+
+RUNGS = ["single image (paper)", "loop 2", "diversity", "CT-like prediction alone", "prediction + MR-ARFI"]
+
+
+@dataclass
+class Rung:
+    """One rung over the repeats."""
+
+    name: str
+    what: str
+    """What was estimated from what."""
+    recovered_fractions: list[float]
+    ambiguous: int
+    seconds: float
+
+    @property
+    def mean_recovered_fraction(self) -> float:
+        return float(np.mean(self.recovered_fractions))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "what": self.what, "recovered_fractions": self.recovered_fractions,
+                "mean_recovered_fraction": self.mean_recovered_fraction, "ambiguous": self.ambiguous, "seconds": self.seconds}
+
+
+def predicted_aberration(sim: Simulation, applied: NDArray[np.float64], seed: int) -> NDArray[np.float64]:
+    """A CT-like prediction of the per-element aberration ``applied``: it plus a seeded error
+    drawn from :data:`PREDICTION_ERROR` (seed ``1000 + seed``, independent of the aberration's)."""
+    return np.asarray(applied, dtype=np.float64) + sim.skull_phases(1000 + seed, **PREDICTION_ERROR)
+
+
+class _Rungs:
+    """Collects each rung's results over the repeats."""
+
+    def __init__(self, case: int) -> None:
+        per_element = case == 1024
+        self.what = {
+            RUNGS[0]: "16 group phases, 1 image",
+            RUNGS[1]: f"16 group phases, 1 + {EXTRA_IMAGES} loop-2 images",
+            RUNGS[2]: f"{'1024 element' if per_element else '16 group'} phases, 1 + {EXTRA_IMAGES} images with known phases",
+            RUNGS[3]: f"prediction error {PREDICTION_ERROR['peak_to_peak_rad']:g} rad peak to peak over "
+                      f"{PREDICTION_ERROR['correlation_length_mm']:g} mm + {PREDICTION_ERROR['jitter_rad']:g} rad jitter",
+            RUNGS[4]: (f"1024 element phases, prior ({PREDICTION_STD_RAD} rad) + 1 + {EXTRA_IMAGES} images" if per_element
+                       else f"16 group phases, prior ({PREDICTION_STD_RAD} rad) + 1 image"),
+        }
+        self.values: dict[str, list[float]] = {n: [] for n in RUNGS}
+        self.flags = {n: 0 for n in RUNGS}
+        self.seconds = {n: 0.0 for n in RUNGS}
+
+    def add(self, name: str, fraction: float, ambiguous: bool, seconds: float) -> None:
+        self.values[name].append(fraction)
+        self.flags[name] += int(ambiguous)
+        self.seconds[name] += seconds
+
+    def rungs(self) -> list[Rung]:
+        return [Rung(n, self.what[n], self.values[n], self.flags[n], self.seconds[n]) for n in RUNGS]
+
+
+def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.float64], images: list[NDArray[np.float64]],
+          known: list[Any], acquire: Callable[[NDArray[np.float64]], NDArray[np.float64]], seed: int,
+          focus: Callable[[NDArray[np.float64]], float], rungs: _Rungs,
+          paper: tuple[float, bool, float] | None = None) -> None:
+    """Runs the rungs for one repeat and adds them to ``rungs``. ``images``/``known``: the
+    aberrated image and the diversity images with their known group phases; ``acquire(added)``:
+    a new noisy image with per-group phases added; ``focus(correction)``: the recovered fraction
+    of a per-element correction; ``paper``: the study's own paper-faithful result (recovered
+    fraction, ambiguous, seconds), when it ran one, instead of running it again."""
+    if paper is None:
+        t = time.perf_counter()
+        est = model.estimate(images[:1], method="nelder-mead", seed=seed)
+        paper = (focus(est.phases_rad[model.groups]), est.ambiguous, time.perf_counter() - t)
+    rungs.add(RUNGS[0], *paper)
+
+    t = time.perf_counter()
+    loop = loop2(model, images[0], acquire, iterations=EXTRA_IMAGES, method="lbfgs", seed=seed)
+    last = loop.steps[-1].estimate
+    rungs.add(RUNGS[1], focus(loop.correction_rad[model.groups]), bool(last is not None and last.ambiguous), time.perf_counter() - t)
+
+    fitted = model.with_groups(sim.n_elements) if case == 1024 else model
+    t = time.perf_counter()
+    est = fitted.estimate(images, known, method="lbfgs", seed=seed)
+    rungs.add(RUNGS[2], focus(est.phases_rad[fitted.groups]), est.ambiguous, time.perf_counter() - t)
+
+    prediction = predicted_aberration(sim, applied, seed)
+    rungs.add(RUNGS[3], focus(prediction), False, 0.0)
+
+    t = time.perf_counter()
+    data = (images, known) if case == 1024 else (images[:1], None)
+    est = fitted.estimate(data[0], data[1], method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD)
+    rungs.add(RUNGS[4], focus(est.phases_rad[fitted.groups]), est.ambiguous, time.perf_counter() - t)
+
+
+def new_rungs(case: int) -> _Rungs:
+    """An empty ladder for ``case`` (16 or 1024)."""
+    return _Rungs(case)
+
+
+def summary_line(ladder: list[dict[str, Any]], paper: float) -> str:
+    """One line: each rung's mean recovered fraction (``Rung.as_dict`` entries), next to the paper's."""
+    parts = ", ".join(f"{r['name']} {r['mean_recovered_fraction']:.2f}" for r in ladder)
+    return f"recovered fraction by path: {parts} (paper {paper})"
+
+
+def focus_of(sim: Simulation, applied: NDArray[np.float64], ideal_peak: float) -> Callable[[NDArray[np.float64]], float]:
+    """The recovered fraction of a per-element correction of the aberration ``applied``."""
+    def focus(correction: NDArray[np.float64]) -> float:
+        return recovered_fraction(float(sim.arfi_image(applied - np.asarray(correction)).max()), ideal_peak)
+
+    return focus
