@@ -235,7 +235,8 @@ class Simulation:
 
         With one group per element (``with_groups(n_elements)``, the CLI's ``--groups 1024``)
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
-        element, about a minute for 1024), warm-started by the estimate on the default 16 groups;
+        element, about 15 s for 1024), warm-started by the estimate on the default 16 groups (with a
+        prior, from the prediction);
         ``max_evaluations`` (default 500) bounds that fit. ``progress`` prints the basis
         marching to stderr.
 

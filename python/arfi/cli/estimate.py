@@ -24,7 +24,7 @@ def register(sub: Any) -> None:
     add_calibration(p)
     p.add_argument("--groups", type=int, default=16,
                    help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
-                   "phase per element on the element field basis (lbfgs only, about a minute of marching)")
+                   "phase per element on the element field basis (lbfgs only; about 15 s of marching for 1024 elements)")
     add_method(p, "lbfgs",
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)
