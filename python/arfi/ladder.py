@@ -69,8 +69,8 @@ def predicted_aberration(sim: Simulation, applied: NDArray[np.float64], seed: in
     return np.asarray(applied, dtype=np.float64) + sim.skull_phases(1000 + seed, **PREDICTION_ERROR)
 
 
-class _Rungs:
-    """Collects each rung's results over the repeats."""
+class Ladder:
+    """Collects each rung's results over the repeats of ``case`` (16 or 1024)."""
 
     def __init__(self, case: int) -> None:
         per_element = case == 1024
@@ -98,7 +98,7 @@ class _Rungs:
 
 def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.float64], images: list[NDArray[np.float64]],
           known: list[Any], acquire: Callable[[NDArray[np.float64]], NDArray[np.float64]], seed: int,
-          focus: Callable[[NDArray[np.float64]], float], rungs: _Rungs,
+          focus: Callable[[NDArray[np.float64]], float], rungs: Ladder,
           paper: tuple[float, bool, float] | None = None) -> None:
     """Runs the rungs for one repeat and adds them to ``rungs``. ``images``/``known``: the
     aberrated image and the diversity images with their known group phases; ``acquire(added)``:
@@ -125,14 +125,9 @@ def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.flo
     rungs.add(RUNGS[3], focus(prediction), False, 0.0)
 
     t = time.perf_counter()
-    data = (images, known) if case == 1024 else (images[:1], None)
-    est = fitted.estimate(data[0], data[1], method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD)
+    data, data_known = (images, known) if case == 1024 else (images[:1], None)
+    est = fitted.estimate(data, data_known, method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD)
     rungs.add(RUNGS[4], focus(est.phases_rad[fitted.groups]), est.ambiguous, time.perf_counter() - t)
-
-
-def new_rungs(case: int) -> _Rungs:
-    """An empty ladder for ``case`` (16 or 1024)."""
-    return _Rungs(case)
 
 
 def summary_line(ladder: list[dict[str, Any]], paper: float) -> str:

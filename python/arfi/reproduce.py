@@ -22,7 +22,7 @@ import numpy as np
 
 from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
-from arfi.ladder import EXTRA_IMAGES, Rung, climb, focus_of, new_rungs
+from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, focus_of
 from arfi.loop import loop2
 from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
@@ -32,6 +32,10 @@ from arfi.validate import as_count, as_number
 #: Largest first seed of a study: each acquisition's seed is derived from it (e.g. ``60_000 + 100·seed + k``)
 #: and must stay a 64-bit seed.
 MAX_STUDY_SEED = 10**17
+
+#: The paper's results per case (Vyas et al. 2014, Table 1 and text).
+PAPER = {16: {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
+         1024: {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10}}
 
 
 @dataclass
@@ -121,7 +125,7 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
     ideal = sim.arfi_image()
     rows: list[Row] = []
     runs: list[dict[str, Any]] = []
-    rungs = new_rungs(case)
+    rungs = Ladder(case)
     paper_faithful = method == "nelder-mead" and not diversity and not loop2_iterations
     for r in range(repeats):
         s = seed + r
@@ -176,8 +180,7 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         "mean_recovered_fraction": float(np.mean([r.recovered_fraction for r in rows])),
         "mean_gain": float(np.mean([r.gain for r in rows])),
         "mean_phase_error_rad": float(np.mean([r.phase_error_rad for r in rows])),
-        "paper": {"16": {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
-                  "1024": {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10}}[str(case)],
+        "paper": PAPER[case],
         "figures": figures,
         "ladder": [r.as_dict() for r in ladder_rungs],
         "seconds": time.perf_counter() - t_start,
@@ -208,7 +211,7 @@ def _ladder_figure(rungs: list[Rung], case: int, out: Path) -> str:
     ax.bar(x, [r.mean_recovered_fraction for r in rungs], color="0.6")
     for i, r in enumerate(rungs):
         ax.plot([i] * len(r.recovered_fractions), r.recovered_fractions, "k.")
-    ax.axhline({16: 0.83, 1024: 0.39}[case], color="r", ls="--", label="paper")
+    ax.axhline(PAPER[case]["recovered_fraction"], color="r", ls="--", label="paper")
     ax.set_xticks(x, [r.name.replace(" + ", "\n+ ").replace(" alone", "\nalone").replace(" (paper)", "\n(paper)") for r in rungs], fontsize=8)
     ax.set(ylabel="recovered fraction of the ideal focus", ylim=(0, 1.1), title=f"{case}-aberration: paths to a correction")
     ax.legend()
