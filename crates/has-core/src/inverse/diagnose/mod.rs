@@ -32,9 +32,9 @@ mod effects;
 mod forward;
 mod search;
 
+pub use effects::{Effect, Effects, FieldState, Parameter, Value, ValueKind, View, PARAMETERS, SLICE_REACH_MM};
 use forward::Forward;
 use search::{Context, Path};
-pub use effects::{Effect, Effects, FieldState, Parameter, Value, ValueKind, View, PARAMETERS, SLICE_REACH_MM};
 
 /// Evidence difference below which two candidates explain the data equally well (BIC units:
 /// "not worth more than a bare mention", Kass & Raftery 1995).
@@ -50,7 +50,6 @@ pub fn effect_images(sim: &Simulation, knowns: &[Vec<f64>], effects: &Effects) -
     }
     Ok(images)
 }
-
 
 /// Settings of the workflow.
 #[derive(Debug, Clone, PartialEq)]

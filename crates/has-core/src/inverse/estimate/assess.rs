@@ -150,12 +150,7 @@ fn focal(kernel: &ArfiKernel, phases: &[f64]) -> Result<f64> {
 
 /// Among `tries` seeded random group-phase patterns, the one whose added image best separates the candidates: it
 /// maximises the smallest `Σ (d_a - d_b)² / sigma²` over candidate pairs.
-pub fn propose_diversity(
-    model: &Model,
-    candidates: &[RivalSolution],
-    tries: usize,
-    seed: u64,
-) -> Result<(Vec<f64>, f64)> {
+pub fn propose_diversity(model: &Model, candidates: &[RivalSolution], tries: usize, seed: u64) -> Result<(Vec<f64>, f64)> {
     let g = model.cost.n_groups;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_d17e);
     let sigma2 = model.noise.powi(2).max(1e-30);

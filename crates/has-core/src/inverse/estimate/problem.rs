@@ -55,7 +55,13 @@ impl std::error::Error for EarlyStop {}
 
 impl<'a> Problem<'a> {
     /// `start` is reported when the run ends before its first evaluation (a limit already hit).
-    pub(super) fn new(cost: &'a dyn Objective, start: Vec<f64>, budget: usize, deadline: Option<Instant>, cancel: Option<&'a AtomicBool>) -> Self {
+    pub(super) fn new(
+        cost: &'a dyn Objective,
+        start: Vec<f64>,
+        budget: usize,
+        deadline: Option<Instant>,
+        cancel: Option<&'a AtomicBool>,
+    ) -> Self {
         let best = Mutex::new((f64::INFINITY, start, vec![]));
         Problem {
             cost,

@@ -159,7 +159,6 @@ fn argmin_error(e: argmin::core::Error) -> HasError {
     HasError::invalid("estimator", e.to_string())
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
