@@ -225,6 +225,7 @@ class Simulation:
         progress: bool = False,
         prior: ArrayLike | None = None,
         prior_std_rad: float | None = None,
+        prior_correlation_mm: float | None = None,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
@@ -247,7 +248,15 @@ class Simulation:
         plus a von Mises prior ``(1 - cos(phi - prior)) / prior_std_rad**2`` per phase. The prior
         fixes the common phase, rules out the twin that one image cannot, and ``ambiguous`` is
         judged on the posterior. ``cost`` stays the images' cost (paper Eq. 4);
-        ``posterior_cost`` is the minimised negative log posterior."""
+        ``posterior_cost`` is the minimised negative log posterior.
+
+        ``prior_correlation_mm``: the prediction's errors form a smooth field over the aperture,
+        correlated over this length (a CT-based prediction errs where skull thickness or sound
+        speed is misjudged, which varies over centimetres). A per-element estimate then corrects
+        the prediction by smooth fields only (a Gaussian random field of ``prior_std_rad`` per
+        phase, squared-exponential correlation, in the reduced-rank form of Solin & Särkkä 2020):
+        element-scale detail the images cannot resolve stays as predicted instead of being
+        fitted to noise. Group estimates keep the independent prior of the group means."""
         # A list (or a 3-D stack) of images, or one image.
         stack = isinstance(images, (list, tuple)) or (isinstance(images, np.ndarray) and images.ndim == 3)
         imgs = list(images) if stack else [images]  # type: ignore[arg-type]
@@ -265,8 +274,10 @@ class Simulation:
         n_starts = None if starts is None else as_count(starts, "starts", 1, 10_000)
         prior_array = as_phases(prior, "prior")
         std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad", 0.0, low_open=True)
+        length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm", 0.0, low_open=True)
         d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
-                                progress=bool(progress), prior=prior_array, prior_std_rad=std)
+                                progress=bool(progress), prior=prior_array, prior_std_rad=std,
+                                prior_correlation_mm=length)
         return Estimate(**d)
 
     def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,

@@ -49,6 +49,9 @@ def test_the_prior_makes_one_image_better_than_either_alone(sim, case):
     ({"prior": np.zeros(16), "prior_std_rad": float("inf")}, "prior_std_rad: must be a finite number > 0"),
     ({"prior": np.zeros(16)}, "prior_std_rad: is required with a prior"),
     ({"prior_std_rad": 0.5}, "prior_std_rad: was given without a prior"),
+    ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": 0.0}, "prior_correlation_mm: must be"),
+    ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": float("nan")}, "prior_correlation_mm: must be"),
+    ({"prior_correlation_mm": 15.0}, "prior_correlation_mm: was given without a prior"),
 ])
 def test_bad_priors_are_refused_naming_the_parameter(sim, ideal, kwargs, match):
     with pytest.raises(ValueError, match=match.replace("(", "\\(").replace(")", "\\)")):
@@ -82,6 +85,7 @@ def test_cli_estimate_with_a_prior_writes_prior_used(tmp_path, files, capsys):
     (["--prior", "{f}/prior.npy", "--prior-std-rad", "nan"], "prior_std_rad: must be a finite number > 0"),
     (["--prior", "{f}/prior.npy"], "prior_std_rad: is required with a prior"),
     (["--prior-std-rad", "0.5"], "prior_std_rad: was given without a prior"),
+    (["--prior", "{f}/prior.npy", "--prior-std-rad", "0.5", "--prior-correlation-mm", "-3"], "prior_correlation_mm: must be"),
     (["--prior", "{f}/missing.npy", "--prior-std-rad", "0.5"], "missing.npy"),
 ])
 def test_cli_bad_priors_are_one_line_exit_2_and_nothing_written(tmp_path, files, capsys, args, match):
@@ -103,5 +107,12 @@ def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
     for s, prior in ((0.3, truth), (0.5, sim.condense(truth))):
         e = el.estimate(images, prior=prior, prior_std_rad=s, max_evaluations=50)
         assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.underdetermined
+    # Errors as a smooth field (15 mm): the estimate corrects the prediction by smooth fields; a
+    # prediction that is the truth stays within its stated error (0.3 rad) of it.
+    e = el.estimate(images, prior=truth, prior_std_rad=0.3, prior_correlation_mm=15.0, max_evaluations=50)
+    assert e.prior_used and len(e.phases_rad) == sim.n_elements
+    assert phase_error(e.phases_rad, truth) < 0.3
+    with pytest.raises(ValueError, match="prior_correlation_mm: 0.010 mm is too short for 256 phases"):
+        el.estimate(images, prior=truth, prior_std_rad=0.3, prior_correlation_mm=0.01)
     with pytest.raises(ValueError, match="prior: has 5 values"):
         el.estimate(images, prior=np.zeros(5), prior_std_rad=0.5)

@@ -6,11 +6,12 @@ use crate::diagnose::{diagnosis_dict, effects_from_dict};
 use crate::error::{invalid, to_py};
 use crate::interrupt::run_interruptible;
 use crate::scenario::parse_scenario;
+use has_core::inverse::basis::BasisCache;
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
-use has_core::inverse::estimation::{estimate_aberration, EstimateRequest, Method};
+use has_core::inverse::estimation::{estimate_aberration_with, EstimateRequest, Method};
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
@@ -25,6 +26,15 @@ use std::sync::Arc;
 #[pyclass(module = "arfi._core", frozen)]
 pub(crate) struct CoreSimulation {
     inner: Simulation,
+    /// The element basis of the last per-element estimate, reused by the next one on the same
+    /// pixel box (the object is immutable, so the simulation cannot change under it).
+    basis: BasisCache,
+}
+
+impl From<Simulation> for CoreSimulation {
+    fn from(inner: Simulation) -> Self {
+        CoreSimulation { inner, basis: BasisCache::default() }
+    }
 }
 
 #[pymethods]
@@ -34,7 +44,7 @@ impl CoreSimulation {
     fn new(py: Python<'_>, text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Self> {
         let s = parse_scenario(text, format, base_dir)?;
         let inner = py.detach(|| Simulation::new(&s)).map_err(to_py)?;
-        Ok(CoreSimulation { inner })
+        Ok(inner.into())
     }
 
     #[getter]
@@ -173,7 +183,7 @@ impl CoreSimulation {
     /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
     fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
         let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;
-        Ok(CoreSimulation { inner })
+        Ok(inner.into())
     }
 
     /// The same simulation with another element → group map.
@@ -184,7 +194,7 @@ impl CoreSimulation {
         }
         let mut inner = self.inner.clone();
         inner.set_groups(g.iter().map(|&v| v as usize).collect()).map_err(to_py)?;
-        Ok(CoreSimulation { inner })
+        Ok(inner.into())
     }
 
     /// Skull-like per-element phases (rad), seeded: a smooth random screen over the aperture plus
@@ -273,7 +283,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -290,9 +300,15 @@ impl CoreSimulation {
         progress: bool,
         prior: Option<PyReadonlyArray1<'py, f64>>,
         prior_std_rad: Option<f64>,
+        prior_correlation_mm: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
         let prior = Prior::from_parts(prior.map(|p| p.as_array().to_vec()), prior_std_rad).map_err(to_py)?;
+        let prior = match (prior, prior_correlation_mm) {
+            (Some(p), Some(l)) => Some(p.with_correlation_length(l * 1e-3).map_err(to_py)?),
+            (None, Some(_)) => return Err(invalid("prior_correlation_mm", "was given without a prior")),
+            (p, None) => p,
+        };
         let request = EstimateRequest {
             method: Method::parse(method).map_err(to_py)?,
             max_evaluations,
@@ -309,8 +325,10 @@ impl CoreSimulation {
             }
         };
         let cancel = AtomicBool::new(false);
-        let r = run_interruptible(py, &cancel, || estimate_aberration(&self.inner, &measurements, &request, Some(&cancel), Some(&report)))?
-            .map_err(to_py)?;
+        let r = run_interruptible(py, &cancel, || {
+            estimate_aberration_with(&self.inner, &measurements, &request, &self.basis, Some(&cancel), Some(&report))
+        })?
+        .map_err(to_py)?;
         let (e, a, model) = (&r.estimate, &r.assessment, &r.model);
         let d = PyDict::new(py);
         d.set_item("n_pixels", r.n_pixels)?;

@@ -1,13 +1,14 @@
 //! Per-element estimation on the field basis (issue 3: `--groups` = number of elements), on a
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
-use has_core::inverse::basis::build_element_model;
+use has_core::inverse::basis::{build_element_model, BasisCache};
 use has_core::inverse::cost::{build_model, Measurement, Objective};
 use has_core::inverse::estimate::{condense, Estimator};
 use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
+use std::sync::Arc;
 
 fn peak(img: &Array2<f64>) -> f64 {
     img.iter().copied().fold(f64::MIN, f64::max)
@@ -89,4 +90,18 @@ fn element_basis_images_gradient_and_estimate() {
     println!("aberrated {:.3}, best 16-group {best16:.3}, per-element {per_element:.3}, cost {:.2e}", recovered(&vec![0.0; n]), e.cost);
     assert_eq!(e.phases.len(), n);
     assert!(per_element > best16 + 0.05, "per-element {per_element:.3} vs best 16-group {best16:.3}");
+}
+
+#[test]
+fn a_basis_cache_reuses_the_basis_for_the_same_pixel_box_only() {
+    // The basis depends on the simulation and the pixel box: the same images give the same box
+    // and the kept basis (the same allocation); another box is built anew.
+    let sim = small_array();
+    let (_, ms) = study(&sim, 2);
+    let cache = BasisCache::default();
+    let a = cache.element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
+    let b = cache.element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
+    assert!(Arc::ptr_eq(&a.cost.basis, &b.cost.basis));
+    let c = cache.element_model(&sim, &ms, sim.mask_fraction, 2, None, None).unwrap();
+    assert!(!Arc::ptr_eq(&a.cost.basis, &c.cost.basis) && c.cost.basis.sampler.pixels != a.cost.basis.sampler.pixels);
 }

@@ -39,6 +39,9 @@ def register(sub: Any) -> None:
                    "estimate is then the posterior optimum")
     p.add_argument("--prior-std-rad", type=float, dest="prior_std_rad", metavar="S",
                    help="expected error of each predicted phase (rad); required with --prior")
+    p.add_argument("--prior-correlation-mm", type=float, dest="prior_correlation_mm", metavar="L",
+                   help="the prediction's errors are a smooth field correlated over L mm (per-element estimates then "
+                   "correct the prediction by smooth fields only; default: independent errors)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
     add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
@@ -55,12 +58,15 @@ def run(args: argparse.Namespace) -> int:
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
-                     progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad)
+                     progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
+                     prior_correlation_mm=args.prior_correlation_mm)
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
-          + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase), ambiguity judged on the posterior" if e.prior_used else ""))
+          + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
+             + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
+             + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.underdetermined:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")

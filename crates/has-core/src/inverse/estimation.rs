@@ -4,11 +4,12 @@
 //! the answer (ambiguity, misfit). What the CLI, the Python API and Rust users run.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::{build_element_model, known_per_element};
+use crate::inverse::basis::{known_per_element, BasisCache};
 use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
 use crate::inverse::estimate::{Assessment, Estimate, Estimator};
-use crate::inverse::phase::point_reflection;
+use crate::inverse::phase::{point_reflection, wrap};
 use crate::inverse::prior::{Posterior, Prior};
+use crate::inverse::smooth_prior::SmoothPosterior;
 use crate::simulation::Simulation;
 use std::sync::atomic::AtomicBool;
 
@@ -145,9 +146,22 @@ pub fn estimate_aberration(
     cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
+    estimate_aberration_with(sim, measurements, request, &BasisCache::default(), cancel, progress)
+}
+
+/// [`estimate_aberration`] keeping the element basis of a per-element estimate in `basis` for
+/// the next estimate on the same simulation (see [`BasisCache`]).
+pub fn estimate_aberration_with(
+    sim: &Simulation,
+    measurements: &[Measurement],
+    request: &EstimateRequest,
+    basis: &BasisCache,
+    cancel: Option<&AtomicBool>,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+) -> Result<EstimateReport> {
     if per_element(sim) {
         let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
-        return estimate_per_element(sim, measurements, request, prior, cancel, progress);
+        return estimate_per_element(sim, measurements, request, prior, basis, cancel, progress);
     }
     if sim.n_groups > MAX_KERNEL_GROUPS {
         return Err(HasError::invalid(
@@ -228,7 +242,11 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
         HasError::InvalidParameter { reason, .. } => HasError::invalid("prior", reason),
         e => e,
     })?;
-    Prior::new(mean, prior.std_rad())
+    let spread = Prior::new(mean, prior.std_rad())?;
+    match prior.correlation_length() {
+        Some(l) => spread.with_correlation_length(l),
+        None => Ok(spread),
+    }
 }
 
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
@@ -240,6 +258,7 @@ fn estimate_per_element(
     measurements: &[Measurement],
     request: &EstimateRequest,
     prior: Option<Prior>,
+    basis: &BasisCache,
     cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
@@ -269,19 +288,21 @@ fn estimate_per_element(
         Some(p) => p.mean().to_vec(),
         None => grouped.element_phases(&group.phases)?,
     };
-    let mut model = build_element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
+    let mut model = basis.element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
     model.cost.fit_scale = request.fit_scale;
-    let posterior = prior.as_ref().map(|p| Posterior::new(&model.cost, model.noise, p)).transpose()?;
-    let objective: &dyn Objective = match &posterior {
-        Some(p) => p,
-        None => &model.cost,
-    };
-    let elements = Estimator::lbfgs()
+    let search = Estimator::lbfgs()
         .with_starts(1)?
         .with_max_evaluations(request.max_evaluations.unwrap_or(500))?
-        .with_time_limit_opt(warm.time_limit)
-        .with_start(start)?
-        .run(objective, cancel)?;
+        .with_time_limit_opt(warm.time_limit);
+    let elements = match &prior {
+        Some(p) if p.correlation_length().is_some() => {
+            let smooth = SmoothPosterior::new(&model.cost, model.noise, p, &positions(sim))?;
+            let e = search.with_start(vec![0.0; smooth.n_modes()])?.run(&smooth, cancel)?;
+            e.map_phases(|a| smooth.phases(a).into_iter().map(wrap).collect())
+        }
+        Some(p) => search.with_start(start)?.run(&Posterior::new(&model.cost, model.noise, p)?, cancel)?,
+        None => search.with_start(start)?.run(&model.cost, cancel)?,
+    };
     let n_pixels = model.cost.n_pixels();
     // One image's masked pixels cannot determine more phases than they number (without a prior).
     let underdetermined = prior.is_none() && n_pixels < sim.n_elements();

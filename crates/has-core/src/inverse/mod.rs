@@ -9,3 +9,4 @@ pub mod estimate;
 pub mod estimation;
 pub mod phase;
 pub mod prior;
+pub mod smooth_prior;

@@ -27,6 +27,8 @@ pub const MIN_NOISE_RAD: f64 = 1e-4;
 pub struct Prior {
     mean: Vec<f64>,
     std_rad: f64,
+    /// Length over which the errors are correlated (m); none: independent per phase.
+    correlation_length: Option<f64>,
 }
 
 impl Prior {
@@ -42,7 +44,24 @@ impl Prior {
         if !(std_rad.is_finite() && std_rad > 0.0) {
             return Err(HasError::invalid("prior_std_rad", format!("must be a finite number > 0, got {std_rad}")));
         }
-        Ok(Prior { mean, std_rad })
+        Ok(Prior { mean, std_rad, correlation_length: None })
+    }
+
+    /// The same prior with errors that form a smooth field over the aperture, correlated over
+    /// `length_m` (m, finite, > 0): per-element estimates then search the smooth corrections of
+    /// the prediction (see [`crate::inverse::smooth_prior`]); group estimates keep the
+    /// independent prior of the group means.
+    pub fn with_correlation_length(mut self, length_m: f64) -> Result<Self> {
+        if !(length_m.is_finite() && length_m > 0.0) {
+            return Err(HasError::invalid("prior_correlation_mm", format!("must be a finite number > 0, got {}", length_m * 1e3)));
+        }
+        self.correlation_length = Some(length_m);
+        Ok(self)
+    }
+
+    /// The length over which the errors are correlated (m), if they are.
+    pub fn correlation_length(&self) -> Option<f64> {
+        self.correlation_length
     }
 
     /// The prior of optional parts as a caller gives them: none without `mean`; a `mean` needs
@@ -51,7 +70,9 @@ impl Prior {
         match (mean, std_rad) {
             (None, None) => Ok(None),
             (Some(m), Some(s)) => Prior::new(m, s).map(Some),
-            (Some(_), None) => Err(HasError::invalid("prior_std_rad", "is required with a prior: the expected error of each predicted phase (rad)")),
+            (Some(_), None) => {
+                Err(HasError::invalid("prior_std_rad", "is required with a prior: the expected error of each predicted phase (rad)"))
+            }
             (None, Some(_)) => Err(HasError::invalid("prior_std_rad", "was given without a prior")),
         }
     }

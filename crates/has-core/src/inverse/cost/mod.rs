@@ -32,6 +32,11 @@ pub trait Objective: Sync {
     fn sees_common_phase(&self) -> bool {
         false
     }
+    /// Whether the parameters are phases (rad, periodic; reported wrapped to (-pi, pi]). False
+    /// for coefficients of a linear parametrisation, which are searched and reported as they are.
+    fn periodic(&self) -> bool {
+        true
+    }
 }
 
 /// One measured image as the cost sees it: a kernel, the measured values on the masked pixels,

@@ -275,7 +275,7 @@ impl Estimator {
         }
         let best = runs[0].params.clone();
         while second.len() < starts {
-            second.push(best.iter().map(|b| wrap(b + rng.random_range(-1.0..1.0))).collect());
+            second.push(best.iter().map(|b| frame.step(*b, rng.random_range(-1.0..1.0))).collect());
         }
         second
     }
@@ -309,6 +309,18 @@ pub struct Estimate {
     pub minima: Vec<Minimum>,
 }
 
+impl Estimate {
+    /// The same estimate with its parameters (the best and every run's minimum) mapped to
+    /// phases by `f`: for searches over coefficients of a parametrisation of the phases.
+    pub fn map_phases(mut self, f: impl Fn(&[f64]) -> Vec<f64>) -> Self {
+        self.phases = f(&self.phases);
+        for m in &mut self.minima {
+            m.phases = f(&m.phases);
+        }
+        self
+    }
+}
+
 pub(super) struct Run {
     params: Vec<f64>,
     cost: f64,
@@ -326,12 +338,16 @@ pub(super) enum Frame {
     /// The cost sees the common phase (a prior anchors it): every phase is searched, and
     /// reported wrapped to (-pi, pi].
     Absolute,
+    /// The parameters are coefficients, not phases: searched and reported as they are.
+    Linear,
 }
 
 impl Frame {
     /// The frame `cost` needs.
     pub(super) fn of(cost: &dyn Objective) -> Self {
-        if cost.sees_common_phase() {
+        if !cost.periodic() {
+            Frame::Linear
+        } else if cost.sees_common_phase() {
             Frame::Absolute
         } else {
             Frame::Relative
@@ -342,7 +358,7 @@ impl Frame {
     pub(super) fn dims(self, g: usize) -> usize {
         match self {
             Frame::Relative => g - 1,
-            Frame::Absolute => g,
+            Frame::Absolute | Frame::Linear => g,
         }
     }
 
@@ -350,7 +366,7 @@ impl Frame {
     pub(super) fn search(self, phases: &[f64]) -> Vec<f64> {
         match self {
             Frame::Relative => phases[1..].iter().map(|p| wrap(p - phases[0])).collect(),
-            Frame::Absolute => phases.to_vec(),
+            Frame::Absolute | Frame::Linear => phases.to_vec(),
         }
     }
 
@@ -358,7 +374,7 @@ impl Frame {
     pub(super) fn phases(self, x: &[f64]) -> Vec<f64> {
         match self {
             Frame::Relative => std::iter::once(0.0).chain(x.iter().copied()).collect(),
-            Frame::Absolute => x.to_vec(),
+            Frame::Absolute | Frame::Linear => x.to_vec(),
         }
     }
 
@@ -367,6 +383,15 @@ impl Frame {
         match self {
             Frame::Relative => centred(&self.phases(x)),
             Frame::Absolute => x.iter().map(|&p| wrap(p)).collect(),
+            Frame::Linear => x.to_vec(),
+        }
+    }
+
+    /// Parameter `x` moved by `d` (wrapped when it is a phase).
+    pub(super) fn step(self, x: f64, d: f64) -> f64 {
+        match self {
+            Frame::Linear => x + d,
+            _ => wrap(x + d),
         }
     }
 
@@ -378,7 +403,6 @@ impl Frame {
         g
     }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -401,5 +425,4 @@ mod tests {
             assert_eq!(method.run(&cost, Some(&cancel)).unwrap().stop, Stop::Interrupted);
         }
     }
-
 }
