@@ -76,6 +76,7 @@ def test_cli_estimate_with_a_prior_writes_prior_used(tmp_path, files, capsys):
     assert "with the prior" in capsys.readouterr().out
     d = json.loads(out.read_text())
     assert d["prior_used"] is True and len(d["phases_rad"]) == 16 and d["posterior_cost"] > 0
+    assert d["prior_std_rad"] == 0.6 and d["prior_correlation_mm"] is None
 
 
 @pytest.mark.parametrize("args, match", [

@@ -252,7 +252,10 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
 /// the prior's group means); the group estimate spread to the elements (with a prior, the
 /// prediction itself) starts L-BFGS on the element basis, at most `max_evaluations` (default
-/// 500). The assessment is that of the group stage. `prior`: one predicted phase per element.
+/// 500). With a prior whose errors are correlated ([`Prior::with_correlation_length`]) the
+/// element stage searches only smooth corrections of the prediction
+/// ([`SmoothPosterior`]). The assessment is that of the group stage. `prior`: one predicted
+/// phase per element.
 fn estimate_per_element(
     sim: &Simulation,
     measurements: &[Measurement],
