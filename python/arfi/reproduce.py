@@ -22,7 +22,7 @@ import numpy as np
 
 from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
-from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, focus_of
+from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, defocused_images, focus_of
 from arfi.loop import loop2
 from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
@@ -165,7 +165,10 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         if ladder:
             say(f"repeat {r + 1}/{repeats}: the ladder (loop 2, diversity, prediction, prediction + MR-ARFI)")
             paper = (rows[-1].recovered_fraction, rows[-1].ambiguous, rows[-1].seconds) if paper_faithful else None
-            climb(sim, model, case, applied, *study_images(sim, applied, noise, s, EXTRA_IMAGES), _acquirer(sim, applied, noise, s),
+            images, known = study_images(sim, applied, noise, s, EXTRA_IMAGES)
+            if case == 1024:
+                images, known = defocused_images(sim, applied, images[0], noise, s)
+            climb(sim, model, case, applied, images, known, _acquirer(sim, applied, noise, s),
                   s, focus_of(sim, applied, float(ideal.max())), rungs, paper)
     say("drawing figures")
     out.mkdir(parents=True, exist_ok=True)

@@ -189,6 +189,20 @@ class Simulation:
         the paper's 16-aberration case."""
         return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
 
+    def focus_shift_phases(self, shift_mm: ArrayLike) -> NDArray[np.float64]:
+        """Known per-element phases (rad) that move the focus by ``shift_mm`` (x, y, z in the
+        transducer frame, mm): the steering phases for the shifted target minus the current ones.
+        Added to an acquisition (``arfi_image(aberration + p)``, ``arfi simulate --known-phases``)
+        they give a displaced or, along z, a defocused diversity image: the classic phase-diversity
+        choice (Gonsalves 1982). Per element, with a prediction as smooth prior, three defocused
+        images (focus moved by +5, -5 and +10 mm) recovered 0.87–0.91 of the ideal focus (mean
+        0.885, seeds 1–5) where three images with random group phases recovered 0.80–0.88 (mean
+        0.85), measured 2026-11-24."""
+        a = np.asarray(shift_mm, dtype=np.float64) if not isinstance(shift_mm, str) else np.array([np.nan])
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"shift_mm: must be three finite numbers (x, y, z in mm), got {shift_mm!r}")
+        return self._core.focus_shift_phases((float(a[0]), float(a[1]), float(a[2])))
+
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
         """Added phases, one per element or one per group, as one per element. Errors name ``name``."""
         a = as_phases(phases, name)
@@ -238,7 +252,7 @@ class Simulation:
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
         element, about 15 s for 1024), warm-started by the estimate on the default 16 groups (with a
         prior, from the prediction);
-        ``max_evaluations`` (default 500) bounds that fit. ``progress`` prints the basis
+        ``max_evaluations`` (default 200) bounds that fit. ``progress`` prints the basis
         marching to stderr.
 
         ``prior``: a predicted aberration (e.g. from a CT-based skull simulation), one phase per

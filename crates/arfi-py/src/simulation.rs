@@ -197,6 +197,14 @@ impl CoreSimulation {
         Ok(inner.into())
     }
 
+    /// Known per-element phases (rad) that move the focus by `shift_mm` (x, y, z in the
+    /// transducer frame, mm): a displaced or defocused diversity acquisition.
+    fn focus_shift_phases<'py>(&self, py: Python<'py>, shift_mm: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let shift = shift_mm.map(|v| v * 1e-3);
+        let phases = self.inner.focus_shift_phases(shift).map_err(|e| invalid("shift_mm", e.to_string()))?;
+        Ok(phases.into_pyarray(py))
+    }
+
     /// Skull-like per-element phases (rad), seeded: a smooth random screen over the aperture plus
     /// per-element jitter.
     #[pyo3(signature = (seed, correlation_length_mm=12.0, peak_to_peak_rad=6.0, jitter_rad=0.5))]

@@ -5,6 +5,7 @@
 //! only the ARFI images, fits and diagnoses report why they cannot be made.
 
 use crate::error::{HasError, Result};
+use crate::inverse::phase::wrap;
 use crate::memory;
 use crate::physics::grid::{fft_friendly, Grid};
 use crate::physics::medium::{Material, Medium};
@@ -238,6 +239,19 @@ impl Simulation {
     /// Number of elements.
     pub fn n_elements(&self) -> usize {
         self.steering.len()
+    }
+
+    /// Known phases (rad, one per element) that move the focus by `shift` (m, transducer frame):
+    /// the steering phases for `focus + shift` minus the current ones. Added to an
+    /// acquisition they give a displaced or, along the axis, defocused diversity image: the
+    /// classic phase-diversity choice (Gonsalves, Opt. Eng. 21, 829, 1982). A defocused image
+    /// spreads the beam over more pixels while keeping it bright, and it tells an aberration
+    /// from its twin, so it carries more information per image than random group phases.
+    pub fn focus_shift_phases(&self, shift: [f64; 3]) -> Result<Vec<f64>> {
+        crate::error::require_finite("shift", &shift)?;
+        let target = [self.focus[0] + shift[0], self.focus[1] + shift[1], self.focus[2] + shift[2]];
+        let moved = steering_phases(&self.transducer, &self.medium, self.frequency, target)?;
+        Ok(moved.iter().zip(&self.steering).map(|(m, s)| wrap(m - s)).collect())
     }
 
     /// Expands added phases (rad), one per element or one per group, to one per element.

@@ -45,13 +45,19 @@ impl Method {
     }
 }
 
+/// Default evaluation limit of the per-element search. Measured 2026-11-24 without a prior (1024
+/// elements, 4 images, seeds 0–2): after 150 evaluations the best point's recovered focus
+/// changed by at most 0.01 and its cost by under 1 % (the images do not determine more); with a
+/// prior the search converges in 50–160.
+pub const ELEMENT_EVALUATIONS: usize = 200;
+
 /// What to estimate with: the method and its limits (each `None`: the method's default).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EstimateRequest {
     /// The search method and its settings.
     pub method: Method,
     /// Evaluation limit (defaults: Nelder–Mead and particle swarm 8000, L-BFGS 40 000 over all
-    /// starts, per element 500 on the element basis).
+    /// starts, per element [`ELEMENT_EVALUATIONS`] on the element basis).
     pub max_evaluations: Option<usize>,
     /// Wall-clock limit per stage (s).
     pub time_limit_s: Option<f64>,
@@ -252,7 +258,7 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
 /// the prior's group means); the group estimate spread to the elements (with a prior, the
 /// prediction itself) starts L-BFGS on the element basis, at most `max_evaluations` (default
-/// 500). With a prior whose errors are correlated ([`Prior::with_correlation_length`]) the
+/// [`ELEMENT_EVALUATIONS`]). With a prior whose errors are correlated ([`Prior::with_correlation_length`]) the
 /// element stage searches only smooth corrections of the prediction
 /// ([`SmoothPosterior`]). The assessment is that of the group stage. `prior`: one predicted
 /// phase per element.
@@ -295,7 +301,7 @@ fn estimate_per_element(
     model.cost.fit_scale = request.fit_scale;
     let search = Estimator::lbfgs()
         .with_starts(1)?
-        .with_max_evaluations(request.max_evaluations.unwrap_or(500))?
+        .with_max_evaluations(request.max_evaluations.unwrap_or(ELEMENT_EVALUATIONS))?
         .with_time_limit_opt(warm.time_limit);
     let elements = match &prior {
         Some(p) if p.correlation_length().is_some() => {
