@@ -84,6 +84,21 @@ def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):
     np.testing.assert_allclose(image, sim.arfi_image(np.linspace(-1, 1, 16)), atol=1e-6)
 
 
+def test_simulate_focus_shift_records_per_element_known_phases(tmp_path):
+    # A defocused diversity image: the focus-shift phases plus any --known-phases, per element, in
+    # the sidecar; the image is the one the Python API gives for the same phases.
+    known = tmp_path / "known.txt"
+    known.write_text("\n".join(str(v) for v in np.linspace(-1, 1, 16)))
+    out = tmp_path / "d.nii.gz"
+    assert main(["simulate", "--focus-shift-mm", "0", "0", "5", "--known-phases", str(known), "--noise-rad", "0",
+                 "--out", str(out)]) == 0
+    image, _, side = arfi.read_arfi_image(out)
+    sim = arfi.Simulation()
+    expected = sim.element_phases(np.linspace(-1, 1, 16)) + sim.focus_shift_phases((0.0, 0.0, 5.0))
+    np.testing.assert_allclose(side["applied_phases_rad"], expected)
+    np.testing.assert_allclose(image, sim.arfi_image(expected), atol=1e-6)
+
+
 def test_field_writes_the_documented_npz_keys(tmp_path):
     out = tmp_path / "f.npz"
     assert main(["field", "--z-mm", "60", "--out", str(out)]) == 0
@@ -106,6 +121,7 @@ def test_field_writes_the_documented_npz_keys(tmp_path):
         ("nan\n" * 16, ["simulate", "--phases", "{d}/s.toml", "--out", "{d}/x.nii.gz"], "NaN"),
         (None, ["simulate", "--noise-rad", "-1", "--out", "{d}/x.nii.gz"], "noise_rad: must be a finite number >= 0"),
         (None, ["simulate", "--out", "{d}/x.png"], ".nii"),
+        (None, ["simulate", "--focus-shift-mm", "0", "0", "nan", "--out", "{d}/x.nii.gz"], "--focus-shift-mm: must be three finite numbers"),
         (None, ["field", "--z-mm", "900", "--out", "{d}/x.npz"], "z_mm"),
         (None, ["estimat"], "invalid choice"),
     ],

@@ -21,6 +21,10 @@ def register(sub: Any) -> None:
     p.add_argument("--phases", metavar="P", help="unknown aberration (rad) added to the steering (not recorded in the sidecar)")
     p.add_argument("--known-phases", metavar="P", dest="known_phases",
                    help="known diversity phases (rad) added to the steering and recorded as applied_phases_rad in the sidecar")
+    p.add_argument("--focus-shift-mm", type=float, nargs=3, dest="focus_shift_mm", metavar=("DX", "DY", "DZ"),
+                   help="known diversity phases that move the focus by (DX, DY, DZ) mm, e.g. 0 0 5 for a defocused image "
+                   "(more informative than random group phases for per-element estimates); added to --known-phases and "
+                   "recorded with them, per element, as applied_phases_rad")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--out", required=True, metavar="M.nii.gz")
@@ -35,6 +39,12 @@ def run(args: argparse.Namespace) -> int:
     sim = Simulation(load_scenario(args))
     aberration = read_optional_phases(args.phases, "--phases")
     known = read_optional_phases(args.known_phases, "--known-phases")
+    if args.focus_shift_mm is not None:
+        try:
+            shift = sim.focus_shift_phases(args.focus_shift_mm)
+        except ValueError as e:
+            raise ValueError("--focus-shift-mm" + str(e)[len("shift_mm"):]) from None
+        known = shift if known is None else sim.element_phases(known, "--known-phases") + shift
     total = None
     for p in (aberration, known):
         if p is not None:
