@@ -165,9 +165,11 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         if ladder:
             say(f"repeat {r + 1}/{repeats}: the ladder (loop 2, diversity, prediction, prediction + MR-ARFI)")
             paper = (rows[-1].recovered_fraction, rows[-1].ambiguous, rows[-1].seconds) if paper_faithful else None
-            images, known = study_images(sim, applied, noise, s, EXTRA_IMAGES)
+            # The same aberrated image as the study's; its diversity images when they are the ladder's.
             if case == 1024:
-                images, known = defocused_images(sim, applied, images[0], noise, s)
+                images, known = defocused_images(sim, applied, measured, noise, s)
+            elif diversity != EXTRA_IMAGES:
+                images, known = study_images(sim, applied, noise, s, EXTRA_IMAGES)
             climb(sim, model, case, applied, images, known, _acquirer(sim, applied, noise, s),
                   s, focus_of(sim, applied, float(ideal.max())), rungs, paper)
     say("drawing figures")

@@ -198,7 +198,7 @@ class Simulation:
         images (focus moved by +5, -5 and +10 mm) recovered 0.87–0.91 of the ideal focus (mean
         0.885, seeds 1–5) where three images with random group phases recovered 0.80–0.88 (mean
         0.85), measured 2026-11-24."""
-        a = np.asarray(shift_mm, dtype=np.float64) if not isinstance(shift_mm, str) else np.array([np.nan])
+        a = real_array(shift_mm, "shift_mm")
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise ValueError(f"shift_mm: must be three finite numbers (x, y, z in mm), got {shift_mm!r}")
         return self._core.focus_shift_phases((float(a[0]), float(a[1]), float(a[2])))

@@ -248,11 +248,7 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
         HasError::InvalidParameter { reason, .. } => HasError::invalid("prior", reason),
         e => e,
     })?;
-    let spread = Prior::new(mean, prior.std_rad())?;
-    match prior.correlation_length() {
-        Some(l) => spread.with_correlation_length(l),
-        None => Ok(spread),
-    }
+    prior.with_mean(mean)
 }
 
 /// Per-element estimation: the array's default groups are fitted first (the same method, and

@@ -59,6 +59,12 @@ impl Prior {
         Ok(self)
     }
 
+    /// The same prior (expected error, correlation) on other predicted phases `mean`, checked
+    /// as [`Prior::new`] checks them.
+    pub fn with_mean(&self, mean: Vec<f64>) -> Result<Self> {
+        Ok(Prior { correlation_length: self.correlation_length, ..Prior::new(mean, self.std_rad)? })
+    }
+
     /// The length over which the errors are correlated (m), if they are.
     pub fn correlation_length(&self) -> Option<f64> {
         self.correlation_length
@@ -109,6 +115,13 @@ impl Prior {
     }
 }
 
+/// The weight `1/(2·sigma²)` of an image cost `J` as a Gaussian log likelihood at noise floor
+/// `noise_rad` (at least [`MIN_NOISE_RAD`]; a non-finite floor counts as that minimum).
+pub(crate) fn likelihood_weight(noise_rad: f64) -> f64 {
+    let sigma = if noise_rad.is_finite() { noise_rad.max(MIN_NOISE_RAD) } else { MIN_NOISE_RAD };
+    0.5 / (sigma * sigma)
+}
+
 /// The negative log posterior `U = J/(2·sigma²) + kappa·Σ(1 - cos(phi - mu))` of an image cost
 /// `J` (see the module docs). Its minimum is the estimate with the prior.
 pub struct Posterior<'a> {
@@ -126,8 +139,7 @@ impl<'a> Posterior<'a> {
         if prior.mean.len() != n {
             return Err(HasError::invalid("prior", format!("has {} values; the estimate has {n} phases", prior.mean.len())));
         }
-        let sigma = if noise_rad.is_finite() { noise_rad.max(MIN_NOISE_RAD) } else { MIN_NOISE_RAD };
-        Ok(Posterior { likelihood, prior, weight: 0.5 / (sigma * sigma) })
+        Ok(Posterior { likelihood, prior, weight: likelihood_weight(noise_rad) })
     }
 
     /// The image cost `J` at `phases` (rad²).

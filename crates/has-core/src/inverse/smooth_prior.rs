@@ -23,7 +23,8 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Objective;
-use crate::inverse::prior::{Prior, MIN_NOISE_RAD};
+use crate::inverse::prior::{likelihood_weight, Prior};
+use crate::physics::aberration::lateral_bounds;
 use std::f64::consts::PI;
 
 /// Relative spectral weight below which a mode is dropped (its share of the field's variance is
@@ -35,13 +36,7 @@ pub const MODE_CUTOFF: f64 = 1e-4;
 /// `positions` (x, y used; m). Refused when it needs more modes than there are positions (the
 /// field is then no smoother than independent errors).
 pub fn error_modes(positions: &[[f64; 3]], std_rad: f64, length: f64) -> Result<Vec<Vec<f64>>> {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in positions {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    let (lo, hi) = lateral_bounds(positions);
     let half = [0.5 * (hi[0] - lo[0]) + 2.0 * length, 0.5 * (hi[1] - lo[1]) + 2.0 * length];
     let centre = [0.5 * (hi[0] + lo[0]), 0.5 * (hi[1] + lo[1])];
     // s(w)/s(0) >= MODE_CUTOFF  <=>  ℓ·w <= sqrt(-2 ln MODE_CUTOFF).
@@ -87,7 +82,7 @@ pub struct SmoothPosterior<'a> {
 
 impl<'a> SmoothPosterior<'a> {
     /// The posterior of image cost `likelihood` (noise floor `noise_rad`, at least
-    /// [`MIN_NOISE_RAD`]) under `prior`, which must have a correlation length, with one prior
+    /// [`crate::inverse::prior::MIN_NOISE_RAD`]) under `prior`, which must have a correlation length, with one prior
     /// phase per phase of the cost at `positions`.
     pub fn new(likelihood: &'a dyn Objective, noise_rad: f64, prior: &Prior, positions: &[[f64; 3]]) -> Result<Self> {
         let n = likelihood.n_phases();
@@ -97,8 +92,7 @@ impl<'a> SmoothPosterior<'a> {
         let length =
             prior.correlation_length().ok_or_else(|| HasError::invalid("prior_correlation_mm", "is required for a smooth prior"))?;
         let modes = error_modes(positions, prior.std_rad(), length)?;
-        let sigma = if noise_rad.is_finite() { noise_rad.max(MIN_NOISE_RAD) } else { MIN_NOISE_RAD };
-        Ok(SmoothPosterior { likelihood, mean: prior.mean().to_vec(), modes, weight: 0.5 / (sigma * sigma) })
+        Ok(SmoothPosterior { likelihood, mean: prior.mean().to_vec(), modes, weight: likelihood_weight(noise_rad) })
     }
 
     /// Number of smooth modes searched.

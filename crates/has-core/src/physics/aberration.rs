@@ -12,6 +12,18 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+/// The lateral bounding box of `positions`: the smallest and largest x and y (m).
+pub fn lateral_bounds(positions: &[[f64; 3]]) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in positions {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
 /// Parameters of the screen (SI: metres, radians).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SkullScreen {
@@ -37,13 +49,7 @@ impl SkullScreen {
         require_non_negative("peak_to_peak", self.peak_to_peak)?;
         require_non_negative("jitter", self.jitter)?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in positions {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = lateral_bounds(positions);
         let l = self.correlation_length;
         let (x0, x1, y0, y1) = (lo[0] - 2.0 * l, hi[0] + 2.0 * l, lo[1] - 2.0 * l, hi[1] + 2.0 * l);
         let bumps = (4.0 * (x1 - x0) * (y1 - y0) / (l * l)).ceil() as usize;
