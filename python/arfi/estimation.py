@@ -66,6 +66,10 @@ class Estimate:
     """A predicted aberration entered the estimate (the posterior optimum; ``ambiguous`` judged on the posterior)."""
     posterior_cost: float | None = None
     """With a prior: the minimised negative log posterior, ``cost / (2·noise_floor²) + Σ (1 - cos(phi - prior)) / prior_std_rad²``."""
+    nuisance: dict[str, Any] | None = None
+    """Per-element estimates that fitted nuisance parameters (``fit_nuisance``): ``fitted`` (their names), ``scale``,
+    ``broadening_width_mm``, ``shift_mm`` (u, v), and per image ``background_offset_rad`` and
+    ``background_slope_rad_per_mm`` (u, v); the model's values for those not fitted."""
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,7 @@ from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
-from arfi.validate import as_count, as_image, as_number, as_phases, real_array
+from arfi.validate import as_count, as_image, as_number, as_phases, nuisance_names, real_array
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
@@ -240,6 +241,7 @@ class Simulation:
         prior: ArrayLike | None = None,
         prior_std_rad: float | None = None,
         prior_correlation_mm: float | None = None,
+        fit_nuisance: str | Sequence[str] | None = None,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
@@ -270,7 +272,18 @@ class Simulation:
         the prediction by smooth fields only (a Gaussian random field of ``prior_std_rad`` per
         phase, squared-exponential correlation, in the reduced-rank form of Solin & Särkkä 2020):
         element-scale detail the images cannot resolve stays as predicted instead of being
-        fitted to noise. Group estimates keep the independent prior of the group means."""
+        fitted to noise. Group estimates keep the independent prior of the group means.
+
+        ``fit_nuisance``: what else the images may differ in from this model, fitted jointly with
+        per-element phases (names as ``diagnose`` reports them, a list or a comma-separated
+        string, or ``"all"``): ``"amplitude"`` (one scale for all images, as ``fit_amplitude``),
+        ``"background_phase"`` (per image an offset and a linear ramp, fitted on every pixel
+        around the focal zone), ``"broadening"`` (the width W) and ``"registration_shift"``
+        (an in-plane offset of the images; per element it trades with a tilt of the phases, which
+        steers the focus, so prefer registering the images on a calibration image). The scale and
+        backgrounds are solved in every evaluation; W and the shift alternate with the phase
+        search. The fitted values are in ``nuisance``; ``misfit`` is then judged on the fit with
+        them. Group estimates fit the amplitude only."""
         # A list (or a 3-D stack) of images, or one image.
         stack = isinstance(images, (list, tuple)) or (isinstance(images, np.ndarray) and images.ndim == 3)
         imgs = list(images) if stack else [images]  # type: ignore[arg-type]
@@ -289,9 +302,10 @@ class Simulation:
         prior_array = as_phases(prior, "prior")
         std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad", 0.0, low_open=True)
         length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm", 0.0, low_open=True)
+        nuisance = nuisance_names(fit_nuisance)
         d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress), prior=prior_array, prior_std_rad=std,
-                                prior_correlation_mm=length)
+                                prior_correlation_mm=length, fit_nuisance=nuisance)
         return Estimate(**d)
 
     def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,

@@ -3,6 +3,7 @@ takes, or raises ``ValueError`` naming the parameter (complex values are refused
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -62,3 +63,15 @@ def as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
     if a.ndim != 2:
         raise ValueError(f"{name}: must be a 2-D image, got shape {a.shape}")
     return np.ascontiguousarray(a)
+
+
+def nuisance_names(value: str | Sequence[str] | None) -> list[str] | None:
+    """Nuisance parameter names from a list or a comma-separated string (None: none). The core
+    checks the names; this checks the form. Raises ValueError naming ``fit_nuisance``."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return [n.strip() for n in value.split(",") if n.strip()]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(n, str) for n in value):
+        raise ValueError(f"fit_nuisance: must be names (a list of strings or one comma-separated string), got {value!r}")
+    return list(value)

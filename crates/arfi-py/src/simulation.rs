@@ -12,6 +12,7 @@ use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimation::{estimate_aberration_with, EstimateRequest, Method};
+use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
@@ -291,7 +292,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -309,8 +310,10 @@ impl CoreSimulation {
         prior: Option<PyReadonlyArray1<'py, f64>>,
         prior_std_rad: Option<f64>,
         prior_correlation_mm: Option<f64>,
+        fit_nuisance: Option<Vec<String>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
+        let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
         let prior = Prior::from_parts(prior.map(|p| p.as_array().to_vec()), prior_std_rad).map_err(to_py)?;
         let prior = match (prior, prior_correlation_mm) {
             (Some(p), Some(l)) => Some(p.with_correlation_length(l * 1e-3).map_err(to_py)?),
@@ -324,6 +327,7 @@ impl CoreSimulation {
             seed,
             starts,
             fit_scale,
+            nuisance,
             threshold,
             prior,
         };
@@ -368,6 +372,16 @@ impl CoreSimulation {
         d.set_item("suggested_separation", a.suggested_separation)?;
         d.set_item("misfit", a.misfit)?;
         d.set_item("model_mismatch", a.mismatch)?;
+        if let Some(n) = &r.nuisance {
+            let f = PyDict::new(py);
+            f.set_item("fitted", n.fitted.names())?;
+            f.set_item("scale", n.scale)?;
+            f.set_item("broadening_width_mm", n.broadening_width_mm)?;
+            f.set_item("shift_mm", n.shift_mm.to_vec())?;
+            f.set_item("background_offset_rad", n.background.iter().map(|b| b[0]).collect::<Vec<_>>())?;
+            f.set_item("background_slope_rad_per_mm", n.background.iter().map(|b| vec![b[1], b[2]]).collect::<Vec<_>>())?;
+            d.set_item("nuisance", f)?;
+        }
         Ok(d)
     }
 

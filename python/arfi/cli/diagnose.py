@@ -6,7 +6,8 @@ import argparse
 import time
 from typing import Any
 
-from arfi.cli.common import UsageError, add_calibration, add_common, add_report, calibrated_simulation, finish, read_image
+from arfi.cli.common import (UsageError, add_calibration, add_common, add_report, calibrated_simulation, finish, read_image,
+                             read_optional_phases)
 
 
 def register(sub: Any) -> None:
@@ -22,6 +23,10 @@ def register(sub: Any) -> None:
     p.add_argument("--image", required=True, action="append", metavar="M.nii.gz",
                    help="measured image (repeat for several; each sidecar's applied_phases_rad are its known phases)")
     add_calibration(p)
+    p.add_argument("--aberration", metavar="P",
+                   help="an aberration the model includes (.npy or text, per element or per group, the sign of phases_rad), "
+                   "e.g. a per-element estimate (arfi estimate --out-phases): it is added to every image's known phases, so "
+                   "what is named is what else the images differ in (the nuisance to fit with arfi estimate --fit-nuisance)")
     p.add_argument("--threshold", type=float, default=0.0, help="evidence an effect needs (default 0: the plain BIC)")
     p.add_argument("--effects", metavar="A,B", help="comma-separated effects to try (default: the whole library)")
     add_report(p, "per-step PNG figures")
@@ -39,10 +44,15 @@ def run(args: argparse.Namespace) -> int:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
         if not effects:
             raise UsageError(f"arfi diagnose: --effects: no effect named; known: {', '.join(EFFECTS)}")
+    aberration = read_optional_phases(args.aberration, "--aberration")
     sim = calibrated_simulation(args)
     pairs = [read_image(sim, p) for p in args.image]
     images = [p[0] for p in pairs]
-    d = sim.diagnose(images, [p[1] for p in pairs], threshold=args.threshold, effects=effects, time_limit_s=args.time_limit_s)
+    known = [p[1] for p in pairs]
+    if aberration is not None:
+        added = sim.element_phases(aberration, "--aberration")
+        known = [added if k is None else added + sim.element_phases(k) for k in known]
+    d = sim.diagnose(images, known, threshold=args.threshold, effects=effects, time_limit_s=args.time_limit_s)
     for k, e in enumerate(d.effects, 1):
         same = f"; explained as well by {', '.join(e['equivalent'])}" if e["equivalent"] else ""
         print(f"diagnose: {k}. {e['name']} ({params_text(e['params'])}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, "

@@ -34,6 +34,11 @@ def register(sub: Any) -> None:
     p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
     p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
                    help="fit a free amplitude scale too (absorbs a uniform focal loss)")
+    p.add_argument("--fit-nuisance", dest="fit_nuisance", metavar="NAMES",
+                   help="per-element estimates: also fit what the images differ in from the model (comma-separated, "
+                   "names as arfi diagnose reports them, or 'all'): amplitude, background_phase (per image an offset and "
+                   "a ramp), broadening (W), registration_shift (trades with a steering tilt of the phases: prefer "
+                   "registering on a calibration image)")
     p.add_argument("--prior", metavar="P", help="predicted aberration (.npy or text, one value per line; per element or per "
                    "group, the sign of phases_rad: subtracting it corrects), e.g. from a CT-based skull simulation; the "
                    "estimate is then the posterior optimum")
@@ -59,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
                      progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
-                     prior_correlation_mm=args.prior_correlation_mm)
+                     prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance)
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
@@ -67,6 +72,12 @@ def run(args: argparse.Namespace) -> int:
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
+    if e.nuisance is not None:
+        n = e.nuisance
+        offsets = ", ".join(f"{b:+.3f}" for b in n["background_offset_rad"])
+        print(f"estimate: fitted {', '.join(n['fitted'])}: amplitude scale {n['scale']:.3f}, W {n['broadening_width_mm']:.2f} mm, "
+              f"shift ({n['shift_mm'][0]:+.2f}, {n['shift_mm'][1]:+.2f}) mm, background offsets {offsets} rad; misfit "
+              f"{e.misfit:.2f} x the noise expectation")
     if e.underdetermined:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")

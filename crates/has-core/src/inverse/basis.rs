@@ -13,6 +13,7 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{masks_and_box, Measurement, Objective};
+use crate::inverse::nuisance::{width_reach, Nuisance, SHIFT_REACH_MM};
 use crate::memory;
 use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
@@ -23,6 +24,8 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
+/// Pixels around the masks whose background a background plane is fitted on.
+pub const BACKGROUND_MARGIN: usize = 4;
 /// Samples per block of the matrix products.
 const BLOCK: usize = 2048;
 /// Element fields marched per batch while building.
@@ -38,21 +41,33 @@ pub struct FieldBasis {
     /// Real and imaginary parts of `B`, samples x elements (Pa per unit drive).
     re: Array2<f32>,
     im: Array2<f32>,
+    /// Whether the window reaches for other broadening widths and shifts ([`FieldBasis::build`]).
+    wide: bool,
 }
 
 impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches and keeps the
-    /// samples that pixels `u x v` depend on. `progress(done, total)` is called after each batch;
-    /// `cancel`, when set by another thread, ends the build before the next batch
-    /// ([`HasError::Interrupted`]).
+    /// samples that pixels `u x v` depend on; `wide`: also those they depend on with another
+    /// broadening width up to [`width_reach`] and a registration shift up to
+    /// [`SHIFT_REACH_MM`] (for fitting them, [`crate::inverse::nuisance`]). `progress(done,
+    /// total)` is called after each batch; `cancel`, when set by another thread, ends the build
+    /// before the next batch ([`HasError::Interrupted`]).
     pub fn build(
         sim: &Simulation,
         u: Range<usize>,
         v: Range<usize>,
+        wide: bool,
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<Self> {
-        let sampler = sim.sampler()?.restrict(u, v)?;
+        let full = sim.sampler()?;
+        let sampler = if wide {
+            // The Gaussian reaches 4 widths: one of width_reach + shift/4 covers both.
+            let w = full.broadening.width;
+            full.with_broadening(width_reach(w) + 0.25 * SHIFT_REACH_MM * 1e-3)?.restrict(u, v)?.with_view([w; 2], [0.0; 2])?
+        } else {
+            full.restrict(u, v)?
+        };
         let n = sim.n_elements();
         let s_len = sampler.window.len();
         let bytes = (s_len * n) as u64 * 8;
@@ -91,7 +106,7 @@ impl FieldBasis {
                 f(end, n);
             }
         }
-        Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im })
+        Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im, wide })
     }
 
     /// Number of elements (columns of `B`).
@@ -190,7 +205,10 @@ pub struct ElementTerm {
 }
 
 /// The joint cost of paper Eq. 4 over images, on the per-element basis: the same `J` as
-/// [`crate::inverse::cost::HybridCost`] with one phase per element.
+/// [`crate::inverse::cost::HybridCost`] with one phase per element, optionally with nuisance
+/// parameters ([`crate::inverse::nuisance`]): the model value of pixel `i` of image `k` is
+/// `s·d_k,i + b_k·(1, u_i, v_i)` with the scale `s` and the background planes `b_k` solved by
+/// least squares for each `phases`, and `d` formed with the cost's view (W, shift).
 #[derive(Debug, Clone)]
 pub struct ElementCost {
     /// The fields of every element in the MR window.
@@ -199,6 +217,21 @@ pub struct ElementCost {
     pub terms: Vec<ElementTerm>,
     /// Fit one least-squares amplitude scale for all images (see `HybridCost::fit_scale`).
     pub fit_scale: bool,
+    /// Fit a background plane (offset and slopes along u and v) per image.
+    pub fit_background: bool,
+    /// The MR sampling the images are formed with: the basis' own, or another W and shift.
+    sampler: MrSampler,
+    /// Pixel-centre coordinates (mm) of the box's rows (u) and columns (v).
+    coords: [Vec<f64>; 2],
+}
+
+/// The linear nuisance at some phases: the amplitude scale and one background plane per image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearNuisance {
+    /// Scale on the model image (1 unless fitted).
+    pub scale: f64,
+    /// Per image: offset (rad), slopes along u and v (rad/mm); zero unless fitted.
+    pub background: Vec<[f64; 3]>,
 }
 
 impl ElementCost {
@@ -219,7 +252,49 @@ impl ElementCost {
                 return Err(HasError::invalid(format!("image[{k}]"), "mask is empty or outside the basis' pixel box"));
             }
         }
-        Ok(ElementCost { basis, terms, fit_scale: false })
+        let sampler = basis.sampler.clone();
+        let coords = [0, 1].map(|k| sampler.pixels[k].clone().map(|i| sampler.geometry.pixel_center(k, i) * 1e3).collect());
+        Ok(ElementCost { basis, terms, fit_scale: false, fit_background: false, sampler, coords })
+    }
+
+    /// The same cost with the images formed with broadening widths `widths` and shift `shift`
+    /// (m, along u and v; see [`MrSampler::with_view`]), on the basis' window.
+    pub fn with_view(&self, widths: [f64; 2], shift: [f64; 2]) -> Result<Self> {
+        Ok(ElementCost { sampler: self.basis.sampler.with_view(widths, shift)?, ..self.clone() })
+    }
+
+    /// The view the images are formed with: W and the shift along u and v (mm).
+    pub fn view_mm(&self) -> (f64, [f64; 2]) {
+        (self.sampler.broadening.width * 1e3, self.sampler.shift.map(|s| s * 1e3))
+    }
+
+    /// The broadening width of the basis (the model's, m).
+    pub fn model_width(&self) -> f64 {
+        self.basis.sampler.broadening.width
+    }
+
+    /// `|p|²` on the window for every term at `phases` (samples, one vector per term).
+    pub fn powers(&self, phases: &[f64]) -> Vec<Vec<f64>> {
+        let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
+        let (vr, vi) = FieldBasis::drives(phases, &offsets);
+        let (pr, pi) = self.basis.fields(&vr, &vi);
+        (0..self.terms.len())
+            .map(|k| pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect())
+            .collect()
+    }
+
+    /// The cost for fixed `powers` ([`ElementCost::powers`]) with this cost's view and linear
+    /// nuisance.
+    pub fn cost_of_powers(&self, powers: &[Vec<f64>]) -> f64 {
+        let images: Vec<Array2<f64>> = powers.iter().map(|q| self.image_of(q)).collect();
+        let model = self.masked(&images);
+        let linear = self.linear_fit(&model);
+        self.residuals(&model, &linear).iter().flatten().map(|r| r * r).sum()
+    }
+
+    /// The model image on the box (before the linear nuisance) from `|p|²` samples.
+    fn image_of(&self, q: &[f64]) -> Array2<f64> {
+        self.sampler.apply(q).map(|img| img * self.basis.amplitude).unwrap_or_else(|_| Array2::from_elem((0, 0), f64::NAN))
     }
 
     /// Model images on the box for every term, and the fields they came from.
@@ -231,7 +306,7 @@ impl ElementCost {
             .map(|k| {
                 let q: Vec<f64> =
                     pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
-                self.basis.sampler.apply(&q).map(|img| img * self.basis.amplitude).unwrap_or_else(|_| Array2::from_elem((0, 0), f64::NAN))
+                self.image_of(&q)
             })
             .collect();
         (images, pr, pi)
@@ -242,11 +317,86 @@ impl ElementCost {
         images.iter().zip(&self.terms).map(|(img, t)| t.mask.iter().map(|&p| img.as_slice().map_or(f64::NAN, |s| s[p])).collect()).collect()
     }
 
-    fn scale_for(&self, model: &[Vec<f64>]) -> f64 {
-        if !self.fit_scale {
-            return 1.0;
+    /// Pixel-centre coordinates (mm) of box index `p`.
+    fn uv(&self, p: usize) -> (f64, f64) {
+        let nv = self.coords[1].len();
+        (self.coords[0][p / nv], self.coords[1][p % nv])
+    }
+
+    /// The least-squares scale and background planes for masked model values `model`: the
+    /// normal equations of `s·d + b_k·(1, u, v) ≈ m` (s fixed at 1 unless fitted). Falls back to
+    /// the scale alone when the planes are not determined (e.g. one row of pixels).
+    pub fn linear_fit(&self, model: &[Vec<f64>]) -> LinearNuisance {
+        let k = self.terms.len();
+        let scale_only = || {
+            let s = if self.fit_scale {
+                crate::inverse::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
+            } else {
+                1.0
+            };
+            LinearNuisance { scale: s, background: vec![[0.0; 3]; k] }
+        };
+        if !self.fit_background {
+            return scale_only();
         }
-        crate::inverse::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
+        let o = usize::from(self.fit_scale);
+        let m = o + 3 * k;
+        let mut a = vec![vec![0.0; m + 1]; m];
+        for (c, (d, t)) in model.iter().zip(&self.terms).enumerate() {
+            for ((&p, &x), &y) in t.mask.iter().zip(d).zip(&t.measured) {
+                let (u, v) = self.uv(p);
+                let target = if self.fit_scale { y } else { y - x };
+                let mut cols = [(0, 0.0); 4];
+                let mut n = 0;
+                if self.fit_scale {
+                    cols[0] = (0, x);
+                    n = 1;
+                }
+                for (j, value) in [1.0, u, v].into_iter().enumerate() {
+                    cols[n] = (o + 3 * c + j, value);
+                    n += 1;
+                }
+                for &(p, vp) in &cols[..n] {
+                    for &(q, vq) in &cols[..n] {
+                        a[p][q] += vp * vq;
+                    }
+                    a[p][m] += vp * target;
+                }
+            }
+        }
+        match crate::inverse::linear::solve_augmented(a) {
+            Some(x) => LinearNuisance {
+                scale: if self.fit_scale { x[0] } else { 1.0 },
+                background: (0..k).map(|c| [x[o + 3 * c], x[o + 3 * c + 1], x[o + 3 * c + 2]]).collect(),
+            },
+            None => scale_only(),
+        }
+    }
+
+    /// Residuals model - measured per term.
+    fn residuals(&self, model: &[Vec<f64>], linear: &LinearNuisance) -> Vec<Vec<f64>> {
+        model
+            .iter()
+            .zip(&self.terms)
+            .zip(&linear.background)
+            .map(|((d, t), b)| {
+                t.mask
+                    .iter()
+                    .zip(d)
+                    .zip(&t.measured)
+                    .map(|((&p, x), m)| {
+                        let (u, v) = self.uv(p);
+                        linear.scale * x + b[0] + b[1] * u + b[2] * v - m
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The linear nuisance at `phases`.
+    pub fn linear_at(&self, phases: &[f64]) -> LinearNuisance {
+        let (images, _, _) = self.evaluate(phases);
+        self.linear_fit(&self.masked(&images))
     }
 
     /// Number of masked pixels over all images.
@@ -263,28 +413,30 @@ impl Objective for ElementCost {
     fn cost(&self, phases: &[f64]) -> f64 {
         let (images, _, _) = self.evaluate(phases);
         let model = self.masked(&images);
-        let s = self.scale_for(&model);
-        model.iter().zip(&self.terms).map(|(d, t)| d.iter().zip(&t.measured).map(|(x, m)| (s * x - m).powi(2)).sum::<f64>()).sum()
+        let linear = self.linear_fit(&model);
+        self.residuals(&model, &linear).iter().flatten().map(|r| r * r).sum()
     }
 
     fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
         let (images, pr, pi) = self.evaluate(phases);
         let model = self.masked(&images);
-        let s = self.scale_for(&model);
+        let linear = self.linear_fit(&model);
+        let s = linear.scale;
         let b = &self.basis;
-        let (nu, nv) = (b.sampler.pixels[0].len(), b.sampler.pixels[1].len());
+        let (nu, nv) = (self.sampler.pixels[0].len(), self.sampler.pixels[1].len());
         let (n_s, k) = (b.n_samples(), self.terms.len());
         let mut hr = Array2::<f32>::zeros((n_s, k));
         let mut hi = Array2::<f32>::zeros((n_s, k));
         let mut total = 0.0;
-        for (c, (d, t)) in model.iter().zip(&self.terms).enumerate() {
+        for (c, (res, t)) in self.residuals(&model, &linear).iter().zip(&self.terms).enumerate() {
+            // The linear nuisance sits at its least-squares optimum: its own change does not
+            // enter the gradient (variable projection).
             let mut r = Array2::<f64>::zeros((nu, nv));
-            for ((&p, x), m) in t.mask.iter().zip(d).zip(&t.measured) {
-                let res = s * x - m;
-                total += res * res;
-                r[[p / nv, p % nv]] = 2.0 * s * res * b.amplitude;
+            for (&p, &e) in t.mask.iter().zip(res) {
+                total += e * e;
+                r[[p / nv, p % nv]] = 2.0 * s * e * b.amplitude;
             }
-            let Ok(h) = b.sampler.apply_adjoint(&r) else {
+            let Ok(h) = self.sampler.apply_adjoint(&r) else {
                 return (f64::NAN, vec![0.0; phases.len()]);
             };
             // H = h ∘ conj(p)
@@ -329,7 +481,7 @@ pub fn build_element_model(
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
     cancel: Option<&AtomicBool>,
 ) -> Result<ElementModel> {
-    BasisCache::default().element_model(sim, measurements, mask_fraction, margin, progress, cancel)
+    BasisCache::default().element_model(sim, measurements, mask_fraction, margin, &Nuisance::default(), progress, cancel)
 }
 
 /// Keeps the element basis of the last per-element model built through it, for the next on the
@@ -341,51 +493,65 @@ pub fn build_element_model(
 pub struct BasisCache(Mutex<Option<Arc<FieldBasis>>>);
 
 impl BasisCache {
-    /// The kept basis when it covers pixels `u x v`, else a new one (built as
-    /// [`FieldBasis::build`], then kept in place of the old one).
+    /// The kept basis when it covers pixels `u x v` with the same window (`wide` or not), else
+    /// a new one (built as [`FieldBasis::build`], then kept in place of the old one).
     pub fn basis(
         &self,
         sim: &Simulation,
         u: Range<usize>,
         v: Range<usize>,
+        wide: bool,
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<Arc<FieldBasis>> {
         let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some(b) = kept.as_ref().filter(|b| b.sampler.pixels == [u.clone(), v.clone()] && b.n_elements() == sim.n_elements()) {
+        let fits = |b: &&Arc<FieldBasis>| {
+            b.sampler.pixels == [u.clone(), v.clone()] && b.n_elements() == sim.n_elements() && b.wide == wide
+        };
+        if let Some(b) = kept.as_ref().filter(fits) {
             return Ok(Arc::clone(b));
         }
         // Release the old basis before building the next: at most one in memory.
         *kept = None;
-        let b = Arc::new(FieldBasis::build(sim, u, v, progress, cancel)?);
+        let b = Arc::new(FieldBasis::build(sim, u, v, wide, progress, cancel)?);
         *kept = Some(Arc::clone(&b));
         Ok(b)
     }
 
-    /// [`build_element_model`] on the kept basis when it covers the images' pixel box.
+    /// [`build_element_model`] on the kept basis when it covers the images' pixel box, set up
+    /// to fit `nuisance`: a background plane is fitted on every pixel of the box (its margin at
+    /// least [`BACKGROUND_MARGIN`] pixels), and W or the shift need the wide window.
+    #[allow(clippy::too_many_arguments)]
     pub fn element_model(
         &self,
         sim: &Simulation,
         measurements: &[Measurement],
         mask_fraction: f64,
         margin: usize,
+        nuisance: &Nuisance,
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<ElementModel> {
+        let margin = if nuisance.background_phase { margin.max(BACKGROUND_MARGIN) } else { margin };
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
+        let every: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
         let mut terms = Vec::with_capacity(measurements.len());
         for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
             let offset = known_per_element(sim, &meas.known)
                 .map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
             let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
+            let pixels = if nuisance.background_phase { &every } else { mask };
             terms.push(ElementTerm {
-                mask: mask.iter().map(local).collect(),
-                measured: mask.iter().map(|&ij| meas.image[ij]).collect(),
+                mask: pixels.iter().map(local).collect(),
+                measured: pixels.iter().map(|&ij| meas.image[ij]).collect(),
                 offset,
             });
         }
-        let basis = self.basis(sim, u, v, progress, cancel)?;
-        Ok(ElementModel { cost: ElementCost::new(basis, terms)?, noise })
+        let basis = self.basis(sim, u, v, nuisance.view(), progress, cancel)?;
+        let mut cost = ElementCost::new(basis, terms)?;
+        cost.fit_scale = nuisance.amplitude;
+        cost.fit_background = nuisance.background_phase;
+        Ok(ElementModel { cost, noise })
     }
 }
 

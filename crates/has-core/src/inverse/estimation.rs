@@ -4,9 +4,10 @@
 //! the answer (ambiguity, misfit). What the CLI, the Python API and Rust users run.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::{known_per_element, BasisCache};
+use crate::inverse::basis::{known_per_element, BasisCache, ElementCost};
 use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
-use crate::inverse::estimate::{Assessment, Estimate, Estimator};
+use crate::inverse::estimate::{misfit, Assessment, Estimate, Estimator};
+use crate::inverse::nuisance::{fit_view, FittedNuisance, Nuisance};
 use crate::inverse::phase::{point_reflection, wrap};
 use crate::inverse::prior::{Posterior, Prior};
 use crate::inverse::smooth_prior::SmoothPosterior;
@@ -67,6 +68,9 @@ pub struct EstimateRequest {
     pub starts: Option<usize>,
     /// Fit a free amplitude scale too.
     pub fit_scale: bool,
+    /// Nuisance parameters fitted jointly with per-element phases (the amplitude also with
+    /// `fit_scale`); group estimates fit the amplitude only.
+    pub nuisance: Nuisance,
     /// A rival solution counts as ambiguous when it would leave less than this fraction of the
     /// ideal focus after the estimate's correction.
     pub threshold: f64,
@@ -85,6 +89,7 @@ impl Default for EstimateRequest {
             seed: 0,
             starts: None,
             fit_scale: false,
+            nuisance: Nuisance::default(),
             threshold: 0.9,
             prior: None,
         }
@@ -115,6 +120,8 @@ pub struct EstimateReport {
     /// The images' cost of paper Eq. 4 at the estimate (rad²): `estimate.cost` without a prior;
     /// with one, `estimate.cost` is the negative log posterior.
     pub image_cost: f64,
+    /// The fitted nuisance values of a per-element estimate that fitted any.
+    pub nuisance: Option<FittedNuisance>,
 }
 
 /// Whether the simulation's groups are its elements, one each in order.
@@ -179,6 +186,17 @@ pub fn estimate_aberration_with(
             ),
         ));
     }
+    let view = Nuisance { amplitude: false, ..request.nuisance };
+    if view.any() {
+        return Err(HasError::invalid(
+            "fit_nuisance",
+            format!(
+                "fitting {} needs a per-element estimate (one group per element, {}); a group estimate fits the amplitude only",
+                view.names().join(", "),
+                sim.n_elements()
+            ),
+        ));
+    }
     let prior = request.prior.as_ref().map(|p| group_prior(sim, p)).transpose()?;
     let sigma = point_reflection(&positions(sim), &sim.groups);
     let mut est = estimator(request, request.method, sigma.clone())?;
@@ -186,7 +204,7 @@ pub fn estimate_aberration_with(
         est = est.with_max_evaluations(n)?;
     }
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
-    model.cost.fit_scale = request.fit_scale;
+    model.cost.fit_scale = request.fit_scale || request.nuisance.amplitude;
     let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
@@ -198,6 +216,7 @@ pub fn estimate_aberration_with(
         group_phases: None,
         underdetermined: false,
         prior_used: prior.is_some(),
+        nuisance: None,
     })
 }
 
@@ -251,6 +270,79 @@ fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
     prior.with_mean(mean)
 }
 
+/// Rounds of the element search when W or the shift is fitted: each fits the view with the
+/// phases held, then searches the phases on the fitted view with its share of the evaluations.
+pub const VIEW_ROUNDS: usize = 3;
+
+/// The element search on `cost` (on the posterior with `prior`) from `start` (phases), at most
+/// `budget` evaluations; with the view in `nuisance`, [`VIEW_ROUNDS`] rounds of view fit and
+/// phase search, and a last view fit at the final phases. Returns the estimate (phases) and the
+/// cost on the last fitted view.
+#[allow(clippy::too_many_arguments)]
+fn search_elements(
+    mut cost: ElementCost,
+    noise: f64,
+    prior: Option<&Prior>,
+    start: Vec<f64>,
+    nuisance: &Nuisance,
+    search: &Estimator,
+    budget: usize,
+    positions: &[[f64; 3]],
+    cancel: Option<&AtomicBool>,
+) -> Result<(Estimate, ElementCost)> {
+    let smooth = prior.filter(|p| p.correlation_length().is_some());
+    let to_phases = |cost: &ElementCost, params: &[f64]| -> Result<Vec<f64>> {
+        Ok(match smooth {
+            Some(p) => SmoothPosterior::new(cost, noise, p, positions)?.phases(params).into_iter().map(wrap).collect(),
+            None => params.to_vec(),
+        })
+    };
+    let rounds = if nuisance.view() { VIEW_ROUNDS } else { 1 };
+    let mut params = match smooth {
+        Some(p) => vec![0.0; SmoothPosterior::new(&cost, noise, p, positions)?.n_modes()],
+        None => start,
+    };
+    let mut done: Option<Estimate> = None;
+    for round in 0..rounds {
+        if nuisance.view() {
+            cost = fit_view(&cost, &to_phases(&cost, &params)?, nuisance, noise)?;
+        }
+        let share = (budget * (round + 1) / rounds - budget * round / rounds).max(1);
+        let search = search.clone().with_max_evaluations(share)?.with_start(params)?;
+        let e = match (smooth, prior) {
+            (Some(p), _) => search.run(&SmoothPosterior::new(&cost, noise, p, positions)?, cancel)?,
+            (None, Some(p)) => search.run(&Posterior::new(&cost, noise, p)?, cancel)?,
+            (None, None) => search.run(&cost, cancel)?,
+        };
+        params = e.phases.clone();
+        done = Some(match done {
+            None => e,
+            Some(d) => merged(d, e),
+        });
+    }
+    let phases = to_phases(&cost, &params)?;
+    if nuisance.view() {
+        cost = fit_view(&cost, &phases, nuisance, noise)?;
+    }
+    let estimate = done.ok_or_else(|| HasError::invalid("max_evaluations", "no element search ran"))?;
+    let estimate = match smooth {
+        Some(p) => {
+            let s = SmoothPosterior::new(&cost, noise, p, positions)?;
+            estimate.map_phases(|a| s.phases(a).into_iter().map(wrap).collect())
+        }
+        None => estimate,
+    };
+    Ok((estimate, cost))
+}
+
+/// Two searches one after the other as one: the later's result, both's evaluations, time and
+/// histories (each on its own view: the cost may step between them).
+fn merged(first: Estimate, later: Estimate) -> Estimate {
+    let mut history = first.history;
+    history.extend(&later.history);
+    Estimate { evaluations: first.evaluations + later.evaluations, seconds: first.seconds + later.seconds, history, ..later }
+}
+
 /// Per-element estimation: the array's default groups are fitted first (the same method, and
 /// the prior's group means); the group estimate spread to the elements (with a prior, the
 /// prediction itself) starts L-BFGS on the element basis, at most `max_evaluations` (default
@@ -293,27 +385,29 @@ fn estimate_per_element(
         Some(p) => p.mean().to_vec(),
         None => grouped.element_phases(&group.phases)?,
     };
-    let mut model = basis.element_model(sim, measurements, sim.mask_fraction, 0, progress, cancel)?;
-    model.cost.fit_scale = request.fit_scale;
-    let search = Estimator::lbfgs()
-        .with_starts(1)?
-        .with_max_evaluations(request.max_evaluations.unwrap_or(ELEMENT_EVALUATIONS))?
-        .with_time_limit_opt(warm.time_limit);
-    let elements = match &prior {
-        Some(p) if p.correlation_length().is_some() => {
-            let smooth = SmoothPosterior::new(&model.cost, model.noise, p, &positions(sim))?;
-            let e = search.with_start(vec![0.0; smooth.n_modes()])?.run(&smooth, cancel)?;
-            e.map_phases(|a| smooth.phases(a).into_iter().map(wrap).collect())
-        }
-        Some(p) => search.with_start(start)?.run(&Posterior::new(&model.cost, model.noise, p)?, cancel)?,
-        None => search.with_start(start)?.run(&model.cost, cancel)?,
-    };
+    let nuisance = Nuisance { amplitude: request.fit_scale || request.nuisance.amplitude, ..request.nuisance };
+    let model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
+    let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(warm.time_limit);
+    let budget = request.max_evaluations.unwrap_or(ELEMENT_EVALUATIONS);
+    let (elements, cost) = search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions(sim), cancel)?;
+    let fitted = nuisance.any().then(|| {
+        let linear = cost.linear_at(&elements.phases);
+        let (w, shift) = cost.view_mm();
+        FittedNuisance { fitted: nuisance, scale: linear.scale, broadening_width_mm: w, shift_mm: shift, background: linear.background }
+    });
+    let model = crate::inverse::basis::ElementModel { cost, noise: model.noise };
     let n_pixels = model.cost.n_pixels();
     // One image's masked pixels cannot determine more phases than they number (without a prior).
     let underdetermined = prior.is_none() && n_pixels < sim.n_elements();
     assessment.ambiguous |= underdetermined;
+    // Misfit of the element fit itself (the group stage's cannot reach the noise on
+    // element-level data).
+    let image_cost = model.cost.cost(&elements.phases);
+    let fitted_phases = if prior.is_some() { 0 } else { sim.n_elements() - 1 };
+    (assessment.misfit, assessment.mismatch) = misfit(image_cost, n_pixels, fitted_phases, model.noise);
     Ok(EstimateReport {
-        image_cost: model.cost.cost(&elements.phases),
+        image_cost,
+        nuisance: fitted,
         estimate: elements,
         assessment,
         model: group_model,

@@ -7,6 +7,8 @@ pub mod cost;
 pub mod diagnose;
 pub mod estimate;
 pub mod estimation;
+pub mod linear;
+pub mod nuisance;
 pub mod phase;
 pub mod prior;
 pub mod smooth_prior;

@@ -56,13 +56,19 @@ pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<
 }
 
 /// The focal zone (paper Eq. 4): the pixels above `fraction` of the image maximum that are
-/// connected (4-neighbours) to the maximum. Isolated noise spikes elsewhere are left out.
+/// connected (4-neighbours) to the maximum. Isolated noise spikes elsewhere are left out. Both
+/// are measured from the image's median (its background level: the focal zone covers a small
+/// part of the image), so that a background phase offset does not flood the mask over the
+/// background (with zero background: `fraction` of the maximum).
 pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
     let (nu, nv) = image.dim();
     let Some((peak, &max)) = image.indexed_iter().max_by(|a, b| a.1.total_cmp(b.1)) else {
         return vec![];
     };
-    let level = fraction * max;
+    let mut values: Vec<f64> = image.iter().copied().collect();
+    let mid = values.len() / 2;
+    let background = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let level = background + fraction * (max - background);
     let mut seen = Array2::from_elem((nu, nv), false);
     let mut stack = vec![peak];
     seen[peak] = true;

@@ -4,6 +4,7 @@
 use super::effects::{focal_material, FieldState, View, SLICE_REACH_MM};
 use super::Effects;
 use crate::error::{HasError, Result};
+use crate::inverse::linear::solve_augmented;
 use crate::physics::mr::MrSampler;
 use crate::physics::propagation::{RecordSpec, Window};
 use crate::simulation::Simulation;
@@ -235,7 +236,7 @@ impl<'a> Forward<'a> {
                 }
             }
         }
-        let solved = match solve(a) {
+        let solved = match solve_augmented(a) {
             Some(x) => {
                 for (&k, xk) in linear.iter().zip(x) {
                     v[k] = xk;
@@ -253,31 +254,6 @@ fn sum_squares(model: &[Array2<f64>], measured: &[Array2<f64>]) -> f64 {
     model.iter().zip(measured).map(|(m, d)| m.iter().zip(d).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sum()
 }
 
-/// Solves the augmented system `[A | b]` by Gaussian elimination with partial pivoting; None
-/// when it is (numerically) singular.
-#[allow(clippy::needless_range_loop)] // index loops read as the textbook algorithm
-fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
-    let m = a.len();
-    let scale = (0..m).map(|i| a[i][i].abs()).fold(0.0, f64::max);
-    for c in 0..m {
-        let p = (c..m).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
-        if !(a[p][c].abs() > 1e-12 * scale) {
-            return None;
-        }
-        a.swap(c, p);
-        for r in c + 1..m {
-            let f = a[r][c] / a[c][c];
-            for k in c..=m {
-                a[r][k] -= f * a[c][k];
-            }
-        }
-    }
-    let mut x = vec![0.0; m];
-    for c in (0..m).rev() {
-        x[c] = (a[c][m] - (c + 1..m).map(|k| a[c][k] * x[k]).sum::<f64>()) / a[c][c];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
 
 /// The MR window extended by [`SLICE_REACH_MM`] plus the slice half-thickness and a sample on each
 /// side along the slice normal, within the grid.

@@ -126,10 +126,7 @@ impl Estimate {
         let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
         // The best image fit among the plausible solutions (with images alone: the best cost).
         let fit = candidates.iter().map(|c| model.cost.cost(&c.phases)).fold(f64::INFINITY, f64::min);
-        let n = model.cost.n_pixels();
-        let sigma2 = model.noise.max(MIN_NOISE_RAD).powi(2);
-        let misfit = fit / (n as f64 * sigma2);
-        let mismatch = fit > sigma2 * chi2_95(n.saturating_sub(g - 1).max(1));
+        let (misfit, mismatch) = misfit(fit, model.cost.n_pixels(), g - 1, model.noise);
         Ok(Assessment {
             ambiguous: worst_recovery < threshold,
             margin,
@@ -141,6 +138,14 @@ impl Estimate {
             mismatch,
         })
     }
+}
+
+/// The misfit of an image cost `fit` (rad²) over `n` pixels with `k` parameters fitted and
+/// noise `noise` (rad, at least 1e-4): `J / (n·sigma²)`, and whether `J` lies above the 95 %
+/// point of `sigma²·chi²(n - k)` (the model cannot explain the images).
+pub fn misfit(fit: f64, n: usize, k: usize, noise: f64) -> (f64, bool) {
+    let sigma2 = noise.max(MIN_NOISE_RAD).powi(2);
+    (fit / (n as f64 * sigma2), fit > sigma2 * chi2_95(n.saturating_sub(k).max(1)))
 }
 
 /// The largest value of the kernel's image (the focal ARFI) for group phases.
