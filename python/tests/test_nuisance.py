@@ -90,3 +90,27 @@ def test_cli_fit_nuisance(tmp_path, capsys) -> None:
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "fit_nuisance: fitting broadening needs a per-element estimate" in err, err
     assert not bad.exists()
+
+
+def test_cli_diagnose_with_the_aberration_in_the_model(tmp_path, capsys) -> None:
+    # With the image's own aberration in the model, the residual is noise: nothing is named;
+    # without it, the model is missing the aberration (here taken as an amplitude loss or more).
+    scenario = tmp_path / "small.toml"
+    scenario.write_text(SMALL)
+    sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
+    aberration = tmp_path / "ab.npy"
+    np.save(aberration, sim.skull_phases(2))
+    image = tmp_path / "s.nii.gz"
+    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--noise-rad", "0.02", "--seed", "3",
+                 "--out", str(image)]) == 0
+    base = ["diagnose", "--scenario", str(scenario), "--image", str(image), "--effects", "amplitude,broadening,background_phase"]
+    capsys.readouterr()
+    assert main(base + ["--aberration", str(aberration)]) == 0
+    assert "no effect missing" in capsys.readouterr().out
+    assert main(base) == 0
+    assert "no effect missing" not in capsys.readouterr().out
+    bad = tmp_path / "bad.npy"
+    np.save(bad, np.zeros(5))
+    assert main(base + ["--aberration", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("arfi: error: --aberration: has 5 values"), err
