@@ -12,3 +12,4 @@ pub mod nuisance;
 pub mod phase;
 pub mod prior;
 pub mod smooth_prior;
+pub mod view_fit;
