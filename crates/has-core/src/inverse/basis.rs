@@ -188,9 +188,15 @@ impl FieldBasis {
         let zero = vec![0.0; phases.len()];
         let (vr, vi) = Self::drives(phases, &[&zero]);
         let (pr, pi) = self.fields(&vr, &vi);
-        let q: Vec<f64> = pr.iter().zip(pi.iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
-        Ok(self.sampler.apply(&q)? * self.amplitude)
+        Ok(self.sampler.apply(&power_columns(&pr, &pi)[0])? * self.amplitude)
     }
+}
+
+/// `|p|²` of each column of fields `P` (real and imaginary parts, samples x columns).
+fn power_columns(pr: &Array2<f32>, pi: &Array2<f32>) -> Vec<Vec<f64>> {
+    (0..pr.ncols())
+        .map(|k| pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect())
+        .collect()
 }
 
 /// One image as the per-element cost sees it.
@@ -273,14 +279,17 @@ impl ElementCost {
         self.basis.sampler.broadening.width
     }
 
-    /// `|p|²` on the window for every term at `phases` (samples, one vector per term).
-    pub fn powers(&self, phases: &[f64]) -> Vec<Vec<f64>> {
+    /// The window fields of every term at `phases` (real and imaginary parts, samples x terms).
+    fn fields_at(&self, phases: &[f64]) -> (Array2<f32>, Array2<f32>) {
         let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
         let (vr, vi) = FieldBasis::drives(phases, &offsets);
-        let (pr, pi) = self.basis.fields(&vr, &vi);
-        (0..self.terms.len())
-            .map(|k| pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect())
-            .collect()
+        self.basis.fields(&vr, &vi)
+    }
+
+    /// `|p|²` on the window for every term at `phases` (samples, one vector per term).
+    pub fn powers(&self, phases: &[f64]) -> Vec<Vec<f64>> {
+        let (pr, pi) = self.fields_at(phases);
+        power_columns(&pr, &pi)
     }
 
     /// The cost for fixed `powers` ([`ElementCost::powers`]) with this cost's view and linear
@@ -299,16 +308,8 @@ impl ElementCost {
 
     /// Model images on the box for every term, and the fields they came from.
     fn evaluate(&self, phases: &[f64]) -> (Vec<Array2<f64>>, Array2<f32>, Array2<f32>) {
-        let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
-        let (vr, vi) = FieldBasis::drives(phases, &offsets);
-        let (pr, pi) = self.basis.fields(&vr, &vi);
-        let images = (0..self.terms.len())
-            .map(|k| {
-                let q: Vec<f64> =
-                    pr.column(k).iter().zip(pi.column(k).iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
-                self.image_of(&q)
-            })
-            .collect();
+        let (pr, pi) = self.fields_at(phases);
+        let images = power_columns(&pr, &pi).iter().map(|q| self.image_of(q)).collect();
         (images, pr, pi)
     }
 
@@ -411,10 +412,7 @@ impl Objective for ElementCost {
     }
 
     fn cost(&self, phases: &[f64]) -> f64 {
-        let (images, _, _) = self.evaluate(phases);
-        let model = self.masked(&images);
-        let linear = self.linear_fit(&model);
-        self.residuals(&model, &linear).iter().flatten().map(|r| r * r).sum()
+        self.cost_of_powers(&self.powers(phases))
     }
 
     fn cost_and_gradient(&self, phases: &[f64]) -> (f64, Vec<f64>) {
@@ -534,7 +532,8 @@ impl BasisCache {
     ) -> Result<ElementModel> {
         let margin = if nuisance.background_phase { margin.max(BACKGROUND_MARGIN) } else { margin };
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
-        let every: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
+        let every: Vec<(usize, usize)> =
+            if nuisance.background_phase { u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect() } else { vec![] };
         let mut terms = Vec::with_capacity(measurements.len());
         for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
             let offset = known_per_element(sim, &meas.known)

@@ -11,7 +11,7 @@ use crate::inverse::nuisance::{FittedNuisance, Nuisance};
 use crate::inverse::view_fit::fit_view;
 use crate::inverse::phase::{point_reflection, wrap};
 use crate::inverse::prior::{Posterior, Prior};
-use crate::inverse::smooth_prior::SmoothPosterior;
+use crate::inverse::smooth_prior::SmoothErrors;
 use crate::simulation::Simulation;
 use std::sync::atomic::AtomicBool;
 
@@ -70,7 +70,8 @@ pub struct EstimateRequest {
     /// Fit a free amplitude scale too.
     pub fit_scale: bool,
     /// Nuisance parameters fitted jointly with per-element phases (the amplitude also with
-    /// `fit_scale`); group estimates fit the amplitude only.
+    /// `fit_scale`: see [`EstimateRequest::fitted_nuisance`]); group estimates fit the amplitude
+    /// only.
     pub nuisance: Nuisance,
     /// A rival solution counts as ambiguous when it would leave less than this fraction of the
     /// ideal focus after the estimate's correction.
@@ -94,6 +95,13 @@ impl Default for EstimateRequest {
             threshold: 0.9,
             prior: None,
         }
+    }
+}
+
+impl EstimateRequest {
+    /// The nuisance fitted: `nuisance`, with the amplitude also when `fit_scale`.
+    pub fn fitted_nuisance(&self) -> Nuisance {
+        Nuisance { amplitude: self.fit_scale || self.nuisance.amplitude, ..self.nuisance }
     }
 }
 
@@ -205,7 +213,7 @@ pub fn estimate_aberration_with(
         est = est.with_max_evaluations(n)?;
     }
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
-    model.cost.fit_scale = request.fit_scale || request.nuisance.amplitude;
+    model.cost.fit_scale = request.fitted_nuisance().amplitude;
     let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
@@ -291,27 +299,27 @@ fn search_elements(
     positions: &[[f64; 3]],
     cancel: Option<&AtomicBool>,
 ) -> Result<(Estimate, ElementCost)> {
-    let smooth = prior.filter(|p| p.correlation_length().is_some());
-    let to_phases = |cost: &ElementCost, params: &[f64]| -> Result<Vec<f64>> {
-        Ok(match smooth {
-            Some(p) => SmoothPosterior::new(cost, noise, p, positions)?.phases(params).into_iter().map(wrap).collect(),
+    let smooth = prior.filter(|p| p.correlation_length().is_some()).map(|p| SmoothErrors::new(p, positions)).transpose()?;
+    let to_phases = |params: &[f64]| -> Vec<f64> {
+        match &smooth {
+            Some(s) => s.phases(params).into_iter().map(wrap).collect(),
             None => params.to_vec(),
-        })
+        }
     };
     let rounds = if nuisance.view() { VIEW_ROUNDS } else { 1 };
-    let mut params = match smooth {
-        Some(p) => vec![0.0; SmoothPosterior::new(&cost, noise, p, positions)?.n_modes()],
+    let mut params = match &smooth {
+        Some(s) => vec![0.0; s.n_modes()],
         None => start,
     };
     let mut done: Option<Estimate> = None;
     for round in 0..rounds {
         if nuisance.view() {
-            cost = fit_view(&cost, &to_phases(&cost, &params)?, nuisance, noise)?;
+            cost = fit_view(&cost, &to_phases(&params), nuisance, noise)?;
         }
         let share = (budget * (round + 1) / rounds - budget * round / rounds).max(1);
         let search = search.clone().with_max_evaluations(share)?.with_start(params)?;
-        let e = match (smooth, prior) {
-            (Some(p), _) => search.run(&SmoothPosterior::new(&cost, noise, p, positions)?, cancel)?,
+        let e = match (&smooth, prior) {
+            (Some(s), _) => search.run(&s.posterior(&cost, noise)?, cancel)?,
             (None, Some(p)) => search.run(&Posterior::new(&cost, noise, p)?, cancel)?,
             (None, None) => search.run(&cost, cancel)?,
         };
@@ -321,18 +329,11 @@ fn search_elements(
             Some(d) => merged(d, e),
         });
     }
-    let phases = to_phases(&cost, &params)?;
     if nuisance.view() {
-        cost = fit_view(&cost, &phases, nuisance, noise)?;
+        cost = fit_view(&cost, &to_phases(&params), nuisance, noise)?;
     }
     let estimate = done.ok_or_else(|| HasError::invalid("max_evaluations", "no element search ran"))?;
-    let estimate = match smooth {
-        Some(p) => {
-            let s = SmoothPosterior::new(&cost, noise, p, positions)?;
-            estimate.map_phases(|a| s.phases(a).into_iter().map(wrap).collect())
-        }
-        None => estimate,
-    };
+    let estimate = if smooth.is_some() { estimate.map_phases(to_phases) } else { estimate };
     Ok((estimate, cost))
 }
 
@@ -386,7 +387,7 @@ fn estimate_per_element(
         Some(p) => p.mean().to_vec(),
         None => grouped.element_phases(&group.phases)?,
     };
-    let nuisance = Nuisance { amplitude: request.fit_scale || request.nuisance.amplitude, ..request.nuisance };
+    let nuisance = request.fitted_nuisance();
     let model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
     let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(warm.time_limit);
     let budget = request.max_evaluations.unwrap_or(ELEMENT_EVALUATIONS);
@@ -396,14 +397,13 @@ fn estimate_per_element(
         let (w, shift) = cost.view_mm();
         FittedNuisance { fitted: nuisance, scale: linear.scale, broadening_width_mm: w, shift_mm: shift, background: linear.background }
     });
-    let model = crate::inverse::basis::ElementModel { cost, noise: model.noise };
-    let n_pixels = model.cost.n_pixels();
+    let n_pixels = cost.n_pixels();
     // One image's masked pixels cannot determine more phases than they number (without a prior).
     let underdetermined = prior.is_none() && n_pixels < sim.n_elements();
     assessment.ambiguous |= underdetermined;
     // Misfit of the element fit itself (the group stage's cannot reach the noise on
     // element-level data).
-    let image_cost = model.cost.cost(&elements.phases);
+    let image_cost = cost.cost(&elements.phases);
     let fitted_phases = if prior.is_some() { 0 } else { sim.n_elements() - 1 };
     (assessment.misfit, assessment.mismatch) = misfit(image_cost, n_pixels, fitted_phases, model.noise);
     Ok(EstimateReport {

@@ -70,32 +70,27 @@ pub fn error_modes(positions: &[[f64; 3]], std_rad: f64, length: f64) -> Result<
     Ok(modes)
 }
 
-/// The negative log posterior `U(a) = J(mu + W·a)/(2·sigma²) + |a|²/2` over the coefficients `a`
-/// of the smooth error modes (see the module docs).
-pub struct SmoothPosterior<'a> {
-    likelihood: &'a dyn Objective,
+/// A prediction and the smooth modes of its error: the phases `mu + W·a` of coefficients `a`
+/// (one phase per element position).
+#[derive(Debug, Clone)]
+pub struct SmoothErrors {
     mean: Vec<f64>,
     modes: Vec<Vec<f64>>,
-    /// `1 / (2·sigma²)`.
-    weight: f64,
 }
 
-impl<'a> SmoothPosterior<'a> {
-    /// The posterior of image cost `likelihood` (noise floor `noise_rad`, at least
-    /// [`crate::inverse::prior::MIN_NOISE_RAD`]) under `prior`, which must have a correlation length, with one prior
-    /// phase per phase of the cost at `positions`.
-    pub fn new(likelihood: &'a dyn Objective, noise_rad: f64, prior: &Prior, positions: &[[f64; 3]]) -> Result<Self> {
-        let n = likelihood.n_phases();
-        if prior.mean().len() != n || positions.len() != n {
-            return Err(HasError::invalid("prior", format!("has {} values; the estimate has {n} phases", prior.mean().len())));
+impl SmoothErrors {
+    /// The error modes of `prior`, which must have a correlation length, at `positions` (one per
+    /// predicted phase).
+    pub fn new(prior: &Prior, positions: &[[f64; 3]]) -> Result<Self> {
+        if prior.mean().len() != positions.len() {
+            return Err(HasError::invalid("prior", format!("has {} values; the estimate has {} phases", prior.mean().len(), positions.len())));
         }
         let length =
             prior.correlation_length().ok_or_else(|| HasError::invalid("prior_correlation_mm", "is required for a smooth prior"))?;
-        let modes = error_modes(positions, prior.std_rad(), length)?;
-        Ok(SmoothPosterior { likelihood, mean: prior.mean().to_vec(), modes, weight: likelihood_weight(noise_rad) })
+        Ok(SmoothErrors { mean: prior.mean().to_vec(), modes: error_modes(positions, prior.std_rad(), length)? })
     }
 
-    /// Number of smooth modes searched.
+    /// Number of smooth modes.
     pub fn n_modes(&self) -> usize {
         self.modes.len()
     }
@@ -110,20 +105,40 @@ impl<'a> SmoothPosterior<'a> {
         }
         p
     }
+
+    /// The posterior over the coefficients for image cost `likelihood` (noise floor
+    /// `noise_rad`, at least [`crate::inverse::prior::MIN_NOISE_RAD`]), which must have one
+    /// phase per predicted phase.
+    pub fn posterior<'a>(&'a self, likelihood: &'a dyn Objective, noise_rad: f64) -> Result<SmoothPosterior<'a>> {
+        let n = likelihood.n_phases();
+        if self.mean.len() != n {
+            return Err(HasError::invalid("prior", format!("has {} values; the estimate has {n} phases", self.mean.len())));
+        }
+        Ok(SmoothPosterior { likelihood, errors: self, weight: likelihood_weight(noise_rad) })
+    }
+}
+
+/// The negative log posterior `U(a) = J(mu + W·a)/(2·sigma²) + |a|²/2` over the coefficients `a`
+/// of the smooth error modes (see the module docs).
+pub struct SmoothPosterior<'a> {
+    likelihood: &'a dyn Objective,
+    errors: &'a SmoothErrors,
+    /// `1 / (2·sigma²)`.
+    weight: f64,
 }
 
 impl Objective for SmoothPosterior<'_> {
     fn n_phases(&self) -> usize {
-        self.modes.len()
+        self.errors.n_modes()
     }
 
     fn cost(&self, a: &[f64]) -> f64 {
-        self.weight * self.likelihood.cost(&self.phases(a)) + 0.5 * a.iter().map(|x| x * x).sum::<f64>()
+        self.weight * self.likelihood.cost(&self.errors.phases(a)) + 0.5 * a.iter().map(|x| x * x).sum::<f64>()
     }
 
     fn cost_and_gradient(&self, a: &[f64]) -> (f64, Vec<f64>) {
-        let (j, g) = self.likelihood.cost_and_gradient(&self.phases(a));
-        let grad = self.modes.iter().zip(a).map(|(w, x)| self.weight * w.iter().zip(&g).map(|(u, v)| u * v).sum::<f64>() + x).collect();
+        let (j, g) = self.likelihood.cost_and_gradient(&self.errors.phases(a));
+        let grad = self.errors.modes.iter().zip(a).map(|(w, x)| self.weight * w.iter().zip(&g).map(|(u, v)| u * v).sum::<f64>() + x).collect();
         (self.weight * j + 0.5 * a.iter().map(|x| x * x).sum::<f64>(), grad)
     }
 
@@ -174,8 +189,9 @@ mod tests {
         let pos = grid(8, 5e-3);
         let prior = Prior::new((0..64).map(|i| 0.1 * i as f64).collect(), 0.5).unwrap().with_correlation_length(20e-3).unwrap();
         let like = Cosines((0..64).map(|i| (i as f64).sin()).collect());
-        let post = SmoothPosterior::new(&like, 0.3, &prior, &pos).unwrap();
-        let a: Vec<f64> = (0..post.n_modes()).map(|i| 0.3 * (i as f64 + 1.0).cos()).collect();
+        let errors = SmoothErrors::new(&prior, &pos).unwrap();
+        let post = errors.posterior(&like, 0.3).unwrap();
+        let a: Vec<f64> = (0..errors.n_modes()).map(|i| 0.3 * (i as f64 + 1.0).cos()).collect();
         let (_, g) = post.cost_and_gradient(&a);
         for i in 0..a.len() {
             let (mut p, mut m) = (a.clone(), a.clone());
@@ -184,6 +200,7 @@ mod tests {
             let fd = (post.cost(&p) - post.cost(&m)) / 2e-6;
             assert!((fd - g[i]).abs() < 1e-6 * (1.0 + g[i].abs()), "{i}: {fd} vs {}", g[i]);
         }
-        assert!(SmoothPosterior::new(&like, 0.3, &Prior::new(vec![0.0; 64], 0.5).unwrap(), &pos).is_err());
+        assert!(SmoothErrors::new(&Prior::new(vec![0.0; 64], 0.5).unwrap(), &pos).is_err());
+        assert!(SmoothErrors::new(&prior, &pos[..63]).is_err());
     }
 }
