@@ -50,7 +50,8 @@ class Estimate:
     candidate_costs: list[float]
     candidate_recoveries: list[float]
     suggested_phases_rad: NDArray[np.float64]
-    """Known group phases to add for one more acquisition that would best separate the candidates."""
+    """Known group phases to add for one more acquisition that would best separate the candidates; per element with
+    ``suggest=True``, the known per-element phases of ``next_acquisition``."""
     suggested_separation: float
     cost_history: NDArray[np.float64] = field(repr=False)
     misfit: float = float("nan")
@@ -70,6 +71,13 @@ class Estimate:
     """Per-element estimates that fitted nuisance parameters (``fit_nuisance``): ``fitted`` (their names), ``scale``,
     ``broadening_width_mm``, ``shift_mm`` (u, v), and per image ``background_offset_rad`` and
     ``background_slope_rad_per_mm`` (u, v); the model's values for those not fitted."""
+    next_acquisition: dict[str, Any] | None = None
+    """Per-element estimates made with ``suggest=True``: the next image to take, as a focus shift
+    ``focus_shift_mm`` (x, y, z; its known phases are ``suggested_phases_rad``, or
+    ``Simulation.focus_shift_phases``), chosen among ``candidates`` (each ``focus_shift_mm`` and
+    ``expected_focus``) for raising most the focal intensity the correction is expected to leave
+    (relative to the ideal, on the linearised posterior): ``expected_focus_now`` from the images so
+    far, ``expected_focus`` with the suggested one added."""
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

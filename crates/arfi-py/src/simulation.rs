@@ -12,6 +12,7 @@ use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimation::{estimate_aberration_with, EstimateRequest, Method};
+use has_core::inverse::information::ShiftSuggestion;
 use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
@@ -19,7 +20,7 @@ use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -292,7 +293,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -311,6 +312,7 @@ impl CoreSimulation {
         prior_std_rad: Option<f64>,
         prior_correlation_mm: Option<f64>,
         fit_nuisance: Option<Vec<String>>,
+        suggest: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
         let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
@@ -330,6 +332,7 @@ impl CoreSimulation {
             nuisance,
             threshold,
             prior,
+            suggest,
         };
         let report = |done: usize, total: usize| {
             if progress {
@@ -368,7 +371,13 @@ impl CoreSimulation {
         d.set_item("candidate_phases_rad", cands)?;
         d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
         d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
-        d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?;
+        match &r.suggestion {
+            Some(next) => {
+                d.set_item("suggested_phases_rad", next.known.clone().into_pyarray(py))?;
+                d.set_item("next_acquisition", next_acquisition(py, next)?)?;
+            }
+            None => d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?,
+        }
         d.set_item("suggested_separation", a.suggested_separation)?;
         d.set_item("misfit", a.misfit)?;
         d.set_item("model_mismatch", a.mismatch)?;
@@ -413,4 +422,22 @@ impl CoreSimulation {
         let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| invalid("field", e.to_string()))?;
         Ok(a.into_pyarray(py))
     }
+}
+
+/// The suggested next acquisition of a per-element estimate as a dict (shifts in mm).
+fn next_acquisition<'py>(py: Python<'py>, next: &ShiftSuggestion) -> PyResult<Bound<'py, PyDict>> {
+    let mm = |s: [f64; 3]| s.map(|v| v * 1e3).to_vec();
+    let d = PyDict::new(py);
+    d.set_item("focus_shift_mm", mm(next.shift))?;
+    d.set_item("expected_focus_now", next.expected_focus_now)?;
+    d.set_item("expected_focus", next.expected_focus)?;
+    let candidates = PyList::empty(py);
+    for c in &next.candidates {
+        let e = PyDict::new(py);
+        e.set_item("focus_shift_mm", mm(c.shift))?;
+        e.set_item("expected_focus", c.expected_focus)?;
+        candidates.append(e)?;
+    }
+    d.set_item("candidates", candidates)?;
+    Ok(d)
 }

@@ -48,7 +48,9 @@ def register(sub: Any) -> None:
                    help="the prediction's errors are a smooth field correlated over L mm (per-element estimates then "
                    "correct the prediction by smooth fields only; default: independent errors)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
-    p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition")
+    p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
+                   "element: the known per-element phases of the focus shift whose image is expected to raise the "
+                   "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
     add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
     p.set_defaults(run=run)
 
@@ -64,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
                      progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
-                     prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance)
+                     prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance,
+                     suggest=bool(args.suggest))
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
@@ -89,6 +92,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
               f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
               f"the focus: check it with an image taken with the correction applied (loop 2).")
+    if e.next_acquisition is not None:
+        n = e.next_acquisition
+        x, y, z = n["focus_shift_mm"]
+        print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest}); "
+              f"expected focus after the correction {n['expected_focus_now']:.2f} of the ideal now, {n['expected_focus']:.2f} "
+              f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
     if args.out_phases:
         save_npy(args.out_phases, e.phases_rad)
     if args.suggest:

@@ -39,8 +39,8 @@ pub struct FieldBasis {
     /// Scale from force density to ARFI phase (rad·m³/N).
     pub amplitude: f64,
     /// Real and imaginary parts of `B`, samples x elements (Pa per unit drive).
-    re: Array2<f32>,
-    im: Array2<f32>,
+    pub(crate) re: Array2<f32>,
+    pub(crate) im: Array2<f32>,
     /// Whether the window reaches for other broadening widths and shifts ([`FieldBasis::build`]).
     wide: bool,
 }
@@ -132,7 +132,7 @@ impl FieldBasis {
 
     /// Fields `P = B·V` for drive columns `V` (elements x images): real and imaginary parts,
     /// samples x images.
-    fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
+    pub(crate) fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
         let blocks = self.map_blocks(|rows| {
             let (br, bi) = (self.re.slice(s![rows.clone(), ..]), self.im.slice(s![rows, ..]));
             (br.dot(vr) - bi.dot(vi), br.dot(vi) + bi.dot(vr))
@@ -166,7 +166,7 @@ impl FieldBasis {
     }
 
     /// Drive columns `exp(i·(phases + offset_k))` for each offset.
-    fn drives(phases: &[f64], offsets: &[&[f64]]) -> (Array2<f32>, Array2<f32>) {
+    pub(crate) fn drives(phases: &[f64], offsets: &[&[f64]]) -> (Array2<f32>, Array2<f32>) {
         let (g, k) = (phases.len(), offsets.len());
         let mut vr = Array2::zeros((g, k));
         let mut vi = Array2::zeros((g, k));
@@ -272,6 +272,11 @@ impl ElementCost {
     /// The view the images are formed with: W and the shift along u and v (mm).
     pub fn view_mm(&self) -> (f64, [f64; 2]) {
         (self.sampler.broadening.width * 1e3, self.sampler.shift.map(|s| s * 1e3))
+    }
+
+    /// The MR sampling the images are formed with (the basis' own, or another view).
+    pub fn sampler(&self) -> &MrSampler {
+        &self.sampler
     }
 
     /// The broadening width of the basis (the model's, m).

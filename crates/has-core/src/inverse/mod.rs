@@ -1,5 +1,6 @@
 //! The inverse layer: phase arithmetic, the hybrid cost and its per-element field basis, the
-//! estimators, a predicted aberration as prior and the estimation workflow, calibration, and the model-discrepancy workflow.
+//! estimators, a predicted aberration as prior and the estimation workflow, what per-element
+//! acquisitions tell (and which to take next), calibration, and the model-discrepancy workflow.
 
 pub mod basis;
 pub mod calibrate;
@@ -7,6 +8,7 @@ pub mod cost;
 pub mod diagnose;
 pub mod estimate;
 pub mod estimation;
+pub mod information;
 pub mod linear;
 pub mod nuisance;
 pub mod phase;

@@ -1,0 +1,67 @@
+"""The next acquisition of a per-element estimate (``suggest=True`` / ``arfi estimate --suggest``),
+on a small array (256 elements) so that each estimate takes seconds. The information
+arithmetic itself (Jacobian, expected focus) is checked against finite differences, a closed form
+and Monte Carlo in crates/has-core/tests/information.rs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import arfi
+from arfi.cli import main
+
+SMALL = "[transducer]\nelements_per_side = 8\n"
+
+
+@pytest.fixture(scope="module")
+def small() -> arfi.Simulation:
+    return arfi.Simulation(arfi.Scenario.from_toml(SMALL))
+
+
+def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> None:
+    el = small.with_groups(small.n_elements)
+    truth = small.skull_phases(2)
+    prediction = truth + small.skull_phases(1002, correlation_length_mm=15.0, peak_to_peak_rad=3.0, jitter_rad=0.0)
+    image = small.arfi_image(truth, noise_rad=0.02, seed=2)
+    e = el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, prior_correlation_mm=15.0, max_evaluations=60,
+                    suggest=True)
+    n = e.next_acquisition
+    assert n is not None
+    shifts = [c["focus_shift_mm"] for c in n["candidates"]]
+    values = [c["expected_focus"] for c in n["candidates"]]
+    assert len(shifts) == 15 and [0.0, 0.0, 0.0] in shifts
+    assert values == sorted(values, reverse=True) and n["focus_shift_mm"] == shifts[0]
+    # More data never lowers the expected focus; the suggested image's known phases move the focus.
+    assert 0.0 < n["expected_focus_now"] <= n["expected_focus"] <= 1.0, n
+    np.testing.assert_allclose(e.suggested_phases_rad, small.focus_shift_phases(n["focus_shift_mm"]), atol=1e-12)
+    assert json.loads(json.dumps(e.to_dict()))["next_acquisition"]["focus_shift_mm"] == n["focus_shift_mm"]
+    # Not asked, or a group estimate: no per-element suggestion.
+    assert el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, max_evaluations=20).next_acquisition is None
+    assert small.estimate(image, suggest=True).next_acquisition is None
+
+
+def test_cli_suggest_per_element(tmp_path, capsys) -> None:
+    scenario = tmp_path / "small.toml"
+    scenario.write_text(SMALL)
+    image = tmp_path / "a.nii.gz"
+    aberration = tmp_path / "ab.npy"
+    sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
+    np.save(aberration, sim.skull_phases(4))
+    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--out", str(image), "--noise-rad", "0.02",
+                 "--seed", "4"]) == 0
+    out, nxt = tmp_path / "e.json", tmp_path / "next.npy"
+    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--groups", "256", "--max-evaluations", "30",
+                 "--suggest", str(nxt), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "next acquisition: the focus shifted by" in printed, printed
+    shift = json.loads(out.read_text())["next_acquisition"]["focus_shift_mm"]
+    np.testing.assert_allclose(np.load(nxt), sim.focus_shift_phases(shift), atol=1e-12)
+    # The suggested image can be taken with simulate --focus-shift-mm and estimated with the first.
+    second = tmp_path / "b.nii.gz"
+    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--focus-shift-mm", *map(str, shift),
+                 "--out", str(second), "--noise-rad", "0.02", "--seed", "5"]) == 0
+    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--image", str(second), "--groups", "256",
+                 "--max-evaluations", "30", "--json", str(tmp_path / "e2.json")]) == 0
