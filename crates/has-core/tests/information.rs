@@ -144,6 +144,10 @@ fn images_add_information_and_the_suggestion_is_the_best_candidate() {
     assert_eq!(s.shift, s.candidates[0].shift);
     assert!(s.expected_focus > s.expected_focus_now, "{} vs {}", s.expected_focus, s.expected_focus_now);
     assert_eq!(s.known, sim.focus_shift_phases(s.shift).unwrap());
+    // The same ranking and values on one thread.
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let single = pool.install(|| suggest_focus_shift(&sim, &model.cost, &truth, noise, &spread, &shifts).unwrap());
+    assert_eq!(single, s, "one thread and the default pool differ");
     // Bad input: no candidates, non-positive noise.
     assert!(suggest_focus_shift(&sim, &model.cost, &truth, noise, &spread, &[]).is_err());
     assert!(suggest_focus_shift(&sim, &model.cost, &truth, 0.0, &spread, &shifts).is_err());

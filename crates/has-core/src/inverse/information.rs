@@ -73,7 +73,7 @@ pub const CANDIDATE_SHIFTS_MM: [[f64; 3]; 15] = [
 /// The prior spread of the phase error the posterior is formed with.
 #[derive(Debug, Clone)]
 pub enum Spread {
-    /// Independent errors of this std (rad); [`UNIFORM_PHASE_STD`] without a prior.
+    /// Independent errors of this std (rad), e.g. an independent prior's.
     Independent(f64),
     /// Smooth error modes (one vector over the elements per mode, coefficients N(0, 1)).
     Smooth(Vec<Vec<f64>>),
@@ -106,6 +106,10 @@ pub fn image_jacobian(cost: &ElementCost, phases: &[f64], offset: &[f64], pixels
     let (g, n_s) = (b.n_elements(), b.n_samples());
     if phases.len() != g || offset.len() != g {
         return Err(HasError::invalid("phases", format!("need {g} values, one per element")));
+    }
+    let n_box = cost.sampler().pixels[0].len() * cost.sampler().pixels[1].len();
+    if let Some(p) = pixels.iter().find(|&&p| p >= n_box) {
+        return Err(HasError::invalid("pixels", format!("index {p} is outside the pixel box of {n_box}")));
     }
     let (vr, vi) = FieldBasis::drives(phases, &[offset]);
     let (pr, pi) = b.fields(&vr, &vi);
@@ -210,7 +214,8 @@ pub fn expected_focus(cov: &Array2<f64>, b: &[C64]) -> Result<f64> {
     if !(norm > 0.0) {
         return Err(HasError::invalid("focus", "the elements' fields at the focus sum to zero"));
     }
-    let total: f64 = (0..g)
+    // Row sums in parallel, added in order: the same value for any number of threads.
+    let rows: Vec<f64> = (0..g)
         .into_par_iter()
         .map(|m| {
             (0..g)
@@ -220,7 +225,8 @@ pub fn expected_focus(cov: &Array2<f64>, b: &[C64]) -> Result<f64> {
                 })
                 .sum::<f64>()
         })
-        .sum();
+        .collect();
+    let total: f64 = rows.iter().sum();
     Ok(total / norm)
 }
 
