@@ -219,7 +219,7 @@ impl CoreSimulation {
         jitter_rad: f64,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let screen = SkullScreen { correlation_length: correlation_length_mm * 1e-3, peak_to_peak: peak_to_peak_rad, jitter: jitter_rad };
-        let pos: Vec<[f64; 3]> = self.inner.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        let pos = self.inner.transducer.reference_points();
         Ok(screen.phases(&pos, seed).map_err(to_py)?.into_pyarray(py))
     }
 

@@ -137,7 +137,7 @@ fn bench_breakdown(c: &mut Criterion) {
 /// The estimation workload of issue 3: one noisy (0.02 rad) MR-ARFI image of the default scenario
 /// with a skull-like aberration (`SkullScreen::default()`, seed 1) condensed to the 16 groups.
 fn aberrated_measurement(sim: &Simulation) -> Vec<Measurement> {
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = sim.transducer.reference_points();
     let truth = condense(&SkullScreen::default().phases(&positions, 1).unwrap(), &sim.groups).unwrap();
     vec![Measurement { image: sim.noisy_arfi_image(&truth, 0.02, 1).unwrap(), known: vec![] }]
 }

@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let sc = Scenario::from_toml(&format!("[transducer]\nelements_per_side = {per_side}\n"), None)?;
     let sim = Simulation::new(&sc)?;
     let n = sim.n_elements();
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = sim.transducer.reference_points();
     let truth = SkullScreen::default().phases(&positions, seed)?;
     let peak = |img: &ndarray::Array2<f64>| img.iter().copied().fold(f64::MIN, f64::max);
     let ideal = peak(&sim.arfi_image(&[])?);

@@ -47,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(1);
     let (sim_s, sim) = secs(|| Simulation::new(&Scenario::default()));
     let sim = sim?;
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = sim.transducer.reference_points();
     let truth = condense(&SkullScreen::default().phases(&positions, seed)?, &sim.groups)?;
     let meas = vec![Measurement { image: sim.noisy_arfi_image(&truth, 0.02, seed)?, known: vec![] }];
 

@@ -45,7 +45,7 @@ fn hide(s: &Simulation, e: &mut Effects, effect: Effect, rng: &mut ChaCha8Rng, s
         Effect::SoundSpeed => e.field.sound_speed += strength(rng, 80.0, 120.0),
         Effect::ElementDropout => e.field.dead_groups = vec![rng.random_range(0..s.n_groups)],
         Effect::PhaseAberration => {
-            let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+            let positions = s.transducer.reference_points();
             e.field.group_phases = condense(&SkullScreen::default().phases(&positions, seed).expect("screen"), &s.groups).expect("groups");
         }
     }

@@ -12,7 +12,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = std::env::args().nth(1).map_or(Ok(1), |s| s.parse())?;
     let noise: f64 = std::env::args().nth(2).map_or(Ok(0.0), |s| s.parse())?;
     let sim = Simulation::new(&Scenario::default())?;
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = sim.transducer.reference_points();
     let truth = condense(&SkullScreen::default().phases(&positions, seed)?, &sim.groups)?;
     let ideal = sim.arfi_image(&[])?;
     let peak = |img: &ndarray::Array2<f64>| img.iter().copied().fold(f64::MIN, f64::max);

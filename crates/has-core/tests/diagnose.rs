@@ -302,7 +302,7 @@ fn a_hidden_phase_aberration_is_named_from_diversity_images() {
     // then reports the aberration as the alternative. Three images with known diversity phases
     // tell them apart, and the aberration is named and measured.
     let s = sim();
-    let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = s.transducer.reference_points();
     let seed = 1;
     let mut e = Effects::none(s);
     e.field.group_phases = condense(&SkullScreen::default().phases(&positions, seed).unwrap(), &s.groups).unwrap();

@@ -1,12 +1,12 @@
 //! Per-element estimation on the field basis (issue 3: `--groups` = number of elements), on a
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
+mod common;
 use has_core::inverse::basis::{build_element_model, BasisCache};
 use has_core::inverse::cost::{build_model, Measurement, Objective};
 use has_core::inverse::estimate::{condense, Estimator};
 use has_core::inverse::nuisance::Nuisance;
 use has_core::physics::aberration::SkullScreen;
-use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
 use std::sync::Arc;
@@ -15,13 +15,9 @@ fn peak(img: &Array2<f64>) -> f64 {
     img.iter().copied().fold(f64::MIN, f64::max)
 }
 
-fn small_array() -> Simulation {
-    Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap()).unwrap()
-}
-
 /// Element-level skull aberration plus images with known random group phases (noise-free).
 fn study(sim: &Simulation, images: u64) -> (Vec<f64>, Vec<Measurement>) {
-    let positions: Vec<[f64; 3]> = sim.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = sim.transducer.reference_points();
     let truth = SkullScreen::default().phases(&positions, 1).unwrap();
     let mut m = vec![Measurement { image: sim.arfi_image(&truth).unwrap(), known: vec![] }];
     for k in 1..images {
@@ -36,7 +32,7 @@ fn study(sim: &Simulation, images: u64) -> (Vec<f64>, Vec<Measurement>) {
 
 #[test]
 fn element_basis_images_gradient_and_estimate() {
-    let sim = small_array();
+    let sim = common::small_array();
     let n = sim.n_elements();
     assert_eq!(n, 256);
     let (truth, ms) = study(&sim, 4);
@@ -85,7 +81,7 @@ fn element_basis_images_gradient_and_estimate() {
 fn a_basis_cache_reuses_the_basis_for_the_same_pixel_box_only() {
     // The basis depends on the simulation and the pixel box: the same images give the same box
     // and the kept basis (the same allocation); another box is built anew.
-    let sim = small_array();
+    let sim = common::small_array();
     let (_, ms) = study(&sim, 2);
     let cache = BasisCache::default();
     let a = cache.element_model(&sim, &ms, sim.mask_fraction, 0, &Nuisance::default(), None, None).unwrap();
@@ -102,7 +98,7 @@ fn a_basis_cache_reuses_the_basis_for_the_same_pixel_box_only() {
 /// (noise-free: to 1e-6 of the added values, single-precision basis).
 #[test]
 fn element_gradient_with_nuisance_projected_out() {
-    let sim = small_array();
+    let sim = common::small_array();
     let (truth, mut ms) = study(&sim, 2);
     let coords = |k: usize, i: usize| sim.mr.pixel_center(k, i) * 1e3;
     let added = [[0.03, 2e-4, -1e-4], [-0.02, 0.0, 3e-4]];

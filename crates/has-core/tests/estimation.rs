@@ -15,10 +15,6 @@ fn sim() -> &'static Simulation {
     SIM.get_or_init(|| Simulation::new(&Scenario::default()).expect("default scenario"))
 }
 
-fn positions(s: &Simulation) -> Vec<[f64; 3]> {
-    s.transducer.elements.iter().map(|e| e.reference_point()).collect()
-}
-
 fn peak(img: &Array2<f64>) -> f64 {
     img.iter().copied().fold(f64::MIN, f64::max)
 }
@@ -26,7 +22,7 @@ fn peak(img: &Array2<f64>) -> f64 {
 /// Skull-like 16-group aberration (smooth over the array, several radians peak to peak) for a seed.
 fn group_truth(seed: u64) -> Vec<f64> {
     let s = sim();
-    condense(&SkullScreen::default().phases(&positions(s), seed).unwrap(), &s.groups).unwrap()
+    condense(&SkullScreen::default().phases(&s.transducer.reference_points(), seed).unwrap(), &s.groups).unwrap()
 }
 
 /// Recovered fraction: focal ARFI after subtracting the estimate, over the ideal focal ARFI.
@@ -61,7 +57,7 @@ fn measurements(truth: &[f64], noise: f64, images: u64, seed: u64) -> Vec<Measur
 }
 
 fn lbfgs() -> Estimator {
-    Estimator::lbfgs().with_twins(point_reflection(&positions(sim()), &sim().groups))
+    Estimator::lbfgs().with_twins(point_reflection(&sim().transducer.reference_points(), &sim().groups))
 }
 
 #[test]
@@ -129,7 +125,7 @@ fn four_diversity_images_at_0_02_rad_recover_the_focus() {
 fn single_noisy_image_never_gives_a_silent_bad_answer() {
     // Every estimate recovering < 0.8 must be flagged; unflagged ones must recover >= 0.9.
     let s = sim();
-    let sigma = point_reflection(&positions(s), &s.groups);
+    let sigma = point_reflection(&s.transducer.reference_points(), &s.groups);
     for noise in [0.005, 0.02] {
         for seed in 1..=5 {
             let truth = group_truth(seed);

@@ -3,6 +3,7 @@
 //! images, the closed form for independent errors, and Monte Carlo draws of correlated errors.
 //! On a 256-element version of the default array to keep the marches short.
 
+mod common;
 use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::information::{
@@ -11,7 +12,6 @@ use has_core::inverse::information::{
 use has_core::inverse::linear::cholesky;
 use has_core::inverse::smooth_prior::error_modes;
 use has_core::physics::aberration::SkullScreen;
-use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
@@ -19,17 +19,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-fn small_array() -> Simulation {
-    Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap()).unwrap()
-}
-
-fn positions(sim: &Simulation) -> Vec<[f64; 3]> {
-    sim.transducer.elements.iter().map(|e| e.reference_point()).collect()
-}
-
 /// A skull-like aberration and two noise-free images of it: in focus and defocused by 5 mm.
 fn study(sim: &Simulation) -> (Vec<f64>, Vec<Measurement>) {
-    let truth = SkullScreen::default().phases(&positions(sim), 1).unwrap();
+    let truth = SkullScreen::default().phases(&sim.transducer.reference_points(), 1).unwrap();
     let known = sim.focus_shift_phases([0.0, 0.0, 5e-3]).unwrap();
     let defocused: Vec<f64> = truth.iter().zip(&known).map(|(t, k)| t + k).collect();
     let images = vec![
@@ -41,7 +33,7 @@ fn study(sim: &Simulation) -> (Vec<f64>, Vec<Measurement>) {
 
 #[test]
 fn jacobian_matches_central_differences_of_the_basis_images() {
-    let sim = small_array();
+    let sim = common::small_array();
     let (truth, images) = study(&sim);
     let model = build_element_model(&sim, &images, sim.mask_fraction, 0, None, None).unwrap();
     let cost = &model.cost;
@@ -79,7 +71,7 @@ fn independent_focus(b: &[C64], v: f64) -> f64 {
 
 #[test]
 fn expected_focus_matches_the_closed_form_and_monte_carlo() {
-    let sim = small_array();
+    let sim = common::small_array();
     let (_, images) = study(&sim);
     let model = build_element_model(&sim, &images, sim.mask_fraction, 0, None, None).unwrap();
     let b = focal_fields(&model.cost.basis);
@@ -96,7 +88,7 @@ fn expected_focus_matches_the_closed_form_and_monte_carlo() {
     // Correlated errors: a squared-exponential field (0.6 rad, 15 mm) plus 0.2 rad jitter,
     // against 20 000 seeded draws. The focus of a draw lies in [0, 1] with a spread near 0.15,
     // so the Monte Carlo mean is within about 0.001 (one standard error); 0.006 is six.
-    let pos = positions(&sim);
+    let pos = sim.transducer.reference_points();
     let cov = Array2::from_shape_fn((g, g), |(m, n)| {
         let r2 = (pos[m][0] - pos[n][0]).powi(2) + (pos[m][1] - pos[n][1]).powi(2);
         0.36 * (-r2 / (2.0 * 15e-3_f64.powi(2))).exp() + if m == n { 0.04 } else { 0.0 }
@@ -118,11 +110,11 @@ fn expected_focus_matches_the_closed_form_and_monte_carlo() {
 
 #[test]
 fn images_add_information_and_the_suggestion_is_the_best_candidate() {
-    let sim = small_array();
+    let sim = common::small_array();
     let (truth, images) = study(&sim);
     let model = build_element_model(&sim, &images[..1], sim.mask_fraction, 0, None, None).unwrap();
     let b = focal_fields(&model.cost.basis);
-    let spread = Spread::Smooth(error_modes(&positions(&sim), 0.8, 15e-3).unwrap());
+    let spread = Spread::Smooth(error_modes(&sim.transducer.reference_points(), 0.8, 15e-3).unwrap());
     let noise = 0.02;
 
     // The prior alone, one image, two images: each adds information, so the expected focus

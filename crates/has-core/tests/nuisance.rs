@@ -65,7 +65,7 @@ struct Case {
 
 fn case(seed: u64) -> Case {
     let (m, d) = (model(), data_sim());
-    let positions: Vec<[f64; 3]> = m.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = m.transducer.reference_points();
     let truth = SkullScreen::default().phases(&positions, seed).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(0xb0d1 + seed);
     let mut effects = Effects::none(d);

@@ -26,7 +26,7 @@ fn peak(img: &Array2<f64>) -> f64 {
 /// Skull-like 16-group aberration for a seed.
 fn group_truth(seed: u64) -> Vec<f64> {
     let s = sim();
-    let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = s.transducer.reference_points();
     condense(&SkullScreen::default().phases(&positions, seed).unwrap(), &s.groups).unwrap()
 }
 
@@ -124,7 +124,7 @@ fn per_element_with_a_smooth_prior_and_defocused_images_lifts_a_prediction_of_0_
     let n = s.n_elements();
     let mut per_element = s.clone();
     per_element.set_groups((0..n).collect()).unwrap();
-    let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+    let positions = s.transducer.reference_points();
     let ideal = peak(&s.arfi_image(&[]).unwrap());
     for seed in 1..=5u64 {
         let truth = SkullScreen::default().phases(&positions, seed).unwrap();

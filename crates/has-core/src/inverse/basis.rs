@@ -182,13 +182,20 @@ impl FieldBasis {
 
     /// The image on the box for per-element phases (rad) added to the steering.
     pub fn image(&self, phases: &[f64]) -> Result<Array2<f64>> {
-        if phases.len() != self.n_elements() {
-            return Err(HasError::invalid("phases", format!("has {} values for {} elements", phases.len(), self.n_elements())));
+        self.image_with(&self.sampler, phases, &vec![0.0; self.n_elements()])
+    }
+
+    /// The image on the box formed with `sampler` for per-element `phases` with known phases
+    /// `offset` added.
+    fn image_with(&self, sampler: &MrSampler, phases: &[f64], offset: &[f64]) -> Result<Array2<f64>> {
+        for (name, values) in [("phases", phases), ("offset", offset)] {
+            if values.len() != self.n_elements() {
+                return Err(HasError::invalid(name, format!("has {} values for {} elements", values.len(), self.n_elements())));
+            }
         }
-        let zero = vec![0.0; phases.len()];
-        let (vr, vi) = Self::drives(phases, &[&zero]);
+        let (vr, vi) = Self::drives(phases, &[offset]);
         let (pr, pi) = self.fields(&vr, &vi);
-        Ok(self.sampler.apply(&power_columns(&pr, &pi)[0])? * self.amplitude)
+        Ok(sampler.apply(&power_columns(&pr, &pi)[0])? * self.amplitude)
     }
 }
 
@@ -277,6 +284,13 @@ impl ElementCost {
     /// The MR sampling the images are formed with (the basis' own, or another view).
     pub fn sampler(&self) -> &MrSampler {
         &self.sampler
+    }
+
+    /// The model image on the box (before the linear nuisance) at `phases` with known
+    /// per-element phases `offset` added, formed with this cost's view: what an acquisition
+    /// with those known phases is expected to show.
+    pub fn predicted_image(&self, phases: &[f64], offset: &[f64]) -> Result<Array2<f64>> {
+        self.basis.image_with(&self.sampler, phases, offset)
     }
 
     /// The broadening width of the basis (the model's, m).

@@ -214,7 +214,7 @@ pub fn estimate_aberration_with(
         ));
     }
     let prior = request.prior.as_ref().map(|p| group_prior(sim, p)).transpose()?;
-    let sigma = point_reflection(&positions(sim), &sim.groups);
+    let sigma = point_reflection(&sim.transducer.reference_points(), &sim.groups);
     let mut est = estimator(request, request.method, sigma.clone())?;
     if let Some(n) = request.max_evaluations {
         est = est.with_max_evaluations(n)?;
@@ -235,11 +235,6 @@ pub fn estimate_aberration_with(
         nuisance: None,
         suggestion: None,
     })
-}
-
-/// Reference points of the elements (m).
-fn positions(sim: &Simulation) -> Vec<[f64; 3]> {
-    sim.transducer.elements.iter().map(|e| e.reference_point()).collect()
 }
 
 /// Runs `est` on the group cost of `model` (on its posterior with `prior`, from the prediction)
@@ -382,7 +377,8 @@ fn estimate_per_element(
     let mut grouped = sim.clone();
     grouped.set_groups(sim.transducer.default_groups())?;
     let group_prior = prior.as_ref().map(|p| p.condensed(&grouped.groups)).transpose()?;
-    let sigma = point_reflection(&positions(sim), &grouped.groups);
+    let positions = sim.transducer.reference_points();
+    let sigma = point_reflection(&positions, &grouped.groups);
     let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
     let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
     group_model.cost.fit_scale = request.fit_scale;
@@ -400,7 +396,7 @@ fn estimate_per_element(
     let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(warm.time_limit);
     let budget = request.max_evaluations.unwrap_or(ELEMENT_EVALUATIONS);
     let (elements, cost) =
-        search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions(sim), cancel)?;
+        search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, cancel)?;
     let fitted = nuisance.any().then(|| {
         let linear = cost.linear_at(&elements.phases);
         let (w, shift) = cost.view_mm();
@@ -416,7 +412,7 @@ fn estimate_per_element(
     let fitted_phases = if prior.is_some() { 0 } else { sim.n_elements() - 1 };
     (assessment.misfit, assessment.mismatch) = misfit(image_cost, n_pixels, fitted_phases, model.noise);
     let suggestion = if request.suggest {
-        let spread = Spread::for_prior(prior.as_ref(), &positions(sim))?;
+        let spread = Spread::for_prior(prior.as_ref(), &positions)?;
         let shifts = CANDIDATE_SHIFTS_MM.map(|s| s.map(|v| v * 1e-3));
         Some(suggest_focus_shift(sim, &cost, &elements.phases, model.noise.max(MIN_NOISE_RAD), &spread, &shifts)?)
     } else {

@@ -233,19 +233,12 @@ pub fn expected_focus(cov: &Array2<f64>, b: &[C64]) -> Result<f64> {
 /// Every element's field (Pa per unit drive) at the window sample of the ideal focus (the
 /// sample where the fields with steering alone add up the most).
 pub fn focal_fields(basis: &FieldBasis) -> Vec<C64> {
-    let row = |s: usize| (0..basis.n_elements()).map(move |e| C64::new(f64::from(basis.re[[s, e]]), f64::from(basis.im[[s, e]])));
-    let focus =
-        (0..basis.n_samples()).max_by(|&a, &b| row(a).sum::<C64>().norm_sqr().total_cmp(&row(b).sum::<C64>().norm_sqr())).unwrap_or(0);
-    row(focus).collect()
-}
-
-/// The model image on the cost's pixel box (before the linear nuisance) at `phases` with known
-/// per-element phases `offset` added: what that acquisition is expected to show.
-fn predicted_image(cost: &ElementCost, phases: &[f64], offset: &[f64]) -> Result<Array2<f64>> {
-    let (vr, vi) = FieldBasis::drives(phases, &[offset]);
-    let (pr, pi) = cost.basis.fields(&vr, &vi);
-    let q: Vec<f64> = pr.iter().zip(pi.iter()).map(|(a, b)| f64::from(*a).powi(2) + f64::from(*b).powi(2)).collect();
-    Ok(cost.sampler().apply(&q)? * cost.basis.amplitude)
+    let zero = vec![0.0; basis.n_elements()];
+    let (vr, vi) = FieldBasis::drives(&zero, &[&zero]);
+    let (pr, pi) = basis.fields(&vr, &vi);
+    let power = |s: usize| f64::from(pr[[s, 0]]).powi(2) + f64::from(pi[[s, 0]]).powi(2);
+    let focus = (0..basis.n_samples()).max_by(|&a, &b| power(a).total_cmp(&power(b))).unwrap_or(0);
+    (0..basis.n_elements()).map(|e| C64::new(f64::from(basis.re[[focus, e]]), f64::from(basis.im[[focus, e]]))).collect()
 }
 
 /// One candidate for the next acquisition and the focus it is expected to leave.
@@ -294,7 +287,7 @@ pub fn suggest_focus_shift(
     let mut candidates = Vec::with_capacity(shifts_m.len());
     for &shift in shifts_m {
         let offset = sim.focus_shift_phases(shift)?;
-        let image = predicted_image(cost, phases, &offset)?;
+        let image = cost.predicted_image(phases, &offset)?;
         let mask: Vec<usize> = mask_pixels(&image, sim.mask_fraction).iter().map(|&(i, j)| i * nv + j).collect();
         let added = information(&image_jacobian(cost, phases, &offset, &mask)?, noise);
         let expected = expected_focus(&error_covariance(&(&now + &added), spread)?, &b)?;

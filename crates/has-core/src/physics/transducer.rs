@@ -286,6 +286,11 @@ impl Transducer {
             .fold(0.0, f64::max)
     }
 
+    /// Every element's reference point (m; [`Surface::reference_point`]), in element order.
+    pub fn reference_points(&self) -> Vec<[f64; 3]> {
+        self.elements.iter().map(Surface::reference_point).collect()
+    }
+
     /// Whether every element lies flat in z = 0 facing +z (no Rayleigh projection needed).
     pub fn is_planar(&self) -> bool {
         self.elements.iter().all(|e| e.is_in_plane(0.0))

@@ -1,6 +1,15 @@
 //! Helpers shared by the integration tests (each test file is its own crate: `mod common;`).
 #![allow(dead_code)]
 
+use has_core::scenario::Scenario;
+use has_core::simulation::Simulation;
+
+/// The default scenario with a 256-element array (8 x 8 per quadrant), to keep the marches of
+/// per-element tests short.
+pub fn small_array() -> Simulation {
+    Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap()).unwrap()
+}
+
 /// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
 /// neighbours: (fractional index, value).
 pub fn parabolic_peak(y: &[f64]) -> (f64, f64) {

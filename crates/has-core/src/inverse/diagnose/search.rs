@@ -285,7 +285,7 @@ impl Context<'_> {
             })
             .collect::<Vec<_>>();
         let hybrid = build_model(&sim, &measurements, s.mask_fraction, 3)?;
-        let positions: Vec<[f64; 3]> = s.transducer.elements.iter().map(|e| e.reference_point()).collect();
+        let positions = s.transducer.reference_points();
         let estimate = Estimator::lbfgs()
             .with_twins(point_reflection(&positions, &s.groups))
             .with_time_limit_opt(self.deadline.map(|d| d.saturating_duration_since(Instant::now()).max(Duration::from_millis(1))))
