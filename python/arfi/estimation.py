@@ -41,6 +41,8 @@ class Estimate:
     """True when clearly different solutions fit within the noise (see ``suggested_phases_rad``)."""
     method: str
     stop: str
+    """Why the search ended: ``"converged"``, ``"evaluation limit"``, ``"time limit"``, ``"interrupted"``, or
+    ``"prediction kept"`` (no search: see ``kept_prediction``)."""
     noise_floor: float
     n_pixels: int
     scale: float
@@ -63,6 +65,12 @@ class Estimate:
     """Per-element estimation only: the default-group estimate that warm-started it."""
     underdetermined: bool = False
     """Per-element estimation only: fewer masked pixels than phases (then also ``ambiguous``)."""
+    kept_prediction: bool = False
+    """Per-element estimation with a prior from one acquisition (one image, or repeats with the same known phases):
+    ``phases_rad`` is the prediction itself, unsearched. One in-focus image cannot check a per-element correction of a
+    prediction (a correction that fits it as well as the truth can leave less focus than the prediction), so the
+    prediction is kept until a second acquisition with other known phases (e.g. ``next_acquisition``, a defocus) is
+    given. ``misfit`` then measures the prediction against the image, and ``model_mismatch`` is not judged."""
     prior_used: bool = False
     """A predicted aberration entered the estimate (the posterior optimum; ``ambiguous`` judged on the posterior)."""
     posterior_cost: float | None = None

@@ -108,6 +108,9 @@ def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
     for s, prior in ((0.3, truth), (0.5, sim.condense(truth))):
         e = el.estimate(images, prior=prior, prior_std_rad=s, max_evaluations=50)
         assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.underdetermined
+        # One acquisition cannot check a per-element correction: the prediction is kept as it is.
+        assert e.kept_prediction and e.evaluations == 0
+        np.testing.assert_allclose(np.exp(1j * e.phases_rad), np.exp(1j * sim.element_phases(prior)), atol=1e-12)
     # Errors as a smooth field (15 mm): the estimate corrects the prediction by smooth fields; a
     # prediction that is the truth stays within its stated error (0.3 rad) of it.
     e = el.estimate(images, prior=truth, prior_std_rad=0.3, prior_correlation_mm=15.0, max_evaluations=50)

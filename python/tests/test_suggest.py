@@ -43,6 +43,36 @@ def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> 
     assert small.estimate(image, suggest=True).next_acquisition is None
 
 
+def test_cli_one_acquisition_keeps_the_prediction_until_a_second(tmp_path, capsys) -> None:
+    # Per element with a prior, one image cannot check a correction of the prediction: the CLI keeps
+    # it, says so and suggests a second acquisition; with that image added it searches.
+    scenario, first, second = tmp_path / "small.toml", tmp_path / "a.nii.gz", tmp_path / "b.nii.gz"
+    scenario.write_text(SMALL)
+    sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
+    truth = sim.skull_phases(3)
+    np.save(tmp_path / "ab.npy", truth)
+    np.save(tmp_path / "prior.npy", truth + sim.skull_phases(1003, correlation_length_mm=15.0, peak_to_peak_rad=3.0, jitter_rad=0.0))
+    common = ["--scenario", str(scenario), "--groups", "256", "--max-evaluations", "30", "--prior", str(tmp_path / "prior.npy"),
+              "--prior-std-rad", "0.8", "--prior-correlation-mm", "15"]
+    assert main(["simulate", "--scenario", str(scenario), "--phases", str(tmp_path / "ab.npy"), "--out", str(first),
+                 "--noise-rad", "0.02", "--seed", "3"]) == 0
+    out, nxt = tmp_path / "e.json", tmp_path / "next.npy"
+    assert main(["estimate", "--image", str(first), *common, "--suggest", str(nxt), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "KEPT THE PREDICTION" in printed and "next acquisition" in printed, printed
+    d = json.loads(out.read_text())
+    assert d["kept_prediction"] is True and d["evaluations"] == 0 and d["stop"] == "prediction kept"
+    assert d["model_mismatch"] is False
+    np.testing.assert_allclose(np.exp(1j * np.array(d["phases_rad"])), np.exp(1j * np.load(tmp_path / "prior.npy")), atol=1e-12)
+    shift = d["next_acquisition"]["focus_shift_mm"]
+    assert main(["simulate", "--scenario", str(scenario), "--phases", str(tmp_path / "ab.npy"), "--focus-shift-mm",
+                 *map(str, shift), "--out", str(second), "--noise-rad", "0.02", "--seed", "4"]) == 0
+    assert main(["estimate", "--image", str(first), "--image", str(second), *common, "--json", str(out)]) == 0
+    assert "KEPT" not in capsys.readouterr().out
+    d = json.loads(out.read_text())
+    assert d["kept_prediction"] is False and d["evaluations"] > 0
+
+
 def test_cli_suggest_per_element(tmp_path, capsys) -> None:
     scenario = tmp_path / "small.toml"
     scenario.write_text(SMALL)

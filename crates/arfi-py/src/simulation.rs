@@ -351,6 +351,7 @@ impl CoreSimulation {
         if let Some(g) = &r.group_phases {
             d.set_item("group_phases_rad", g.clone().into_pyarray(py))?;
             d.set_item("underdetermined", r.underdetermined)?;
+            d.set_item("kept_prediction", r.kept_prediction)?;
         }
         d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
         d.set_item("cost", r.image_cost)?;

@@ -81,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: fitted {', '.join(n['fitted'])}: amplitude scale {n['scale']:.3f}, W {n['broadening_width_mm']:.2f} mm, "
               f"shift ({n['shift_mm'][0]:+.2f}, {n['shift_mm'][1]:+.2f}) mm, background offsets {offsets} rad; misfit "
               f"{e.misfit:.2f} x the noise expectation")
+    if e.kept_prediction:
+        print("estimate: KEPT THE PREDICTION: one acquisition cannot check a per-element correction of a prediction (one "
+              "that fits the image as well as the truth can leave less focus than the prediction); add an image with other "
+              "known phases, e.g. a defocus (--suggest), and estimate from both.")
     if e.underdetermined:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")

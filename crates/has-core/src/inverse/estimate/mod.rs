@@ -40,6 +40,9 @@ pub enum Stop {
     TimeLimit,
     /// Cancelled by another thread (Ctrl-C).
     Interrupted,
+    /// No search ran: the prediction of a prior was kept (see
+    /// [`crate::inverse::estimation::one_acquisition`]).
+    PredictionKept,
 }
 
 impl Stop {
@@ -50,6 +53,7 @@ impl Stop {
             Stop::EvaluationLimit => "evaluation limit",
             Stop::TimeLimit => "time limit",
             Stop::Interrupted => "interrupted",
+            Stop::PredictionKept => "prediction kept",
         }
     }
 }
