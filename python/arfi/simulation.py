@@ -275,6 +275,13 @@ class Simulation:
         element-scale detail the images cannot resolve stays as predicted instead of being
         fitted to noise. Group estimates keep the independent prior of the group means.
 
+        Per element, a prior and one acquisition (one image, or repeats with the same known
+        phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot
+        check a per-element correction of it. Over six skull screens its posterior optimum
+        averaged 0.79 of the ideal focus against the prediction's 0.76, but one lost 0.19 while
+        fitting the image better than the truth does; a second, defocused image lifted all six.
+        ``posterior_cost`` is then the negative log posterior at the prediction.
+
         ``fit_nuisance``: what else the images may differ in from this model, fitted jointly with
         per-element phases (names as ``diagnose`` reports them, a list or a comma-separated
         string, or ``"all"``): ``"amplitude"`` (one scale for all images, as ``fit_amplitude``),

@@ -111,10 +111,18 @@ def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
         # One acquisition cannot check a per-element correction: the prediction is kept as it is.
         assert e.kept_prediction and e.evaluations == 0
         np.testing.assert_allclose(np.exp(1j * e.phases_rad), np.exp(1j * sim.element_phases(prior)), atol=1e-12)
-    # Errors as a smooth field (15 mm): the estimate corrects the prediction by smooth fields; a
-    # prediction that is the truth stays within its stated error (0.3 rad) of it.
-    e = el.estimate(images, prior=truth, prior_std_rad=0.3, prior_correlation_mm=15.0, max_evaluations=50)
-    assert e.prior_used and len(e.phases_rad) == sim.n_elements
+    # A repeat with the same known phases (up to a common phase) is the same acquisition: kept too.
+    repeat = sim.arfi_image(sim.element_phases(truth) + 0.7, noise_rad=0.02, seed=3)
+    assert el.estimate(images + [repeat], [None, np.full(sim.n_elements, 0.7)], prior=truth, prior_std_rad=0.3,
+                       max_evaluations=50).kept_prediction
+    # Errors as a smooth field (15 mm), with a defocused second image: the estimate corrects the
+    # prediction by smooth fields; a prediction that is the truth stays within its stated error
+    # (0.3 rad) of it.
+    shift = sim.focus_shift_phases((0.0, 0.0, 10.0))
+    defocused = sim.arfi_image(sim.element_phases(truth) + shift, noise_rad=0.02, seed=4)
+    e = el.estimate(images + [defocused], [None, shift], prior=truth, prior_std_rad=0.3, prior_correlation_mm=15.0,
+                    max_evaluations=50)
+    assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.kept_prediction and e.evaluations > 0
     assert phase_error(e.phases_rad, truth) < 0.3
     with pytest.raises(ValueError, match="prior_correlation_mm: 0.010 mm is too short for 256 phases"):
         el.estimate(images, prior=truth, prior_std_rad=0.3, prior_correlation_mm=0.01)

@@ -83,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
               f"{e.misfit:.2f} x the noise expectation")
     if e.kept_prediction:
         print("estimate: KEPT THE PREDICTION: one acquisition cannot check a per-element correction of a prediction (one "
-              "that fits the image as well as the truth can leave less focus than the prediction); add an image with other "
-              "known phases, e.g. a defocus (--suggest), and estimate from both.")
+              "that fits the image better than the truth can leave less focus than the prediction); add an image with "
+              "other known phases, e.g. a defocus (--suggest), and estimate from both.")
     if e.underdetermined:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")

@@ -307,7 +307,8 @@ pub struct Estimate {
     pub seconds: f64,
     /// Best cost after each evaluation of the winning run.
     pub history: Vec<f64>,
-    /// Why the search stopped (the first limit any run reached, else converged).
+    /// Why the search stopped (the first limit any run reached, else converged; or that no
+    /// search ran because a prediction was kept).
     pub stop: Stop,
     /// The end point of every run (one per start).
     pub minima: Vec<Minimum>,
