@@ -255,7 +255,7 @@ class Simulation:
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
         element, about 15 s for 1024), warm-started by the estimate on the default 16 groups (with a
         prior, from the prediction);
-        ``max_evaluations`` (default 200) bounds that fit. ``progress`` prints the basis
+        ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress`` prints the basis
         marching to stderr.
 
         ``prior``: a predicted aberration (e.g. from a CT-based skull simulation), one phase per

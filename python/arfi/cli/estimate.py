@@ -29,7 +29,8 @@ def register(sub: Any) -> None:
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
-                   help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 200)")
+                   help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 200, "
+                   "or 120 when --fit-nuisance fits W or the shift)")
     p.add_argument("--time-limit-s", type=float, dest="time_limit_s")
     p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
     p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
