@@ -41,8 +41,7 @@ pub struct FieldBasis {
     /// Real and imaginary parts of `B`, samples x elements (Pa per unit drive).
     pub(crate) re: Array2<f32>,
     pub(crate) im: Array2<f32>,
-    /// The views (W, shift) the window reaches for ([`FieldBasis::build`]; only those two fields
-    /// are set).
+    /// The views (W, shift) the window reaches for ([`FieldBasis::build`]; [`Nuisance::views`]).
     reach: Nuisance,
 }
 
@@ -63,7 +62,7 @@ impl FieldBasis {
         cancel: Option<&AtomicBool>,
     ) -> Result<Self> {
         let full = sim.sampler()?;
-        let reach = Nuisance { broadening: reach.broadening, registration_shift: reach.registration_shift, ..Nuisance::default() };
+        let reach = reach.views();
         let sampler = if reach.view() {
             let w = full.broadening.width;
             full.with_broadening(reach.window_width(w))?.restrict(u, v)?.with_view([w; 2], [0.0; 2])?
@@ -526,9 +525,7 @@ impl BasisCache {
     ) -> Result<Arc<FieldBasis>> {
         let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let fits = |b: &&Arc<FieldBasis>| {
-            b.sampler.pixels == [u.clone(), v.clone()]
-                && b.n_elements() == sim.n_elements()
-                && [b.reach.broadening, b.reach.registration_shift] == [reach.broadening, reach.registration_shift]
+            b.sampler.pixels == [u.clone(), v.clone()] && b.n_elements() == sim.n_elements() && b.reach == reach.views()
         };
         if let Some(b) = kept.as_ref().filter(fits) {
             return Ok(Arc::clone(b));

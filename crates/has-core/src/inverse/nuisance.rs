@@ -85,6 +85,11 @@ impl Nuisance {
         self.broadening || self.registration_shift
     }
 
+    /// Only the view parameters (W, shift) of these: what the element basis' window depends on.
+    pub fn views(&self) -> Nuisance {
+        Nuisance { broadening: self.broadening, registration_shift: self.registration_shift, ..Nuisance::default() }
+    }
+
     /// The broadening width (m) whose window covers every view fitted from a model width `width`
     /// (m): [`width_reach`] when W is fitted, plus a quarter of [`SHIFT_REACH_MM`] when the shift
     /// is (the Gaussian reaches 4 widths, so that covers the shifted pixels); `width` itself when
