@@ -24,6 +24,7 @@
 pub mod error;
 pub mod inverse;
 pub mod memory;
+pub mod nifti;
 pub mod physics;
 pub mod scenario;
 pub mod simulation;

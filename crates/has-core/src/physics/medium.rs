@@ -1,7 +1,9 @@
-//! Acoustic media: materials, regions (cylinder, slab) and voxel maps.
+//! Acoustic media: materials, regions (cylinder, slab), voxel maps and CT volumes.
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
+use crate::physics::ct::CtMedium;
 use crate::physics::grid::Grid;
+use std::sync::Arc;
 
 /// Nepers per decibel: 1 dB = ln(10)/20 Np.
 pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
@@ -222,7 +224,7 @@ impl VoxelMap {
     }
 }
 
-/// The medium: materials, a background, regions and optional voxel maps.
+/// The medium: materials, a background, regions, an optional voxel map and an optional CT.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Medium {
     /// The materials, referred to by index.
@@ -233,12 +235,15 @@ pub struct Medium {
     pub regions: Vec<Region>,
     /// Voxel-by-voxel properties, overriding the regions and background inside their box.
     pub voxels: Option<VoxelMap>,
+    /// A CT of the head, overriding everything else where it holds tissue (its coupling voxels
+    /// and the space outside it keep the description above); shared, as it may be large.
+    pub ct: Option<Arc<CtMedium>>,
 }
 
 impl Medium {
     /// A single homogeneous material.
     pub fn homogeneous(material: Material) -> Self {
-        Medium { materials: vec![material], background: 0, regions: vec![], voxels: None }
+        Medium { materials: vec![material], background: 0, regions: vec![], voxels: None, ct: None }
     }
 
     /// Checks materials, indices and shapes.
@@ -304,6 +309,22 @@ impl Medium {
                 ));
             }
         }
+        if let Some(ct) = &self.ct {
+            let [lo, hi] = ct.bounds();
+            if hi[2] < z_lo || lo[2] > z_hi || lo[0] > x_half || hi[0] < -x_half || lo[1] > y_half || hi[1] < -y_half {
+                return Err(HasError::BadFile {
+                    path: ct.path.clone(),
+                    reason: format!(
+                        "the CT lies outside the simulation grid (z {:.2} to {:.2} mm, |x| <= {:.1} mm, |y| <= {:.1} mm): check \
+                         ct.patient_to_transducer_mm",
+                        z_lo * 1e3,
+                        z_hi * 1e3,
+                        x_half * 1e3,
+                        y_half * 1e3
+                    ),
+                });
+            }
+        }
         Ok(())
     }
 
@@ -314,6 +335,14 @@ impl Medium {
 
     /// Properties at a point for `frequency` (Hz).
     pub fn properties_at(&self, x: f64, y: f64, z: f64, frequency: f64) -> Properties {
+        if let Some(p) = self.ct.as_ref().and_then(|ct| ct.properties_at([x, y, z], frequency)) {
+            return p;
+        }
+        self.described_at(x, y, z, frequency)
+    }
+
+    /// Properties at a point from the voxel map, regions and background (the CT aside).
+    fn described_at(&self, x: f64, y: f64, z: f64, frequency: f64) -> Properties {
         if let Some(v) = &self.voxels {
             if let Some(i) = v.index(x, y, z) {
                 let a = v.attenuation_db_cm_mhz[i] * (frequency / 1e6).powf(v.attenuation_power) * 100.0 * NP_PER_DB;
@@ -326,35 +355,39 @@ impl Medium {
     /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
         let m = self.materials.iter().map(|m| m.sound_speed).fold(f64::INFINITY, f64::min);
+        let m = self.ct.as_ref().map_or(m, |ct| m.min(ct.min_sound_speed()));
         match &self.voxels {
             Some(v) => v.sound_speed.iter().copied().fold(m, f64::min),
             None => m,
         }
     }
 
-    /// Properties on the lateral grid at height `z`: row-major `(ny, nx)`.
+    /// Properties on the lateral grid at height `z`: row-major `(ny, nx)`. Where a CT reaches,
+    /// each pixel holds its cell's average (see [`crate::physics::ct`]).
     pub fn slice(&self, grid: &Grid, z: f64, frequency: f64) -> SliceProperties {
-        let n = grid.lateral_len();
         let per_material: Vec<Properties> = self.materials.iter().map(|m| m.properties(frequency)).collect();
-        let mut s =
-            SliceProperties { sound_speed: Vec::with_capacity(n), density: Vec::with_capacity(n), attenuation: Vec::with_capacity(n) };
         let voxels_here = self.voxels.as_ref().is_some_and(|v| v.covers_z(z));
+        let mut props = Vec::with_capacity(grid.lateral_len());
         for j in 0..grid.ny {
             for i in 0..grid.nx {
                 let (x, y) = (grid.x(i), grid.y(j));
-                let p = if voxels_here { self.properties_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] };
-                s.sound_speed.push(p.sound_speed);
-                s.density.push(p.density);
-                s.attenuation.push(p.attenuation);
+                props.push(if voxels_here { self.described_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] });
             }
         }
-        s
+        if let Some(ct) = self.ct.as_ref().filter(|ct| ct.covers_z(z)) {
+            ct.fill_slice(grid, z, frequency, &mut props);
+        }
+        SliceProperties {
+            sound_speed: props.iter().map(|p| p.sound_speed).collect(),
+            density: props.iter().map(|p| p.density).collect(),
+            attenuation: props.iter().map(|p| p.attenuation).collect(),
+        }
     }
 
     /// Which regions' z-ranges contain `z`; two heights with equal keys have identical slices.
     /// `None` where a voxel map covers `z` (every slice may differ there).
     pub fn slice_key(&self, z: f64) -> Option<Vec<bool>> {
-        if self.voxels.as_ref().is_some_and(|v| v.covers_z(z)) {
+        if self.voxels.as_ref().is_some_and(|v| v.covers_z(z)) || self.ct.as_ref().is_some_and(|ct| ct.covers_z(z)) {
             return None;
         }
         Some(

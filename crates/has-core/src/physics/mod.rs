@@ -1,8 +1,9 @@
-//! The physics layer: the simulation grid, media, transducers and their steering, the source
+//! The physics layer: the simulation grid, media (with CT-derived skulls), transducers and their steering, the source
 //! plane (Rayleigh projection of curved elements), the FFTs, Hybrid Angular Spectrum
 //! propagation, and the MR-ARFI forward model after the pressure field.
 
 pub mod aberration;
+pub mod ct;
 pub mod fft;
 pub mod grid;
 pub mod medium;

@@ -5,8 +5,10 @@
 //! file that names any `[[material]]` or `[[region]]` replaces the default medium whole.
 //! [`Scenario::resolve`] validates them and turns them into SI objects ([`Resolved`]).
 
+mod ct;
 mod resolve;
 
+pub use ct::CtSpec;
 pub use resolve::Resolved;
 
 use crate::error::{HasError, Result};
@@ -43,6 +45,10 @@ pub struct Scenario {
     /// `[[region]]`: where the materials lie; later regions override earlier ones.
     #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
     pub regions: Option<Vec<RegionSpec>>,
+    /// `[ct]`: a CT of the head in the medium. Without `[[material]]`s the rest of the medium is
+    /// water (not the paper's phantom).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ct: Option<CtSpec>,
     /// `[grid]`: sampling and propagation options.
     #[serde(default)]
     pub grid: GridSpec,
@@ -338,6 +344,7 @@ impl Default for Scenario {
             materials: None,
             medium: None,
             regions: None,
+            ct: None,
             grid: GridSpec::default(),
             mr: MrSpec::default(),
             arfi: ArfiSpec::default(),
@@ -346,18 +353,23 @@ impl Default for Scenario {
     }
 }
 
-/// The default medium, the paper's phantom experiment: water (1500 m/s, 1000 kg/m³, no
-/// attenuation) below z = 40 mm, and above it the CIRS phantom (1533 m/s, 1040 kg/m³,
-/// 0.46 dB/cm/MHz) as a cylinder of radius 60 mm about the beam axis up to z = 160 mm.
-fn default_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
+/// Water: 1500 m/s, 1000 kg/m³, no attenuation.
+fn water() -> MaterialSpec {
+    MaterialSpec {
+        name: "water".into(),
+        sound_speed_m_s: 1500.0,
+        density_kg_m3: 1000.0,
+        attenuation_db_cm_mhz: 0.0,
+        attenuation_power: 1.0,
+    }
+}
+
+/// The default medium, the paper's phantom experiment: water below z = 40 mm, and above it the
+/// CIRS phantom (1533 m/s, 1040 kg/m³, 0.46 dB/cm/MHz) as a cylinder of radius 60 mm about the
+/// beam axis up to z = 160 mm.
+fn phantom_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
     let materials = vec![
-        MaterialSpec {
-            name: "water".into(),
-            sound_speed_m_s: 1500.0,
-            density_kg_m3: 1000.0,
-            attenuation_db_cm_mhz: 0.0,
-            attenuation_power: 1.0,
-        },
+        water(),
         MaterialSpec {
             name: "phantom".into(),
             sound_speed_m_s: 1533.0,
@@ -378,6 +390,15 @@ fn default_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
 }
 
 impl Scenario {
+    /// The medium when the file names no material or region: the paper's phantom experiment, or
+    /// water around a CT.
+    fn default_medium(&self) -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
+        match self.ct {
+            Some(_) => (vec![water()], MediumSpec { background: "water".into() }, vec![]),
+            None => phantom_medium(),
+        }
+    }
+
     /// Parses TOML text. `base_dir` resolves relative paths.
     pub fn from_toml(text: &str, base_dir: Option<&Path>) -> Result<Self> {
         let mut s: Scenario = toml::from_str(text).map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
@@ -417,7 +438,7 @@ impl Scenario {
     fn explicit(&self) -> Scenario {
         let mut s = self.clone();
         if s.materials.is_none() && s.regions.is_none() {
-            let (m, b, r) = default_medium();
+            let (m, b, r) = s.default_medium();
             s.materials = Some(m);
             s.medium = Some(s.medium.unwrap_or(b));
             s.regions = Some(r);

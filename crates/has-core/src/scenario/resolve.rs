@@ -1,7 +1,7 @@
 //! Validation of a [`Scenario`] and its conversion to SI objects: the transducer, the medium and
 //! the MR geometry, with every value checked and errors named by their scenario key.
 
-use super::{default_medium, GridSpec, Scenario};
+use super::{GridSpec, Scenario};
 use crate::error::{require_non_negative, require_positive, HasError, Result};
 use crate::physics::medium::{Material, Medium, Region, Shape};
 use crate::physics::mr::{MrGeometry, MrPlane};
@@ -48,8 +48,13 @@ impl Scenario {
         require_positive("frequency_hz", f)?;
         require_positive("acoustic_power_w", self.acoustic_power_w)?;
         let focus = mm3(self.focus.position_mm, "focus.position_mm")?;
-        let medium = self.medium_si()?;
+        let mut medium = self.medium_si()?;
         let transducer = self.transducer_si()?;
+        if let Some(spec) = &self.ct {
+            let ct = spec.resolve(self.base_dir.as_deref(), &medium.materials)?;
+            ct.check_covers(&transducer.reference_points(), focus)?;
+            medium.ct = Some(std::sync::Arc::new(ct));
+        }
         let mr = MrGeometry {
             plane: MrPlane::parse(&self.mr.plane)?,
             center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
@@ -100,7 +105,7 @@ impl Scenario {
     }
 
     fn medium_si(&self) -> Result<Medium> {
-        let (dm, db, dr) = default_medium();
+        let (dm, db, dr) = self.default_medium();
         let custom = self.materials.is_some() || self.regions.is_some();
         let materials = if custom { self.materials.clone().unwrap_or_default() } else { dm };
         let regions = if custom { self.regions.clone().unwrap_or_default() } else { dr };
@@ -152,7 +157,7 @@ impl Scenario {
             };
             regs.push(Region { material, shape });
         }
-        let m = Medium { materials: mats, background, regions: regs, voxels: None };
+        let m = Medium { materials: mats, background, regions: regs, voxels: None, ct: None };
         m.validate()?;
         Ok(m)
     }

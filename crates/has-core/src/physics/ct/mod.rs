@@ -1,0 +1,349 @@
+//! A medium from a CT of the head: Hounsfield units read from NIfTI, placed in the transducer
+//! frame by a rigid transform, converted to acoustic properties ([`HuConversion`]) and sampled
+//! onto the simulation grid without aliasing thin bone.
+//!
+//! Frames: the NIfTI affine maps voxel indices to the scanner's RAS+ frame (mm, as NIfTI
+//! defines it); negating x and y gives the DICOM patient frame (LPS), and the user's rigid
+//! `patient_to_transducer_mm` (the convention of `arfi dicom --transform`) carries that into the
+//! transducer frame.
+//!
+//! Sampling: each grid cell (dx × dy × dz about its centre) averages the converted properties of
+//! `n_x × n_y × n_z` points spread over it, `n_a = ceil(d_a / s)` for the CT's finest voxel size
+//! `s` (at most [`MAX_SAMPLES_PER_AXIS`]), each point taking the HU of the voxel it lies in
+//! (a voxel is a box of one material: interpolating HU across a bone surface would invent soft
+//! tissue between air and bone). Sound speed
+//! is averaged as slowness (travel time through the cell is kept), density and attenuation
+//! arithmetically. A plate thinner than a cell thus keeps its travel-time delay instead of
+//! appearing or vanishing with the grid's phase.
+
+mod conversion;
+
+pub use conversion::{BoneModel, HuConversion, Porosity, HU_RANGE};
+
+use crate::error::{HasError, Result};
+use crate::nifti::Volume;
+use crate::physics::grid::Grid;
+use crate::physics::medium::Properties;
+use rayon::prelude::*;
+
+/// At most this many sample points per axis and cell (a cell 8 CT voxels wide is averaged from 8).
+pub const MAX_SAMPLES_PER_AXIS: usize = 8;
+
+/// A CT volume in the transducer frame with its conversion.
+#[derive(Clone, PartialEq)]
+pub struct CtMedium {
+    /// The file it was read from (for messages).
+    pub path: String,
+    /// Shape `(nk, nj, ni)`.
+    shape: [usize; 3],
+    /// HU per voxel, row-major `(k, j, i)`.
+    hu: Vec<f32>,
+    /// Transducer frame (m) to continuous voxel index (i, j, k).
+    frame_to_voxel: [[f64; 4]; 3],
+    /// Smallest voxel edge, m.
+    finest_voxel: f64,
+    /// Lowest and highest corner of the box the volume spans, transducer frame, m.
+    bounds: [[f64; 3]; 2],
+    /// How HU become properties.
+    pub conversion: HuConversion,
+}
+
+impl std::fmt::Debug for CtMedium {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CtMedium")
+            .field("path", &self.path)
+            .field("shape", &self.shape)
+            .field("conversion", &self.conversion.name)
+            .field("bounds", &self.bounds)
+            .finish()
+    }
+}
+
+/// Checks that `t` is a rigid 4x4 transform (rotation and translation, last row 0 0 0 1).
+pub fn check_rigid(name: &str, t: &[[f64; 4]; 4]) -> Result<()> {
+    if t.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(HasError::invalid(name, "must be finite"));
+    }
+    let r = |i: usize, j: usize| t[i][j];
+    let mut worst: f64 = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            let dot: f64 = (0..3).map(|k| r(i, k) * r(j, k)).sum();
+            worst = worst.max((dot - if i == j { 1.0 } else { 0.0 }).abs());
+        }
+    }
+    let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1)) - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
+        + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
+    if worst > 1e-6 || (det - 1.0).abs() > 1e-6 || t[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Err(HasError::invalid(name, "must be rigid: a rotation and a translation (mm), last row 0 0 0 1"));
+    }
+    Ok(())
+}
+
+/// The inverse of an affine map given by its 3x4 rows; `None` if singular.
+fn invert(m: &[[f64; 4]; 3]) -> Option<[[f64; 4]; 3]> {
+    let a = |i: usize, j: usize| m[i][j];
+    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)) - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
+        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0));
+    if !(det.abs() > 0.0) || !det.is_finite() {
+        return None;
+    }
+    // Row i, column j of the inverse: the cofactor of (j, i) over the determinant.
+    let mut inv: [[f64; 4]; 3] = std::array::from_fn(|i| {
+        let (c0, c1) = ((i + 1) % 3, (i + 2) % 3);
+        std::array::from_fn(|j| {
+            let (r0, r1) = ((j + 1) % 3, (j + 2) % 3);
+            if j < 3 {
+                (a(r0, c0) * a(r1, c1) - a(r0, c1) * a(r1, c0)) / det
+            } else {
+                0.0
+            }
+        })
+    });
+    for row in inv.iter_mut() {
+        row[3] = -(0..3).map(|j| row[j] * m[j][3]).sum::<f64>();
+    }
+    Some(inv)
+}
+
+fn apply(m: &[[f64; 4]; 3], p: [f64; 3]) -> [f64; 3] {
+    let row = |r: &[f64; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
+    [row(&m[0]), row(&m[1]), row(&m[2])]
+}
+
+impl CtMedium {
+    /// Places `volume` (HU, affine to RAS+ mm) in the transducer frame by `patient_to_transducer_mm`
+    /// (rigid, DICOM LPS mm → transducer mm) and checks every value: finite, within
+    /// [`HU_RANGE`]. Errors name `path`.
+    pub fn new(volume: Volume, patient_to_transducer_mm: [[f64; 4]; 4], conversion: HuConversion, path: &str) -> Result<Self> {
+        check_rigid("ct.patient_to_transducer_mm", &patient_to_transducer_mm)?;
+        conversion.validate()?;
+        let bad = |reason: String| HasError::BadFile { path: path.to_string(), reason };
+        if let Some(i) = volume.values.iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!("voxel {i} is {}: a CT must hold finite Hounsfield units", volume.values[i])));
+        }
+        let (lo, hi) = HU_RANGE;
+        if let Some(i) = volume.values.iter().position(|v| !(lo..=hi).contains(&(*v as f64))) {
+            return Err(bad(format!(
+                "voxel {i} is {} HU, outside {lo}…{hi}: not a calibrated CT in Hounsfield units (rescale it, or mask metal)",
+                volume.values[i]
+            )));
+        }
+        // voxel → RAS mm → LPS mm → transducer mm → m.
+        let t = &patient_to_transducer_mm;
+        let a = &volume.affine;
+        let mut voxel_to_frame = [[0.0; 4]; 3];
+        for (r, row) in voxel_to_frame.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                let lps = |k: usize| if k < 2 { -a[k][c] } else { a[k][c] };
+                *v = 1e-3 * ((0..3).map(|k| t[r][k] * lps(k)).sum::<f64>() + if c == 3 { t[r][3] } else { 0.0 });
+            }
+        }
+        let frame_to_voxel =
+            invert(&voxel_to_frame).ok_or_else(|| bad("the voxel-to-world affine is singular (a zero voxel size?)".into()))?;
+        let finest_voxel =
+            (0..3).map(|c| (0..3).map(|r| voxel_to_frame[r][c] * voxel_to_frame[r][c]).sum::<f64>().sqrt()).fold(f64::INFINITY, f64::min);
+        let [nk, nj, ni] = volume.shape;
+        let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        for corner in 0..8 {
+            let pick = |bit: usize, n: usize| if corner >> bit & 1 == 1 { n as f64 - 0.5 } else { -0.5 };
+            let p = apply(&voxel_to_frame, [pick(0, ni), pick(1, nj), pick(2, nk)]);
+            for a in 0..3 {
+                bounds[0][a] = bounds[0][a].min(p[a]);
+                bounds[1][a] = bounds[1][a].max(p[a]);
+            }
+        }
+        Ok(CtMedium { path: path.to_string(), shape: volume.shape, hu: volume.values, frame_to_voxel, finest_voxel, bounds, conversion })
+    }
+
+    /// Lowest and highest corner of the box the CT spans in the transducer frame, m.
+    pub fn bounds(&self) -> [[f64; 3]; 2] {
+        self.bounds
+    }
+
+    /// Whether the CT's box reaches height `z` (m).
+    pub fn covers_z(&self, z: f64) -> bool {
+        z >= self.bounds[0][2] && z <= self.bounds[1][2]
+    }
+
+    /// HU at a point of the transducer frame (m): that of the voxel containing it (voxels are
+    /// boxes of one material, as the scanner reports them); `None` outside the volume.
+    pub fn hu_at(&self, p: [f64; 3]) -> Option<f64> {
+        let q = apply(&self.frame_to_voxel, p);
+        let [nk, nj, ni] = self.shape;
+        let index = |v: f64, n: usize| {
+            let i = v.round();
+            (i >= 0.0 && i < n as f64).then_some(i as usize)
+        };
+        let (i, j, k) = (index(q[0], ni)?, index(q[1], nj)?, index(q[2], nk)?);
+        Some(self.hu[(k * nj + j) * ni + i] as f64)
+    }
+
+    /// Properties at a point (m) for `frequency`, `None` where the scenario's own medium applies
+    /// (outside the CT, or a coupling voxel).
+    pub fn properties_at(&self, p: [f64; 3], frequency: f64) -> Option<Properties> {
+        self.conversion.properties(self.hu_at(p)?, frequency)
+    }
+
+    /// Sample points per axis for a cell of `size` (m); a cell up to 0.1 % wider than a voxel
+    /// (the NIfTI affine is single precision) counts as one voxel wide.
+    fn samples(&self, size: [f64; 3]) -> [usize; 3] {
+        size.map(|d| ((d / self.finest_voxel - 1e-3).ceil() as usize).clamp(1, MAX_SAMPLES_PER_AXIS))
+    }
+
+    /// The properties of the cell of `size` (m) about `center`, averaged over it (see the module
+    /// docs); points outside the CT or in coupling voxels take `outside`. `None` if no point of
+    /// the cell is CT tissue.
+    pub fn cell_properties(&self, center: [f64; 3], size: [f64; 3], frequency: f64, outside: Properties) -> Option<Properties> {
+        let n = self.samples(size);
+        let (mut slowness, mut density, mut attenuation, mut tissue) = (0.0, 0.0, 0.0, false);
+        for k in 0..n[2] {
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    let off = |s: usize, n: usize, d: f64| ((s as f64 + 0.5) / n as f64 - 0.5) * d;
+                    let p = [center[0] + off(i, n[0], size[0]), center[1] + off(j, n[1], size[1]), center[2] + off(k, n[2], size[2])];
+                    let q = self.properties_at(p, frequency);
+                    tissue |= q.is_some();
+                    let q = q.unwrap_or(outside);
+                    slowness += 1.0 / q.sound_speed;
+                    density += q.density;
+                    attenuation += q.attenuation;
+                }
+            }
+        }
+        let count = (n[0] * n[1] * n[2]) as f64;
+        tissue.then(|| Properties { sound_speed: count / slowness, density: density / count, attenuation: attenuation / count })
+    }
+
+    /// Whether the cell of `size` about `center` may reach into the CT's box.
+    fn may_touch(&self, center: [f64; 3], size: [f64; 3]) -> bool {
+        (0..3).all(|a| center[a] + 0.5 * size[a] >= self.bounds[0][a] && center[a] - 0.5 * size[a] <= self.bounds[1][a])
+    }
+
+    /// Overwrites, on the lateral grid at height `z` (row-major `(ny, nx)`), the cells the CT
+    /// reaches with their averaged properties; `outside(i)` gives pixel i's own (scenario)
+    /// properties. Rows run in parallel on the current rayon pool; each cell is computed alone, so
+    /// the result does not depend on the number of threads.
+    pub fn fill_slice(&self, grid: &Grid, z: f64, frequency: f64, props: &mut [Properties]) {
+        let size = [grid.dx, grid.dy, grid.dz];
+        props.par_chunks_mut(grid.nx).enumerate().for_each(|(j, row)| {
+            for (i, p) in row.iter_mut().enumerate() {
+                let c = [grid.x(i), grid.y(j), z];
+                if self.may_touch(c, size) {
+                    if let Some(q) = self.cell_properties(c, size, frequency, *p) {
+                        *p = q;
+                    }
+                }
+            }
+        });
+    }
+
+    /// The lowest sound speed the CT can give.
+    pub fn min_sound_speed(&self) -> f64 {
+        self.conversion.min_sound_speed()
+    }
+
+    /// Checks that the CT covers the beam's path through bone: for each straight path from an
+    /// element to the focus that enters the CT, the first point inside must not be bone (a path
+    /// entering the volume in bone means the scan was cut off where the beam crosses the skull).
+    /// The focus must lie inside the CT.
+    pub fn check_covers(&self, sources: &[[f64; 3]], focus: [f64; 3]) -> Result<()> {
+        let bad = |reason: String| HasError::BadFile { path: self.path.clone(), reason };
+        let mm = |p: [f64; 3]| format!("({:.1}, {:.1}, {:.1}) mm", p[0] * 1e3, p[1] * 1e3, p[2] * 1e3);
+        if self.hu_at(focus).is_none() {
+            return Err(bad(format!(
+                "does not cover the focus {}: the CT spans {} to {}",
+                mm(focus),
+                mm(self.bounds[0]),
+                mm(self.bounds[1])
+            )));
+        }
+        let step = 0.5 * self.finest_voxel;
+        for (e, s) in sources.iter().enumerate() {
+            let d = [focus[0] - s[0], focus[1] - s[1], focus[2] - s[2]];
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let n = (len / step).ceil() as usize;
+            let entry = (0..=n).map(|t| t as f64 / n.max(1) as f64).find_map(|t| {
+                let p = [s[0] + t * d[0], s[1] + t * d[1], s[2] + t * d[2]];
+                self.hu_at(p).map(|hu| (p, hu))
+            });
+            if let Some((p, hu)) = entry {
+                if hu >= self.conversion.bone_from_hu {
+                    return Err(bad(format!(
+                        "does not cover the beam path: the path from element {e} to the focus enters the CT at {} in bone ({hu:.0} HU); \
+                         the scan must include the whole skull the beam crosses",
+                        mm(p)
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const IDENTITY: [[f64; 4]; 4] = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+
+    /// A 4 x 4 x 4 volume of 1 mm voxels whose HU is `100·i + 10·j + k`, voxel (0, 0, 0) at RAS
+    /// (0, 0, 0).
+    fn ramp() -> Volume {
+        let values = (0..64).map(|n| (100 * (n % 4) + 10 * (n / 4 % 4) + n / 16) as f32).collect();
+        Volume { shape: [4, 4, 4], values, affine: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }
+    }
+
+    #[test]
+    fn voxels_land_in_the_transducer_frame_through_lps_and_the_transform() {
+        // Shift by (10, 20, 30) mm: voxel (i, j, k) sits at LPS (-i, -j, k) mm + shift.
+        let mut t = IDENTITY;
+        t[0][3] = 10.0;
+        t[1][3] = 20.0;
+        t[2][3] = 30.0;
+        let ct = CtMedium::new(ramp(), t, HuConversion::named("aubry2003").unwrap(), "ramp.nii").unwrap();
+        let at = |i: f64, j: f64, k: f64| ct.hu_at([(10.0 - i) * 1e-3, (20.0 - j) * 1e-3, (30.0 + k) * 1e-3]);
+        assert_eq!(at(2.0, 1.0, 3.0), Some(213.0));
+        // A point takes its voxel's value, up to half a voxel from the centre; None beyond the box.
+        assert_eq!(at(1.4, 0.6, 2.0), Some(112.0));
+        assert_eq!(at(-0.4, 3.4, 0.0), Some(30.0));
+        assert_eq!(at(-0.6, 0.0, 0.0), None);
+        let [lo, hi] = ct.bounds();
+        assert!((lo[0] - 6.5e-3).abs() < 1e-12 && (hi[0] - 10.5e-3).abs() < 1e-12 && (lo[2] - 29.5e-3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_volumes_and_transforms_are_refused_by_name() {
+        let conv = || HuConversion::named("aubry2003").unwrap();
+        let mut v = ramp();
+        v.values[5] = f32::NAN;
+        assert!(CtMedium::new(v, IDENTITY, conv(), "nan.nii").unwrap_err().to_string().contains("nan.nii"));
+        let mut v = ramp();
+        v.values[5] = 5000.0;
+        let e = CtMedium::new(v, IDENTITY, conv(), "hot.nii").unwrap_err().to_string();
+        assert!(e.contains("hot.nii") && e.contains("5000"), "{e}");
+        let mut t = IDENTITY;
+        t[0][0] = 1.1;
+        let e = CtMedium::new(ramp(), t, conv(), "a.nii").unwrap_err().to_string();
+        assert!(e.contains("patient_to_transducer_mm") && e.contains("rigid"), "{e}");
+    }
+
+    #[test]
+    fn a_cell_averages_slowness_over_its_samples() {
+        // Half the cell in bone of 2000 HU (c 2900), half in soft tissue (c 1546): the cell's
+        // speed is the harmonic mean 2/(1/2900 + 1/1546), not the arithmetic one.
+        let values = (0..64).map(|n| if n % 4 < 2 { 0.0 } else { 2000.0 }).collect();
+        let v = Volume { shape: [4, 4, 4], values, affine: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] };
+        let mut conv = HuConversion::named("aubry2003").unwrap();
+        conv.coupling_below_hu = -1000.0;
+        let ct = CtMedium::new(v, IDENTITY, conv, "half.nii").unwrap();
+        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0 };
+        // Cell centred between voxel columns i = 1 and 2 (LPS x = -1.5 mm), 2 mm wide in x: its
+        // two samples sit at voxel i = 1 (soft tissue) and i = 2 (bone) exactly.
+        let p = ct.cell_properties([-1.5e-3, -1.5e-3, 1.5e-3], [2e-3, 1e-3, 1e-3], 1e6, water).unwrap();
+        assert!((p.sound_speed - 2.0 / (1.0 / 2900.0 + 1.0 / 1546.0)).abs() < 1e-9, "{}", p.sound_speed);
+        assert!((p.density - 0.5 * (2200.0 + 1040.0)).abs() < 1e-9);
+        // Wholly outside: the scenario's medium applies.
+        assert_eq!(ct.cell_properties([0.02, 0.0, 0.0], [1e-3; 3], 1e6, water), None);
+    }
+}
