@@ -1,92 +1,12 @@
 //! Acoustic media: materials, regions (cylinder, slab), voxel maps and CT volumes.
 
-use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
+use crate::error::{require_positive, HasError, Result};
 use crate::physics::ct::CtMedium;
 use crate::physics::grid::Grid;
 use std::sync::Arc;
 
-/// Nepers per decibel: 1 dB = ln(10)/20 Np.
-pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
-
-/// Sound speeds (m/s) the propagation accepts: from below air's 343 m/s to above diamond's
-/// 12 000 m/s. Outside it a value is a unit mistake, and near zero the wavenumber `omega/c`
-/// overflows.
-pub const SOUND_SPEED_RANGE_M_S: (f64, f64) = (100.0, 20_000.0);
-
-/// Checks a sound speed against [`SOUND_SPEED_RANGE_M_S`].
-fn require_sound_speed(name: &str, c: f64) -> Result<()> {
-    let (lo, hi) = SOUND_SPEED_RANGE_M_S;
-    require_in_range(name, c, lo, hi, "m/s, from gases to diamond")
-}
-
-/// A homogeneous material. Attenuation follows `a(f) = a0 · (f / 1 MHz)^y` in dB/cm and is taken to
-/// be all absorption (it drives the radiation force).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Material {
-    /// Name that regions and scenario files refer to it by.
-    pub name: String,
-    /// Sound speed c (m/s).
-    pub sound_speed: f64,
-    /// Density rho (kg/m³).
-    pub density: f64,
-    /// a0 (dB/cm/MHz^y).
-    pub attenuation_db_cm_mhz: f64,
-    /// Frequency exponent y of the power law (1 = linear).
-    pub attenuation_power: f64,
-}
-
-impl Material {
-    /// Validates the acoustic parameters.
-    pub fn new(name: &str, sound_speed: f64, density: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
-        let m = Material { name: name.to_string(), sound_speed, density, attenuation_db_cm_mhz, attenuation_power: 1.0 };
-        m.validate()?;
-        Ok(m)
-    }
-
-    /// Checks every field, naming the material in the error.
-    pub fn validate(&self) -> Result<()> {
-        let p = |k: &str| format!("material '{}'.{k}", self.name);
-        require_sound_speed(&p("sound_speed_m_s"), self.sound_speed)?;
-        require_positive(&p("density_kg_m3"), self.density)?;
-        require_non_negative(&p("attenuation_db_cm_mhz"), self.attenuation_db_cm_mhz)?;
-        require_non_negative(&p("attenuation_power"), self.attenuation_power)?;
-        Ok(())
-    }
-
-    /// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz).
-    pub fn attenuation_np_m(&self, frequency: f64) -> f64 {
-        self.attenuation_db_cm_mhz * (frequency / 1e6).powf(self.attenuation_power) * 100.0 * NP_PER_DB
-    }
-
-    /// Local properties at `frequency`.
-    pub fn properties(&self, frequency: f64) -> Properties {
-        Properties { sound_speed: self.sound_speed, density: self.density, attenuation: self.attenuation_np_m(frequency) }
-    }
-}
-
-/// Acoustic properties at a point, SI: c (m/s), rho (kg/m³), alpha (Np/m).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Properties {
-    /// Sound speed c, m/s.
-    pub sound_speed: f64,
-    /// Density rho, kg/m³.
-    pub density: f64,
-    /// Amplitude attenuation coefficient alpha at the frequency asked for, Np/m.
-    pub attenuation: f64,
-}
-
-impl Properties {
-    /// Characteristic impedance Z = rho·c (Rayl).
-    pub fn impedance(&self) -> f64 {
-        self.density * self.sound_speed
-    }
-
-    /// The radiation-force coefficient `alpha / (rho·c²)` (m·s/kg): force density per unit
-    /// `|p|²` (`F = 2·alpha·I/c` with `I = |p|²/(2·rho·c)`).
-    pub fn force_coefficient(&self) -> f64 {
-        self.attenuation / (self.density * self.sound_speed * self.sound_speed)
-    }
-}
+use crate::physics::material::require_sound_speed;
+pub use crate::physics::material::{Material, Properties, NP_PER_DB};
 
 /// The geometry of a region (metres, transducer frame).
 #[derive(Debug, Clone, PartialEq)]

@@ -6,6 +6,7 @@ pub mod aberration;
 pub mod ct;
 pub mod fft;
 pub mod grid;
+pub mod material;
 pub mod medium;
 pub mod mr;
 pub mod propagation;

@@ -12,7 +12,7 @@
 //! and coupling are given materials.
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
-use crate::physics::medium::{Material, Properties, NP_PER_DB};
+use crate::physics::material::{Material, Properties, NP_PER_DB};
 
 /// Hounsfield units a CT may hold: below −1100 or above 4000 a value is not a calibrated HU of
 /// tissue (air is −1000, the densest cortical bone about 3000); metal implants are out of scope.

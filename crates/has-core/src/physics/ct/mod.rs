@@ -23,7 +23,7 @@ pub use conversion::{BoneModel, HuConversion, Porosity, HU_RANGE};
 use crate::error::{HasError, Result};
 use crate::nifti::Volume;
 use crate::physics::grid::Grid;
-use crate::physics::medium::Properties;
+use crate::physics::material::Properties;
 use rayon::prelude::*;
 
 /// At most this many sample points per axis and cell (a cell 8 CT voxels wide is averaged from 8).
