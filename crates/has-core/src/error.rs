@@ -54,6 +54,15 @@ impl HasError {
     pub fn invalid(name: impl Into<String>, reason: impl Into<String>) -> Self {
         HasError::InvalidParameter { name: name.into(), reason: reason.into() }
     }
+
+    /// A failed read of the file `path`: [`HasError::FileNotFound`] if it does not exist, else
+    /// [`HasError::BadFile`] with the system's message.
+    pub fn reading(path: &str, e: &std::io::Error) -> Self {
+        match e.kind() {
+            std::io::ErrorKind::NotFound => HasError::FileNotFound { path: path.to_string() },
+            _ => HasError::BadFile { path: path.to_string(), reason: e.to_string() },
+        }
+    }
 }
 
 /// Result with [`HasError`].

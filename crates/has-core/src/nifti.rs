@@ -28,10 +28,7 @@ pub struct Volume {
 /// Reads a NIfTI-1 file; errors name the file and say what is wrong in one line.
 pub fn read(path: &Path) -> Result<Volume> {
     let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-        _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
-    })?;
+    let bytes = std::fs::read(path).map_err(|e| HasError::reading(&p, &e))?;
     let bad = |reason: String| HasError::BadFile { path: p.clone(), reason };
     let data = decompress(&bytes).map_err(bad)?;
     let header = Header::parse(&data).map_err(bad)?;

@@ -119,15 +119,12 @@ impl CtSpec {
         Ok(c)
     }
 
-    /// Reads the volume and places it in the transducer frame.
-    pub fn resolve(&self, base_dir: Option<&Path>, materials: &[Material]) -> Result<CtMedium> {
+    /// Reads the volume from `path` (the scenario's `file`, resolved) and places it in the
+    /// transducer frame.
+    pub fn resolve(&self, path: &Path, materials: &[Material]) -> Result<CtMedium> {
         let conversion = self.conversion(materials)?;
-        let path = match base_dir {
-            Some(b) if Path::new(&self.file).is_relative() => b.join(&self.file),
-            _ => Path::new(&self.file).to_path_buf(),
-        };
         let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-        let volume = nifti::read(&path)?;
+        let volume = nifti::read(path)?;
         CtMedium::new(volume, self.patient_to_transducer_mm.unwrap_or(identity), conversion, &path.display().to_string())
     }
 }

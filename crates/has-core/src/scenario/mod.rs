@@ -399,6 +399,14 @@ impl Scenario {
         }
     }
 
+    /// A file named in the scenario: relative paths are taken from the scenario file's folder.
+    fn file_path(&self, file: &str) -> PathBuf {
+        match &self.base_dir {
+            Some(b) if Path::new(file).is_relative() => b.join(file),
+            _ => PathBuf::from(file),
+        }
+    }
+
     /// Parses TOML text. `base_dir` resolves relative paths.
     pub fn from_toml(text: &str, base_dir: Option<&Path>) -> Result<Self> {
         let mut s: Scenario = toml::from_str(text).map_err(|e| HasError::invalid("scenario", one_line(&e.to_string())))?;
@@ -416,10 +424,7 @@ impl Scenario {
     /// Reads a TOML file.
     pub fn load(path: &Path) -> Result<Self> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-            _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| HasError::reading(&p, &e))?;
         let mut s: Scenario = toml::from_str(&text).map_err(|e| HasError::BadFile { path: p.clone(), reason: one_line(&e.to_string()) })?;
         s.base_dir = path.parent().map(Path::to_path_buf);
         Ok(s)

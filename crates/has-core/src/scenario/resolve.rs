@@ -6,7 +6,6 @@ use crate::error::{require_non_negative, require_positive, HasError, Result};
 use crate::physics::medium::{Material, Medium, Region, Shape};
 use crate::physics::mr::{MrGeometry, MrPlane};
 use crate::physics::transducer::{ElementShape, Transducer};
-use std::path::{Path, PathBuf};
 
 /// The scenario in SI units, validated.
 #[derive(Debug, Clone)]
@@ -51,7 +50,7 @@ impl Scenario {
         let mut medium = self.medium_si()?;
         let transducer = self.transducer_si()?;
         if let Some(spec) = &self.ct {
-            let ct = spec.resolve(self.base_dir.as_deref(), &medium.materials)?;
+            let ct = spec.resolve(&self.file_path(&spec.file), &medium.materials)?;
             ct.check_covers(&transducer.reference_points(), focus)?;
             medium.ct = Some(std::sync::Arc::new(ct));
         }
@@ -220,20 +219,14 @@ impl Scenario {
             }
             _ => {
                 let file = t.file.as_deref().ok_or_else(|| HasError::invalid("transducer.file", "is required for kind \"elements\""))?;
-                let path = match &self.base_dir {
-                    Some(b) if Path::new(file).is_relative() => b.join(file),
-                    _ => PathBuf::from(file),
-                };
+                let path = self.file_path(file);
                 let shape = match t.element_shape.as_deref().unwrap_or("square") {
                     "square" => ElementShape::Square,
                     "disc" => ElementShape::Disc,
                     s => return Err(HasError::invalid("transducer.element_shape", format!("must be \"square\" or \"disc\", got \"{s}\""))),
                 };
                 let p = path.display().to_string();
-                let text = std::fs::read_to_string(&path).map_err(|e| match e.kind() {
-                    std::io::ErrorKind::NotFound => HasError::FileNotFound { path: p.clone() },
-                    _ => HasError::BadFile { path: p.clone(), reason: e.to_string() },
-                })?;
+                let text = std::fs::read_to_string(&path).map_err(|e| HasError::reading(&p, &e))?;
                 Transducer::from_csv(&text, &p, shape)
             }
         }

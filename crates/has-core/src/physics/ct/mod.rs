@@ -72,19 +72,23 @@ pub fn check_rigid(name: &str, t: &[[f64; 4]; 4]) -> Result<()> {
             worst = worst.max((dot - if i == j { 1.0 } else { 0.0 }).abs());
         }
     }
-    let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1)) - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
-        + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
+    let det = det3(r);
     if worst > 1e-6 || (det - 1.0).abs() > 1e-6 || t[3] != [0.0, 0.0, 0.0, 1.0] {
         return Err(HasError::invalid(name, "must be rigid: a rotation and a translation (mm), last row 0 0 0 1"));
     }
     Ok(())
 }
 
+/// Determinant of the 3x3 matrix with entries `a(row, column)`.
+fn det3(a: impl Fn(usize, usize) -> f64) -> f64 {
+    a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)) - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
+        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0))
+}
+
 /// The inverse of an affine map given by its 3x4 rows; `None` if singular.
 fn invert(m: &[[f64; 4]; 3]) -> Option<[[f64; 4]; 3]> {
     let a = |i: usize, j: usize| m[i][j];
-    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)) - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
-        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0));
+    let det = det3(a);
     if !(det.abs() > 0.0) || !det.is_finite() {
         return None;
     }
