@@ -109,6 +109,8 @@ impl Simulation {
     pub fn new(scenario: &Scenario) -> Result<Self> {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
+        let step = grid.dz.min(0.5e-3);
+        r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, step, r.frequency)?;
         r.medium.check_on_grid(&grid)?;
         let steering = steering_phases(&r.transducer, &r.medium, r.frequency, r.focus)?;
         let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);

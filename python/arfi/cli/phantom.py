@@ -30,8 +30,18 @@ def register(sub: Any) -> None:
     p.add_argument("--noise-hu", type=float, default=20.0, dest="noise_hu", help="CT noise standard deviation, HU (default 20)")
     p.add_argument("--scenario-out", metavar="FILE.toml", dest="scenario_out",
                    help="also write a scenario with this CT in [ct] (default transducer and focus)")
+    p.add_argument("--array", choices=["planar", "hemisphere"], default="planar",
+                   help="the transducer the scenario uses: the paper's planar array at 550 kHz with the focus 85 mm "
+                        "from it (default), or a 1024-element hemisphere of radius 150 mm out to 60 degrees at 650 kHz "
+                        "focused at its centre (0, 0, 150) mm")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
     p.set_defaults(run=run)
+
+
+#: The hemisphere's centre of curvature, where ``--array hemisphere`` puts the target, mm.
+HEMISPHERE_FOCUS_MM = (0.0, 0.0, 150.0)
+HEMISPHERE_TOML = ("frequency_hz = 650000.0\n\n[transducer]\nkind = \"hemisphere\"\nradius_of_curvature_mm = 150.0\n"
+                   "polar_angle_max_deg = 60.0\nelements = 1024\n\n[focus]\nposition_mm = [0.0, 0.0, 150.0]\n")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,14 +55,16 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario_out is not None and not args.scenario_out.endswith(".toml"):
         raise ValueError(f"--scenario-out: {args.scenario_out}: a scenario must be written as .toml")
     head = head_phantom(args.seed, args.voxel_mm, tuple(args.thickness_mm), args.noise_hu)
-    transform = placement()
+    focus_mm = HEMISPHERE_FOCUS_MM if args.array == "hemisphere" else (0.0, 0.0, 85.0)
+    transform = placement(focus_mm=focus_mm)
     scenario_text = None
     if args.scenario_out is not None:
         folder = Path(args.scenario_out).resolve().parent
         rel = os.path.relpath(out.resolve(), folder)
         rows = ", ".join("[" + ", ".join(f"{v:g}" for v in row) + "]" for row in transform)
-        scenario_text = (f"name = \"head-phantom-seed{args.seed}\"\n\n[ct]\nfile = \"{rel}\"\n"
-                         f"conversion = \"aubry2003\"\npatient_to_transducer_mm = [{rows}]\n")
+        scenario_text = (f"name = \"head-phantom-seed{args.seed}\"\n"
+                         + (HEMISPHERE_TOML if args.array == "hemisphere" else "")
+                         + f"\n[ct]\nfile = \"{rel}\"\nconversion = \"aubry2003\"\npatient_to_transducer_mm = [{rows}]\n")
     head.save(out)
     if scenario_text is not None:
         Scenario.from_toml(scenario_text, Path(args.scenario_out).resolve().parent)  # checks the placement against the CT

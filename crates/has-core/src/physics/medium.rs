@@ -204,7 +204,18 @@ impl Medium {
                     (z_min, z_max, center[0].abs() - radius > x_half || center[1].abs() - radius > y_half)
                 }
             };
-            if z_max < z_lo || z_min > z_hi || lateral_miss {
+            if z_max < z_lo {
+                return Err(HasError::invalid(
+                    name,
+                    format!(
+                        "ends at z = {:.2} mm, before the source plane at {:.2} mm (just in front of the transducer), where the march \
+                         starts: it would have no effect; move it further from the transducer",
+                        z_max * 1e3,
+                        z_lo * 1e3
+                    ),
+                ));
+            }
+            if z_min > z_hi || lateral_miss {
                 return Err(HasError::invalid(
                     name,
                     format!(
@@ -246,6 +257,57 @@ impl Medium {
             }
         }
         Ok(())
+    }
+
+    /// Checks that nothing but the background lies before the source plane `z0` (m) on the straight
+    /// paths from `sources` to `focus` (m): the march starts at the source plane, so tissue behind
+    /// it would be missed without a word. Paths are sampled every `step` (m).
+    pub fn check_before_source_plane(&self, z0: f64, sources: &[[f64; 3]], focus: [f64; 3], step: f64, frequency: f64) -> Result<()> {
+        let background = self.materials[self.background].properties(frequency);
+        for (e, s) in sources.iter().enumerate() {
+            if s[2] >= z0 {
+                continue;
+            }
+            // The part of the path with z < z0 (all of it if the focus lies behind the plane too).
+            let t_end = if focus[2] > z0 { (z0 - s[2]) / (focus[2] - s[2]) } else { 1.0 };
+            let len = t_end * (0..3).map(|k| (focus[k] - s[k]).powi(2)).sum::<f64>().sqrt();
+            let n = (len / step).ceil().max(1.0) as usize;
+            for m in 0..n {
+                let t = t_end * m as f64 / n as f64;
+                let p: [f64; 3] = std::array::from_fn(|k| s[k] + t * (focus[k] - s[k]));
+                if self.properties_at(p[0], p[1], p[2], frequency) != background {
+                    return Err(HasError::invalid(
+                        self.name_at(p),
+                        format!(
+                            "lies on the path from element {e} to the focus at ({:.1}, {:.1}, {:.1}) mm, before the source plane at \
+                             z = {:.1} mm (just in front of the transducer's most forward element): the march along z starts there \
+                             and would miss it; move it further from the transducer or use a smaller aperture (for a hemisphere, \
+                             transducer.polar_angle_max_deg)",
+                            p[0] * 1e3,
+                            p[1] * 1e3,
+                            p[2] * 1e3,
+                            z0 * 1e3
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// What sets the medium at a point, as a scenario names it: the CT, the voxel map or a region.
+    fn name_at(&self, p: [f64; 3]) -> String {
+        // (Whether the CT holds tissue there does not depend on the frequency.)
+        if let Some(ct) = self.ct.as_ref().filter(|ct| ct.properties_at(p, 1e6).is_some()) {
+            return format!("ct.file ({})", ct.path);
+        }
+        if self.voxels.as_ref().is_some_and(|v| v.index(p[0], p[1], p[2]).is_some()) {
+            return "the voxel map".into();
+        }
+        match self.regions.iter().enumerate().rev().find(|(_, r)| r.shape.contains(p[0], p[1], p[2])) {
+            Some((i, r)) => format!("region[{i}] ({})", self.materials[r.material].name),
+            None => format!("medium.background ({})", self.materials[self.background].name),
+        }
     }
 
     /// Index of the material at a point (last region containing it, else the background).

@@ -12,6 +12,7 @@
 //! kept, so every later source plane of that transducer is a multiplication.
 
 use crate::error::{HasError, Result};
+use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
 use crate::physics::rayleigh::Sources;
 use crate::physics::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
@@ -71,7 +72,7 @@ impl SourceModel {
             } else if matches!(e, Surface::Cap { .. }) {
                 Footprint::Plane(model.symmetric_projection(&e.quadrature(spacing)))
             } else {
-                Footprint::Points(e.quadrature(spacing))
+                Footprint::Points(e.quadrature(element_spacing(wavelength, z0 - e.z_max())))
             };
             model.footprints.push(footprint);
         }
@@ -116,16 +117,28 @@ impl SourceModel {
 
     /// Adds the Rayleigh integral of `points` (drive `a`) at every pixel of the plane: one rayon
     /// task per row, each a single-precision blocked sum ([`crate::physics::rayleigh`]).
+    ///
+    /// Where the grid is finer than λ/2, the sum runs on every `r`-th pixel (spacing at most λ/2)
+    /// and is Fourier-interpolated onto the rest ([`fourier_upsample`]): the waves that leave the
+    /// plane have spatial frequencies up to `k`, which samples λ/2 apart hold; what they can
+    /// alias is the evanescent near field of the elements closest to the plane (λ/2 before it).
+    /// `r = 2` at the default λ/4 spacing: a quarter of the work, and for the hemisphere of
+    /// `tests/hemisphere.rs` the same focal field to four digits as the sum at every pixel.
     fn add_rayleigh(&self, points: &[(SurfacePoint, C64)], out: &mut [C64]) {
         let g = &self.grid;
         let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
         let sources = Sources::new(&weighted, g.z0, self.wavenumber, self.attenuation);
-        let xs: Vec<f64> = (0..g.nx).map(|i| g.x(i)).collect();
-        out.par_chunks_mut(g.nx).enumerate().for_each(|(j, row)| {
-            for (v, a) in row.iter_mut().zip(sources.row(&xs, g.y(j))) {
-                *v += a;
-            }
-        });
+        let wavelength = 2.0 * std::f64::consts::PI / self.wavenumber;
+        let r = (1..=((0.5 * wavelength / g.dx.max(g.dy) + 1e-9).floor() as usize).max(1))
+            .rev()
+            .find(|r| g.nx % r == 0 && g.ny % r == 0)
+            .unwrap_or(1);
+        let (cx, cy) = (g.nx / r, g.ny / r);
+        let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
+        let mut coarse = vec![C64::new(0.0, 0.0); cx * cy];
+        coarse.par_chunks_mut(cx).enumerate().for_each(|(j, row)| row.copy_from_slice(&sources.row(&xs, g.y(r * j))));
+        let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
+        out.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
     }
 
     /// The projection of an element symmetric about the z axis (unit drive): the Rayleigh
@@ -153,6 +166,54 @@ impl SourceModel {
             })
             .collect()
     }
+}
+
+/// Band-limited (Fourier) interpolation of a `(cy, cx)` field sampled on every `r`-th pixel onto
+/// the `(r·cy, r·cx)` grid (coarse sample `m` lands on pixel `r·m`): the coarse spectrum,
+/// zero-padded (the Nyquist bin of an even length split evenly between `±`), transformed back.
+/// Exact for periodic fields without spatial frequencies beyond π/(r·dx). `coarse` is overwritten.
+pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
+    let (nx, ny) = (r * cx, r * cy);
+    let small = Fft2::new(cx, cy);
+    let mut ws = small.workspace(true);
+    small.forward(coarse, &mut ws);
+    let big = Fft2::new(nx, ny);
+    let mut wb = big.workspace(true);
+    // Where coarse frequency index `k` of a length-`c` transform goes in a length-`n` one.
+    let targets = |k: usize, c: usize, n: usize| -> Vec<(usize, f64)> {
+        if 2 * k < c {
+            vec![(k, 1.0)]
+        } else if 2 * k > c {
+            vec![(n - (c - k), 1.0)]
+        } else {
+            vec![(k, 0.5), (n - k, 0.5)]
+        }
+    };
+    let scale = 1.0 / (cx * cy) as f64;
+    for a in 0..cx {
+        let ta = targets(a, cx, nx);
+        for b in 0..cy {
+            let v = ws.spectrum[a * cy + b] * scale;
+            for &(ia, wa) in &ta {
+                for (ib, wb_) in targets(b, cy, ny) {
+                    wb.spectrum[ia * ny + ib] += v * (wa * wb_);
+                }
+            }
+        }
+    }
+    let mut fine = vec![C64::new(0.0, 0.0); nx * ny];
+    big.inverse(&mut wb, &mut fine);
+    fine
+}
+
+/// Quadrature spacing on a flat element whose nearest point lies `distance` (m) before the plane:
+/// `h = sqrt(λ·D) / 4`, between λ/8 and λ/3. The midpoint rule misses the curvature of the
+/// phase across a cell, about `k·h²/(8·D)` = 2π/128 ≈ 0.05 rad at this `h`; its other error, a
+/// factor `sinc(k·h·sin ψ / 2)` on the radiation at angle ψ from the element's normal, stays
+/// below 1.5 % inside the main lobe of an element a few wavelengths wide (`sin ψ < λ/d`) at λ/3.
+/// Elements far from the plane (most of a hemisphere) thus take 7 times fewer points than λ/8.
+pub fn element_spacing(wavelength: f64, distance: f64) -> f64 {
+    ((wavelength * distance.max(0.0)).sqrt() / 4.0).clamp(wavelength / 8.0, wavelength / 3.0)
 }
 
 /// Exact pixel coverage of a flat element lying in the plane of the grid (squares: product of 1-D
@@ -227,6 +288,29 @@ mod tests {
         let err = fast.iter().zip(&slow).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
         eprintln!("[cap projection] max error {err:.2e} of the peak (tol 2e-4)");
         assert!(err < 2e-4, "max error {err:.2e} of the peak");
+    }
+
+    #[test]
+    fn fourier_upsampling_reproduces_a_band_limited_field() {
+        // A sum of plane waves strictly below the coarse Nyquist frequency (periodic on the grid), sampled
+        // on every 2nd and 3rd pixel, against its exact values at every pixel: only rounding.
+        for (nx, ny, r) in [(24, 18, 2), (30, 24, 3), (20, 30, 2)] {
+            let waves = [(1.0, 2.0, C64::new(1.0, 0.3)), (-3.0, 1.0, C64::new(-0.4, 0.8)), (2.0, -3.0, C64::new(0.2, -0.1))];
+            let at = |i: usize, j: usize| -> C64 {
+                waves
+                    .iter()
+                    .map(|&(fx, fy, a)| {
+                        a * C64::from_polar(1.0, 2.0 * std::f64::consts::PI * (fx * i as f64 / nx as f64 + fy * j as f64 / ny as f64))
+                    })
+                    .sum()
+            };
+            let (cx, cy) = (nx / r, ny / r);
+            let mut coarse: Vec<C64> = (0..cy).flat_map(|j| (0..cx).map(move |i| (i, j))).map(|(i, j)| at(r * i, r * j)).collect();
+            let fine = fourier_upsample(&mut coarse, cx, cy, r);
+            let err =
+                (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| (fine[j * nx + i] - at(i, j)).norm()).fold(0.0, f64::max);
+            assert!(err < 1e-12, "{nx} x {ny} by {r}: error {err:.2e}");
+        }
     }
 
     #[test]

@@ -67,9 +67,11 @@ impl Surface {
     /// Largest z reached by the surface.
     pub fn z_max(&self) -> f64 {
         match *self {
-            Surface::Flat { center, normal, size, .. } => {
+            Surface::Flat { center, normal, size, shape } => {
                 let tilt = (1.0 - normal[2] * normal[2]).max(0.0).sqrt();
-                center[2] + 0.5 * size * std::f64::consts::SQRT_2 * tilt
+                // The farthest point from the centre: a corner of a square (at most), the rim of a disc.
+                let reach = if shape == ElementShape::Square { std::f64::consts::SQRT_2 } else { 1.0 };
+                center[2] + 0.5 * size * reach * tilt
             }
             Surface::Cap { radius, aperture_diameter } => cap_depth(radius, aperture_diameter),
         }
@@ -228,6 +230,24 @@ impl Transducer {
         Ok(Transducer { elements })
     }
 
+    /// A hemispherical array: `count` flat disc elements of diameter `element_size` on the sphere
+    /// of radius `radius` (apex at the origin, centre of curvature and natural focus at
+    /// (0, 0, R)), from the apex out to the polar angle `polar_angle_max` (rad, at most π/2: a
+    /// whole hemisphere). The layout is that of [`Transducer::bowl_elements`]: element `e` sits at
+    /// `cos θ_e = 1 - (e + ½)/N · (1 - cos θ_max)` (rings of equal area, element 0 nearest the
+    /// apex) and azimuth `φ_e = e · π(3 - √5)` (the golden angle), facing the centre.
+    pub fn hemisphere(radius: f64, polar_angle_max: f64, count: usize, element_size: f64) -> Result<Self> {
+        if !(polar_angle_max.is_finite() && polar_angle_max > 0.0 && polar_angle_max <= 0.5 * PI + 1e-12) {
+            return Err(HasError::invalid(
+                "transducer.polar_angle_max_deg",
+                format!("must lie in (0, 90] degrees, got {:.3}", polar_angle_max.to_degrees()),
+            ));
+        }
+        require_positive("transducer.radius_of_curvature_mm", radius)?;
+        let aperture = 2.0 * radius * polar_angle_max.min(0.5 * PI).sin();
+        Transducer::bowl_elements(radius, aperture, count, element_size)
+    }
+
     /// Elements from CSV text with header `x_mm,y_mm,z_mm,nx,ny,nz,size_mm`, one row per element.
     pub fn from_csv(text: &str, path: &str, shape: ElementShape) -> Result<Self> {
         let bad = |reason: String| HasError::BadFile { path: path.to_string(), reason };
@@ -357,5 +377,25 @@ mod tests {
     fn csv_with_wrong_header_is_rejected() {
         let e = Transducer::from_csv("x,y\n1,2\n", "e.csv", ElementShape::Square).unwrap_err();
         assert!(e.to_string().contains("header"), "{e}");
+    }
+
+    #[test]
+    fn hemisphere_elements_cover_equal_areas_facing_the_centre() {
+        // 1024 elements out to 60° on R = 150 mm: on the sphere, facing the centre, cos θ evenly
+        // spread (equal-area rings) from the apex to the rim, the golden-angle spiral in azimuth.
+        let (r, n) = (0.15, 1024);
+        let t = Transducer::hemisphere(r, 60f64.to_radians(), n, 6e-3).unwrap();
+        assert_eq!(t.elements.len(), n);
+        for (e, s) in t.elements.iter().enumerate() {
+            let Surface::Flat { center, normal, .. } = *s else { unreachable!() };
+            let to_centre = [-center[0] / r, -center[1] / r, 1.0 - center[2] / r];
+            assert!(to_centre.iter().zip(&normal).all(|(a, b)| (a - b).abs() < 1e-12), "element {e} does not face the centre");
+            let cos_theta = 1.0 - center[2] / r;
+            let expected = 1.0 - (e as f64 + 0.5) / n as f64 * 0.5;
+            assert!((cos_theta - expected).abs() < 1e-12, "element {e}: cos θ {cos_theta}");
+        }
+        let whole = Transducer::hemisphere(r, 0.5 * PI, 8, 6e-3).unwrap();
+        assert!(whole.elements.iter().all(|e| e.z_max() <= r + 3e-3));
+        assert!(Transducer::hemisphere(r, 1.6, 8, 6e-3).is_err());
     }
 }

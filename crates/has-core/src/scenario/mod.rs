@@ -63,12 +63,12 @@ pub struct Scenario {
     pub base_dir: Option<PathBuf>,
 }
 
-/// `[transducer]`: `kind` = `"planar-quadrants"` | `"bowl"` | `"elements"`; only the keys of
-/// that kind may be given.
+/// `[transducer]`: `kind` = `"planar-quadrants"` | `"bowl"` | `"hemisphere"` | `"elements"`;
+/// only the keys of that kind may be given.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TransducerSpec {
-    /// `"planar-quadrants"` (default), `"bowl"` or `"elements"`.
+    /// `"planar-quadrants"` (default), `"bowl"`, `"hemisphere"` or `"elements"`.
     #[serde(default = "d::kind")]
     pub kind: String,
     /// Planar quadrants: elements per side of each square quadrant (default 16).
@@ -77,20 +77,26 @@ pub struct TransducerSpec {
     /// Planar quadrants: centre-to-centre element spacing, mm (default 2.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pitch_mm: Option<f64>,
-    /// Side of a square planar element, mm (default 2.3); or diameter of a bowl's disc elements,
-    /// mm (default: 80 % of the centre spacing of equal-area cells on the cap).
+    /// Side of a square planar element, mm (default 2.3); or diameter of a bowl's or hemisphere's
+    /// disc elements, mm (default: 80 % of the centre spacing of equal-area cells on the cap).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub element_size_mm: Option<f64>,
     /// Planar quadrants: extra spacing between adjacent quadrants, mm (default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quadrant_gap_mm: Option<f64>,
-    /// Bowl: radius of curvature R, mm (required); apex at the origin, centre at (0, 0, R).
+    /// Bowl (required) or hemisphere (default 150): radius of curvature R, mm; apex at the
+    /// origin, centre at (0, 0, R).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius_of_curvature_mm: Option<f64>,
     /// Bowl: diameter of the cap's rim, mm (required).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aperture_diameter_mm: Option<f64>,
-    /// Bowl: number of flat disc elements on the cap (absent: one continuous cap).
+    /// Hemisphere: elements from the apex out to this polar angle, degrees (0 to 90; default 60,
+    /// the part of a 150 mm hemisphere a march along z reaches in front of a head).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub polar_angle_max_deg: Option<f64>,
+    /// Bowl: number of flat disc elements on the cap (absent: one continuous cap); hemisphere:
+    /// number of elements (default 1024).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub elements: Option<usize>,
     /// Elements: CSV with header `x_mm,y_mm,z_mm,nx,ny,nz,size_mm`, one row per element in
@@ -112,6 +118,7 @@ impl Default for TransducerSpec {
             quadrant_gap_mm: Some(1.0),
             radius_of_curvature_mm: None,
             aperture_diameter_mm: None,
+            polar_angle_max_deg: None,
             elements: None,
             file: None,
             element_shape: None,

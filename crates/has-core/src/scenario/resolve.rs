@@ -1,11 +1,11 @@
 //! Validation of a [`Scenario`] and its conversion to SI objects: the transducer, the medium and
 //! the MR geometry, with every value checked and errors named by their scenario key.
 
-use super::{GridSpec, Scenario};
+use super::{GridSpec, Scenario, TransducerSpec};
 use crate::error::{require_non_negative, require_positive, HasError, Result};
 use crate::physics::medium::{Material, Medium, Region, Shape};
 use crate::physics::mr::{MrGeometry, MrPlane};
-use crate::physics::transducer::{ElementShape, Transducer};
+use crate::physics::transducer::{cap_depth, ElementShape, Transducer};
 
 /// The scenario in SI units, validated.
 #[derive(Debug, Clone)]
@@ -171,6 +171,7 @@ impl Scenario {
             given("quadrant_gap_mm", t.quadrant_gap_mm.is_some()),
             given("radius_of_curvature_mm", t.radius_of_curvature_mm.is_some()),
             given("aperture_diameter_mm", t.aperture_diameter_mm.is_some()),
+            given("polar_angle_max_deg", t.polar_angle_max_deg.is_some()),
             given("elements", t.elements.is_some()),
             given("file", t.file.is_some()),
             given("element_shape", t.element_shape.is_some()),
@@ -178,11 +179,12 @@ impl Scenario {
         let allowed: &[&str] = match t.kind.as_str() {
             "planar-quadrants" => &["elements_per_side", "pitch_mm", "element_size_mm", "quadrant_gap_mm"],
             "bowl" => &["radius_of_curvature_mm", "aperture_diameter_mm", "elements", "element_size_mm"],
+            "hemisphere" => &["radius_of_curvature_mm", "polar_angle_max_deg", "elements", "element_size_mm"],
             "elements" => &["file", "element_shape"],
             k => {
                 return Err(HasError::invalid(
                     "transducer.kind",
-                    format!("must be \"planar-quadrants\", \"bowl\" or \"elements\", got \"{k}\""),
+                    format!("must be \"planar-quadrants\", \"bowl\", \"hemisphere\" or \"elements\", got \"{k}\""),
                 ))
             }
         };
@@ -209,13 +211,15 @@ impl Scenario {
                         Err(HasError::invalid("transducer.element_size_mm", "needs transducer.elements"))
                     }
                     None => Transducer::bowl(r, a),
-                    Some(n) => {
-                        // Default element diameter: 80 % of the centre spacing of equal-area cells.
-                        let cap = Transducer::bowl(r, a)?.area();
-                        let size = t.element_size_mm.map(|s| s * 1e-3).unwrap_or(0.8 * (cap / n.max(1) as f64).sqrt());
-                        Transducer::bowl_elements(r, a, n, size)
-                    }
+                    Some(n) => Transducer::bowl_elements(r, a, n, element_diameter(t, r, a, n)),
                 }
+            }
+            "hemisphere" => {
+                let r = t.radius_of_curvature_mm.unwrap_or(150.0) * 1e-3;
+                let theta = t.polar_angle_max_deg.unwrap_or(60.0).to_radians();
+                let n = t.elements.unwrap_or(1024);
+                let a = 2.0 * r * theta.min(0.5 * std::f64::consts::PI).sin();
+                Transducer::hemisphere(r, theta, n, element_diameter(t, r, a, n))
             }
             _ => {
                 let file = t.file.as_deref().ok_or_else(|| HasError::invalid("transducer.file", "is required for kind \"elements\""))?;
@@ -231,6 +235,14 @@ impl Scenario {
             }
         }
     }
+}
+
+/// The disc diameter of a bowl's or hemisphere's elements (m): `element_size_mm` if given, else
+/// 80 % of the centre spacing of `n` equal-area cells on the cap of radius `r` and aperture `a`.
+/// (The constructor validates `r`, `a` and `n`.)
+fn element_diameter(t: &TransducerSpec, r: f64, a: f64, n: usize) -> f64 {
+    let cap = 2.0 * std::f64::consts::PI * r * cap_depth(r, a);
+    t.element_size_mm.map(|s| s * 1e-3).unwrap_or(0.8 * (cap.abs() / n.max(1) as f64).sqrt())
 }
 
 /// Converts a position from mm to m, checking that it is finite.
