@@ -24,6 +24,23 @@ fn scratch(name: &str) -> PathBuf {
 /// the same grid.
 const BASE: &str = "[grid]\nspacing_mm = 0.68\nstep_mm = 0.68\n";
 
+/// A scenario: `head` (e.g. a `[grid]`), water, and a slab of bone from `lo` to `hi` (m) whose
+/// material is the porosity model's conversion of [`PLATE_HU`].
+fn plate_as_region(head: &str, lo: f64, hi: f64) -> Scenario {
+    let p = HuConversion::named("aubry2003").unwrap().properties(PLATE_HU, 1e6).unwrap();
+    let a0 = p.attenuation / (100.0 * has_core::physics::medium::NP_PER_DB);
+    let text = format!(
+        "{head}[[material]]\nname = \"water\"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n\
+         [[material]]\nname = \"bone\"\nsound_speed_m_s = {}\ndensity_kg_m3 = {}\nattenuation_db_cm_mhz = {a0}\n\
+         [[region]]\nmaterial = \"bone\"\nshape = \"slab\"\nz_min_mm = {}\nz_max_mm = {}\n",
+        p.sound_speed,
+        p.density,
+        lo * 1e3,
+        hi * 1e3
+    );
+    Scenario::from_toml(&text, None).unwrap()
+}
+
 /// A CT of `nk` slices of `dz` (m) from `z_first` (centre of slice 0, transducer frame, m), three
 /// 60 mm voxels wide in x and y (covering ±90 mm), holding `hu(z)`; the patient frame is the
 /// transducer frame (identity transform), so the NIfTI's RAS x and y are the frame's negated.
@@ -40,18 +57,7 @@ fn a_plate_read_from_a_ct_gives_the_field_of_the_same_plate_as_a_region() {
     let g = water.grid.clone();
     // The plate fills the steps from plane a to plane b (whole cells), 4 steps = 2.7 mm thick.
     let (a, b) = (g.plane_index(0.030), g.plane_index(0.030) + 4);
-    let p = HuConversion::named("aubry2003").unwrap().properties(PLATE_HU, 1e6).unwrap();
-    let a0 = p.attenuation / (100.0 * has_core::physics::medium::NP_PER_DB);
-    let region = format!(
-        "{BASE}[[material]]\nname = \"water\"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n\
-         [[material]]\nname = \"bone\"\nsound_speed_m_s = {}\ndensity_kg_m3 = {}\nattenuation_db_cm_mhz = {a0}\n\
-         [[region]]\nmaterial = \"bone\"\nshape = \"slab\"\nz_min_mm = {}\nz_max_mm = {}\n",
-        p.sound_speed,
-        p.density,
-        g.z(a) * 1e3,
-        g.z(b) * 1e3
-    );
-    let with_region = Simulation::new(&Scenario::from_toml(&region, None).unwrap()).unwrap();
+    let with_region = Simulation::new(&plate_as_region(BASE, g.z(a), g.z(b))).unwrap();
     // The CT: one slice per step, centred on the steps' midpoints, from 5 steps before the plate to
     // beyond the focus; air (coupling) around the plate.
     let z_first = g.z(a - 5) + 0.5 * g.dz;
@@ -130,24 +136,11 @@ fn a_plate_thinner_than_its_cells_keeps_its_delay_wherever_it_lies_on_the_grid()
     let z_first = g.z(g.plane_index(0.025)) + 0.5 * dz;
     let nk = ((0.095 - z_first) / dz) as usize;
     let dir = scratch("thin");
-    let p = HuConversion::named("aubry2003").unwrap().properties(PLATE_HU, 1e6).unwrap();
-    let a0 = p.attenuation / (100.0 * has_core::physics::medium::NP_PER_DB);
     let centre = |sim: &Simulation| {
         let f = sim.field(&[], None).unwrap();
         f.pressure[[f.y.len() / 2, f.x.len() / 2]]
     };
-    let region = |grid: &str, lo: f64, hi: f64| {
-        let t = format!(
-            "{grid}[[material]]\nname = \"water\"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n\
-             [[material]]\nname = \"bone\"\nsound_speed_m_s = {}\ndensity_kg_m3 = {}\nattenuation_db_cm_mhz = {a0}\n\
-             [[region]]\nmaterial = \"bone\"\nshape = \"slab\"\nz_min_mm = {}\nz_max_mm = {}\n",
-            p.sound_speed,
-            p.density,
-            lo * 1e3,
-            hi * 1e3
-        );
-        centre(&Simulation::new(&Scenario::from_toml(&t, None).unwrap()).unwrap())
-    };
+    let region = |grid: &str, lo: f64, hi: f64| centre(&Simulation::new(&plate_as_region(grid, lo, hi)).unwrap());
     let fine = format!("[grid]\nspacing_mm = {}\nstep_mm = {}\n", g.dx * 1e3, dz * 1e3);
     let (mut ct_worst, mut coarse_worst, mut amplitude_worst) = (0.0f64, 0.0f64, 0.0f64);
     for shift in 0..4 {

@@ -10,6 +10,12 @@ pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
 /// overflows.
 pub const SOUND_SPEED_RANGE_M_S: (f64, f64) = (100.0, 20_000.0);
 
+/// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz) of the power law
+/// `a(f) = a0 · (f / 1 MHz)^y` dB/cm with `a0` in dB/cm/MHz^y.
+pub fn attenuation_np_m(a0_db_cm_mhz: f64, power: f64, frequency: f64) -> f64 {
+    a0_db_cm_mhz * (frequency / 1e6).powf(power) * 100.0 * NP_PER_DB
+}
+
 /// Checks a sound speed against [`SOUND_SPEED_RANGE_M_S`].
 pub(crate) fn require_sound_speed(name: &str, c: f64) -> Result<()> {
     let (lo, hi) = SOUND_SPEED_RANGE_M_S;
@@ -52,7 +58,7 @@ impl Material {
 
     /// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz).
     pub fn attenuation_np_m(&self, frequency: f64) -> f64 {
-        self.attenuation_db_cm_mhz * (frequency / 1e6).powf(self.attenuation_power) * 100.0 * NP_PER_DB
+        attenuation_np_m(self.attenuation_db_cm_mhz, self.attenuation_power, frequency)
     }
 
     /// Local properties at `frequency`.

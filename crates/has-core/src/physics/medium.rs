@@ -5,7 +5,7 @@ use crate::physics::ct::CtMedium;
 use crate::physics::grid::Grid;
 use std::sync::Arc;
 
-use crate::physics::material::require_sound_speed;
+use crate::physics::material::{attenuation_np_m, require_sound_speed};
 pub use crate::physics::material::{Material, Properties, NP_PER_DB};
 
 /// The geometry of a region (metres, transducer frame).
@@ -327,7 +327,7 @@ impl Medium {
     fn described_at(&self, x: f64, y: f64, z: f64, frequency: f64) -> Properties {
         if let Some(v) = &self.voxels {
             if let Some(i) = v.index(x, y, z) {
-                let a = v.attenuation_db_cm_mhz[i] * (frequency / 1e6).powf(v.attenuation_power) * 100.0 * NP_PER_DB;
+                let a = attenuation_np_m(v.attenuation_db_cm_mhz[i], v.attenuation_power, frequency);
                 return Properties { sound_speed: v.sound_speed[i], density: v.density[i], attenuation: a };
             }
         }

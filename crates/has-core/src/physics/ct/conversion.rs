@@ -12,7 +12,7 @@
 //! and coupling are given materials.
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
-use crate::physics::material::{Material, Properties, NP_PER_DB};
+use crate::physics::material::{attenuation_np_m, Material, Properties};
 
 /// Hounsfield units a CT may hold: below −1100 or above 4000 a value is not a calibrated HU of
 /// tissue (air is −1000, the densest cortical bone about 3000); metal implants are out of scope.
@@ -208,7 +208,7 @@ impl HuConversion {
                 ((1.33 * rho + 167.0).max(1500.0), rho, law.attenuation(law.porosity(hu)))
             }
         };
-        Some(Properties { sound_speed, density, attenuation: a0 * (frequency / 1e6) * 100.0 * NP_PER_DB })
+        Some(Properties { sound_speed, density, attenuation: attenuation_np_m(a0, 1.0, frequency) })
     }
 
     /// The lowest sound speed a voxel can get (sets the shortest wavelength).
@@ -221,6 +221,7 @@ impl HuConversion {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::physics::material::NP_PER_DB;
 
     /// c (m/s), ρ (kg/m³) and a0 (dB/cm/MHz) of a tissue voxel, read at 1 MHz.
     fn tissue(c: &HuConversion, hu: f64) -> (f64, f64, f64) {
