@@ -68,11 +68,12 @@ impl Fft2 {
         rows(&*self.inv_x, field, self.nx, &mut ws.scratch, ws.parallel);
     }
 
-    /// `field ← post · IFFT2(kernel · FFT2(pre · field))` (one HAS step), unnormalised like
-    /// [`Fft2::forward`] then [`Fft2::inverse`], with `kernel` in the transposed layout `(nx, ny)`.
+    /// `field ← post · IFFT2(kernel · FFT2(pre · field))` (one HAS step with `post` its screen;
+    /// the transposed step with `pre` the screen), unnormalised like [`Fft2::forward`] then
+    /// [`Fft2::inverse`], with `kernel` in the transposed layout `(nx, ny)`; `None`: no factor.
     /// The multiplies are fused into the row passes (the same operations in the same order, so the
     /// result is bit-identical to the separate calls): 3 passes over the data instead of 6–7.
-    pub fn filter(&self, field: &mut [C64], ws: &mut FftWorkspace, pre: Option<&[f64]>, kernel: &[C64], post: &[C64]) {
+    pub fn filter(&self, field: &mut [C64], ws: &mut FftWorkspace, pre: Option<&[C64]>, kernel: &[C64], post: Option<&[C64]>) {
         let FftWorkspace { spectrum, scratch, parallel } = ws;
         let (fwd_x, inv_x, fwd_y, inv_y) = (&*self.fwd_x, &*self.inv_x, &*self.fwd_y, &*self.inv_y);
         row_chunks(field, self.nx, scratch, *parallel, |row, at, s| {
@@ -90,7 +91,9 @@ impl Fft2 {
         transpose(spectrum, field, self.nx, self.ny, *parallel);
         row_chunks(field, self.nx, scratch, *parallel, |row, at, s| {
             inv_x.process_with_scratch(row, s);
-            row.iter_mut().zip(&post[at..]).for_each(|(x, p)| *x *= *p);
+            if let Some(post) = post {
+                row.iter_mut().zip(&post[at..]).for_each(|(x, p)| *x *= *p);
+            }
         });
     }
 }
@@ -202,7 +205,7 @@ mod tests {
         let (nx, ny) = (12, 10);
         let wave = |k: usize, a: f64| C64::new((a * k as f64).sin(), (0.3 * a * k as f64).cos());
         let x: Vec<C64> = (0..nx * ny).map(|k| wave(k, 0.7)).collect();
-        let pre: Vec<f64> = (0..nx * ny).map(|k| 1.0 + 0.01 * k as f64).collect();
+        let pre: Vec<C64> = (0..nx * ny).map(|k| wave(k, 0.4)).collect();
         let kernel: Vec<C64> = (0..nx * ny).map(|k| wave(k, 1.3)).collect();
         let post: Vec<C64> = (0..nx * ny).map(|k| wave(k, 0.2)).collect();
         for parallel in [false, true] {
@@ -215,7 +218,7 @@ mod tests {
             f.inverse(&mut ws, &mut separate);
             multiply(&mut separate, &post, parallel);
             let mut fused = x.clone();
-            f.filter(&mut fused, &mut ws, Some(&pre), &kernel, &post);
+            f.filter(&mut fused, &mut ws, Some(&pre), &kernel, Some(&post));
             assert_eq!(fused, separate, "parallel = {parallel}");
         }
     }

@@ -84,6 +84,50 @@ impl Sources {
     }
 }
 
+/// The transposed sum: for values `v` on the pixels `(xs[i], ys[j], z0)` of a plane (row-major
+/// `(ys.len(), xs.len())`), `Σ_pixels v · (-(i·k / 2·pi) · exp((i·k - alpha)·R) / R)` at each of
+/// `points`, so that `Σ_q w_q · out_q` equals `Σ_pixels v · p` for the field `p` that
+/// [`Sources::row`] gives for weights `w_q` at `points` (the kernel depends on the distance
+/// only). Single precision over each row in [`LANES`] lanes, rows added in double precision;
+/// one rayon task per point.
+pub fn at_points(values: &[C64], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<C64> {
+    use rayon::prelude::*;
+    let nx = xs.len();
+    let xs32: Vec<f32> = xs.iter().map(|&x| x as f32).collect();
+    let v_re: Vec<f32> = values.iter().map(|v| v.re as f32).collect();
+    let v_im: Vec<f32> = values.iter().map(|v| v.im as f32).collect();
+    let (k32, alpha32) = (k as f32, alpha as f32);
+    let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
+    points
+        .par_iter()
+        .map(|p| {
+            let (px, h2) = (p[0] as f32, (z0 - p[2]) * (z0 - p[2]));
+            let mut total = C64::new(0.0, 0.0);
+            for (j, &y) in ys.iter().enumerate() {
+                let d2 = ((y - p[1]) * (y - p[1]) + h2) as f32;
+                let (mut re, mut im) = ([0f32; LANES], [0f32; LANES]);
+                let row = j * nx..(j + 1) * nx;
+                let lanes = xs32.chunks(LANES).zip(v_re[row.clone()].chunks(LANES)).zip(v_im[row].chunks(LANES));
+                for ((x, vr), vi) in lanes {
+                    for l in 0..x.len() {
+                        let dx = x[l] - px;
+                        let r = (dx * dx + d2).sqrt();
+                        let (s, c) = sin_cos(k32 * r);
+                        let f = if alpha32 > 0.0 { (-alpha32 * r).exp() / r } else { 1.0 / r };
+                        re[l] += f * (vr[l] * c - vi[l] * s);
+                        im[l] += f * (vr[l] * s + vi[l] * c);
+                    }
+                }
+                total += C64::new(re.iter().map(|&a| a as f64).sum(), im.iter().map(|&b| b as f64).sum());
+            }
+            pre * total
+        })
+        .collect()
+}
+
+/// Lanes of the single-precision partial sums in [`at_points`].
+pub const LANES: usize = 8;
+
 /// The same integral in double precision, point by point (the slow obvious reference).
 pub fn row_f64(points: &[([f64; 3], C64)], xs: &[f64], y: f64, z0: f64, k: f64, alpha: f64) -> Vec<C64> {
     let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));

@@ -30,6 +30,16 @@ enum Footprint {
     Plane(Vec<C64>),
 }
 
+impl Footprint {
+    /// The Rayleigh quadrature points (none for rasters and stored projections).
+    fn points(&self) -> &[SurfacePoint] {
+        match self {
+            Footprint::Points(p) => p,
+            _ => &[],
+        }
+    }
+}
+
 /// Radial samples per grid spacing for the projection of a cap.
 pub const RADIAL_OVERSAMPLING: usize = 8;
 
@@ -128,17 +138,65 @@ impl SourceModel {
         let g = &self.grid;
         let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
         let sources = Sources::new(&weighted, g.z0, self.wavenumber, self.attenuation);
-        let wavelength = 2.0 * std::f64::consts::PI / self.wavenumber;
-        let r = (1..=((0.5 * wavelength / g.dx.max(g.dy) + 1e-9).floor() as usize).max(1))
-            .rev()
-            .find(|r| g.nx % r == 0 && g.ny % r == 0)
-            .unwrap_or(1);
+        let r = self.coarsening();
         let (cx, cy) = (g.nx / r, g.ny / r);
         let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
         let mut coarse = vec![C64::new(0.0, 0.0); cx * cy];
         coarse.par_chunks_mut(cx).enumerate().for_each(|(j, row)| row.copy_from_slice(&sources.row(&xs, g.y(r * j))));
         let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
         out.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
+    }
+
+    /// The coarsening `r` of the Rayleigh sums: the largest whole number with `r·dx ≤ λ/2` that
+    /// divides both `nx` and `ny` (1: every pixel).
+    fn coarsening(&self) -> usize {
+        let g = &self.grid;
+        let wavelength = 2.0 * std::f64::consts::PI / self.wavenumber;
+        (1..=((0.5 * wavelength / g.dx.max(g.dy) + 1e-9).floor() as usize).max(1))
+            .rev()
+            .find(|r| g.nx % r == 0 && g.ny % r == 0)
+            .unwrap_or(1)
+    }
+
+    /// The transpose of [`SourceModel::field`]: for `weights` on the plane (row-major `(ny, nx)`),
+    /// `Σ_pixels weights · field(δ_e)` for every element `e` (its pressure on the plane for unit
+    /// drive, weighted and summed), with the same rasters, projections, coarse pixels and
+    /// interpolation. With the transposed march as weights this is each element's pressure at
+    /// one point ([`crate::Simulation::element_responses`]); the Rayleigh part costs what one
+    /// `field` call does.
+    pub fn transposed(&self, weights: &[C64]) -> Result<Vec<C64>> {
+        let g = &self.grid;
+        if weights.len() != g.lateral_len() {
+            return Err(HasError::invalid("weights", format!("has {} samples, grid has {}", weights.len(), g.lateral_len())));
+        }
+        let dot = |a: &[C64]| -> C64 { a.iter().zip(weights).map(|(a, w)| a * w).sum() };
+        let mut out: Vec<C64> = self
+            .footprints
+            .iter()
+            .map(|fp| match fp {
+                Footprint::Raster(px) => px.iter().map(|&(i, w)| weights[i as usize] * w).sum(),
+                Footprint::Plane(p) => dot(p),
+                Footprint::Points(_) => C64::new(0.0, 0.0),
+            })
+            .collect();
+        let points: Vec<[f64; 3]> = self.footprints.iter().flat_map(Footprint::points).map(|q| q.position).collect();
+        if !points.is_empty() {
+            let r = self.coarsening();
+            let (cx, cy) = (g.nx / r, g.ny / r);
+            let coarse = if r == 1 { weights.to_vec() } else { fourier_upsample_transposed(weights, cx, cy, r) };
+            let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
+            let ys: Vec<f64> = (0..cy).map(|j| g.y(r * j)).collect();
+            let at = crate::physics::rayleigh::at_points(&coarse, &xs, &ys, g.z0, &points, self.wavenumber, self.attenuation);
+            let mut next = 0;
+            for (o, fp) in out.iter_mut().zip(&self.footprints) {
+                for q in fp.points() {
+                    *o += at[next] * q.area;
+                    next += 1;
+                }
+            }
+        }
+        out.iter_mut().for_each(|o| *o *= self.face_pressure);
+        Ok(out)
     }
 
     /// The projection of an element symmetric about the z axis (unit drive): the Rayleigh
@@ -179,23 +237,13 @@ pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> V
     small.forward(coarse, &mut ws);
     let big = Fft2::new(nx, ny);
     let mut wb = big.workspace(true);
-    // Where coarse frequency index `k` of a length-`c` transform goes in a length-`n` one.
-    let targets = |k: usize, c: usize, n: usize| -> Vec<(usize, f64)> {
-        if 2 * k < c {
-            vec![(k, 1.0)]
-        } else if 2 * k > c {
-            vec![(n - (c - k), 1.0)]
-        } else {
-            vec![(k, 0.5), (n - k, 0.5)]
-        }
-    };
     let scale = 1.0 / (cx * cy) as f64;
     for a in 0..cx {
-        let ta = targets(a, cx, nx);
+        let ta = upsample_targets(a, cx, nx);
         for b in 0..cy {
             let v = ws.spectrum[a * cy + b] * scale;
             for &(ia, wa) in &ta {
-                for (ib, wb_) in targets(b, cy, ny) {
+                for (ib, wb_) in upsample_targets(b, cy, ny) {
                     wb.spectrum[ia * ny + ib] += v * (wa * wb_);
                 }
             }
@@ -204,6 +252,52 @@ pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> V
     let mut fine = vec![C64::new(0.0, 0.0); nx * ny];
     big.inverse(&mut wb, &mut fine);
     fine
+}
+
+/// The transpose of [`fourier_upsample`]: for `fine` on the `(r·cy, r·cx)` grid, the coarse
+/// `(cy, cx)` vector `c̄` with `Σ c̄ · c = Σ fine · fourier_upsample(c)` for every `c` (the
+/// unnormalised inverse transform of `fine`, the coarse frequencies gathered with the same
+/// weights, the forward transform of those).
+pub fn fourier_upsample_transposed(fine: &[C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
+    let (nx, ny) = (r * cx, r * cy);
+    let big = Fft2::new(nx, ny);
+    let mut wb = big.workspace(true);
+    // The unnormalised inverse DFT is symmetric: applied to `fine` as if it were a spectrum.
+    crate::physics::fft::transpose(fine, &mut wb.spectrum, ny, nx, true);
+    let mut spectrum = vec![C64::new(0.0, 0.0); nx * ny];
+    big.inverse(&mut wb, &mut spectrum);
+    let small = Fft2::new(cx, cy);
+    let mut ws = small.workspace(true);
+    let scale = 1.0 / (cx * cy) as f64;
+    // `spectrum[b·nx + a]` holds frequency (a, b); the coarse values in (cy, cx) layout.
+    let mut coarse = vec![C64::new(0.0, 0.0); cx * cy];
+    for b in 0..cy {
+        for a in 0..cx {
+            let mut v = C64::new(0.0, 0.0);
+            for &(ia, wa) in &upsample_targets(a, cx, nx) {
+                for &(ib, wb_) in &upsample_targets(b, cy, ny) {
+                    v += spectrum[ib * nx + ia] * (wa * wb_);
+                }
+            }
+            coarse[b * cx + a] = v * scale;
+        }
+    }
+    small.forward(&mut coarse, &mut ws);
+    let mut out = vec![C64::new(0.0, 0.0); cx * cy];
+    crate::physics::fft::transpose(&ws.spectrum, &mut out, cx, cy, true);
+    out
+}
+
+/// Where coarse frequency index `k` of a length-`c` transform goes in a length-`n` one (the
+/// Nyquist bin of an even length split evenly between `±`).
+fn upsample_targets(k: usize, c: usize, n: usize) -> Vec<(usize, f64)> {
+    if 2 * k < c {
+        vec![(k, 1.0)]
+    } else if 2 * k > c {
+        vec![(n - (c - k), 1.0)]
+    } else {
+        vec![(k, 0.5), (n - k, 0.5)]
+    }
 }
 
 /// Quadrature spacing on a flat element whose nearest point lies `distance` (m) before the plane:
@@ -310,6 +404,52 @@ mod tests {
             let err =
                 (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| (fine[j * nx + i] - at(i, j)).norm()).fold(0.0, f64::max);
             assert!(err < 1e-12, "{nx} x {ny} by {r}: error {err:.2e}");
+        }
+    }
+
+    /// Deterministic complex pseudo-random values with parts in [-0.5, 0.5).
+    fn random(n: usize, seed: u64) -> Vec<C64> {
+        let mut s = seed;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        (0..n).map(|_| C64::new(rnd(), rnd())).collect()
+    }
+
+    #[test]
+    fn transposed_upsampling_passes_the_dot_product_test() {
+        // Σ c̄·c = Σ fine·U(c) for random c and fine: only rounding.
+        for (nx, ny, r) in [(24, 18, 2), (30, 24, 3), (20, 30, 2)] {
+            let (cx, cy) = (nx / r, ny / r);
+            let (c, fine) = (random(cx * cy, 1), random(nx * ny, 2));
+            let up = fourier_upsample(&mut c.clone(), cx, cy, r);
+            let lhs: C64 = fine.iter().zip(&up).map(|(a, b)| a * b).sum();
+            let rhs: C64 = fourier_upsample_transposed(&fine, cx, cy, r).iter().zip(&c).map(|(a, b)| a * b).sum();
+            assert!((lhs - rhs).norm() < 1e-12 * lhs.norm().max(1.0), "{nx} x {ny} by {r}: {lhs} vs {rhs}");
+        }
+    }
+
+    #[test]
+    fn transposed_source_passes_the_dot_product_test() {
+        // Σ w·field(d) = Σ d·transposed(w) for random drives and weights, for elements projected by
+        // the Rayleigh sum on coarse pixels (a small hemisphere at λ/4) and rasterised ones (a
+        // planar array). Tolerance 1e-5 of Σ|w|·|field|: both sides sum in single precision
+        // (~1e-6, see rayleigh.rs).
+        let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
+        let hemisphere = Transducer::hemisphere(30e-3, 40f64.to_radians(), 24, 4e-3).unwrap();
+        let planar = Transducer::planar_quadrants(4, 2.5e-3, 2.3e-3, 1e-3).unwrap();
+        for (name, t, z0) in [("hemisphere", hemisphere, 9e-3), ("planar", planar, 0.0)] {
+            let g = Grid::new(96, 90, 0.375e-3, 0.375e-3, 2, 0.375e-3, z0).unwrap();
+            let model = SourceModel::new(&t, &g, 2.0, k, 3.0).unwrap();
+            let (d, w) = (random(t.elements.len(), 3), random(g.lateral_len(), 4));
+            let field = model.field(&d).unwrap();
+            let lhs: C64 = w.iter().zip(&field).map(|(a, b)| a * b).sum();
+            let scale: f64 = w.iter().zip(&field).map(|(a, b)| a.norm() * b.norm()).sum();
+            let rhs: C64 = model.transposed(&w).unwrap().iter().zip(&d).map(|(a, b)| a * b).sum();
+            let err = (lhs - rhs).norm() / scale;
+            eprintln!("[{name}] transposed source: relative error {err:.1e} (tolerance 1e-5)");
+            assert!(err < 1e-5, "{name}: {lhs} vs {rhs}");
         }
     }
 

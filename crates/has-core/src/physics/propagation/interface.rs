@@ -179,6 +179,31 @@ impl Interface {
             }
         }
     }
+
+    /// `out ← Rᵀ p`, the transpose of [`Interface::reflect`]: `Σ_pairs IFFT(R_ab · FFT(M_ab · p))`
+    /// (each pair's pixels taken before its filter, not after; `R_ab` depends on `kx² + ky²`
+    /// only, so the filter is its own transpose). `work` is overwritten.
+    pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
+        match &self.kind {
+            Kind::Pointwise(r) => out.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r),
+            Kind::Spectral(pairs) => {
+                let mut sum = vec![C64::new(0.0, 0.0); p.len()];
+                for pair in pairs {
+                    match &pair.pixels {
+                        None => work.copy_from_slice(p),
+                        Some(px) => {
+                            work.fill(C64::new(0.0, 0.0));
+                            px.iter().for_each(|&i| work[i as usize] = p[i as usize]);
+                        }
+                    }
+                    fft.forward(work, ws);
+                    sum.iter_mut().zip(&ws.spectrum).zip(pair.coefficient.iter()).for_each(|((s, a), r)| *s += a * r);
+                }
+                ws.spectrum.copy_from_slice(&sum);
+                fft.inverse(ws, out);
+            }
+        }
+    }
 }
 
 /// (density, complex wavenumber at `omega`) of pixel `i`.

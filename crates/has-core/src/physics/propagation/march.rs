@@ -200,7 +200,7 @@ impl<'a> Sweeper<'a> {
     /// Propagates `field` through slab `s` (from plane `s` to `s + 1`, or back).
     fn step(&mut self, s: usize, field: &mut [C64]) {
         let st = &self.plan.steps[s];
-        self.plan.fft.filter(field, &mut self.ws, None, &st.propagator, &st.screen);
+        self.plan.fft.filter(field, &mut self.ws, None, &st.propagator, Some(&st.screen));
     }
 
     /// Forward sweep from plane `from` to plane `to`. With `entering`, `field` is the incident

@@ -33,6 +33,7 @@
 
 mod interface;
 mod march;
+mod transpose;
 
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
@@ -184,7 +185,7 @@ impl HasPlan {
             let screen =
                 screen_cache.entry((slab, bits[0])).or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, grid.dz))).clone();
             let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
-            plan.fft.filter(&mut field, &mut ws, None, &s.propagator, &s.screen);
+            plan.fft.filter(&mut field, &mut ws, None, &s.propagator, Some(&s.screen));
             plan.steps.push(s);
         }
         let last = grid.nz - 1;

@@ -1,0 +1,270 @@
+//! The transpose of a march: one sweep that gives, for weights on one plane, the source-plane
+//! vector whose dot product with any source is the weighted sum of that source's recorded field.
+//!
+//! A march is a linear map `s ↦ M·s` from the source plane to the recorded planes, a product of
+//! steps `P = screen · IFFT · propagator · FFT`, crossings `I ± R` and additions. Its transpose
+//! `Mᵀ` is the product of the transposed factors in reverse order: `Pᵀ = IFFT · propagator · FFT
+//! · screen` (the propagator depends on `kx² + ky²` only, which makes `IFFT · propagator · FFT`
+//! symmetric), `Rᵀ` masks each material pair's pixels before its filter
+//! ([`Interface::reflect_transposed`]), and every wave the march adds, reflects or keeps becomes
+//! an adjoint wave that the transposed sweep collects. The control flow of a march with a fixed
+//! number of round trips does not depend on the source, so the transposed sweeps follow the same
+//! plane lists backwards. This is discrete reciprocity: `Mᵀ·δ` at a pixel is the field a point
+//! source there sends back to the source plane in this model, and with it each element's
+//! pressure at that pixel is one dot product (see [`crate::Simulation::element_responses`]).
+
+use super::interface::Interface;
+use super::march::RecordSpec;
+use super::HasPlan;
+use crate::error::{HasError, Result};
+use crate::physics::fft::FftWorkspace;
+use num_complex::Complex64 as C64;
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+/// Adjoint waves by plane.
+type Adjoints = BTreeMap<usize, Vec<C64>>;
+
+/// Buffers and the weighted plane of one transposed march.
+struct Transposer<'a> {
+    plan: &'a HasPlan,
+    ws: FftWorkspace,
+    work: Vec<C64>,
+    reflected: Vec<C64>,
+    plane: usize,
+    weights: &'a [C64],
+}
+
+impl<'a> Transposer<'a> {
+    fn zero(&self) -> Vec<C64> {
+        vec![C64::new(0.0, 0.0); self.plan.grid.lateral_len()]
+    }
+
+    fn interface(&self, n: usize) -> Option<&'a Interface> {
+        let plan: &'a HasPlan = self.plan;
+        plan.steps.get(n).and_then(|s| s.interface.as_deref())
+    }
+
+    /// The transpose of recording plane `n`: the weights join the adjoint there.
+    fn record(&self, n: usize, adjoint: &mut [C64]) {
+        if n == self.plane {
+            adjoint.iter_mut().zip(self.weights).for_each(|(a, w)| *a += w);
+        }
+    }
+
+    /// The transpose of stepping through slab `s`: screen first, then the propagator.
+    fn step(&mut self, s: usize, adjoint: &mut [C64]) {
+        let st = &self.plan.steps[s];
+        self.plan.fft.filter(adjoint, &mut self.ws, Some(&st.screen), &st.propagator, None);
+    }
+
+    /// The transpose of crossing plane `n` in direction `sign` (`f ← f + sign·R·f`, the reflected
+    /// wave `sign·R·f` kept with adjoint `kept`): `a ← a + sign·Rᵀ·(a + kept)`.
+    fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Vec<C64>>) {
+        let Some(interface) = self.interface(n) else { return };
+        if self.work.len() != adjoint.len() {
+            self.work = self.zero();
+        }
+        let mut input = adjoint.to_vec();
+        if let Some(k) = kept {
+            input.iter_mut().zip(k).for_each(|(a, k)| *a += k);
+        }
+        interface.reflect_transposed(&self.plan.fft, &input, &mut self.reflected, &mut self.work, &mut self.ws);
+        adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
+    }
+
+    /// The transpose of `Sweeper::forward` from `from` to `to` with sources on `sources`:
+    /// `adjoint` holds on entry the adjoint of the field leaving `to`, on return that of the
+    /// field entering `from`; `kept(n)` is the adjoint of the reflection kept at plane `n`.
+    /// Returns the adjoints of the sources, by plane.
+    fn forward<'k>(
+        &mut self,
+        adjoint: &mut [C64],
+        from: usize,
+        to: usize,
+        entering: bool,
+        sources: &[usize],
+        kept: &dyn Fn(usize) -> Option<&'k Vec<C64>>,
+    ) -> Adjoints {
+        let mut out = Adjoints::new();
+        for n in (from..=to).rev() {
+            if sources.contains(&n) {
+                out.insert(n, adjoint.to_vec());
+            }
+            if n > from || entering {
+                self.cross(n, adjoint, 1.0, kept(n));
+                self.record(n, adjoint);
+            }
+            if n > from {
+                self.step(n - 1, adjoint);
+            }
+        }
+        out
+    }
+
+    /// The transpose of `Sweeper::backward` of waves starting on `sources` (and `inject`) down
+    /// to `bottom`: `leaving` is the adjoint of the wave leaving `bottom`, `emitted(m)` that of
+    /// the forward wave reflected at `m`. Returns the adjoints of the sources (by plane) and of
+    /// the injected wave.
+    fn backward<'k>(
+        &mut self,
+        mut adjoint: Vec<C64>,
+        sources: &[usize],
+        bottom: usize,
+        inject: Option<usize>,
+        emitted: &dyn Fn(usize) -> Option<&'k Vec<C64>>,
+    ) -> (Adjoints, Option<Vec<C64>>) {
+        let mut out = Adjoints::new();
+        let mut injected = None;
+        let Some(top) = sources.iter().copied().chain(inject).max() else {
+            return (out, injected);
+        };
+        for m in bottom..=top {
+            if m > bottom {
+                self.step(m - 1, &mut adjoint);
+            }
+            if inject == Some(m) {
+                injected = Some(adjoint.clone());
+            }
+            let source_here = sources.contains(&m);
+            if m < top || source_here {
+                self.record(m, &mut adjoint);
+            }
+            if source_here {
+                out.insert(m, adjoint.clone());
+            }
+            if m < top {
+                self.cross(m, &mut adjoint, -1.0, emitted(m));
+            }
+        }
+        (out, injected)
+    }
+}
+
+/// What one round trip of the reverberation consumed and produced (plane lists).
+struct Trip {
+    /// Planes of the backward waves it started from.
+    inside: Vec<usize>,
+    /// Planes of the forward waves its backward sweep reflected (`None`: none, the last trip).
+    emitted: Option<Vec<usize>>,
+}
+
+impl HasPlan {
+    /// The transpose of [`HasPlan::propagate`] for one recorded plane: for `weights` on `plane`
+    /// (row-major `(ny, nx)`), the source-plane vector `m` with
+    /// `Σ weights · propagate(s).planes[plane] = Σ m · s` for every source `s` (no complex
+    /// conjugate: a transpose, not an adjoint), `reflections` as in [`RecordSpec`]. With a single
+    /// pixel's weight, `m` is the field a point source there sends back to the source plane in this
+    /// model (reciprocity). Costs one march.
+    pub fn transposed(&self, plane: usize, weights: &[C64], reflections: bool) -> Result<Vec<C64>> {
+        let g = &self.grid;
+        if plane >= g.nz {
+            return Err(HasError::invalid("plane", format!("plane {plane} is beyond the grid ({} planes)", g.nz)));
+        }
+        if weights.len() != g.lateral_len() {
+            return Err(HasError::invalid("weights", format!("has {} samples, grid has {}", weights.len(), g.lateral_len())));
+        }
+        if weights.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()) {
+            return Err(HasError::invalid("weights", "contains NaN or infinite values"));
+        }
+        let mut out = Vec::new();
+        super::march::in_pool(|| out = self.transposed_here(plane, weights, reflections));
+        Ok(out)
+    }
+
+    fn transposed_here(&self, plane: usize, weights: &[C64], reflections: bool) -> Vec<C64> {
+        let spec = RecordSpec { planes: vec![plane], reflections, ..RecordSpec::default() };
+        let last = spec.last_plane(self.grid.nz);
+        let zone = self.zone.filter(|z| z.first <= last);
+        let in_zone = |n: usize| zone.is_some_and(|z| (z.first..=z.last).contains(&n));
+        let keep = |n: usize| reflections || in_zone(n);
+        let reflecting = |n: usize| self.steps.get(n).is_some_and(|s| s.interface.is_some());
+        // The planes of the reflections a forward sweep keeps, and of the forward waves a
+        // backward sweep from `top` reflects inside `emit`.
+        let kept_by = |from: usize, to: usize, entering: bool| -> Vec<usize> {
+            (from..=to).filter(|&n| (n > from || entering) && reflecting(n) && keep(n)).collect()
+        };
+        let emitted_by = |bottom: usize, top: usize, emit: Range<usize>| -> Vec<usize> {
+            (bottom..top).filter(|m| emit.contains(m) && reflecting(*m)).collect()
+        };
+        let mut t = Transposer {
+            plan: self,
+            ws: self.fft.workspace(true),
+            work: Vec::new(),
+            reflected: vec![C64::new(0.0, 0.0); self.grid.lateral_len()],
+            plane,
+            weights,
+        };
+        let mut adjoint = t.zero();
+        let Some(z) = zone else {
+            let outside = kept_by(0, last, true);
+            let reflected = if reflections { t.backward(t.zero(), &outside, 0, None, &|_| None).0 } else { Adjoints::new() };
+            t.forward(&mut adjoint, 0, last, true, &[], &|n| reflected.get(&n));
+            return adjoint;
+        };
+        // The plane lists of the march, in its order (see `HasPlan::march`).
+        let mut outside: Vec<usize> = Vec::new();
+        let mut inside: Vec<usize> = Vec::new();
+        for n in kept_by(0, z.first, true).into_iter().chain(kept_by(z.first, z.last, false)) {
+            if in_zone(n) {
+                inside.push(n)
+            } else {
+                outside.push(n)
+            }
+        }
+        let mut trips: Vec<Trip> = Vec::new();
+        while trips.len() < z.round_trips && !inside.is_empty() {
+            let top = inside.iter().copied().max().unwrap_or(z.first);
+            let emitted = emitted_by(z.first, top, z.first..z.last + 1);
+            if emitted.is_empty() {
+                trips.push(Trip { inside: std::mem::take(&mut inside), emitted: None });
+                break;
+            }
+            let consumed = std::mem::take(&mut inside);
+            for n in kept_by(emitted[0], z.last, false) {
+                if in_zone(n) {
+                    inside.push(n)
+                } else {
+                    outside.push(n)
+                }
+            }
+            trips.push(Trip { inside: consumed, emitted: Some(emitted) });
+        }
+        if last > z.last {
+            outside.extend(kept_by(z.last, last, false));
+        }
+        // Transposed, last stage first.
+        let (reflected, leaving) = if reflections {
+            let waves: Vec<usize> = outside.iter().chain(&inside).copied().collect();
+            let (a, leaving) = t.backward(t.zero(), &waves, 0, Some(z.first), &|_| None);
+            (a, leaving)
+        } else {
+            (Adjoints::new(), None)
+        };
+        if last > z.last {
+            t.forward(&mut adjoint, z.last, last, false, &[], &|n| reflected.get(&n));
+        }
+        // The adjoint of the waves left inside after the last trip: they join the reflections.
+        let mut inside_adjoint: Adjoints = if reflections { reflected.clone() } else { Adjoints::new() };
+        for trip in trips.iter().rev() {
+            let mut emitted_adjoint = Adjoints::new();
+            if let Some(emitted) = &trip.emitted {
+                let mut a = adjoint.clone();
+                let next = &inside_adjoint;
+                emitted_adjoint = t.forward(&mut a, emitted[0], z.last, false, emitted, &|n| {
+                    if in_zone(n) {
+                        next.get(&n)
+                    } else {
+                        reflected.get(&n)
+                    }
+                });
+            }
+            let start = leaving.clone().unwrap_or_else(|| t.zero());
+            inside_adjoint = t.backward(start, &trip.inside, z.first, None, &|m| emitted_adjoint.get(&m)).0;
+        }
+        let kept = |n: usize| if in_zone(n) { inside_adjoint.get(&n) } else { reflected.get(&n) };
+        t.forward(&mut adjoint, z.first, z.last, false, &[], &kept);
+        t.forward(&mut adjoint, 0, z.first, true, &[], &kept);
+        adjoint
+    }
+}
