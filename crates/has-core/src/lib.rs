@@ -26,6 +26,7 @@ pub mod inverse;
 pub mod memory;
 pub mod nifti;
 pub mod physics;
+pub mod prediction;
 pub mod scenario;
 pub mod simulation;
 

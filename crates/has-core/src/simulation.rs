@@ -172,6 +172,11 @@ impl Simulation {
         })
     }
 
+    /// The steered source plane (no added phases), Pa.
+    pub fn steered_source(&self) -> &[C64] {
+        &self.steered_source
+    }
+
     /// The same simulation with another broadening width W (m) and amplitude (rad·m³/N), e.g.
     /// from a calibration; the HAS plan is shared.
     pub fn with_calibration(&self, broadening_width: f64, amplitude: f64) -> Result<Self> {
@@ -355,6 +360,11 @@ impl Simulation {
     /// equal what one march per element gives, to the rounding of the single-precision Rayleigh
     /// sums (`tests/reciprocity.rs`).
     pub fn element_responses(&self, target: [f64; 3]) -> Result<Vec<C64>> {
+        self.element_responses_through(&self.plan, target)
+    }
+
+    /// [`Simulation::element_responses`] through another plan on the same grid (another medium).
+    pub(crate) fn element_responses_through(&self, plan: &HasPlan, target: [f64; 3]) -> Result<Vec<C64>> {
         let g = &self.grid;
         crate::error::require_finite("target", &target)?;
         let index = |v: f64, d: f64, n: usize| {
@@ -378,7 +388,7 @@ impl Simulation {
         };
         let mut weights = vec![C64::new(0.0, 0.0); g.lateral_len()];
         weights[j * g.nx + i] = C64::new(1.0, 0.0);
-        let back = self.plan.transposed(g.plane_index(target[2]), &weights, self.reflections)?;
+        let back = plan.transposed(g.plane_index(target[2]), &weights, self.reflections)?;
         self.source.transposed(&back)
     }
 

@@ -166,6 +166,13 @@ impl Medium {
         Medium { materials: vec![material], background: 0, regions: vec![], voxels: None, ct: None }
     }
 
+    /// The same medium with the CT's bone read as soft tissue (the head without its skull);
+    /// `None` without a CT.
+    pub fn without_bone(&self) -> Option<Medium> {
+        let ct = self.ct.as_ref()?;
+        Some(Medium { ct: Some(Arc::new(ct.without_bone())), ..self.clone() })
+    }
+
     /// Checks materials, indices and shapes.
     pub fn validate(&self) -> Result<()> {
         if self.materials.is_empty() {

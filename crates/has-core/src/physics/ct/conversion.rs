@@ -211,9 +211,19 @@ impl HuConversion {
         Some(Properties { sound_speed, density, attenuation: attenuation_np_m(a0, 1.0, frequency) })
     }
 
+    /// The same conversion with bone read as soft tissue: the head without its skull, the
+    /// reference of a CT-based prediction.
+    pub fn without_bone(&self) -> Self {
+        HuConversion { bone_from_hu: f64::INFINITY, ..self.clone() }
+    }
+
     /// The lowest sound speed a voxel can get (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
-        let bone = self.properties(self.bone_from_hu, 1e6).map_or(f64::INFINITY, |p| p.sound_speed);
+        let bone = if self.bone_from_hu.is_finite() {
+            self.properties(self.bone_from_hu, 1e6).map_or(f64::INFINITY, |p| p.sound_speed)
+        } else {
+            f64::INFINITY
+        };
         bone.min(self.soft_tissue.sound_speed)
     }
 }

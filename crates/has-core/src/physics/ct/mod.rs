@@ -25,6 +25,7 @@ use crate::nifti::Volume;
 use crate::physics::grid::Grid;
 use crate::physics::material::Properties;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// At most this many sample points per axis and cell (a cell 8 CT voxels wide is averaged from 8).
 pub const MAX_SAMPLES_PER_AXIS: usize = 8;
@@ -36,8 +37,8 @@ pub struct CtMedium {
     pub path: String,
     /// Shape `(nk, nj, ni)`.
     shape: [usize; 3],
-    /// HU per voxel, row-major `(k, j, i)`.
-    hu: Vec<f32>,
+    /// HU per voxel, row-major `(k, j, i)` (shared by [`CtMedium::without_bone`]).
+    hu: Arc<Vec<f32>>,
     /// Transducer frame (m) to continuous voxel index (i, j, k).
     frame_to_voxel: [[f64; 4]; 3],
     /// Smallest voxel edge, m.
@@ -157,7 +158,21 @@ impl CtMedium {
                 bounds[1][a] = bounds[1][a].max(p[a]);
             }
         }
-        Ok(CtMedium { path: path.to_string(), shape: volume.shape, hu: volume.values, frame_to_voxel, finest_voxel, bounds, conversion })
+        Ok(CtMedium {
+            path: path.to_string(),
+            shape: volume.shape,
+            hu: Arc::new(volume.values),
+            frame_to_voxel,
+            finest_voxel,
+            bounds,
+            conversion,
+        })
+    }
+
+    /// The same CT with its bone read as soft tissue ([`HuConversion::without_bone`]); the
+    /// voxels are shared, not copied.
+    pub fn without_bone(&self) -> CtMedium {
+        CtMedium { conversion: self.conversion.without_bone(), ..self.clone() }
     }
 
     /// Lowest and highest corner of the box the CT spans in the transducer frame, m.
