@@ -5,6 +5,7 @@ mod cost;
 mod diagnose;
 mod error;
 mod interrupt;
+mod prediction;
 mod scenario;
 mod simulation;
 
@@ -20,5 +21,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
+    m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     Ok(())
 }

@@ -18,7 +18,7 @@ use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
 use crate::physics::propagation::{HasPlan, RecordSpec};
 use crate::physics::steering::steering_phases;
-use crate::simulation::Simulation;
+use crate::simulation::{reciprocal_field, Simulation};
 use num_complex::Complex64 as C64;
 
 /// The prediction for one target, with the focal pressures it implies (Pa, for the
@@ -50,30 +50,41 @@ pub struct Prediction {
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
-/// Costs two transposed marches (through the skull and through the reference head) and two
-/// transposed projections, whatever the number of elements. Refused without a `[ct]`.
-pub fn predict(sim: &Simulation, target: Option<[f64; 3]>) -> Result<Prediction> {
+/// Costs two transposed marches (through the skull and through the reference head, whose plan is
+/// built for the purpose) and one transposed projection, whatever the number of elements. Takes
+/// the simulation by value: its plan is dropped once its march is done, so that the two plans
+/// are never held at once (a 650 kHz hemisphere's plan through a head holds several GB).
+/// Refused without a `[ct]`.
+pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> {
     let target = target.unwrap_or(sim.focus);
     let reference_medium = sim.medium.without_bone().ok_or_else(|| {
         HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
     })?;
-    let skull = sim.element_responses(target)?;
-    let (reference_plan, _) =
-        HasPlan::build(&sim.grid, &reference_medium, sim.frequency, sim.steered_source(), &sim.plan.options, &RecordSpec::default())?;
-    let reference = sim.element_responses_through(&reference_plan, target)?;
-    let reference_steering = steering_phases(&sim.transducer, &reference_medium, sim.frequency, sim.focus)?;
+    let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
+    let steered_source = sim.steered_source().to_vec();
+    let Simulation { plan, grid, frequency, source, steering, transducer, focus, reflections, .. } = sim;
+    let options = plan.options.clone();
+    drop(plan);
+    let through_reference = {
+        let spec = RecordSpec::default();
+        let (reference_plan, _) = HasPlan::build(&grid, &reference_medium, frequency, &steered_source, &options, &spec)?;
+        reciprocal_field(&reference_plan, target, reflections)?
+    };
+    let mut responses = source.transposed_many(&[through_skull, through_reference])?;
+    let (reference, skull) = (responses.remove(1), responses.remove(0));
+    let reference_steering = steering_phases(&transducer, &reference_medium, frequency, focus)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
     let focal =
         |h: &[C64], drive: &dyn Fn(usize) -> f64| h.iter().enumerate().map(|(e, h)| h * C64::from_polar(1.0, drive(e))).sum::<C64>().norm();
-    let g = &sim.grid;
+    let g = &grid;
     let snap = |v: f64, d: f64| (v / d).round() * d;
     Ok(Prediction {
         target: [snap(target[0], g.dx), snap(target[1], g.dy), g.z(g.plane_index(target[2]))],
         reference_pressure: focal(&reference, &|e| reference_steering[e]),
         uncorrected_pressure: focal(&skull, &|e| reference_steering[e]),
-        ray_pressure: focal(&skull, &|e| sim.steering[e]),
+        ray_pressure: focal(&skull, &|e| steering[e]),
         corrected_pressure: focal(&skull, &|e| reference_steering[e] - phases[e]),
         optimal_pressure: skull.iter().map(|h| h.norm()).sum(),
         phases,

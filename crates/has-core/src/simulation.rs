@@ -360,36 +360,7 @@ impl Simulation {
     /// equal what one march per element gives, to the rounding of the single-precision Rayleigh
     /// sums (`tests/reciprocity.rs`).
     pub fn element_responses(&self, target: [f64; 3]) -> Result<Vec<C64>> {
-        self.element_responses_through(&self.plan, target)
-    }
-
-    /// [`Simulation::element_responses`] through another plan on the same grid (another medium).
-    pub(crate) fn element_responses_through(&self, plan: &HasPlan, target: [f64; 3]) -> Result<Vec<C64>> {
-        let g = &self.grid;
-        crate::error::require_finite("target", &target)?;
-        let index = |v: f64, d: f64, n: usize| {
-            let i = (v / d).round() + (n / 2) as f64;
-            (i >= 0.0 && i < n as f64).then_some(i as usize)
-        };
-        let in_z = target[2] >= g.z0 - 0.5 * g.dz && target[2] <= g.z(g.nz - 1) + 0.5 * g.dz;
-        let (Some(i), Some(j), true) = (index(target[0], g.dx, g.nx), index(target[1], g.dy, g.ny), in_z) else {
-            return Err(HasError::invalid(
-                "target",
-                format!(
-                    "({:.1}, {:.1}, {:.1}) mm lies outside the grid (x, y within ±{:.1} mm, z {:.1} to {:.1} mm)",
-                    target[0] * 1e3,
-                    target[1] * 1e3,
-                    target[2] * 1e3,
-                    0.5 * g.nx as f64 * g.dx * 1e3,
-                    g.z0 * 1e3,
-                    g.z(g.nz - 1) * 1e3
-                ),
-            ));
-        };
-        let mut weights = vec![C64::new(0.0, 0.0); g.lateral_len()];
-        weights[j * g.nx + i] = C64::new(1.0, 0.0);
-        let back = plan.transposed(g.plane_index(target[2]), &weights, self.reflections)?;
-        self.source.transposed(&back)
+        self.source.transposed(&reciprocal_field(&self.plan, target, self.reflections)?)
     }
 
     /// The noise-free MR-ARFI phase image (rad), `(n_u, n_v)`, for added phases (per element
@@ -422,6 +393,36 @@ impl Simulation {
         let spec = RecordSpec { window: Some(self.sampler()?.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         self.plan.propagate_batch(sources, &spec)
     }
+}
+
+/// The transposed march through `plan` from the grid point nearest `target` (m): the
+/// source-plane field whose dot product with a source plane is that source's pressure there
+/// (`reflections` as the simulation marches).
+pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
+    let g = &plan.grid;
+    crate::error::require_finite("target", &target)?;
+    let index = |v: f64, d: f64, n: usize| {
+        let i = (v / d).round() + (n / 2) as f64;
+        (i >= 0.0 && i < n as f64).then_some(i as usize)
+    };
+    let in_z = target[2] >= g.z0 - 0.5 * g.dz && target[2] <= g.z(g.nz - 1) + 0.5 * g.dz;
+    let (Some(i), Some(j), true) = (index(target[0], g.dx, g.nx), index(target[1], g.dy, g.ny), in_z) else {
+        return Err(HasError::invalid(
+            "target",
+            format!(
+                "({:.1}, {:.1}, {:.1}) mm lies outside the grid (x, y within ±{:.1} mm, z {:.1} to {:.1} mm)",
+                target[0] * 1e3,
+                target[1] * 1e3,
+                target[2] * 1e3,
+                0.5 * g.nx as f64 * g.dx * 1e3,
+                g.z0 * 1e3,
+                g.z(g.nz - 1) * 1e3
+            ),
+        ));
+    };
+    let mut weights = vec![C64::new(0.0, 0.0); g.lateral_len()];
+    weights[j * g.nx + i] = C64::new(1.0, 0.0);
+    plan.transposed(g.plane_index(target[2]), &weights, reflections)
 }
 
 /// The scenario with the `[grid]` it resolves to written out (spacing, step, lateral size, last

@@ -72,7 +72,7 @@ fn predicted_phases_restore_the_focus_through_a_shifted_uneven_shell() {
     let dir = scratch("shifted");
     std::fs::write(dir.join("shell.nii"), shell_ct([4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3)).unwrap();
     let sim = bowl_through_shell(&dir);
-    let p = predict(&sim, None).unwrap();
+    let p = predict(sim.clone(), None).unwrap();
     let best = p.optimal_pressure;
     let mean_t = p.transmission.iter().sum::<f64>() / p.transmission.len() as f64;
     println!(
@@ -112,6 +112,6 @@ fn a_prediction_needs_a_ct() {
     let text = "[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 40.0\naperture_diameter_mm = 30.0\nelements = 16\n\
                 [focus]\nposition_mm = [0.0, 0.0, 40.0]\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\n";
     let sim = Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap();
-    let err = predict(&sim, None).unwrap_err().to_string();
+    let err = predict(sim, None).unwrap_err().to_string();
     assert!(err.contains("ct") && err.contains("CT of the head"), "{err}");
 }

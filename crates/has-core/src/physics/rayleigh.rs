@@ -84,45 +84,56 @@ impl Sources {
     }
 }
 
-/// The transposed sum: for values `v` on the pixels `(xs[i], ys[j], z0)` of a plane (row-major
-/// `(ys.len(), xs.len())`), `Σ_pixels v · (-(i·k / 2·pi) · exp((i·k - alpha)·R) / R)` at each of
-/// `points`, so that `Σ_q w_q · out_q` equals `Σ_pixels v · p` for the field `p` that
-/// [`Sources::row`] gives for weights `w_q` at `points` (the kernel depends on the distance
-/// only). Single precision over each row in [`LANES`] lanes, rows added in double precision;
-/// one rayon task per point.
-pub fn at_points(values: &[C64], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<C64> {
+/// The transposed sum: for each field `v` of `fields` on the pixels `(xs[i], ys[j], z0)` of a
+/// plane (row-major `(ys.len(), xs.len())`), `Σ_pixels v · (-(i·k / 2·pi) · exp((i·k - alpha)·R) /
+/// R)` at each of `points` (`out[field][point]`), so that `Σ_q w_q · out_q` equals
+/// `Σ_pixels v · p` for the field `p` that [`Sources::row`] gives for weights `w_q` at `points`
+/// (the kernel depends on the distance only). Each row's kernel is evaluated once in single
+/// precision and dotted with every field in [`LANES`] lanes; rows add in double precision; one
+/// rayon task per point.
+pub fn at_points(fields: &[Vec<C64>], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<Vec<C64>> {
     use rayon::prelude::*;
     let nx = xs.len();
     let xs32: Vec<f32> = xs.iter().map(|&x| x as f32).collect();
-    let v_re: Vec<f32> = values.iter().map(|v| v.re as f32).collect();
-    let v_im: Vec<f32> = values.iter().map(|v| v.im as f32).collect();
+    let parts: Vec<(Vec<f32>, Vec<f32>)> =
+        fields.iter().map(|v| (v.iter().map(|v| v.re as f32).collect(), v.iter().map(|v| v.im as f32).collect())).collect();
     let (k32, alpha32) = (k as f32, alpha as f32);
     let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
-    points
+    let per_point: Vec<Vec<C64>> = points
         .par_iter()
-        .map(|p| {
-            let (px, h2) = (p[0] as f32, (z0 - p[2]) * (z0 - p[2]));
-            let mut total = C64::new(0.0, 0.0);
-            for (j, &y) in ys.iter().enumerate() {
-                let d2 = ((y - p[1]) * (y - p[1]) + h2) as f32;
-                let (mut re, mut im) = ([0f32; LANES], [0f32; LANES]);
-                let row = j * nx..(j + 1) * nx;
-                let lanes = xs32.chunks(LANES).zip(v_re[row.clone()].chunks(LANES)).zip(v_im[row].chunks(LANES));
-                for ((x, vr), vi) in lanes {
-                    for l in 0..x.len() {
-                        let dx = x[l] - px;
+        .map_init(
+            || (vec![0f32; nx], vec![0f32; nx]),
+            |(kr, ki), p| {
+                let (px, h2) = (p[0] as f32, (z0 - p[2]) * (z0 - p[2]));
+                let mut totals = vec![C64::new(0.0, 0.0); fields.len()];
+                for (j, &y) in ys.iter().enumerate() {
+                    let d2 = ((y - p[1]) * (y - p[1]) + h2) as f32;
+                    for ((a, b), &x) in kr.iter_mut().zip(ki.iter_mut()).zip(&xs32) {
+                        let dx = x - px;
                         let r = (dx * dx + d2).sqrt();
                         let (s, c) = sin_cos(k32 * r);
                         let f = if alpha32 > 0.0 { (-alpha32 * r).exp() / r } else { 1.0 / r };
-                        re[l] += f * (vr[l] * c - vi[l] * s);
-                        im[l] += f * (vr[l] * s + vi[l] * c);
+                        (*a, *b) = (f * c, f * s);
+                    }
+                    for ((v_re, v_im), total) in parts.iter().zip(totals.iter_mut()) {
+                        let (mut re, mut im) = ([0f32; LANES], [0f32; LANES]);
+                        let row = j * nx..(j + 1) * nx;
+                        let lanes =
+                            kr.chunks(LANES).zip(ki.chunks(LANES)).zip(v_re[row.clone()].chunks(LANES).zip(v_im[row].chunks(LANES)));
+                        for ((c, s), (vr, vi)) in lanes {
+                            for l in 0..c.len() {
+                                re[l] += vr[l] * c[l] - vi[l] * s[l];
+                                im[l] += vr[l] * s[l] + vi[l] * c[l];
+                            }
+                        }
+                        *total += C64::new(re.iter().map(|&a| a as f64).sum(), im.iter().map(|&b| b as f64).sum());
                     }
                 }
-                total += C64::new(re.iter().map(|&a| a as f64).sum(), im.iter().map(|&b| b as f64).sum());
-            }
-            pre * total
-        })
-        .collect()
+                totals.iter().map(|t| pre * t).collect()
+            },
+        )
+        .collect();
+    (0..fields.len()).map(|f| per_point.iter().map(|v| v[f]).collect()).collect()
 }
 
 /// Lanes of the single-precision partial sums in [`at_points`].

@@ -165,37 +165,49 @@ impl SourceModel {
     /// one point ([`crate::Simulation::element_responses`]); the Rayleigh part costs what one
     /// `field` call does.
     pub fn transposed(&self, weights: &[C64]) -> Result<Vec<C64>> {
+        Ok(self.transposed_many(&[weights.to_vec()])?.remove(0))
+    }
+
+    /// [`SourceModel::transposed`] of several weight fields at once (`out[field][element]`): the
+    /// Rayleigh kernel, the costly part, is evaluated once for all of them.
+    pub fn transposed_many(&self, weights: &[Vec<C64>]) -> Result<Vec<Vec<C64>>> {
         let g = &self.grid;
-        if weights.len() != g.lateral_len() {
-            return Err(HasError::invalid("weights", format!("has {} samples, grid has {}", weights.len(), g.lateral_len())));
+        if let Some(w) = weights.iter().find(|w| w.len() != g.lateral_len()) {
+            return Err(HasError::invalid("weights", format!("has {} samples, grid has {}", w.len(), g.lateral_len())));
         }
-        let dot = |a: &[C64]| -> C64 { a.iter().zip(weights).map(|(a, w)| a * w).sum() };
-        let mut out: Vec<C64> = self
-            .footprints
+        let mut out: Vec<Vec<C64>> = weights
             .iter()
-            .map(|fp| match fp {
-                Footprint::Raster(px) => px.iter().map(|&(i, w)| weights[i as usize] * w).sum(),
-                Footprint::Plane(p) => dot(p),
-                Footprint::Points(_) => C64::new(0.0, 0.0),
+            .map(|w| {
+                self.footprints
+                    .iter()
+                    .map(|fp| match fp {
+                        Footprint::Raster(px) => px.iter().map(|&(i, a)| w[i as usize] * a).sum(),
+                        Footprint::Plane(p) => p.iter().zip(w).map(|(a, w)| a * w).sum(),
+                        Footprint::Points(_) => C64::new(0.0, 0.0),
+                    })
+                    .collect()
             })
             .collect();
         let points: Vec<[f64; 3]> = self.footprints.iter().flat_map(Footprint::points).map(|q| q.position).collect();
         if !points.is_empty() {
             let r = self.coarsening();
             let (cx, cy) = (g.nx / r, g.ny / r);
-            let coarse = if r == 1 { weights.to_vec() } else { fourier_upsample_transposed(weights, cx, cy, r) };
+            let coarse: Vec<Vec<C64>> =
+                weights.iter().map(|w| if r == 1 { w.clone() } else { fourier_upsample_transposed(w, cx, cy, r) }).collect();
             let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
             let ys: Vec<f64> = (0..cy).map(|j| g.y(r * j)).collect();
             let at = crate::physics::rayleigh::at_points(&coarse, &xs, &ys, g.z0, &points, self.wavenumber, self.attenuation);
-            let mut next = 0;
-            for (o, fp) in out.iter_mut().zip(&self.footprints) {
-                for q in fp.points() {
-                    *o += at[next] * q.area;
-                    next += 1;
+            for (o, at) in out.iter_mut().zip(&at) {
+                let mut next = 0;
+                for (o, fp) in o.iter_mut().zip(&self.footprints) {
+                    for q in fp.points() {
+                        *o += at[next] * q.area;
+                        next += 1;
+                    }
                 }
             }
         }
-        out.iter_mut().for_each(|o| *o *= self.face_pressure);
+        out.iter_mut().flatten().for_each(|o| *o *= self.face_pressure);
         Ok(out)
     }
 

@@ -1,0 +1,38 @@
+//! `predict`: the CT-based prediction of each element's aberration.
+
+use crate::error::to_py;
+use crate::scenario::parse_scenario;
+use has_core::prediction::predict as predict_core;
+use has_core::simulation::Simulation;
+use numpy::IntoPyArray;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Builds the scenario's simulation and predicts at `target_mm` (default: the focus), by
+/// reciprocity (see `has_core::prediction`): dict with `phases_rad`, `transmission`,
+/// `reference_steering_rad` (per element), `target_mm` and the focal pressures (Pa)
+/// `reference_pa`, `uncorrected_pa`, `ray_steering_pa`, `corrected_pa`, `optimal_pa`.
+#[pyfunction]
+#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None))]
+pub(crate) fn predict<'py>(
+    py: Python<'py>,
+    text: &str,
+    format: &str,
+    base_dir: Option<&str>,
+    target_mm: Option<[f64; 3]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let scenario = parse_scenario(text, format, base_dir)?;
+    let target = target_mm.map(|t| t.map(|v| v * 1e-3));
+    let p = py.detach(|| Simulation::new(&scenario).and_then(|sim| predict_core(sim, target))).map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("phases_rad", p.phases.into_pyarray(py))?;
+    d.set_item("transmission", p.transmission.into_pyarray(py))?;
+    d.set_item("reference_steering_rad", p.reference_steering.into_pyarray(py))?;
+    d.set_item("target_mm", p.target.map(|v| v * 1e3).to_vec())?;
+    d.set_item("reference_pa", p.reference_pressure)?;
+    d.set_item("uncorrected_pa", p.uncorrected_pressure)?;
+    d.set_item("ray_steering_pa", p.ray_pressure)?;
+    d.set_item("corrected_pa", p.corrected_pressure)?;
+    d.set_item("optimal_pa", p.optimal_pressure)?;
+    Ok(d)
+}

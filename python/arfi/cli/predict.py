@@ -1,0 +1,50 @@
+"""``arfi predict``: the CT-based prediction of each element's aberration, the prior of ``arfi estimate``."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from arfi.cli.common import UsageError, add_common, finish, load_scenario, npy_path, save_npy
+from arfi.prediction import predict
+
+
+def register(sub: Any) -> None:
+    """Adds the verb to the subcommands ``sub``."""
+    p = sub.add_parser(
+        "predict", help="per-element aberration of the CT's skull at the focus (.npy, the prior of arfi estimate)",
+        description="Predict what the skull of the scenario's CT ([ct]) does to each element's wave at the focus, by "
+        "reciprocity: one march from the focus back to the array through the head, and one through the same head with "
+        "its bone read as soft tissue (the reference the estimation's model assumes). Writes the predicted phase per "
+        "element (rad) in the sign of arfi estimate's phases_rad: subtracting it from the reference steering corrects, "
+        "and it is the --prior of arfi estimate. --json adds each element's transmission and the focal pressures "
+        "(reference, uncorrected, straight-ray CT steering, corrected, and the most any phases give).",
+        epilog="example: arfi predict --scenario head.toml --out prior.npy --json prediction.json")
+    add_common(p)
+    p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
+    p.add_argument("--target-mm", type=float, nargs=3, dest="target_mm", metavar=("X", "Y", "Z"),
+                   help="point to predict for, transducer frame (default: the focus)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    npy_path(args.out, "--out")  # before the simulation
+    scenario = load_scenario(args)
+    if scenario.to_dict().get("ct") is None:
+        raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
+                         "arfi phantom writes a synthetic one")
+    t = time.perf_counter()
+    p = predict(scenario, args.target_mm)
+    seconds = time.perf_counter() - t
+    save_npy(args.out, p.phases_rad)
+    x, y, z = p.target_mm
+    print(
+        f"predict: {len(p.phases_rad)} elements at ({x:.1f}, {y:.1f}, {z:.1f}) mm: phases span "
+        f"{p.phases_rad.max() - p.phases_rad.min():.2f} rad, transmission {p.transmission.mean():.2f} mean -> {args.out}\n"
+        f"predict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {p.ray_steering_pa / 1e6:.3f} MPa with straight-ray "
+        f"CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: {p.optimal_pa / 1e6:.3f} MPa; "
+        f"{p.reference_pa / 1e6:.3f} MPa without the skull) in {seconds:.1f} s"
+    )
+    finish(args, {"out": args.out, **p.to_dict(), "seconds": seconds})
+    return 0

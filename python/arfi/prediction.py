@@ -1,0 +1,82 @@
+"""CT-based prediction of the skull's per-element aberration: :func:`predict`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from arfi import _core
+from arfi.scenario import Scenario
+from arfi.validate import real_array
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """What the scenario's CT bone does to each element's wave at the target, by reciprocity.
+
+    Each element's complex pressure ``h_e`` at the target (unit drive) is computed through the
+    head with its CT and through the same head with the CT's bone read as soft tissue (the
+    *reference*: the head without its skull, which the estimation's model assumes), from one
+    transposed march each instead of one march per element. ``phases_rad`` is
+    ``arg(h_skull · conj(h_reference))`` less its weighted circular mean: the aberration in the sign
+    of an estimate's ``phases_rad`` (driving the reference steering minus it corrects; it is the
+    ``--prior`` of ``arfi estimate``). The focal pressures are exact sums of the responses."""
+
+    phases_rad: NDArray[np.float64]
+    """Predicted aberration per element (rad, wrapped to (-pi, pi])."""
+    transmission: NDArray[np.float64]
+    """Per element, ``|h_skull| / |h_reference|`` at the target."""
+    reference_steering_rad: NDArray[np.float64]
+    """Steering phases of the head without bone (straight-ray times of flight)."""
+    target_mm: tuple[float, float, float]
+    """The grid point predicted for (transducer frame, mm)."""
+    reference_pa: float
+    """Focal |p| of the reference steering in the head without bone."""
+    uncorrected_pa: float
+    """Focal |p| of the reference steering through the skull (the aberrated focus)."""
+    ray_steering_pa: float
+    """Focal |p| of the scenario's own steering (straight rays through the CT's bone) through the skull."""
+    corrected_pa: float
+    """Focal |p| of the reference steering minus ``phases_rad`` through the skull."""
+    optimal_pa: float
+    """The most any phases give through the skull at this drive amplitude: ``sum |h_skull|``."""
+
+    def correction_rad(self, steering_rad: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Phases to add to a simulation's own ``steering_rad`` to drive the corrected array
+        (reference steering minus the prediction), e.g. ``sim.field(p.correction_rad(sim.steering_phases_rad))``."""
+        return self.reference_steering_rad - self.phases_rad - np.asarray(steering_rad, dtype=np.float64)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON ``arfi predict`` writes: per-element vectors and the focal pressures."""
+        return {
+            "phases_rad": self.phases_rad.tolist(),
+            "transmission": self.transmission.tolist(),
+            "reference_steering_rad": self.reference_steering_rad.tolist(),
+            "target_mm": list(self.target_mm),
+            "focal_pressure_pa": {
+                "reference": self.reference_pa,
+                "uncorrected": self.uncorrected_pa,
+                "ray_steering": self.ray_steering_pa,
+                "corrected": self.corrected_pa,
+                "optimal": self.optimal_pa,
+            },
+        }
+
+
+def predict(scenario: Scenario, target_mm: ArrayLike | None = None) -> Prediction:
+    """Simulates ``scenario`` (which needs a ``[ct]``) and predicts each element's aberration at
+    ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs the
+    scenario's simulation, two transposed marches and one transposed projection, whatever the
+    number of elements; the skull's plan is dropped before the reference's is built, so that
+    they are never held at once."""
+    target = None
+    if target_mm is not None:
+        t = real_array(target_mm, "target_mm")
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise ValueError(f"target_mm: must be three finite numbers (x, y, z), got shape {t.shape}")
+        target = (float(t[0]), float(t[1]), float(t[2]))
+    d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target)
+    return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})
