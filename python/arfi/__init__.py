@@ -10,6 +10,7 @@ Quick start::
     sim = arfi.Simulation()              # the paper's phantom experiment (550 kHz, focus at 85 mm)
     image = sim.arfi_image()             # ideal MR-ARFI phase image, rad, shape (128, 96)
     field = sim.field()                  # complex pressure (Pa) on the focal plane and the axis
+    p = arfi.predict(arfi.Scenario.load("head.toml"))  # a CT's per-element aberration (needs [ct])
 """
 
 from arfi.scenario import Scenario
@@ -17,8 +18,10 @@ from arfi.cost import CostModel, CostTerm
 from arfi.simulation import Field, Simulation
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
+from arfi.prediction import Prediction, predict
 
-__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm"]
+__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
+           "predict", "Prediction"]
 
 try:
     from importlib.metadata import version as _version

@@ -13,6 +13,8 @@
 //! `arg Σ_e h_e^skull · conj(h_e^reference)` removed (the images see phase differences only). The
 //! transmission is `|h_e^skull| / |h_e^reference|`. Since the march is linear, every focal
 //! pressure below is exact in the model: `|Σ_e h_e · exp(i·drive_e)|` for the drive in question.
+//! The reference's plan is fixed by the same steered beam as the skull's (its mean wavenumbers
+//! are weighted by that beam's pressure; see [`crate::physics::propagation`]).
 
 use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
