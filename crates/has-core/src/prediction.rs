@@ -49,6 +49,22 @@ pub struct Prediction {
     /// The most any phases can give through the skull at this drive amplitude, `Σ_e |h_e^skull|`
     /// (every element's wave arriving in phase).
     pub optimal_pressure: f64,
+    /// Each element's complex pressure at the target through the skull for unit drive, Pa.
+    pub skull_responses: Vec<C64>,
+}
+
+impl Prediction {
+    /// The focal pressure (Pa) through this prediction's skull when the array is driven with the
+    /// reference steering minus `phases` (one per element), e.g. another prediction's: what a
+    /// prediction made with wrong CT constants would give on this skull.
+    pub fn pressure_with(&self, phases: &[f64]) -> Result<f64> {
+        if phases.len() != self.skull_responses.len() {
+            return Err(HasError::invalid("phases", format!("has {} values for {} elements", phases.len(), self.skull_responses.len())));
+        }
+        crate::error::require_finite("phases", phases)?;
+        let drive = |e: usize| C64::from_polar(1.0, self.reference_steering[e] - phases[e]);
+        Ok(self.skull_responses.iter().enumerate().map(|(e, h)| h * drive(e)).sum::<C64>().norm())
+    }
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
@@ -92,5 +108,6 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
         phases,
         transmission,
         reference_steering,
+        skull_responses: skull,
     })
 }
