@@ -31,6 +31,7 @@ struct Transposer<'a> {
     ws: FftWorkspace,
     work: Vec<C64>,
     reflected: Vec<C64>,
+    incident: Vec<C64>,
     plane: usize,
     weights: &'a [C64],
 }
@@ -65,11 +66,11 @@ impl<'a> Transposer<'a> {
         if self.work.len() != adjoint.len() {
             self.work = self.zero();
         }
-        let mut input = adjoint.to_vec();
+        self.incident.copy_from_slice(adjoint);
         if let Some(k) = kept {
-            input.iter_mut().zip(k).for_each(|(a, k)| *a += k);
+            self.incident.iter_mut().zip(k).for_each(|(a, k)| *a += k);
         }
-        interface.reflect_transposed(&self.plan.fft, &input, &mut self.reflected, &mut self.work, &mut self.ws);
+        interface.reflect_transposed(&self.plan.fft, &self.incident, &mut self.reflected, &mut self.work, &mut self.ws);
         adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
     }
 
@@ -192,6 +193,7 @@ impl HasPlan {
             ws: self.fft.workspace(true),
             work: Vec::new(),
             reflected: vec![C64::new(0.0, 0.0); self.grid.lateral_len()],
+            incident: vec![C64::new(0.0, 0.0); self.grid.lateral_len()],
             plane,
             weights,
         };
