@@ -268,3 +268,16 @@ fn a_ten_percent_error_in_the_ct_conversion_costs_focus() {
     assert!(worst_kept[0] < worst_kept[1] && worst_kept[0] < worst_kept[2], "{worst_kept:?}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn the_estimates_model_reads_the_bone_as_the_predictions_reference_does() {
+    // `[ct] without_bone = true` is the medium a prediction's reference uses: the model of the
+    // MR-ARFI estimate its prior is meant for.
+    let dir = scratch("without-bone");
+    std::fs::write(dir.join("shell.nii"), shell_ct([4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3)).unwrap();
+    let skull = bowl_through_shell(&dir, "");
+    let model = bowl_through_shell(&dir, "without_bone = true\n");
+    assert_eq!(Some(model.medium.clone()), skull.medium.without_bone());
+    assert_ne!(model.medium, skull.medium);
+    std::fs::remove_dir_all(dir).ok();
+}

@@ -58,6 +58,10 @@ pub struct CtSpec {
     /// Porosity model: exponent β of the attenuation law (default 0.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub porosity_exponent: Option<f64>,
+    /// Read the bone as soft tissue (default false): the head without its skull, the model of
+    /// an MR-ARFI estimate whose prior comes from `arfi predict` (that prediction's reference).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub without_bone: Option<bool>,
 }
 
 fn aubry() -> String {
@@ -116,7 +120,7 @@ impl CtSpec {
             }
         }
         c.validate()?;
-        Ok(c)
+        Ok(if self.without_bone == Some(true) { c.without_bone() } else { c })
     }
 
     /// Reads the volume from `path` (the scenario's `file`, resolved) and places it in the

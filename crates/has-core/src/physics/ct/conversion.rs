@@ -165,11 +165,15 @@ impl HuConversion {
         })
     }
 
-    /// Checks the thresholds, the soft tissue and the bone constants.
+    /// Checks the thresholds (`bone_from_hu` may be infinite: no bone), the soft tissue and the
+    /// bone constants.
     pub fn validate(&self) -> Result<()> {
         let (lo, hi) = HU_RANGE;
         require_in_range("ct.coupling_below_hu", self.coupling_below_hu, lo, hi, "calibrated HU")?;
-        require_in_range("ct.bone_from_hu", self.bone_from_hu, lo, hi, "calibrated HU")?;
+        if self.bone_from_hu != f64::INFINITY {
+            // (infinite: no bone, see `without_bone`)
+            require_in_range("ct.bone_from_hu", self.bone_from_hu, lo, hi, "calibrated HU")?;
+        }
         if self.bone_from_hu <= self.coupling_below_hu {
             return Err(HasError::invalid(
                 "ct.bone_from_hu",
