@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
 from arfi.scenario import Scenario
-from arfi.validate import real_array
+from arfi.validate import as_point_mm
 
 
 @dataclass(frozen=True)
@@ -72,11 +72,6 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None) -> Predictio
     scenario's simulation, two transposed marches and one transposed projection, whatever the
     number of elements; the skull's plan is dropped before the reference's is built, so that
     they are never held at once."""
-    target = None
-    if target_mm is not None:
-        t = real_array(target_mm, "target_mm")
-        if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise ValueError(f"target_mm: must be three finite numbers (x, y, z), got shape {t.shape}")
-        target = (float(t[0]), float(t[1]), float(t[2]))
+    target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
     d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target)
     return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})

@@ -14,7 +14,7 @@ from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
-from arfi.validate import as_count, as_image, as_number, as_phases, nuisance_names, real_array
+from arfi.validate import as_count, as_image, as_number, as_phases, as_point_mm, nuisance_names, real_array
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
@@ -199,10 +199,7 @@ class Simulation:
         images (focus moved by +5, -5 and +10 mm) recovered 0.87–0.91 of the ideal focus (mean
         0.885, seeds 1–5) where three images with random group phases recovered 0.80–0.88 (mean
         0.85), measured 2026-11-24."""
-        a = real_array(shift_mm, "shift_mm")
-        if a.shape != (3,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"shift_mm: must be three finite numbers (x, y, z in mm), got {shift_mm!r}")
-        return self._core.focus_shift_phases((float(a[0]), float(a[1]), float(a[2])))
+        return self._core.focus_shift_phases(as_point_mm(shift_mm, "shift_mm"))
 
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
         """Added phases, one per element or one per group, as one per element. Errors name ``name``."""

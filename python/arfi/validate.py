@@ -24,6 +24,14 @@ def real_array(value: Any, name: str) -> NDArray[np.float64]:
         raise ValueError(f"{name}: not numeric ({e})") from None
 
 
+def as_point_mm(value: ArrayLike, name: str) -> tuple[float, float, float]:
+    """Three finite numbers (x, y, z in mm) as a tuple; ValueError naming ``name`` otherwise."""
+    a = real_array(value, name)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: must be three finite numbers (x, y, z in mm), got {value!r}")
+    return float(a[0]), float(a[1]), float(a[2])
+
+
 def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.float64] | None:
     """Phases (rad) as a 1-D float64 array, or None. Raises ValueError naming `name`."""
     if phases is None:

@@ -62,9 +62,14 @@ impl Prediction {
             return Err(HasError::invalid("phases", format!("has {} values for {} elements", phases.len(), self.skull_responses.len())));
         }
         crate::error::require_finite("phases", phases)?;
-        let drive = |e: usize| C64::from_polar(1.0, self.reference_steering[e] - phases[e]);
-        Ok(self.skull_responses.iter().enumerate().map(|(e, h)| h * drive(e)).sum::<C64>().norm())
+        Ok(focal_pressure(&self.skull_responses, |e| self.reference_steering[e] - phases[e]))
     }
+}
+
+/// `|Σ_e h_e · exp(i·drive(e))|`: the focal pressure of element responses `h` (Pa per unit drive)
+/// for the drive phases `drive(e)` (rad).
+fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
+    h.iter().enumerate().map(|(e, h)| h * C64::from_polar(1.0, drive(e))).sum::<C64>().norm()
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
@@ -94,16 +99,14 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
-    let focal =
-        |h: &[C64], drive: &dyn Fn(usize) -> f64| h.iter().enumerate().map(|(e, h)| h * C64::from_polar(1.0, drive(e))).sum::<C64>().norm();
-    let g = &grid;
-    let snap = |v: f64, d: f64| (v / d).round() * d;
+    // (Inside the grid: the reciprocal fields were computed there.)
+    let [i, j, n] = grid.nearest(target).unwrap_or_default();
     Ok(Prediction {
-        target: [snap(target[0], g.dx), snap(target[1], g.dy), g.z(g.plane_index(target[2]))],
-        reference_pressure: focal(&reference, &|e| reference_steering[e]),
-        uncorrected_pressure: focal(&skull, &|e| reference_steering[e]),
-        ray_pressure: focal(&skull, &|e| steering[e]),
-        corrected_pressure: focal(&skull, &|e| reference_steering[e] - phases[e]),
+        target: [grid.x(i), grid.y(j), grid.z(n)],
+        reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
+        uncorrected_pressure: focal_pressure(&skull, |e| reference_steering[e]),
+        ray_pressure: focal_pressure(&skull, |e| steering[e]),
+        corrected_pressure: focal_pressure(&skull, |e| reference_steering[e] - phases[e]),
         optimal_pressure: skull.iter().map(|h| h.norm()).sum(),
         phases,
         transmission,

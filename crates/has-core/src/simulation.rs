@@ -401,12 +401,7 @@ impl Simulation {
 pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
     let g = &plan.grid;
     crate::error::require_finite("target", &target)?;
-    let index = |v: f64, d: f64, n: usize| {
-        let i = (v / d).round() + (n / 2) as f64;
-        (i >= 0.0 && i < n as f64).then_some(i as usize)
-    };
-    let in_z = target[2] >= g.z0 - 0.5 * g.dz && target[2] <= g.z(g.nz - 1) + 0.5 * g.dz;
-    let (Some(i), Some(j), true) = (index(target[0], g.dx, g.nx), index(target[1], g.dy, g.ny), in_z) else {
+    let Some([i, j, n]) = g.nearest(target) else {
         return Err(HasError::invalid(
             "target",
             format!(
@@ -422,7 +417,7 @@ pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bo
     };
     let mut weights = vec![C64::new(0.0, 0.0); g.lateral_len()];
     weights[j * g.nx + i] = C64::new(1.0, 0.0);
-    plan.transposed(g.plane_index(target[2]), &weights, reflections)
+    plan.transposed(n, &weights, reflections)
 }
 
 /// The scenario with the `[grid]` it resolves to written out (spacing, step, lateral size, last

@@ -57,6 +57,17 @@ impl Grid {
         let n = ((z - self.z0) / self.dz).round();
         n.clamp(0.0, (self.nz - 1) as f64) as usize
     }
+    /// Column, row and plane `[i, j, n]` of the grid point nearest `p` (m); `None` if `p` lies
+    /// outside the grid (more than half a spacing beyond its outermost points) or is not finite.
+    pub fn nearest(&self, p: [f64; 3]) -> Option<[usize; 3]> {
+        let index = |v: f64, d: f64, n: usize| {
+            let i = (v / d).round() + (n / 2) as f64;
+            (i >= 0.0 && i < n as f64).then_some(i as usize)
+        };
+        let in_z = p[2] >= self.z0 - 0.5 * self.dz && p[2] <= self.z(self.nz - 1) + 0.5 * self.dz;
+        Some([index(p[0], self.dx, self.nx)?, index(p[1], self.dy, self.ny)?, in_z.then(|| self.plane_index(p[2]))?])
+    }
+
     /// Number of lateral samples.
     pub fn lateral_len(&self) -> usize {
         self.nx * self.ny

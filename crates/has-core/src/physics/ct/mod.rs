@@ -241,8 +241,9 @@ impl CtMedium {
 
     /// Overwrites, on the lateral grid at height `z` (row-major `(ny, nx)`), the cells the CT
     /// reaches with their averaged properties; `props` holds each pixel's own (scenario)
-    /// properties on entry, which the cell's points outside the CT tissue take. Rows run in parallel on the current rayon pool; each cell is computed alone, so
-    /// the result does not depend on the number of threads.
+    /// properties on entry, which the cell's points outside the CT tissue take. Rows run in
+    /// parallel on the current rayon pool; each cell is computed alone, so the result does not
+    /// depend on the number of threads.
     pub fn fill_slice(&self, grid: &Grid, z: f64, frequency: f64, props: &mut [Properties]) {
         let size = [grid.dx, grid.dy, grid.dz];
         props.par_chunks_mut(grid.nx).enumerate().for_each(|(j, row)| {
