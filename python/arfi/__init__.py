@@ -15,12 +15,12 @@ Quick start::
 
 from arfi.scenario import Scenario
 from arfi.cost import CostModel, CostTerm
-from arfi.simulation import Field, Simulation
+from arfi.simulation import Field, Section, Simulation
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
 
-__all__ = ["Scenario", "Simulation", "Field", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
+__all__ = ["Scenario", "Simulation", "Field", "Section", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
            "predict", "Prediction"]
 
 try:

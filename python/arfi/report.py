@@ -68,11 +68,51 @@ def element_map(fig: Any, ax: Any, sim: Any, phases: Sequence[float], title: str
     """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π]);
     ``phases`` per element or per group."""
     per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
+    element_values(fig, ax, sim, np.angle(np.exp(1j * per_element)), title, "phase (rad)", cmap="twilight_shifted",
+                   vmin=-np.pi, vmax=np.pi)
+
+
+def element_values(fig: Any, ax: Any, sim: Any, values: NDArray[np.float64], title: str, label: str, **kw: Any) -> None:
+    """The transducer's elements (x, y in mm) coloured by one value each (colour bar ``label``;
+    ``kw``: colour map and limits)."""
     pos = sim.element_positions_mm
-    sc = ax.scatter(pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * per_element)), cmap="twilight", vmin=-np.pi, vmax=np.pi,
-                    s=9, marker="s")
+    sc = ax.scatter(pos[:, 0], pos[:, 1], c=values, s=9 if len(values) > 300 else 30, marker="s", **kw)
     ax.set(title=title, xlabel="x (mm)", ylabel="y (mm)", aspect="equal")
-    fig.colorbar(sc, ax=ax, label="phase (rad)")
+    fig.colorbar(sc, ax=ax, label=label)
+
+
+def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, columns: slice) -> tuple[Any, Any]:
+    """One drive's |p| on an x–z section (MPa, shown where above 10 % of ``vmax_pa``) over the
+    sound speed (grey, m/s), x across (the ``columns`` shown) and z up from the source plane, in
+    mm. Returns the two images (for colour bars)."""
+    x, z = section.x_mm[columns], section.z_mm
+    dx, dz = x[1] - x[0], z[1] - z[0]
+    extent = [x[0] - dx / 2, x[-1] + dx / 2, z[0] - dz / 2, z[-1] + dz / 2]
+    c = section.sound_speed_m_s[:, columns]
+    bg = ax.imshow(c, origin="lower", extent=extent, cmap="Greys", vmin=1300.0, vmax=max(3000.0, float(c.max())))
+    p = np.abs(section.pressure[drive][:, columns]) / 1e6
+    im = ax.imshow(np.ma.masked_less(p, 0.1 * vmax_pa / 1e6), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
+                   vmax=vmax_pa / 1e6, alpha=0.9)
+    ax.set(title=title, xlabel="x (mm)", ylabel="z (mm)")
+    return bg, im
+
+
+def section_figure(section: Any, titles: Sequence[str]) -> Any:
+    """A row of x–z sections, one per drive, on one pressure scale, cropped across to where the
+    medium differs from the source plane's or the beam exceeds 10 % of its peak (10 mm margin)."""
+    plt = pyplot()
+    p = np.abs(section.pressure).max(axis=(0, 1))
+    c = section.sound_speed_m_s
+    busy = np.flatnonzero((p > 0.1 * p.max()) | np.any(np.abs(c - c[:1]) > 1.0, axis=0))
+    margin = int(round(10.0 / (section.x_mm[1] - section.x_mm[0])))
+    columns = slice(max(busy[0] - margin, 0), min(busy[-1] + margin + 1, c.shape[1]))
+    fig, ax = plt.subplots(1, len(titles), figsize=(5.0 * len(titles) + 1.8, 4.6), squeeze=False, layout="constrained")
+    vmax = float(np.abs(section.pressure).max())
+    for k, t in enumerate(titles):
+        bg, im = show_section(ax[0][k], section, k, t, vmax, columns)
+    fig.colorbar(im, ax=ax[0].tolist(), label="|p| (MPa)", shrink=0.8)
+    fig.colorbar(bg, ax=ax[0].tolist(), label="sound speed (m/s)", shrink=0.8)
+    return fig
 
 
 def figure_html(out: Path, figures: Sequence[tuple[str, str]]) -> str:
@@ -150,7 +190,8 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
 
 def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
     """Report of a simulated field: |p| (MPa) on the plane, axes in mm; |p| along the beam axis;
-    with ``phases``, the element map of the phases added to the steering."""
+    with ``phases``, the element map of the phases added to the steering; the beam on the x–z
+    section through the plane's peak over the sound speed (one more march)."""
     plt = pyplot()
     out = _report_dir(out)
     fig, ax = plt.subplots(1, 3 if phases is not None else 2, figsize=(17 if phases is not None else 11, 4.4))
@@ -165,4 +206,33 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     ax[1].set(title="|p| on the beam axis", xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
     if phases is not None:
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
-    return _verb_page(out, "field", values, [("pressure amplitude", save_figure(fig, out / "field.png"))])
+    figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
+    peak_y = float(field.y_mm[np.unravel_index(int(np.argmax(np.abs(field.pressure))), field.pressure.shape)[0]])
+    section = sim.section(phases, y_mm=peak_y)
+    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"])
+    figures.append(("the beam on the x–z section through the peak, over the sound speed",
+                    save_figure(fig, out / "field_section.png")))
+    return _verb_page(out, "field", values, figures)
+
+
+def predict_report(out: str | Path, sim: Any, prediction: Any, values: dict[str, Any]) -> Path:
+    """Report of a CT-based prediction: the beam through the skull on the x–z section through the
+    target, driven with the reference steering (uncorrected), the scenario's straight-ray
+    steering and the reference steering minus the prediction (three marches of ``sim``, the
+    skull's simulation); the element maps of the predicted phase and of the transmission."""
+    plt = pyplot()
+    out = _report_dir(out)
+    steering = sim.steering_phases_rad
+    drives = [prediction.reference_steering_rad - steering, np.zeros(steering.size), prediction.correction_rad(steering)]
+    section = sim.section(drives, y_mm=prediction.target_mm[1])
+    best = prediction.optimal_pa
+    fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in
+                                   [("uncorrected", prediction.uncorrected_pa), ("straight-ray CT steering", prediction.ray_steering_pa),
+                                    ("predicted correction", prediction.corrected_pa)]])
+    figures = [(f"the beam through the skull on the section y = {section.y_mm:.1f} mm", save_figure(fig, out / "predict_section.png"))]
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
+    element_map(fig, ax[0], sim, prediction.phases_rad, "predicted aberration (subtract to correct)")
+    element_values(fig, ax[1], sim, prediction.transmission, "transmission through the skull", "|h skull| / |h reference|",
+                   cmap="viridis", vmin=0.0)
+    figures.append(("element maps of the prediction", save_figure(fig, out / "predict_elements.png")))
+    return _verb_page(out, "predict", values, figures)

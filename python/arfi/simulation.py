@@ -58,6 +58,21 @@ class Field:
         }
 
 
+@dataclass(frozen=True)
+class Section:
+    """The beam on the x–z plane nearest ``y_mm``: complex pressure amplitude (Pa) of each drive
+    and the sound speed (m/s) the march used, every grid plane from the source plane on (a
+    skull slice with the beam through it)."""
+
+    pressure: NDArray[np.complex128]
+    """Shape (drives, nz, nx), in the order the phases were given."""
+    sound_speed_m_s: NDArray[np.float64]
+    """Shape (nz, nx): the slab each plane was reached through."""
+    x_mm: NDArray[np.float64]
+    z_mm: NDArray[np.float64]
+    y_mm: float
+
+
 class Simulation:
     """A scenario made ready to simulate: grid chosen, beam steered to the focus, HAS plan built.
 
@@ -175,6 +190,19 @@ class Simulation:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
         d = self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
         return Field(**d)
+
+    def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None) -> Section:
+        """Pressure on the x–z plane nearest ``y_mm`` (default: the focus's) with the sound speed
+        there. ``phases``: one drive (phases added to the steering, per element or per group;
+        None: the steering alone) or a sequence or 2-D array of drives, marched in one batch."""
+        if phases is None:
+            drives = [np.zeros(0)]
+        elif isinstance(phases, (Sequence, np.ndarray)) and len(phases) > 0 and np.ndim(phases[0]) == 1:
+            drives = [as_phases(p, f"phases[{k}]") for k, p in enumerate(phases)]
+        else:
+            drives = [as_phases(phases)]
+        y = None if y_mm is None else as_number(y_mm, "y_mm")
+        return Section(**self._core.section(drives, y))
 
     def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
         """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).

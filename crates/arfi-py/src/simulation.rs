@@ -168,6 +168,27 @@ impl CoreSimulation {
         Ok(d)
     }
 
+    /// Pressure on the x–z section nearest `y_mm` (default: the focus's) for each drive in
+    /// `phases`, with the sound speed there.
+    #[pyo3(signature = (phases, y_mm=None))]
+    fn section<'py>(&self, py: Python<'py>, phases: Vec<PyReadonlyArray1<'py, f64>>, y_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        let added: Vec<Vec<f64>> = phases.into_iter().map(|p| phases_vec(Some(p))).collect();
+        let s = py.detach(|| self.inner.section(&added, y_mm.map(|y| y * 1e-3))).map_err(to_py)?;
+        let (nz, nx) = s.sound_speed.dim();
+        let mut pressure = ndarray::Array3::<C64>::zeros((s.pressure.len(), nz, nx));
+        for (k, p) in s.pressure.iter().enumerate() {
+            pressure.index_axis_mut(ndarray::Axis(0), k).assign(p);
+        }
+        let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
+        let d = PyDict::new(py);
+        d.set_item("pressure", pressure.into_pyarray(py))?;
+        d.set_item("sound_speed_m_s", s.sound_speed.into_pyarray(py))?;
+        d.set_item("x_mm", mm(&s.x).into_pyarray(py))?;
+        d.set_item("z_mm", mm(&s.z).into_pyarray(py))?;
+        d.set_item("y_mm", s.y * 1e3)?;
+        Ok(d)
+    }
+
     /// MR-ARFI phase image (rad), shape (n_u, n_v); Gaussian noise of `noise_rad` if given.
     #[pyo3(signature = (phases=None, noise_rad=0.0, seed=0))]
     fn arfi_image<'py>(

@@ -28,6 +28,7 @@ pub mod nifti;
 pub mod physics;
 pub mod prediction;
 pub mod scenario;
+pub mod section;
 pub mod simulation;
 
 pub use error::{HasError, Result};
@@ -39,4 +40,5 @@ pub use physics::medium::{Material, Medium};
 pub use physics::propagation::{HasOptions, HasPlan, InterfaceModel, RecordSpec, Recording};
 pub use physics::transducer::Transducer;
 pub use scenario::Scenario;
+pub use section::Section;
 pub use simulation::{Field, Simulation};

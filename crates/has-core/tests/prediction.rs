@@ -270,7 +270,7 @@ fn a_ten_percent_error_in_the_ct_conversion_costs_focus() {
 }
 
 #[test]
-fn the_estimates_model_reads_the_bone_as_the_predictions_reference_does() {
+fn the_estimates_model_and_the_patients_steering_are_the_predictions_reference() {
     // `[ct] without_bone = true` is the medium a prediction's reference uses: the model of the
     // MR-ARFI estimate its prior is meant for.
     let dir = scratch("without-bone");
@@ -279,5 +279,17 @@ fn the_estimates_model_reads_the_bone_as_the_predictions_reference_does() {
     let model = bowl_through_shell(&dir, "without_bone = true\n");
     assert_eq!(Some(model.medium.clone()), skull.medium.without_bone());
     assert_ne!(model.medium, skull.medium);
+    // `steer_without_bone = true` keeps the bone in the medium but drives the model's steering:
+    // the prediction's reference steering (and its focus shifts move the focus as the model's do).
+    let patient = bowl_through_shell(
+        &dir,
+        "steer_without_bone = true
+",
+    );
+    assert_eq!(patient.medium, skull.medium);
+    assert_eq!(patient.steering, model.steering);
+    assert_ne!(patient.steering, skull.steering);
+    assert_eq!(patient.focus_shift_phases([0.0, 0.0, 5e-3]).unwrap(), model.focus_shift_phases([0.0, 0.0, 5e-3]).unwrap());
+    assert_eq!(predict(patient, None).unwrap().reference_steering, model.steering);
     std::fs::remove_dir_all(dir).ok();
 }

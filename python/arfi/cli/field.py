@@ -21,6 +21,8 @@ def register(sub: Any) -> None:
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
+    p.add_argument("--correction", metavar="P", help="an estimate's or a prediction's phases_rad (.npy or text), "
+                   "subtracted from the steering: the corrected beam (with --phases: both)")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
     p.add_argument("--out", required=True, metavar="F.npz")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile)")
@@ -32,6 +34,10 @@ def run(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
     phases = read_optional_phases(args.phases, "--phases")
+    correction = read_optional_phases(args.correction, "--correction")
+    if correction is not None:
+        added = sim.element_phases(phases, "--phases") if phases is not None else np.zeros(sim.n_elements)
+        phases = added - sim.element_phases(correction, "--correction")
     f = sim.field(phases, args.z_mm)
     write_npz(
         args.out,

@@ -6,7 +6,7 @@ import argparse
 import time
 from typing import Any
 
-from arfi.cli.common import UsageError, add_common, finish, load_scenario, npy_path, save_npy
+from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
 from arfi.prediction import predict
 
 
@@ -25,6 +25,9 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
     p.add_argument("--target-mm", type=float, nargs=3, dest="target_mm", metavar=("X", "Y", "Z"),
                    help="point to predict for, transducer frame (default: the focus)")
+    add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
+                  "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
+                  "phase and transmission; simulates the skull again: about as long as the prediction)")
     p.set_defaults(run=run)
 
 
@@ -46,5 +49,12 @@ def run(args: argparse.Namespace) -> int:
         f"CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: {p.optimal_pa / 1e6:.3f} MPa; "
         f"{p.reference_pa / 1e6:.3f} MPa without the skull) in {seconds:.1f} s"
     )
+    if args.report:
+        from arfi.report import predict_report
+        from arfi.simulation import Simulation
+
+        predict_report(args.report, Simulation(scenario), p,
+                       {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad), "seconds": seconds,
+                        **{f"focal |p| {k} (Pa)": v for k, v in p.to_dict()["focal_pressure_pa"].items()}})
     finish(args, {"out": args.out, **p.to_dict(), "seconds": seconds})
     return 0

@@ -62,6 +62,12 @@ pub struct CtSpec {
     /// an MR-ARFI estimate whose prior comes from `arfi predict` (that prediction's reference).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub without_bone: Option<bool>,
+    /// Steer with the straight-ray times of flight of the head without its skull (default
+    /// false: through the CT's bone): the reference steering of `arfi predict`, the one the
+    /// estimation's model (`without_bone = true`) drives. For a scenario that plays the patient
+    /// whose MR-ARFI images an estimate with a CT prior fits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steer_without_bone: Option<bool>,
 }
 
 fn aubry() -> String {
