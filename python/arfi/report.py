@@ -97,9 +97,11 @@ def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, 
     return bg, im
 
 
-def section_figure(section: Any, titles: Sequence[str]) -> Any:
-    """A row of x–z sections, one per drive, on one pressure scale, cropped across to where the
-    medium differs from the source plane's or the beam exceeds 10 % of its peak (10 mm margin)."""
+def section_figure(section: Any, titles: Sequence[str], focal_z_mm: float) -> Any:
+    """A row of x–z sections, one per drive, on one pressure scale: that of the focal region
+    (the largest |p| within 15 mm of ``focal_z_mm``; the field before a skull, often stronger, is
+    drawn saturated), cropped across to where the medium differs from the source plane's or the
+    beam exceeds 10 % of its peak (10 mm margin)."""
     plt = pyplot()
     p = np.abs(section.pressure).max(axis=(0, 1))
     c = section.sound_speed_m_s
@@ -107,10 +109,11 @@ def section_figure(section: Any, titles: Sequence[str]) -> Any:
     margin = int(round(10.0 / (section.x_mm[1] - section.x_mm[0])))
     columns = slice(max(busy[0] - margin, 0), min(busy[-1] + margin + 1, c.shape[1]))
     fig, ax = plt.subplots(1, len(titles), figsize=(5.0 * len(titles) + 1.8, 4.6), squeeze=False, layout="constrained")
-    vmax = float(np.abs(section.pressure).max())
+    near = np.abs(section.z_mm - focal_z_mm) <= 15.0
+    vmax = float(np.abs(section.pressure[:, near]).max()) if near.any() else float(np.abs(section.pressure).max())
     for k, t in enumerate(titles):
         bg, im = show_section(ax[0][k], section, k, t, vmax, columns)
-    fig.colorbar(im, ax=ax[0].tolist(), label="|p| (MPa)", shrink=0.8)
+    fig.colorbar(im, ax=ax[0].tolist(), label="|p| (MPa)", shrink=0.8, extend="max")
     fig.colorbar(bg, ax=ax[0].tolist(), label="sound speed (m/s)", shrink=0.8)
     return fig
 
@@ -209,7 +212,7 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
     peak_y = float(field.y_mm[np.unravel_index(int(np.argmax(np.abs(field.pressure))), field.pressure.shape)[0]])
     section = sim.section(phases, y_mm=peak_y)
-    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"])
+    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"], field.z_mm)
     figures.append(("the beam on the x–z section through the peak, over the sound speed",
                     save_figure(fig, out / "field_section.png")))
     return _verb_page(out, "field", values, figures)
@@ -228,7 +231,7 @@ def predict_report(out: str | Path, sim: Any, prediction: Any, values: dict[str,
     best = prediction.optimal_pa
     fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in
                                    [("uncorrected", prediction.uncorrected_pa), ("straight-ray CT steering", prediction.ray_steering_pa),
-                                    ("predicted correction", prediction.corrected_pa)]])
+                                    ("predicted correction", prediction.corrected_pa)]], prediction.target_mm[2])
     figures = [(f"the beam through the skull on the section y = {section.y_mm:.1f} mm", save_figure(fig, out / "predict_section.png"))]
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
     element_map(fig, ax[0], sim, prediction.phases_rad, "predicted aberration (subtract to correct)")

@@ -194,11 +194,13 @@ class Simulation:
     def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None) -> Section:
         """Pressure on the x–z plane nearest ``y_mm`` (default: the focus's) with the sound speed
         there. ``phases``: one drive (phases added to the steering, per element or per group;
-        None: the steering alone) or a sequence or 2-D array of drives, marched in one batch."""
+        None: the steering alone) or a sequence (None entries: the steering alone) or 2-D array of
+        drives, marched in one batch."""
+        none = np.zeros(0)
         if phases is None:
-            drives = [np.zeros(0)]
-        elif isinstance(phases, (Sequence, np.ndarray)) and len(phases) > 0 and np.ndim(phases[0]) == 1:
-            drives = [as_phases(p, f"phases[{k}]") for k, p in enumerate(phases)]
+            drives = [none]
+        elif isinstance(phases, (Sequence, np.ndarray)) and len(phases) > 0 and all(p is None or np.ndim(p) == 1 for p in phases):
+            drives = [none if p is None else as_phases(p, f"phases[{k}]") for k, p in enumerate(phases)]
         else:
             drives = [as_phases(phases)]
         y = None if y_mm is None else as_number(y_mm, "y_mm")

@@ -172,3 +172,20 @@ def test_focus_shift_phases_move_the_focus_where_asked(sim):
     assert 5.0 < axial["axis_peak_z_mm"] - ideal["axis_peak_z_mm"] < 15.0
     with pytest.raises(ValueError, match="shift_mm: must be three finite numbers"):
         sim.focus_shift_phases((0.0, 1.0))
+
+
+def test_section_takes_one_drive_or_several():
+    # None, one vector, a list with None entries or a 2-D array: one section per drive, the
+    # steering alone wherever None; the focus is the section's peak (85 mm from the array).
+    sim = arfi.Simulation()
+    truth = sim.condense(sim.skull_phases(seed=1))
+    one, both = sim.section(), sim.section([None, truth])
+    assert one.pressure.shape[0] == 1 and both.pressure.shape[0] == 2
+    assert np.array_equal(one.pressure[0], both.pressure[0])
+    assert np.array_equal(sim.section(truth).pressure[0], both.pressure[1])
+    assert sim.section(np.zeros((3, 16))).pressure.shape[0] == 3
+    n, i = np.unravel_index(np.argmax(np.abs(one.pressure[0])), one.pressure[0].shape)
+    assert abs(one.z_mm[n] - 85.0) < 10.0 and abs(one.x_mm[i]) < 1.0
+    assert np.abs(both.pressure[1]).max() < np.abs(both.pressure[0]).max()  # the aberration defocuses
+    with pytest.raises(ValueError, match=r"phases\[1\]"):
+        sim.section([None, [np.nan] * 16])

@@ -25,7 +25,8 @@ def register(sub: Any) -> None:
                    "subtracted from the steering: the corrected beam (with --phases: both)")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
     p.add_argument("--out", required=True, metavar="F.npz")
-    add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile)")
+    add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
+                  "through the plane's peak over the sound speed: one more march)")
     p.set_defaults(run=run)
 
 
