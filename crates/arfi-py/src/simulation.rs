@@ -174,14 +174,9 @@ impl CoreSimulation {
     fn section<'py>(&self, py: Python<'py>, phases: Vec<PyReadonlyArray1<'py, f64>>, y_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
         let added: Vec<Vec<f64>> = phases.into_iter().map(|p| phases_vec(Some(p))).collect();
         let s = py.detach(|| self.inner.section(&added, y_mm.map(|y| y * 1e-3))).map_err(to_py)?;
-        let (nz, nx) = s.sound_speed.dim();
-        let mut pressure = ndarray::Array3::<C64>::zeros((s.pressure.len(), nz, nx));
-        for (k, p) in s.pressure.iter().enumerate() {
-            pressure.index_axis_mut(ndarray::Axis(0), k).assign(p);
-        }
         let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
         let d = PyDict::new(py);
-        d.set_item("pressure", pressure.into_pyarray(py))?;
+        d.set_item("pressure", s.pressure.into_pyarray(py))?;
         d.set_item("sound_speed_m_s", s.sound_speed.into_pyarray(py))?;
         d.set_item("x_mm", mm(&s.x).into_pyarray(py))?;
         d.set_item("z_mm", mm(&s.z).into_pyarray(py))?;

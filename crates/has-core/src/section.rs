@@ -5,7 +5,7 @@
 use crate::error::{HasError, Result};
 use crate::physics::propagation::{RecordSpec, Window};
 use crate::simulation::Simulation;
-use ndarray::Array2;
+use ndarray::{Array2, Array3};
 use num_complex::Complex64 as C64;
 
 /// Pressure and sound speed on the grid's x–z plane nearest y = `y`.
@@ -20,8 +20,8 @@ pub struct Section {
     /// Sound speed (m/s) of the slab each plane was reached through, `(nz, nx)` (the source
     /// plane's row: the medium before it).
     pub sound_speed: Array2<f64>,
-    /// Complex pressure amplitude (Pa), `(nz, nx)`, one per drive, in the order given.
-    pub pressure: Vec<Array2<C64>>,
+    /// Complex pressure amplitude (Pa), `(drives, nz, nx)`, drives in the order given.
+    pub pressure: Array3<C64>,
 }
 
 impl Simulation {
@@ -34,7 +34,7 @@ impl Simulation {
     /// let sim = Simulation::new(&Scenario::default())?;
     /// let s = sim.section(&[vec![]], None)?;
     /// let axis = s.x.len() / 2; // the column x = 0
-    /// let peak = (0..s.z.len()).max_by(|&a, &b| s.pressure[0][[a, axis]].norm().total_cmp(&s.pressure[0][[b, axis]].norm())).unwrap();
+    /// let peak = (0..s.z.len()).max_by(|&a, &b| s.pressure[[0, a, axis]].norm().total_cmp(&s.pressure[[0, b, axis]].norm())).unwrap();
     /// assert!((s.z[peak] - 0.085).abs() < 0.01); // the focus, 85 mm from the array
     /// # Ok::<(), has_core::HasError>(())
     /// ```
@@ -50,12 +50,9 @@ impl Simulation {
         let sources = added.iter().map(|a| self.source_field(a)).collect::<Result<Vec<_>>>()?;
         let window = Window { planes: 0..g.nz, rows: row..row + 1, cols: 0..g.nx };
         let spec = RecordSpec { window: Some(window), reflections: self.reflections, ..RecordSpec::default() };
-        let pressure = self
-            .plan
-            .propagate_batch(&sources, &spec)?
-            .into_iter()
-            .map(|rec| Array2::from_shape_vec((g.nz, g.nx), rec.window).map_err(|e| HasError::invalid("section", e.to_string())))
-            .collect::<Result<Vec<_>>>()?;
+        let recordings = self.plan.propagate_batch(&sources, &spec)?;
+        let pressure = Array3::from_shape_vec((added.len(), g.nz, g.nx), recordings.into_iter().flat_map(|rec| rec.window).collect())
+            .map_err(|e| HasError::invalid("section", e.to_string()))?;
         let sound_speed = Array2::from_shape_fn((g.nz, g.nx), |(n, i)| self.plan.slab_properties(n).sound_speed[row * g.nx + i]);
         Ok(Section { y: g.y(row), x: (0..g.nx).map(|i| g.x(i)).collect(), z: (0..g.nz).map(|n| g.z(n)).collect(), sound_speed, pressure })
     }
@@ -79,7 +76,7 @@ mod tests {
             let f = sim.field(added, None).unwrap();
             let peak = f.pressure.iter().map(|p| p.norm()).fold(0.0, f64::max);
             for i in 0..sim.grid.nx {
-                assert!((s.pressure[k][[n, i]] - f.pressure[[j, i]]).norm() <= 1e-9 * peak);
+                assert!((s.pressure[[k, n, i]] - f.pressure[[j, i]]).norm() <= 1e-9 * peak);
             }
         }
         assert_eq!(s.y, 0.0);

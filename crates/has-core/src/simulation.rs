@@ -31,9 +31,8 @@ pub struct Simulation {
     pub grid: Grid,
     /// The acoustic medium: materials, background, regions and any voxel map.
     pub medium: Medium,
-    /// The medium whose straight-ray times of flight give the steering (see
-    /// [`crate::scenario::Resolved::steering_medium`]).
-    pub steering_medium: Medium,
+    /// The medium that steers where it is not `medium` (see [`Simulation::steering_medium`]).
+    steering_medium: Option<Medium>,
     /// The array (element number = index).
     pub transducer: Transducer,
     /// The steering target in the transducer frame, m.
@@ -115,7 +114,7 @@ impl Simulation {
         let step = grid.dz.min(0.5e-3);
         r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, step, r.frequency)?;
         r.medium.check_on_grid(&grid)?;
-        let steering = steering_phases(&r.transducer, &r.steering_medium, r.frequency, r.focus)?;
+        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
         let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
         let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
@@ -174,6 +173,13 @@ impl Simulation {
             noise: r.noise,
             reflections: r.grid.reflections.unwrap_or(false),
         })
+    }
+
+    /// The medium whose straight-ray times of flight give the steering: `medium`, or the head
+    /// without its skull with `[ct] steer_without_bone`
+    /// ([`crate::scenario::Resolved::steering_medium`]).
+    pub fn steering_medium(&self) -> &Medium {
+        self.steering_medium.as_ref().unwrap_or(&self.medium)
     }
 
     /// The steered source plane (no added phases), Pa.
@@ -261,7 +267,7 @@ impl Simulation {
     pub fn focus_shift_phases(&self, shift: [f64; 3]) -> Result<Vec<f64>> {
         crate::error::require_finite("shift", &shift)?;
         let target = [self.focus[0] + shift[0], self.focus[1] + shift[1], self.focus[2] + shift[2]];
-        let moved = steering_phases(&self.transducer, &self.steering_medium, self.frequency, target)?;
+        let moved = steering_phases(&self.transducer, self.steering_medium(), self.frequency, target)?;
         Ok(moved.iter().zip(&self.steering).map(|(m, s)| wrap(m - s)).collect())
     }
 

@@ -287,6 +287,8 @@ fn the_estimates_model_and_the_patients_steering_are_the_predictions_reference()
 ",
     );
     assert_eq!(patient.medium, skull.medium);
+    assert_eq!(patient.steering_medium(), &model.medium);
+    assert_eq!(skull.steering_medium(), &skull.medium);
     assert_eq!(patient.steering, model.steering);
     assert_ne!(patient.steering, skull.steering);
     assert_eq!(patient.focus_shift_phases([0.0, 0.0, 5e-3]).unwrap(), model.focus_shift_phases([0.0, 0.0, 5e-3]).unwrap());

@@ -49,12 +49,13 @@ def run(args: argparse.Namespace) -> int:
         f"CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: {p.optimal_pa / 1e6:.3f} MPa; "
         f"{p.reference_pa / 1e6:.3f} MPa without the skull) in {seconds:.1f} s"
     )
+    result = p.to_dict()
     if args.report:
         from arfi.report import predict_report
         from arfi.simulation import Simulation
 
         predict_report(args.report, Simulation(scenario), p,
                        {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad), "seconds": seconds,
-                        **{f"focal |p| {k} (Pa)": v for k, v in p.to_dict()["focal_pressure_pa"].items()}})
-    finish(args, {"out": args.out, **p.to_dict(), "seconds": seconds})
+                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()}})
+    finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

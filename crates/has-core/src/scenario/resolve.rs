@@ -22,9 +22,9 @@ pub struct Resolved {
     pub focus: [f64; 3],
     /// The acoustic medium: materials and regions.
     pub medium: Medium,
-    /// The medium whose straight-ray times of flight steer the array: `medium`, or the head
-    /// without its skull with `[ct] steer_without_bone`.
-    pub steering_medium: Medium,
+    /// The medium whose straight-ray times of flight steer the array where it is not `medium`:
+    /// the head without its skull with `[ct] steer_without_bone` (`None`: `medium`).
+    pub steering_medium: Option<Medium>,
     /// The `[grid]` options as given (file units, mm), checked; the grid itself is chosen from
     /// them by [`crate::simulation::choose_grid`].
     pub grid: GridSpec,
@@ -58,7 +58,7 @@ impl Scenario {
             medium.ct = Some(std::sync::Arc::new(ct));
         }
         let steer_without_bone = self.ct.as_ref().and_then(|c| c.steer_without_bone) == Some(true);
-        let steering_medium = if steer_without_bone { medium.without_bone().unwrap_or_else(|| medium.clone()) } else { medium.clone() };
+        let steering_medium = if steer_without_bone { medium.without_bone() } else { None };
         let mr = MrGeometry {
             plane: MrPlane::parse(&self.mr.plane)?,
             center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
