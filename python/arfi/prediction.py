@@ -32,9 +32,14 @@ class Prediction:
     reference_steering_rad: NDArray[np.float64]
     """Steering phases of the head without bone (straight-ray times of flight)."""
     target_mm: tuple[float, float, float]
-    """The grid point predicted for (transducer frame, mm)."""
+    """The point predicted for (transducer frame, mm); between grid points the fields are
+    interpolated there (band-limited across, an angular-spectrum sub-step along z)."""
     reference_pa: float
     """Focal |p| of the reference steering in the head without bone."""
+    reference_optimal_pa: float
+    """The most any phases give in the head without bone, ``sum |h_reference|``: ``reference_pa``
+    falls short of it by what straight rays miss without any bone (refraction, oblique paths
+    through soft tissue), which a correction relative to the reference steering keeps."""
     uncorrected_pa: float
     """Focal |p| of the reference steering through the skull (the aberrated focus)."""
     ray_steering_pa: float
@@ -58,6 +63,7 @@ class Prediction:
             "target_mm": list(self.target_mm),
             "focal_pressure_pa": {
                 "reference": self.reference_pa,
+                "reference_optimal": self.reference_optimal_pa,
                 "uncorrected": self.uncorrected_pa,
                 "ray_steering": self.ray_steering_pa,
                 "corrected": self.corrected_pa,

@@ -98,6 +98,21 @@ class Simulation:
         is shared, so this is cheap."""
         return self._wrap(self.scenario, self._core.with_calibration(float(broadening_width_mm), float(amplitude)))
 
+    def with_element_amplitudes(self, amplitudes: ArrayLike) -> "Simulation":
+        """The same simulation with each element driven at ``amplitudes`` (one per element, >= 0)
+        times the scenario's amplitude: e.g. a CT prediction's ``transmission``, so that a model of
+        the head without its skull loses at each element what the skull loses there. The HAS plan
+        and the calibration are kept; the steered source is projected again (seconds for a
+        hemisphere)."""
+        a = as_phases(amplitudes, "amplitudes")
+        return self._wrap(self.scenario, self._core.with_element_amplitudes(a))
+
+    @property
+    def element_amplitudes(self) -> NDArray[np.float64]:
+        """Each element's drive amplitude relative to the scenario's (1 unless set by
+        :meth:`with_element_amplitudes`)."""
+        return np.asarray(self._core.element_amplitudes)
+
     def with_groups(self, groups: int | ArrayLike) -> "Simulation":
         """The same simulation with ``groups`` contiguous groups (or an element → group array)."""
         return self._wrap(self.scenario, self._core.with_groups(_group_map(groups, self.n_elements)))

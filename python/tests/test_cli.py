@@ -250,3 +250,32 @@ def test_image_axes_follow_the_mr_plane():
     assert axis_labels(sim) == {"xlabel": "x (mm)", "ylabel": "z (mm)"}
     # Pixel edges: first centre minus half a pixel, last centre plus half a pixel.
     assert image_extent_mm(sim, np.zeros((11, 41))) == [-11.0, 11.0, 79.75, 100.25]
+
+
+def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, capsys):
+    # Images of an array whose elements reach the focus unevenly (as through a skull): the model
+    # weighted by that transmission (relative to its mean) explains them; the unweighted one
+    # cannot (noise-free, so the weighted fit's cost is near 0).
+    sim = arfi.Simulation()
+    element = np.arange(sim.n_elements)
+    t = 0.2 + 0.8 * (element % 64) / 63.0 * (element // 512 + 1) / 2.0
+    truth = sim.condense(sim.skull_phases(seed=2))
+    image = tmp_path / "m.nii.gz"
+    arfi.write_arfi_image(image, sim.with_element_amplitudes(t / t.mean()).arfi_image(truth), sim.mr_affine_mm, sim.mr_volume_shape)
+    (tmp_path / "prediction.json").write_text(json.dumps({"transmission": list(t)}))
+    costs = {}
+    for name, extra in [("plain", []), ("weighted", ["--prior-transmission", str(tmp_path / "prediction.json")])]:
+        assert main(["estimate", "--image", str(image), "--json", str(tmp_path / f"{name}.json"), *extra]) == 0
+        costs[name] = json.loads((tmp_path / f"{name}.json").read_text())["cost"]
+    assert costs["weighted"] < 0.01 * costs["plain"], costs
+    assert json.loads((tmp_path / "weighted.json").read_text())["prior_transmission"] == str(tmp_path / "prediction.json")
+    capsys.readouterr()
+    np.save(tmp_path / "short.npy", t[:10])
+    np.save(tmp_path / "negative.npy", -t)
+    (tmp_path / "other.json").write_text(json.dumps({"phases_rad": [0.0]}))
+    for bad in ["short.npy", "negative.npy", "other.json", "missing.json"]:
+        assert main(["estimate", "--image", str(image), "--prior-transmission", str(tmp_path / bad),
+                     "--out-phases", str(tmp_path / "x.npy")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "--prior-transmission" in err and bad in err, err
+    assert not (tmp_path / "x.npy").exists()

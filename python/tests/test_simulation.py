@@ -189,3 +189,18 @@ def test_section_takes_one_drive_or_several():
     assert np.abs(both.pressure[1]).max() < np.abs(both.pressure[0]).max()  # the aberration defocuses
     with pytest.raises(ValueError, match=r"phases\[1\]"):
         sim.section([None, [np.nan] * 16])
+
+
+def test_element_amplitudes_weight_the_elements_linearly():
+    # The march is linear in the drives: the fields of amplitudes a and 1 - a add up to the whole
+    # array's (to 1e-9 of the peak: double-precision sums), and amplitudes of 1 change nothing.
+    sim = arfi.Simulation()
+    a = np.random.default_rng(3).uniform(0.0, 1.0, sim.n_elements)
+    whole = sim.field().pressure
+    part, rest = (sim.with_element_amplitudes(v).field().pressure for v in (a, 1.0 - a))
+    assert np.abs(part + rest - whole).max() < 1e-9 * np.abs(whole).max()
+    assert np.array_equal(sim.with_element_amplitudes(np.ones(sim.n_elements)).field().pressure, whole)
+    assert np.array_equal(sim.with_element_amplitudes(a).element_amplitudes, a) and np.all(sim.element_amplitudes == 1.0)
+    for bad in [np.ones(3), -a, np.zeros(sim.n_elements), np.full(sim.n_elements, np.nan)]:
+        with pytest.raises(ValueError, match="amplitudes"):
+            sim.with_element_amplitudes(bad)

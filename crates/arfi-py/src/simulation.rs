@@ -204,6 +204,20 @@ impl CoreSimulation {
         Ok(inner.into())
     }
 
+    /// The same simulation with each element driven at `amplitudes` (one per element) times the
+    /// scenario's amplitude; the plan is shared, the steered source projected again.
+    fn with_element_amplitudes(&self, py: Python<'_>, amplitudes: PyReadonlyArray1<'_, f64>) -> PyResult<Self> {
+        let a = amplitudes.as_array().to_vec();
+        let inner = py.detach(|| self.inner.with_element_amplitudes(&a)).map_err(to_py)?;
+        Ok(inner.into())
+    }
+
+    /// Each element's drive amplitude relative to the scenario's.
+    #[getter]
+    fn element_amplitudes<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.element_amplitudes().to_vec().into_pyarray(py)
+    }
+
     /// The same simulation with another element → group map.
     fn with_groups(&self, groups: PyReadonlyArray1<'_, i64>) -> PyResult<Self> {
         let g = groups.as_array();

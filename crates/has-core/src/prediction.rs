@@ -27,7 +27,8 @@ use num_complex::Complex64 as C64;
 /// scenario's drive amplitude).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prediction {
-    /// The point predicted for (m, transducer frame): the grid point nearest the target.
+    /// The point predicted for (m, transducer frame); between grid points, the fields are
+    /// interpolated there (see [`crate::physics::propagation::HasPlan::point_weights`]).
     pub target: [f64; 3],
     /// Predicted aberration per element (rad, wrapped to (-π, π]), relative to the reference
     /// steering: driving `reference_steering - phases` corrects it.
@@ -39,6 +40,11 @@ pub struct Prediction {
     pub reference_steering: Vec<f64>,
     /// Reference steering through the reference head (no skull).
     pub reference_pressure: f64,
+    /// The most any phases give through the reference head, `Σ_e |h_e^reference|`:
+    /// `reference_pressure` below it is what the straight-ray reference steering misses without
+    /// any bone (refraction and oblique paths through the soft tissue), which the predicted phases,
+    /// relative to that steering, do not correct either.
+    pub reference_optimal_pressure: f64,
     /// Reference steering through the skull: the aberrated focus.
     pub uncorrected_pressure: f64,
     /// The scenario's own steering through the skull (straight-ray times of flight through the
@@ -99,11 +105,10 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
-    // (Inside the grid: the reciprocal fields were computed there.)
-    let [i, j, n] = grid.nearest(target).unwrap_or_default();
     Ok(Prediction {
-        target: [grid.x(i), grid.y(j), grid.z(n)],
+        target,
         reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
+        reference_optimal_pressure: reference.iter().map(|h| h.norm()).sum(),
         uncorrected_pressure: focal_pressure(&skull, |e| reference_steering[e]),
         ray_pressure: focal_pressure(&skull, |e| steering[e]),
         corrected_pressure: focal_pressure(&skull, |e| reference_steering[e] - phases[e]),

@@ -40,6 +40,9 @@ pub struct Simulation {
     /// Steering phases per element (rad): a phase `phi` delays that element's emission by
     /// `phi / (2·pi·f)`.
     pub steering: Vec<f64>,
+    /// Drive amplitude of each element relative to the scenario's (see
+    /// [`Simulation::with_element_amplitudes`]; 1 for all by default).
+    element_amplitudes: Arc<Vec<f64>>,
     /// Element → group (default: 16 groups of contiguous elements).
     pub groups: Vec<usize>,
     /// Number of groups G (groups are numbered 0 to G-1).
@@ -126,6 +129,7 @@ impl Simulation {
             ..HasOptions::default()
         };
         let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
+        let element_amplitudes = Arc::new(vec![1.0; steering.len()]);
         let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
         let reference = source.field(&drive)?;
         // The ideal image comes from the plan's own march of the reference beam when it sets the
@@ -161,6 +165,7 @@ impl Simulation {
             transducer: r.transducer,
             focus: r.focus,
             steering,
+            element_amplitudes,
             groups,
             n_groups,
             source,
@@ -195,6 +200,37 @@ impl Simulation {
         s.sampler = Ok(self.sampler()?.with_broadening(broadening_width)?);
         s.amplitude = Ok(amplitude);
         Ok(s)
+    }
+
+    /// The same simulation with each element driven at `amplitudes` (one per element, ≥ 0, not
+    /// all zero) times the scenario's amplitude: e.g. a CT prediction's per-element transmission,
+    /// so that a model of the head without its skull loses at each element what the skull loses
+    /// there (its focus then as weak as the skull's, and its elements weighted as through it).
+    /// The HAS plan, the ARFI amplitude and the MR sampler are kept; the steered source plane is
+    /// projected again.
+    pub fn with_element_amplitudes(&self, amplitudes: &[f64]) -> Result<Self> {
+        if amplitudes.len() != self.n_elements() {
+            return Err(HasError::invalid("amplitudes", format!("has {} values for {} elements", amplitudes.len(), self.n_elements())));
+        }
+        if amplitudes.iter().any(|a| !a.is_finite() || *a < 0.0) || amplitudes.iter().all(|&a| a == 0.0) {
+            return Err(HasError::invalid("amplitudes", "must be finite and non-negative, and not all zero"));
+        }
+        let mut s = self.clone();
+        s.element_amplitudes = Arc::new(amplitudes.to_vec());
+        s.steered_source = Arc::new(s.source.field(&(0..s.n_elements()).map(|e| s.drive(e, 0.0)).collect::<Vec<_>>())?);
+        Ok(s)
+    }
+
+    /// Each element's drive amplitude relative to the scenario's (see
+    /// [`Simulation::with_element_amplitudes`]).
+    pub fn element_amplitudes(&self) -> &[f64] {
+        &self.element_amplitudes
+    }
+
+    /// The complex drive of element `e` with `added` phase (rad) on top of its steering:
+    /// `a_e·exp(i·(steering_e + added))`.
+    pub fn drive(&self, e: usize, added: f64) -> C64 {
+        C64::from_polar(self.element_amplitudes[e], self.steering[e] + added)
     }
 
     /// The MR sampler (the map from `|p|²` on the MR window to the image without its amplitude),
@@ -302,7 +338,7 @@ impl Simulation {
             return Ok(self.steered_source.to_vec());
         }
         let extra = self.element_phases(added)?;
-        let drive: Vec<C64> = self.steering.iter().zip(&extra).map(|(s, a)| C64::from_polar(1.0, s + a)).collect();
+        let drive: Vec<C64> = extra.iter().enumerate().map(|(e, a)| self.drive(e, *a)).collect();
         self.source.field(&drive)
     }
 
@@ -317,9 +353,7 @@ impl Simulation {
         let g_count = groups.iter().max().map_or(0, |m| m + 1);
         (0..g_count)
             .map(|g| {
-                let drive: Vec<C64> = (0..n)
-                    .map(|e| if groups[e] == g { C64::from_polar(1.0, self.steering[e] + known[e]) } else { C64::new(0.0, 0.0) })
-                    .collect();
+                let drive: Vec<C64> = (0..n).map(|e| if groups[e] == g { self.drive(e, known[e]) } else { C64::new(0.0, 0.0) }).collect();
                 self.source.field(&drive)
             })
             .collect()
@@ -362,8 +396,9 @@ impl Simulation {
         })
     }
 
-    /// Each element's complex pressure (Pa) at the grid point nearest `target` (m, transducer
-    /// frame) when it alone is driven with a unit phasor (no steering): `p = Σ_e h_e · d_e` for
+    /// Each element's complex pressure (Pa) at `target` (m, transducer frame; between grid points,
+    /// the march's field interpolated there, see [`HasPlan::point_weights`]) when it alone is
+    /// driven with a unit phasor (no steering): `p = Σ_e h_e · d_e` for
     /// drives `d`. By reciprocity, one transposed march from that point back to the source plane
     /// ([`HasPlan::transposed`]) and one transposed projection onto the elements
     /// ([`SourceModel::transposed`]) give all of them, instead of one march per element; they
@@ -405,13 +440,13 @@ impl Simulation {
     }
 }
 
-/// The transposed march through `plan` from the grid point nearest `target` (m): the
-/// source-plane field whose dot product with a source plane is that source's pressure there
-/// (`reflections` as the simulation marches).
+/// The transposed march through `plan` from `target` (m; between grid points, the band-limited
+/// interpolation of [`HasPlan::point_weights`]): the source-plane field whose dot product with a
+/// source plane is that source's pressure there (`reflections` as the simulation marches).
 pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
     let g = &plan.grid;
     crate::error::require_finite("target", &target)?;
-    let Some([i, j, n]) = g.nearest(target) else {
+    let Some((plane, weights)) = plan.point_weights(target) else {
         return Err(HasError::invalid(
             "target",
             format!(
@@ -425,9 +460,7 @@ pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bo
             ),
         ));
     };
-    let mut weights = vec![C64::new(0.0, 0.0); g.lateral_len()];
-    weights[j * g.nx + i] = C64::new(1.0, 0.0);
-    plan.transposed(n, &weights, reflections)
+    plan.transposed(plane, &weights, reflections)
 }
 
 /// The scenario with the `[grid]` it resolves to written out (spacing, step, lateral size, last

@@ -163,7 +163,10 @@ fn element_responses_equal_one_march_per_element_and_add_up_to_the_array() {
     let sim = bowl_through_plate();
     assert!(sim.propagation().reverberation.is_some(), "the plate reverberates");
     let g = &sim.grid;
-    for target in [sim.focus, [sim.focus[0] + 3e-3, sim.focus[1], sim.focus[2] - 6e-3]] {
+    // On grid points, where the march's own field is the reference (between them the responses
+    // are interpolated: tested against direct sums in `tests/hemisphere.rs`).
+    let grid_point = |p: [f64; 3]| g.nearest(p).map(|[i, j, n]| [g.x(i), g.y(j), g.z(n)]).unwrap();
+    for target in [grid_point(sim.focus), grid_point([sim.focus[0] + 3e-3, sim.focus[1], sim.focus[2] - 6e-3])] {
         let h = sim.element_responses(target).unwrap();
         let plane = g.plane_index(target[2]);
         let index = |v: f64, d: f64, n: usize| ((v / d).round() as i64 + (n / 2) as i64) as usize;
@@ -187,6 +190,24 @@ fn element_responses_equal_one_march_per_element_and_add_up_to_the_array() {
         let err = (array - sum).norm() / array.norm();
         eprintln!("[array] marched {:.4e} Pa, sum of responses {:.4e} Pa, error {err:.1e} (tolerance 1e-5)", array.norm(), sum.norm());
         assert!(err < 1e-5, "array: marched {array}, summed {sum}");
+        // Element amplitudes (e.g. a prediction's transmission) weight the responses.
+        let amplitudes: Vec<f64> = (0..h.len()).map(|e| 0.2 + 0.8 * ((e * 37) % 11) as f64 / 10.0).collect();
+        let weighted = sim.with_element_amplitudes(&amplitudes).unwrap();
+        let array = weighted.plan.propagate(&weighted.source_field(&[]).unwrap(), &spec).unwrap().planes[0][pixel];
+        let sum: C64 = h.iter().zip(&sim.steering).zip(&amplitudes).map(|((h, s), a)| h * C64::from_polar(*a, *s)).sum();
+        let err = (array - sum).norm() / array.norm();
+        eprintln!(
+            "[amplitudes] marched {:.4e} Pa, weighted sum of responses {:.4e} Pa, error {err:.1e} (tolerance 1e-5)",
+            array.norm(),
+            sum.norm()
+        );
+        assert!(err < 1e-5, "amplitudes: marched {array}, summed {sum}");
+    }
+    for (bad, named) in
+        [(vec![1.0; 3], "has 3 values"), (vec![-1.0; sim.n_elements()], "non-negative"), (vec![0.0; sim.n_elements()], "not all zero")]
+    {
+        let err = sim.with_element_amplitudes(&bad).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err.contains("amplitudes") && err.contains(named), "{err}");
     }
     let outside = sim.element_responses([0.5, 0.0, 0.05]).unwrap_err().to_string();
     assert!(outside.contains("target") && outside.contains("outside the grid"), "{outside}");

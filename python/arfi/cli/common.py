@@ -58,6 +58,27 @@ def read_optional_phases(path: str | None, name: str) -> np.ndarray | None:
     return None if path is None else read_phases(path, name)
 
 
+def read_transmission(path: str) -> np.ndarray:
+    """Per-element amplitudes from ``--prior-transmission``: the JSON of ``arfi predict`` (its
+    ``transmission``), or a vector file (.npy or text); finite and non-negative."""
+    name = "--prior-transmission"
+    if path.endswith(".json"):
+        p = Path(path)
+        if not p.is_file():
+            raise FileNotFoundError(f"{name}: {p}: no such file")
+        try:
+            values = np.asarray(json.loads(p.read_text(encoding="utf-8"))["transmission"], dtype=np.float64)
+        except (ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{name}: {p}: not the JSON of arfi predict (no 'transmission': {e})") from None
+        if values.ndim != 1 or values.size == 0 or not np.all(np.isfinite(values)):
+            raise ValueError(f"{name}: {p}: 'transmission' must be a non-empty list of finite numbers")
+    else:
+        values = read_phases(path, name)
+    if np.any(values < 0) or not np.any(values > 0):
+        raise ValueError(f"{name}: {path}: transmissions must be non-negative, and not all zero")
+    return values
+
+
 def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Writes ``--json`` when asked."""
     if args.json:

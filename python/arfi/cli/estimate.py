@@ -8,7 +8,7 @@ import time
 from typing import Any
 
 from arfi.cli.common import (add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
-                             read_optional_phases, save_npy)
+                             read_optional_phases, read_transmission, save_npy)
 
 
 def register(sub: Any) -> None:
@@ -48,6 +48,11 @@ def register(sub: Any) -> None:
     p.add_argument("--prior-correlation-mm", type=float, dest="prior_correlation_mm", metavar="L",
                    help="the prediction's errors are a smooth field correlated over L mm (per-element estimates then "
                    "correct the prediction by smooth fields only; default: independent errors)")
+    p.add_argument("--prior-transmission", dest="prior_transmission", metavar="T",
+                   help="each element's predicted transmission through the skull: the JSON of arfi predict (its "
+                   "'transmission'), or .npy or text with one value per element. The model then drives each element at its "
+                   "transmission relative to the mean, so that a model of the head without its skull weighs the elements "
+                   "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
@@ -62,7 +67,13 @@ def run(args: argparse.Namespace) -> int:
             npy_path(path, option)  # before the estimate, so that neither is written when one is wrong
     t = time.perf_counter()
     prior = read_optional_phases(args.prior, "--prior")
+    transmission = read_transmission(args.prior_transmission) if args.prior_transmission else None
     sim = calibrated_simulation(args)
+    if transmission is not None:
+        if len(transmission) != sim.n_elements:
+            raise ValueError(f"--prior-transmission: {args.prior_transmission}: has {len(transmission)} values for "
+                             f"{sim.n_elements} elements")
+        sim = sim.with_element_amplitudes(transmission / transmission.mean())
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
@@ -115,5 +126,7 @@ def run(args: argparse.Namespace) -> int:
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
                    "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
     prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
+    if transmission is not None:
+        prior_settings["prior_transmission"] = args.prior_transmission
     finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
     return 0

@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
         f"{p.phases_rad.max() - p.phases_rad.min():.2f} rad, transmission {p.transmission.mean():.2f} mean -> {args.out}\n"
         f"predict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {p.ray_steering_pa / 1e6:.3f} MPa with straight-ray "
         f"CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: {p.optimal_pa / 1e6:.3f} MPa; "
-        f"{p.reference_pa / 1e6:.3f} MPa without the skull) in {seconds:.1f} s"
+        f"{p.reference_pa / 1e6:.3f} MPa without the skull, {p.reference_pa / p.reference_optimal_pa:.2f} of what that head "
+        f"allows) in {seconds:.1f} s"
     )
     result = p.to_dict()
     if args.report:

@@ -92,7 +92,7 @@ impl FieldBasis {
             let sources = (start..end)
                 .map(|e| {
                     let mut drive = vec![C64::new(0.0, 0.0); n];
-                    drive[e] = C64::from_polar(1.0, sim.steering[e]);
+                    drive[e] = sim.drive(e, 0.0);
                     sim.source.field(&drive)
                 })
                 .collect::<Result<Vec<_>>>()?;

@@ -119,7 +119,7 @@ impl<'a> Forward<'a> {
                             return C64::new(0.0, 0.0);
                         }
                         let extra = state.group_phases.get(g).copied().unwrap_or(0.0);
-                        C64::from_polar(1.0, s.steering[e] + known[e] + extra)
+                        s.drive(e, known[e] + extra)
                     })
                     .collect();
                 s.source.field(&drive)

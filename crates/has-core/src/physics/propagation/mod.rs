@@ -33,6 +33,7 @@
 
 mod interface;
 mod march;
+mod point;
 mod transpose;
 
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
@@ -181,7 +182,7 @@ impl HasPlan {
             let props = &plan.slabs[slab];
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
-            let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, k_mean, a_mean))).clone();
+            let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
             let screen =
                 screen_cache.entry((slab, bits[0])).or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, grid.dz))).clone();
             let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
@@ -358,8 +359,9 @@ fn mean_wavenumber(field: &[C64], props: &SliceProperties, omega: f64, quantum: 
 }
 
 /// `exp(i·kz·dz + ᾱ·dz) / (nx·ny)` with `kz = sqrt((k̄ + i·ᾱ)² - kt²)` on the transposed spectrum
-/// layout `(nx, ny)`; with `ᾱ = 0` the plain `exp(i·kz·dz)`.
-fn propagator(g: &Grid, k: f64, alpha: f64) -> Vec<C64> {
+/// layout `(nx, ny)`; with `ᾱ = 0` the plain `exp(i·kz·dz)`. A step back (`dz < 0`, the inverse
+/// of a step) leaves out the evanescent components (`kt > k̄`), which it would amplify.
+fn propagator(g: &Grid, dz: f64, k: f64, alpha: f64) -> Vec<C64> {
     let norm = 1.0 / (g.nx * g.ny) as f64;
     let mut h = Vec::with_capacity(g.lateral_len());
     for i in 0..g.nx {
@@ -367,16 +369,18 @@ fn propagator(g: &Grid, k: f64, alpha: f64) -> Vec<C64> {
         for j in 0..g.ny {
             let ky = Grid::wavenumber(j, g.ny, g.dy);
             let kt2 = kx * kx + ky * ky;
-            h.push(if alpha == 0.0 {
-                let kz2 = k * k - kt2;
+            let kz2 = k * k - kt2;
+            h.push(if dz < 0.0 && kz2 < 0.0 {
+                C64::new(0.0, 0.0)
+            } else if alpha == 0.0 {
                 if kz2 >= 0.0 {
-                    C64::from_polar(norm, kz2.sqrt() * g.dz)
+                    C64::from_polar(norm, kz2.sqrt() * dz)
                 } else {
-                    C64::new(norm * (-(-kz2).sqrt() * g.dz).exp(), 0.0)
+                    C64::new(norm * (-(-kz2).sqrt() * dz).exp(), 0.0)
                 }
             } else {
                 let kz = axial_wavenumber(C64::new(k, alpha), kt2);
-                (C64::i() * kz * g.dz + alpha * g.dz).exp() * norm
+                (C64::i() * kz * dz + alpha * dz).exp() * norm
             });
         }
     }
