@@ -153,7 +153,7 @@ fn hemisphere_focal_plane_matches_a_direct_rayleigh_sommerfeld_sum() {
 fn element_responses_between_grid_points_match_the_direct_sum(sim: &Simulation) {
     let g = &sim.grid;
     let elements = element_points(sim);
-    let face_pressure = sim.field(&[], None).unwrap().surface_pressure;
+    let face_pressure = sim.source.face_pressure;
     for offset in [[0.0, 0.0, 0.0], [0.21, -0.13, 0.17], [-0.29, 0.27, -0.11]] {
         let target: [f64; 3] = std::array::from_fn(|k| sim.focus[k] + offset[k] * 1e-3);
         let on_grid = [target[0] / g.dx, target[1] / g.dy, (target[2] - g.z0) / g.dz].map(|u| (u - u.round()).abs());
