@@ -162,7 +162,8 @@ class Simulation:
         """How changes of medium are crossed: ``interfaces`` (``"angular"``: plane-wave
         coefficients of every angular-spectrum component, exact at planar interfaces, with total
         reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
-        pixel), ``reflections`` (waves sent back towards the source added) and ``reverberation``
+        pixel), ``screen`` (``"oblique"``: each pixel's wave crosses its slab along the line to the
+        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source added) and ``reverberation``
         (``None``, or the z of the first and last interface between which the waves bouncing
         inside layers are added, and the round trips added)."""
         return dict(self._core.propagation)
@@ -172,6 +173,8 @@ class Simulation:
         p = self.propagation
         text = ("angle-dependent interface transmission (plane-wave coefficients on the angular spectrum)"
                 if p["interfaces"] == "angular" else "normal-incidence interface transmission (T = 2·Z2/(Z1+Z2) per pixel)")
+        if p["screen"] == "vertical":
+            text += ", vertical phase screen (original HAS)"
         r = p["reverberation"]
         if r is not None:
             text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "

@@ -143,13 +143,17 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
 
     sim = arfi.Simulation(arfi.Scenario.from_toml(PLATE))
     p = sim.propagation
-    assert p["interfaces"] == "angular" and p["reflections"] is False
+    assert p["interfaces"] == "angular" and p["screen"] == "oblique" and p["reflections"] is False
     r = p["reverberation"]
     # Between the plate's faces (the grid puts each on the nearest plane, within one step).
     assert abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"] and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
     assert r["round_trips"] >= 1
     normal = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\ninterfaces = \"normal-incidence\"\n[medium]")))
-    assert normal.propagation == {"interfaces": "normal-incidence", "reflections": False, "reverberation": None}
+    assert normal.propagation == {"interfaces": "normal-incidence", "screen": "oblique", "reflections": False, "reverberation": None}
+    vertical = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\nscreen = \"vertical\"\n[medium]")))
+    assert vertical.propagation["screen"] == "vertical"
+    with pytest.raises(ValueError, match="grid.screen"):
+        arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\nscreen = \"slanted\"\n[medium]"))
     scenario = tmp_path / "plate.toml"
     scenario.write_text(PLATE)
     assert main(["field", "--scenario", str(scenario), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "rep")]) == 0

@@ -73,13 +73,14 @@ impl CoreSimulation {
         self.inner.frequency
     }
     /// How changes of medium are crossed: dict with `interfaces` ("angular" or
-    /// "normal-incidence"), `reflections` (bool) and `reverberation` (None, or dict with
+    /// "normal-incidence"), `screen` ("oblique" or "vertical"), `reflections` (bool) and `reverberation` (None, or dict with
     /// `first_interface_z_mm`, `last_interface_z_mm`, `round_trips`).
     #[getter]
     fn propagation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.propagation();
         let d = PyDict::new(py);
         d.set_item("interfaces", p.interfaces)?;
+        d.set_item("screen", p.screen)?;
         d.set_item("reflections", p.reflections)?;
         match p.reverberation {
             None => d.set_item("reverberation", py.None())?,

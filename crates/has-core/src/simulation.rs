@@ -75,6 +75,8 @@ pub struct Simulation {
 pub struct Propagation {
     /// `"angular"` or `"normal-incidence"` (see [`crate::physics::propagation::InterfaceModel`]).
     pub interfaces: &'static str,
+    /// `"oblique"` or `"vertical"` (see [`crate::physics::propagation::Screen`]).
+    pub screen: &'static str,
     /// z (m) of the first and last interface between which reverberation is added, and the round
     /// trips added; `None` where no two interfaces reflect strongly enough.
     pub reverberation: Option<(f64, f64, usize)>,
@@ -126,6 +128,7 @@ impl Simulation {
         let options = HasOptions {
             sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
             interfaces: r.grid.interface_model()?,
+            screen: r.grid.screen_model(r.focus)?,
             ..HasOptions::default()
         };
         let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
@@ -280,10 +283,11 @@ impl Simulation {
         Ok(())
     }
 
-    /// The interface model and reverberation this simulation uses.
+    /// The interface model, screen and reverberation this simulation uses.
     pub fn propagation(&self) -> Propagation {
         Propagation {
             interfaces: self.plan.options.interfaces.name(),
+            screen: self.plan.options.screen.name(),
             reverberation: self.plan.reverberation().map(|(a, b, n)| (self.grid.z(a), self.grid.z(b), n)),
             reflections: self.reflections,
         }
@@ -478,6 +482,7 @@ pub fn with_chosen_grid(scenario: &Scenario) -> Result<Scenario> {
         sponge_width_mm: Some(r.grid.sponge_width_mm.unwrap_or(HasOptions::default().sponge_width * 1e3)),
         reflections: Some(r.grid.reflections.unwrap_or(false)),
         interfaces: Some(r.grid.interface_model()?.name().to_string()),
+        screen: Some(r.grid.screen_model(r.focus)?.name().to_string()),
     };
     Ok(s)
 }

@@ -13,7 +13,7 @@ mod common;
 use common::{parabolic_peak, pearson};
 use has_core::physics::grid::Grid;
 use has_core::physics::medium::{Material, Medium, Region, Shape};
-use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec};
+use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec, Screen};
 use has_core::physics::source::SourceModel;
 use has_core::physics::transducer::Surface;
 use has_core::scenario::Scenario;
@@ -670,4 +670,76 @@ fn voxel_map_reproduces_the_region_description() {
     let worst = a.axis_pressure.iter().zip(&b.axis_pressure).map(|(x, y)| (x - y).norm()).fold(0.0, f64::max);
     eprintln!("voxel map vs regions: worst axis difference {:.2e} of the peak", worst / peak);
     assert!(worst < 1e-12 * peak, "{}", worst / peak);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Oblique waves beside a lateral change of medium
+// ---------------------------------------------------------------------------------------------
+
+/// A plane wave travelling obliquely in the y–z plane, `exp(i·ky·y)` on plane 0, through a medium
+/// split along x: water for x < 0, soft tissue for x > 0 (a cylinder of 1 m radius: a flat
+/// boundary across the grid). The wave runs along the boundary, so away from it each half is a
+/// homogeneous medium and the field there is that medium's plane wave,
+/// `exp(i·kz_i·z - alpha_i·z/cos θ_i)` with `kz_i = sqrt(k_i² - ky²)` and `cos θ_i = kz_i/k_i`.
+/// Every plane holds both media, so HAS marches both with one mean wavenumber `k̄` between
+/// them; the oblique screen (its rays aimed at a point 1 km away along the wave) must give each
+/// half its own phase and absorption. The vertical screen `(k_i - k̄)·dz` leaves
+/// `(k_i - k̄)·(1/cos θ - 1)` per metre (0.33 and 0.40 rad here) and absorbs along z instead of
+/// along the path (3–4 % too little): the test must tell the two apart.
+#[test]
+fn oblique_waves_keep_their_own_medium_beside_a_lateral_boundary() {
+    let f = 1e6;
+    let lambda = C_WATER / f;
+    let (dx, dz) = (lambda / 8.0, lambda / 4.0);
+    let g = Grid::new(768, 64, dx, dx, (20e-3 / dz) as usize + 1, dz, 0.0).unwrap();
+    let ky = Grid::wavenumber(5, g.ny, g.dy);
+    let source: Vec<C64> = (0..g.lateral_len()).map(|p| C64::from_polar(1.0, ky * g.y(p / g.nx))).collect();
+    let last = g.nz - 1;
+    let spec = RecordSpec { planes: vec![last], ..RecordSpec::default() };
+    let c_t = 1546.0;
+    let sin = ky / (2.0 * PI * f / C_WATER);
+    let oblique = Screen::Oblique { toward: [0.0, 1e3 * sin, 1e3 * (1.0 - sin * sin).sqrt()] };
+    let field = |a0: f64, screen: Screen| {
+        let mut medium = Medium::homogeneous(Material::new("water", C_WATER, RHO_WATER, 0.0).unwrap());
+        medium.materials.push(Material::new("tissue", c_t, 1040.0, a0).unwrap());
+        medium.regions.push(Region { material: 1, shape: Shape::Cylinder { radius: 1.0, z_min: -1.0, z_max: 1.0, center: [1.0, 0.0] } });
+        let options = HasOptions { sponge_width: 0.0, screen, ..HasOptions::default() };
+        let (_, mut rec) = HasPlan::build(&g, &medium, f, &source, &options, &spec).unwrap();
+        rec.planes.remove(0)
+    };
+    let z = g.z(last);
+    // Columns a quarter of the grid from the boundary (x = 0) and from its periodic image (the
+    // grid's edge): 29 mm from either, well beyond the boundary's diffraction, sqrt(λ·z) = 5.5 mm.
+    let errors = |screen: Screen| {
+        let (lossless, lossy) = (field(0.0, screen), field(1.0, screen));
+        let mut worst: (f64, f64) = (0.0, 0.0);
+        for (i, c, a0) in [(g.nx / 4, C_WATER, 0.0), (3 * g.nx / 4, c_t, 1.0)] {
+            let k = 2.0 * PI * f / c;
+            let kz = (k * k - ky * ky).sqrt();
+            let alpha = a0 * 100.0 / (20.0 / std::f64::consts::LN_10);
+            let (mut phase, mut absorption): (f64, f64) = (0.0, 0.0);
+            for j in 0..g.ny {
+                let p = j * g.nx + i;
+                phase = phase.max((lossy[p] / C64::from_polar(1.0, ky * g.y(j) + kz * z)).arg().abs());
+                absorption = absorption.max((lossy[p].norm() / lossless[p].norm() / (-alpha * z * k / kz).exp() - 1.0).abs());
+            }
+            eprintln!(
+                "[oblique] {} screen, c {c} m/s at {:.1}° over {:.0} mm: phase error {phase:.3} rad (tol 0.05), \
+                 absorption error {:.2} % (tol 0.5 %)",
+                screen.name(),
+                (ky / k).asin().to_degrees(),
+                z * 1e3,
+                absorption * 100.0
+            );
+            worst = (worst.0.max(phase), worst.1.max(absorption));
+        }
+        worst
+    };
+    // Tolerances: 0.05 rad and 0.5 %, an eighth of the vertical screen's errors; what is left is
+    // diffraction from the boundary (the ratio of lossy to lossless fields removes most of it from
+    // the absorption).
+    let (phase, absorption) = errors(oblique);
+    assert!(phase < 0.05 && absorption < 0.005, "oblique screen: {phase} rad, {absorption}");
+    let (phase, absorption) = errors(Screen::Vertical);
+    assert!(phase > 0.2 && absorption > 0.02, "the vertical screen should miss: {phase} rad, {absorption}");
 }

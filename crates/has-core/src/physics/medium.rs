@@ -401,6 +401,14 @@ pub struct SliceProperties {
     pub attenuation: Vec<f64>,
 }
 
+impl SliceProperties {
+    /// Whether sound speed and attenuation are the same at every pixel.
+    pub fn is_uniform(&self) -> bool {
+        let same = |v: &[f64]| v.iter().all(|x| *x == v[0]);
+        same(&self.sound_speed) && same(&self.attenuation)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

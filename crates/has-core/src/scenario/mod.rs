@@ -12,7 +12,7 @@ pub use ct::CtSpec;
 pub use resolve::Resolved;
 
 use crate::error::{HasError, Result};
-use crate::physics::propagation::InterfaceModel;
+use crate::physics::propagation::{InterfaceModel, Screen};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -215,9 +215,24 @@ pub struct GridSpec {
     /// or `"normal-incidence"` (the original HAS coefficient per pixel, one way).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interfaces: Option<String>,
+    /// The direction the phase screen gives the waves in each slab: `"oblique"` (default: along
+    /// the line to the focus, so that a wave crossing soft tissue or bone at an angle gets the
+    /// phase and absorption of its path) or `"vertical"` (the original HAS screen, exact along z
+    /// only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<String>,
 }
 
 impl GridSpec {
+    /// The screen named by `screen` (default: oblique), its rays converging on `focus` (m).
+    pub fn screen_model(&self, focus: [f64; 3]) -> Result<Screen> {
+        match self.screen.as_deref() {
+            None | Some("oblique") => Ok(Screen::Oblique { toward: focus }),
+            Some("vertical") => Ok(Screen::Vertical),
+            Some(name) => Err(HasError::invalid("grid.screen", format!("must be \"oblique\" or \"vertical\", got \"{name}\""))),
+        }
+    }
+
     /// The interface model named by `interfaces` (default: angular).
     pub fn interface_model(&self) -> Result<InterfaceModel> {
         match self.interfaces.as_deref() {

@@ -91,6 +91,7 @@ impl Scenario {
             require_non_negative("grid.sponge_width_mm", v)?;
         }
         self.grid.interface_model()?;
+        self.grid.screen_model(focus)?;
         Ok(Resolved {
             name: self.name.clone(),
             frequency: f,

@@ -71,11 +71,39 @@ pub struct HasOptions {
     pub sponge_strength: f64,
     /// How changes of medium between slabs are applied.
     pub interfaces: InterfaceModel,
+    /// The phase screen's model of the waves' direction.
+    pub screen: Screen,
+}
+
+/// The direction the phase screen assumes for the waves crossing a slab.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Screen {
+    /// Along z (the plain HAS screen `(k - k̄)·dz`), exact for waves travelling along the beam
+    /// axis; an oblique wave in a medium other than `k̄` gains `(k - k̄)·(1/cos θ - 1)·dz` too
+    /// little phase per step and is absorbed along z instead of along its path.
+    #[default]
+    Vertical,
+    /// Along the line from each pixel to the point `toward` (m, the focus): the screen gives
+    /// each pixel the phase and absorption of a wave crossing it at that angle (see `screen`).
+    Oblique {
+        /// The point the rays converge to (m).
+        toward: [f64; 3],
+    },
+}
+
+impl Screen {
+    /// The scenario's name for it (`[grid] screen`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Screen::Vertical => "vertical",
+            Screen::Oblique { .. } => "oblique",
+        }
+    }
 }
 
 impl Default for HasOptions {
     fn default() -> Self {
-        HasOptions { sponge_width: 10e-3, sponge_strength: 6.9, interfaces: InterfaceModel::default() }
+        HasOptions { sponge_width: 10e-3, sponge_strength: 6.9, interfaces: InterfaceModel::default(), screen: Screen::default() }
     }
 }
 
@@ -183,8 +211,16 @@ impl HasPlan {
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
             let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
-            let screen =
-                screen_cache.entry((slab, bits[0])).or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, grid.dz))).clone();
+            let screen = match (options.screen, props.is_uniform()) {
+                (Screen::Oblique { toward }, false) => {
+                    let kt2 = transverse_wavenumber_sq(grid, props, omega, grid.z(step) + 0.5 * grid.dz, toward);
+                    Arc::new(screen(props, &sponge, omega, k_mean, a_mean, Some(&kt2), grid.dz))
+                }
+                _ => screen_cache
+                    .entry((slab, bits[0]))
+                    .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
+                    .clone(),
+            };
             let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
             plan.fft.filter(&mut field, &mut ws, None, &s.propagator, Some(&s.screen));
             plan.steps.push(s);
@@ -387,15 +423,55 @@ fn propagator(g: &Grid, dz: f64, k: f64, alpha: f64) -> Vec<C64> {
     h
 }
 
-/// `exp(i·(k - k̄)·dz - (alpha + sigma)·dz)` per pixel.
-fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, dz: f64) -> Vec<C64> {
+/// The screen per pixel, `exp(i·φ·dz - (β + sigma)·dz)`. With the local transverse wavenumber
+/// `kt` of the waves crossing the pixel ([`Screen::Oblique`]), `φ = kz(k) - kz(k̄)` and
+/// `β = alpha/cos θ - ᾱ·(1/cos θ̄ - 1)`, where `kz(k) = sqrt(k² - kt²)`, `cos θ = kz(k)/k` and
+/// `cos θ̄ = kz(k̄)/k̄`: the propagator gives such a wave `kz(k̄)·dz` and the oblique part of the
+/// mean absorption, the screen adds what its own medium gives it along its path. Without
+/// (`None`, [`Screen::Vertical`]), the plain HAS screen `φ = k - k̄`, `β = alpha`.
+fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_mean: f64, kt2: Option<&[f64]>, dz: f64) -> Vec<C64> {
     props
         .sound_speed
         .iter()
         .zip(&props.attenuation)
         .zip(sponge)
-        .map(|((c, a), s)| C64::from_polar((-(a + s) * dz).exp(), (omega / c - k_mean) * dz))
+        .enumerate()
+        .map(|(p, ((c, a), s))| {
+            let k = omega / c;
+            let (phase, absorption) = match kt2 {
+                None => (k - k_mean, *a),
+                Some(t) => {
+                    let kt2 = t[p].min(MAX_OBLIQUITY_SIN2 * k.min(k_mean).powi(2));
+                    let (kz, kz_mean) = ((k * k - kt2).sqrt(), (k_mean * k_mean - kt2).sqrt());
+                    (kz - kz_mean, a * k / kz - a_mean * (k_mean / kz_mean - 1.0))
+                }
+            };
+            C64::from_polar((-(absorption + s) * dz).exp(), phase * dz)
+        })
         .collect()
+}
+
+/// The screen's angle is capped at 80° (`sin² θ ≤ 0.97`, in the slower of the pixel's medium and
+/// the mean): by the focal plane the line to the focus lies across the plane, where the ray
+/// picture fails and `kz` would vanish.
+const MAX_OBLIQUITY_SIN2: f64 = 0.97;
+
+/// The local transverse wavenumber squared (rad²/m²), row-major `(ny, nx)`, of waves crossing
+/// the slab at height `z` on their way to or from the point `toward` (m): `k(x, y)²·sin² θ` with
+/// `θ` the angle of the line from the pixel to that point against z. For a beam focused at that
+/// point, the directions of its rays (the field near the point holds every direction; there the
+/// beam is in one medium, where the screen's correction is small).
+fn transverse_wavenumber_sq(g: &Grid, props: &SliceProperties, omega: f64, z: f64, toward: [f64; 3]) -> Vec<f64> {
+    let dz2 = (z - toward[2]).powi(2);
+    let mut kt2 = Vec::with_capacity(g.lateral_len());
+    for j in 0..g.ny {
+        for i in 0..g.nx {
+            let rho2 = (g.x(i) - toward[0]).powi(2) + (g.y(j) - toward[1]).powi(2);
+            let k = omega / props.sound_speed[j * g.nx + i];
+            kt2.push(if rho2 > 0.0 { k * k * rho2 / (rho2 + dz2) } else { 0.0 });
+        }
+    }
+    kt2
 }
 
 /// The absorbing layer sigma(x, y) (Np/m): quadratic in the depth into the layer.

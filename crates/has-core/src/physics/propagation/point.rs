@@ -42,7 +42,7 @@ impl HasPlan {
         let step = &self.steps[next - 1];
         let omega = 2.0 * PI * self.frequency;
         let back = propagator(g, dz, step.mean_wavenumber, step.mean_attenuation);
-        let back_screen = screen(&self.slabs[step.slab], &sponge_map(g, &self.options), omega, step.mean_wavenumber, dz);
+        let back_screen = screen(&self.slabs[step.slab], &sponge_map(g, &self.options), omega, step.mean_wavenumber, 0.0, None, dz);
         let mut ws = self.fft.workspace(true);
         self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
         Some((next, w))
