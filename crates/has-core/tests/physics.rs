@@ -662,7 +662,7 @@ fn voxel_map_reproduces_the_region_description() {
     let reference = regions.source.field(&drive).unwrap();
     let spec = has_core::physics::propagation::RecordSpec { axis: true, ..Default::default() };
     let (plan, _) =
-        has_core::physics::propagation::HasPlan::build(&g, &medium, regions.frequency, &reference, &Default::default(), &spec).unwrap();
+        has_core::physics::propagation::HasPlan::build(&g, &medium, regions.frequency, &reference, &regions.plan.options, &spec).unwrap();
     voxel.plan = plan;
     let a = regions.field(&[], None).unwrap();
     let b = voxel.field(&[], None).unwrap();
