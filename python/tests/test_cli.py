@@ -18,8 +18,9 @@ def test_scenario_default_prints_complete_toml_with_the_grid_it_uses():
     assert r.returncode == 0
     printed = arfi.Scenario.from_toml(r.stdout)
     grid = printed.to_dict()["grid"]
-    assert set(grid) == {"spacing_mm", "step_mm", "lateral_size_mm", "z_max_mm", "sponge_width_mm", "reflections", "interfaces"}
-    assert grid["interfaces"] == "angular" and grid["reflections"] is False
+    assert set(grid) == {"spacing_mm", "step_mm", "lateral_size_mm", "z_max_mm", "sponge_width_mm", "reflections", "interfaces",
+                         "screen"}
+    assert grid["interfaces"] == "angular" and grid["screen"] == "oblique" and grid["reflections"] is False
     # The written grid is the one the default resolves to, and nothing else differs.
     assert arfi.Simulation(printed).grid == arfi.Simulation().grid
     d = printed.to_dict()
