@@ -213,8 +213,8 @@ impl HasPlan {
             let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
             let screen = match (options.screen, props.is_uniform()) {
                 (Screen::Oblique { toward }, false) => {
-                    let kt2 = transverse_wavenumber_sq(grid, props, omega, grid.z(step) + 0.5 * grid.dz, toward);
-                    Arc::new(screen(props, &sponge, omega, k_mean, a_mean, Some(&kt2), grid.dz))
+                    let sin2 = obliquity(grid, grid.z(step) + 0.5 * grid.dz, toward);
+                    Arc::new(screen(props, &sponge, omega, k_mean, a_mean, Some(&sin2), grid.dz))
                 }
                 _ => screen_cache
                     .entry((slab, bits[0]))
@@ -423,13 +423,14 @@ fn propagator(g: &Grid, dz: f64, k: f64, alpha: f64) -> Vec<C64> {
     h
 }
 
-/// The screen per pixel, `exp(i·φ·dz - (β + sigma)·dz)`. With the local transverse wavenumber
-/// `kt` of the waves crossing the pixel ([`Screen::Oblique`]), `φ = kz(k) - kz(k̄)` and
+/// The screen per pixel, `exp(i·φ·dz - (β + sigma)·dz)`. With the angle θ of the waves crossing
+/// the pixel (`sin2`: `sin² θ` per pixel, [`Screen::Oblique`]) and their transverse wavenumber
+/// `kt = k·sin θ` in the pixel's medium, `φ = kz(k) - kz(k̄)` and
 /// `β = alpha/cos θ - ᾱ·(1/cos θ̄ - 1)`, where `kz(k) = sqrt(k² - kt²)`, `cos θ = kz(k)/k` and
 /// `cos θ̄ = kz(k̄)/k̄`: the propagator gives such a wave `kz(k̄)·dz` and the oblique part of the
 /// mean absorption, the screen adds what its own medium gives it along its path. Without
 /// (`None`, [`Screen::Vertical`]), the plain HAS screen `φ = k - k̄`, `β = alpha`.
-fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_mean: f64, kt2: Option<&[f64]>, dz: f64) -> Vec<C64> {
+fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_mean: f64, sin2: Option<&[f64]>, dz: f64) -> Vec<C64> {
     props
         .sound_speed
         .iter()
@@ -438,10 +439,10 @@ fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_me
         .enumerate()
         .map(|(p, ((c, a), s))| {
             let k = omega / c;
-            let (phase, absorption) = match kt2 {
+            let (phase, absorption) = match sin2 {
                 None => (k - k_mean, *a),
-                Some(t) => {
-                    let kt2 = t[p].min(MAX_OBLIQUITY_SIN2 * k.min(k_mean).powi(2));
+                Some(sin2) => {
+                    let kt2 = (k * k * sin2[p]).min(MAX_OBLIQUITY_SIN2 * k.min(k_mean).powi(2));
                     let (kz, kz_mean) = ((k * k - kt2).sqrt(), (k_mean * k_mean - kt2).sqrt());
                     (kz - kz_mean, a * k / kz - a_mean * (k_mean / kz_mean - 1.0))
                 }
@@ -456,22 +457,20 @@ fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_me
 /// picture fails and `kz` would vanish.
 const MAX_OBLIQUITY_SIN2: f64 = 0.97;
 
-/// The local transverse wavenumber squared (rad²/m²), row-major `(ny, nx)`, of waves crossing
-/// the slab at height `z` on their way to or from the point `toward` (m): `k(x, y)²·sin² θ` with
-/// `θ` the angle of the line from the pixel to that point against z. For a beam focused at that
-/// point, the directions of its rays (the field near the point holds every direction; there the
-/// beam is in one medium, where the screen's correction is small).
-fn transverse_wavenumber_sq(g: &Grid, props: &SliceProperties, omega: f64, z: f64, toward: [f64; 3]) -> Vec<f64> {
+/// `sin² θ` per pixel, row-major `(ny, nx)`, with `θ` the angle against z of the line from the
+/// pixel at height `z` to the point `toward` (m): for a beam focused at that point, the direction
+/// of its rays through the pixel (near the point the field holds every direction; there the beam
+/// is in one medium, where the screen's correction is small). Zero on the line through the point.
+fn obliquity(g: &Grid, z: f64, toward: [f64; 3]) -> Vec<f64> {
     let dz2 = (z - toward[2]).powi(2);
-    let mut kt2 = Vec::with_capacity(g.lateral_len());
+    let mut sin2 = Vec::with_capacity(g.lateral_len());
     for j in 0..g.ny {
         for i in 0..g.nx {
             let rho2 = (g.x(i) - toward[0]).powi(2) + (g.y(j) - toward[1]).powi(2);
-            let k = omega / props.sound_speed[j * g.nx + i];
-            kt2.push(if rho2 > 0.0 { k * k * rho2 / (rho2 + dz2) } else { 0.0 });
+            sin2.push(if rho2 > 0.0 { rho2 / (rho2 + dz2) } else { 0.0 });
         }
     }
-    kt2
+    sin2
 }
 
 /// The absorbing layer sigma(x, y) (Np/m): quadratic in the depth into the layer.

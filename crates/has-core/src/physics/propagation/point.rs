@@ -5,8 +5,9 @@
 //! Dirichlet kernel `d_i(x) = (1/N)·Σ_m exp(i·k_m·(x - x_i))` (the Nyquist term split evenly
 //! between `±π/dx`, so that the weights are real). Between planes, the field at `z` is that of the
 //! next plane stepped back by `δz = z - z_next < 0` through the slab between them, the inverse of
-//! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the slab's propagator `H` and screen
-//! `S` evaluated for `δz` (evanescent components left out). The next plane's field is recorded
+//! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the slab's propagator `H` and the
+//! vertical screen `S` evaluated for `δz` (evanescent components left out; the oblique screen's
+//! correction over this fraction of one step is left out too). The next plane's field is recorded
 //! before its interface, so no interface lies between. On a grid point the weights are that
 //! point's alone.
 
