@@ -30,7 +30,8 @@ class Prediction:
     transmission: NDArray[np.float64]
     """Per element, ``|h_skull| / |h_reference|`` at the target."""
     reference_steering_rad: NDArray[np.float64]
-    """Steering phases of the head without bone (straight-ray times of flight)."""
+    """Steering phases toward the target through the head without bone (straight-ray times of
+    flight; at the focus, those of the estimation's model)."""
     target_mm: tuple[float, float, float]
     """The point predicted for (transducer frame, mm); between grid points the fields are
     interpolated there (band-limited across, an angular-spectrum sub-step along z)."""
@@ -43,7 +44,8 @@ class Prediction:
     uncorrected_pa: float
     """Focal |p| of the reference steering through the skull (the aberrated focus)."""
     ray_steering_pa: float
-    """Focal |p| of the scenario's own steering (straight rays through the CT's bone) through the skull."""
+    """Focal |p| of the scenario's own steering toward the target (straight rays through the CT's
+    bone) through the skull."""
     corrected_pa: float
     """Focal |p| of the reference steering minus ``phases_rad`` through the skull."""
     optimal_pa: float

@@ -220,13 +220,15 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
 
 def predict_report(out: str | Path, sim: Any, prediction: Any, values: dict[str, Any]) -> Path:
     """Report of a CT-based prediction: the beam through the skull on the x–z section through the
-    target, driven with the reference steering (uncorrected), the scenario's straight-ray
-    steering and the reference steering minus the prediction (three marches of ``sim``, the
-    skull's simulation); the element maps of the predicted phase and of the transmission."""
+    target, driven toward the target with the reference steering (uncorrected), the scenario's
+    straight-ray steering and the reference steering minus the prediction (three marches of
+    ``sim``, the skull's simulation); the element maps of the predicted phase and of the
+    transmission."""
     plt = pyplot()
     out = _report_dir(out)
     steering = sim.steering_phases_rad
-    drives = [prediction.reference_steering_rad - steering, np.zeros(steering.size), prediction.correction_rad(steering)]
+    ray = sim.focus_shift_phases(np.subtract(prediction.target_mm, sim.focus_mm))  # its steering toward the target
+    drives = [prediction.reference_steering_rad - steering, ray, prediction.correction_rad(steering)]
     section = sim.section(drives, y_mm=prediction.target_mm[1])
     best = prediction.optimal_pa
     fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in

@@ -35,8 +35,8 @@ pub struct Prediction {
     pub phases: Vec<f64>,
     /// Pressure transmission per element at the target: `|h^skull| / |h^reference|`.
     pub transmission: Vec<f64>,
-    /// Steering phases (rad) of the reference (straight-ray times of flight through the head
-    /// without bone).
+    /// Steering phases (rad) of the reference toward the target (straight-ray times of flight
+    /// through the head without bone): at the focus, those of the estimation's model.
     pub reference_steering: Vec<f64>,
     /// Reference steering through the reference head (no skull).
     pub reference_pressure: f64,
@@ -47,8 +47,8 @@ pub struct Prediction {
     pub reference_optimal_pressure: f64,
     /// Reference steering through the skull: the aberrated focus.
     pub uncorrected_pressure: f64,
-    /// The scenario's own steering through the skull (straight-ray times of flight through the
-    /// CT's bone, as `Simulation::field` drives it).
+    /// The scenario's own steering toward the target through the skull (straight-ray times of
+    /// flight through the CT's bone; at the focus, as `Simulation::field` drives it).
     pub ray_pressure: f64,
     /// Reference steering minus the predicted phases, through the skull.
     pub corrected_pressure: f64,
@@ -90,8 +90,13 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
         HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
     })?;
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
+    let ray_steering = if target == sim.focus {
+        sim.steering.clone()
+    } else {
+        steering_phases(&sim.transducer, sim.steering_medium(), sim.frequency, target)?
+    };
     let steered_source = sim.steered_source().to_vec();
-    let Simulation { plan, grid, frequency, source, steering, transducer, focus, reflections, .. } = sim;
+    let Simulation { plan, grid, frequency, source, transducer, reflections, .. } = sim;
     let options = plan.options.clone();
     drop(plan);
     let through_reference = {
@@ -101,7 +106,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     };
     let mut responses = source.transposed_many(&[through_skull, through_reference])?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));
-    let reference_steering = steering_phases(&transducer, &reference_medium, frequency, focus)?;
+    let reference_steering = steering_phases(&transducer, &reference_medium, frequency, target)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
@@ -110,7 +115,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
         reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
         reference_optimal_pressure: reference.iter().map(|h| h.norm()).sum(),
         uncorrected_pressure: focal_pressure(&skull, |e| reference_steering[e]),
-        ray_pressure: focal_pressure(&skull, |e| steering[e]),
+        ray_pressure: focal_pressure(&skull, |e| ray_steering[e]),
         corrected_pressure: focal_pressure(&skull, |e| reference_steering[e] - phases[e]),
         optimal_pressure: skull.iter().map(|h| h.norm()).sum(),
         phases,

@@ -212,9 +212,8 @@ impl HasPlan {
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
             let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
             let screen = match (options.screen, props.is_uniform()) {
-                (Screen::Oblique { toward }, false) => {
-                    let sin2 = obliquity(grid, grid.z(step) + 0.5 * grid.dz, toward);
-                    Arc::new(screen(props, &sponge, omega, k_mean, a_mean, Some(&sin2), grid.dz))
+                (Screen::Oblique { .. }, false) => {
+                    Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz))
                 }
                 _ => screen_cache
                     .entry((slab, bits[0]))
@@ -450,6 +449,30 @@ fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_me
             C64::from_polar((-(absorption + s) * dz).exp(), phase * dz)
         })
         .collect()
+}
+
+/// The screen of the step from plane `step` to the next through `props`, for a distance `dz` (m;
+/// `grid.dz` for the whole step, less or negative for part of it): with [`Screen::Oblique`] its
+/// directions are those at the step's mid-height, whatever `dz`, so that part of a step is the
+/// same operator over a shorter distance.
+#[allow(clippy::too_many_arguments)]
+fn step_screen(
+    g: &Grid,
+    props: &SliceProperties,
+    sponge: &[f64],
+    omega: f64,
+    mean: (f64, f64),
+    model: Screen,
+    step: usize,
+    dz: f64,
+) -> Vec<C64> {
+    match model {
+        Screen::Oblique { toward } if !props.is_uniform() => {
+            let sin2 = obliquity(g, g.z(step) + 0.5 * g.dz, toward);
+            screen(props, sponge, omega, mean.0, mean.1, Some(&sin2), dz)
+        }
+        _ => screen(props, sponge, omega, mean.0, mean.1, None, dz),
+    }
 }
 
 /// The screen's angle is capped at 80° (`sin² θ ≤ 0.97`, in the slower of the pixel's medium and

@@ -5,13 +5,12 @@
 //! Dirichlet kernel `d_i(x) = (1/N)·Σ_m exp(i·k_m·(x - x_i))` (the Nyquist term split evenly
 //! between `±π/dx`, so that the weights are real). Between planes, the field at `z` is that of the
 //! next plane stepped back by `δz = z - z_next < 0` through the slab between them, the inverse of
-//! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the slab's propagator `H` and the
-//! vertical screen `S` evaluated for `δz` (evanescent components left out; the oblique screen's
-//! correction over this fraction of one step is left out too). The next plane's field is recorded
-//! before its interface, so no interface lies between. On a grid point the weights are that
-//! point's alone.
+//! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the step's own propagator `H` and
+//! screen `S` (the oblique screen with the step's directions) evaluated for `δz` (evanescent
+//! components left out). The next plane's field is recorded before its interface, so no interface
+//! lies between. On a grid point the weights are that point's alone.
 
-use super::{propagator, screen, sponge_map, HasPlan};
+use super::{propagator, sponge_map, step_screen, HasPlan};
 use num_complex::Complex64 as C64;
 use std::f64::consts::PI;
 
@@ -43,7 +42,9 @@ impl HasPlan {
         let step = &self.steps[next - 1];
         let omega = 2.0 * PI * self.frequency;
         let back = propagator(g, dz, step.mean_wavenumber, step.mean_attenuation);
-        let back_screen = screen(&self.slabs[step.slab], &sponge_map(g, &self.options), omega, step.mean_wavenumber, 0.0, None, dz);
+        let mean = (step.mean_wavenumber, step.mean_attenuation);
+        let back_screen =
+            step_screen(g, &self.slabs[step.slab], &sponge_map(g, &self.options), omega, mean, self.options.screen, next - 1, dz);
         let mut ws = self.fft.workspace(true);
         self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
         Some((next, w))
