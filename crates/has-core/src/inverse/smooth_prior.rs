@@ -83,7 +83,10 @@ impl SmoothErrors {
     /// predicted phase).
     pub fn new(prior: &Prior, positions: &[[f64; 3]]) -> Result<Self> {
         if prior.mean().len() != positions.len() {
-            return Err(HasError::invalid("prior", format!("has {} values; the estimate has {} phases", prior.mean().len(), positions.len())));
+            return Err(HasError::invalid(
+                "prior",
+                format!("has {} values; the estimate has {} phases", prior.mean().len(), positions.len()),
+            ));
         }
         let length =
             prior.correlation_length().ok_or_else(|| HasError::invalid("prior_correlation_mm", "is required for a smooth prior"))?;
@@ -138,7 +141,8 @@ impl Objective for SmoothPosterior<'_> {
 
     fn cost_and_gradient(&self, a: &[f64]) -> (f64, Vec<f64>) {
         let (j, g) = self.likelihood.cost_and_gradient(&self.errors.phases(a));
-        let grad = self.errors.modes.iter().zip(a).map(|(w, x)| self.weight * w.iter().zip(&g).map(|(u, v)| u * v).sum::<f64>() + x).collect();
+        let grad =
+            self.errors.modes.iter().zip(a).map(|(w, x)| self.weight * w.iter().zip(&g).map(|(u, v)| u * v).sum::<f64>() + x).collect();
         (self.weight * j + 0.5 * a.iter().map(|x| x * x).sum::<f64>(), grad)
     }
 

@@ -254,7 +254,6 @@ fn sum_squares(model: &[Array2<f64>], measured: &[Array2<f64>]) -> f64 {
     model.iter().zip(measured).map(|(m, d)| m.iter().zip(d).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sum()
 }
 
-
 /// The MR window extended by [`SLICE_REACH_MM`] plus the slice half-thickness and a sample on each
 /// side along the slice normal, within the grid.
 fn extended_window(sim: &Simulation, sampler: &MrSampler) -> Window {
