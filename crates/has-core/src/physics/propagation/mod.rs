@@ -429,10 +429,13 @@ fn propagator(g: &Grid, dz: f64, k: f64, alpha: f64) -> Vec<C64> {
 /// `cos θ̄ = kz(k̄)/k̄`: the propagator gives such a wave `kz(k̄)·dz` and the oblique part of the
 /// mean absorption, the screen adds what its own medium gives it along its path. Without
 /// (`None`, [`Screen::Vertical`]), the plain HAS screen `φ = k - k̄`, `β = alpha`.
+/// Computed in parallel over pixels (each pixel alone, so the result does not depend on the
+/// threads): the oblique screen is built anew for every step of a plan.
 fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_mean: f64, sin2: Option<&[f64]>, dz: f64) -> Vec<C64> {
+    use rayon::prelude::*;
     props
         .sound_speed
-        .iter()
+        .par_iter()
         .zip(&props.attenuation)
         .zip(sponge)
         .enumerate()
@@ -485,15 +488,19 @@ const MAX_OBLIQUITY_SIN2: f64 = 0.97;
 /// of its rays through the pixel (near the point the field holds every direction; there the beam
 /// is in one medium, where the screen's correction is small). Zero on the line through the point.
 fn obliquity(g: &Grid, z: f64, toward: [f64; 3]) -> Vec<f64> {
+    use rayon::prelude::*;
     let dz2 = (z - toward[2]).powi(2);
-    let mut sin2 = Vec::with_capacity(g.lateral_len());
-    for j in 0..g.ny {
-        for i in 0..g.nx {
-            let rho2 = (g.x(i) - toward[0]).powi(2) + (g.y(j) - toward[1]).powi(2);
-            sin2.push(if rho2 > 0.0 { rho2 / (rho2 + dz2) } else { 0.0 });
-        }
-    }
-    sin2
+    (0..g.lateral_len())
+        .into_par_iter()
+        .map(|p| {
+            let rho2 = (g.x(p % g.nx) - toward[0]).powi(2) + (g.y(p / g.nx) - toward[1]).powi(2);
+            if rho2 > 0.0 {
+                rho2 / (rho2 + dz2)
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 /// The absorbing layer sigma(x, y) (Np/m): quadratic in the depth into the layer.
