@@ -79,7 +79,8 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None) -> Predictio
     ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs the
     scenario's simulation, two transposed marches and one transposed projection, whatever the
     number of elements; the skull's plan is dropped before the reference's is built, so that
-    they are never held at once."""
+    they are never held at once. The ARFI amplitude is not calibrated (a prediction makes no
+    image), which spares a march through a reverberating head."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
     d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target)
     return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})

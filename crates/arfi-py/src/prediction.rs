@@ -2,8 +2,7 @@
 
 use crate::error::to_py;
 use crate::scenario::parse_scenario;
-use has_core::prediction::predict as predict_core;
-use has_core::simulation::Simulation;
+use has_core::prediction::predict_scenario;
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -23,7 +22,7 @@ pub(crate) fn predict<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let scenario = parse_scenario(text, format, base_dir)?;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
-    let p = py.detach(|| Simulation::new(&scenario).and_then(|sim| predict_core(sim, target))).map_err(to_py)?;
+    let p = py.detach(|| predict_scenario(&scenario, target)).map_err(to_py)?;
     let d = PyDict::new(py);
     d.set_item("phases_rad", p.phases.into_pyarray(py))?;
     d.set_item("transmission", p.transmission.into_pyarray(py))?;

@@ -20,6 +20,7 @@ use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
 use crate::physics::propagation::{HasPlan, RecordSpec};
 use crate::physics::steering::steering_phases;
+use crate::scenario::Scenario;
 use crate::simulation::{reciprocal_field, Simulation};
 use num_complex::Complex64 as C64;
 
@@ -76,6 +77,15 @@ impl Prediction {
 /// for the drive phases `drive(e)` (rad).
 fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
     h.iter().enumerate().map(|(e, h)| h * C64::from_polar(1.0, drive(e))).sum::<C64>().norm()
+}
+
+/// [`predict`] for a scenario: its simulation is built without calibrating the ARFI amplitude
+/// from the ideal image, which a prediction does not use (through a reverberating head that is
+/// one whole march more: about 5 s of a 650 kHz hemisphere's prediction).
+pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result<Prediction> {
+    let mut fields_only = scenario.clone();
+    fields_only.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
+    predict(Simulation::new(&fields_only)?, target)
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
