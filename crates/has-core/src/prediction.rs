@@ -100,11 +100,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
         HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
     })?;
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
-    let ray_steering = if target == sim.focus {
-        sim.steering.clone()
-    } else {
-        steering_phases(&sim.transducer, sim.steering_medium(), sim.frequency, target)?
-    };
+    let ray_steering = sim.steering_toward(target)?;
     let steered_source = sim.steered_source().to_vec();
     let Simulation { plan, grid, frequency, source, transducer, reflections, .. } = sim;
     let options = plan.options.clone();

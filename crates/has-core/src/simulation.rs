@@ -307,8 +307,17 @@ impl Simulation {
     pub fn focus_shift_phases(&self, shift: [f64; 3]) -> Result<Vec<f64>> {
         crate::error::require_finite("shift", &shift)?;
         let target = [self.focus[0] + shift[0], self.focus[1] + shift[1], self.focus[2] + shift[2]];
-        let moved = steering_phases(&self.transducer, self.steering_medium(), self.frequency, target)?;
+        let moved = self.steering_toward(target)?;
         Ok(moved.iter().zip(&self.steering).map(|(m, s)| wrap(m - s)).collect())
+    }
+
+    /// The scenario's steering phases (rad, one per element) toward `target` (m): straight-ray
+    /// times of flight through the steering medium, as for the focus (whose are kept).
+    pub fn steering_toward(&self, target: [f64; 3]) -> Result<Vec<f64>> {
+        if target == self.focus {
+            return Ok(self.steering.clone());
+        }
+        steering_phases(&self.transducer, self.steering_medium(), self.frequency, target)
     }
 
     /// Expands added phases (rad), one per element or one per group, to one per element.

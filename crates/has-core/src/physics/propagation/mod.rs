@@ -211,14 +211,13 @@ impl HasPlan {
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
             let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
-            let screen = match (options.screen, props.is_uniform()) {
-                (Screen::Oblique { .. }, false) => {
-                    Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz))
-                }
-                _ => screen_cache
+            let screen = if oblique_toward(options.screen, props).is_some() {
+                Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz))
+            } else {
+                screen_cache
                     .entry((slab, bits[0]))
                     .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
-                    .clone(),
+                    .clone()
             };
             let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
             plan.fft.filter(&mut field, &mut ws, None, &s.propagator, Some(&s.screen));
@@ -469,12 +468,17 @@ fn step_screen(
     step: usize,
     dz: f64,
 ) -> Vec<C64> {
+    let sin2 = oblique_toward(model, props).map(|toward| obliquity(g, g.z(step) + 0.5 * g.dz, toward));
+    screen(props, sponge, omega, mean.0, mean.1, sin2.as_deref(), dz)
+}
+
+/// The point the screen's rays converge on where a slab's screen depends on the step: an
+/// oblique screen through a slab that is not uniform (in a uniform slab, where `k = k̄` up to
+/// `k̄`'s rounding, the oblique screen is the vertical one, so one screen serves all its steps).
+fn oblique_toward(model: Screen, props: &SliceProperties) -> Option<[f64; 3]> {
     match model {
-        Screen::Oblique { toward } if !props.is_uniform() => {
-            let sin2 = obliquity(g, g.z(step) + 0.5 * g.dz, toward);
-            screen(props, sponge, omega, mean.0, mean.1, Some(&sin2), dz)
-        }
-        _ => screen(props, sponge, omega, mean.0, mean.1, None, dz),
+        Screen::Oblique { toward } if !props.is_uniform() => Some(toward),
+        _ => None,
     }
 }
 
