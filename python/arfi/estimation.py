@@ -59,9 +59,10 @@ class Estimate:
     misfit: float = float("nan")
     """Best cost over its noise expectation, ``cost / (n_pixels·noise_floor²)``: about 1 when the model explains the images."""
     model_mismatch: bool = False
-    """The cost is above the 95 % chi-square point of the noise: the model cannot explain the images (e.g. element-level
-    aberrations fitted with group phases) and the correction may make the focus worse; check it with loop 2. Not judged
-    (False) when ``kept_prediction``: nothing was fitted."""
+    """The cost is above the 95 % chi-square point of the noise and the misfit above 1.2 (what the model leaves is at
+    least 0.45 of the noise's RMS): the model cannot explain the images (e.g. element-level aberrations fitted with
+    group phases) and the correction may make the focus worse; check it with loop 2. Not judged (False) when
+    ``kept_prediction``: nothing was fitted."""
     group_phases_rad: NDArray[np.float64] | None = None
     """Per-element estimation only: the default-group estimate that warm-started it."""
     underdetermined: bool = False

@@ -95,7 +95,7 @@ def write_arfi_image(
     sidecar: dict[str, Any] | None = None,
 ) -> None:
     """Writes an MR-ARFI phase image (rad) as NIfTI with its affine (mm, transducer frame), and
-    the sidecar JSON when given."""
+    the sidecar JSON when given; pixels without MR signal are NaN."""
     import nibabel as nib
 
     p = arfi_image_path(path)
@@ -113,7 +113,8 @@ def write_arfi_image(
 
 def read_arfi_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, Any]]:
     """Reads an MR-ARFI image: (image as 2-D float64 with the singleton axis removed, 4x4 affine
-    in mm, sidecar dict or {}). Raises FileNotFoundError or ValueError naming the file."""
+    in mm, sidecar dict or {}). NaN marks a pixel without MR signal (bone, air, a masked-out
+    pixel); fits leave it out. Raises FileNotFoundError or ValueError naming the file."""
     import nibabel as nib
 
     p = Path(path)
@@ -127,8 +128,10 @@ def read_arfi_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], 
     squeezed = data.reshape([n for n in data.shape if n != 1]) if data.ndim > 2 else data
     if squeezed.ndim != 2:
         raise ValueError(f"image: {p}: must hold one 2-D slice, got shape {data.shape}")
-    if not np.all(np.isfinite(squeezed)):
-        raise ValueError(f"image: {p}: contains NaN or infinite pixels")
+    if np.any(np.isinf(squeezed)):
+        raise ValueError(f"image: {p}: contains infinite pixels (NaN marks a pixel without MR signal; infinity is no phase)")
+    if not np.any(np.isfinite(squeezed)):
+        raise ValueError(f"image: {p}: every pixel is NaN (no MR signal anywhere)")
     side: dict[str, Any] = {}
     sp = sidecar_path(p)
     if sp.is_file():

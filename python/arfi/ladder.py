@@ -169,6 +169,6 @@ def summary_line(ladder: list[dict[str, Any]], paper: float) -> str:
 def focus_of(sim: Simulation, applied: NDArray[np.float64], ideal_peak: float) -> Callable[[NDArray[np.float64]], float]:
     """The recovered fraction of a per-element correction of the aberration ``applied``."""
     def focus(correction: NDArray[np.float64]) -> float:
-        return recovered_fraction(float(sim.arfi_image(applied - np.asarray(correction)).max()), ideal_peak)
+        return recovered_fraction(sim.focal_arfi(sim.arfi_image(applied - np.asarray(correction)))[0], ideal_peak)
 
     return focus

@@ -55,12 +55,18 @@ class LoopResult:
         }
 
 
-def robust_focal(image: NDArray[np.float64]) -> float:
-    """The mean over the 3 x 3 pixels centred on the maximum of the 3 x 3 box-smoothed image."""
-    padded = np.pad(image, 1, mode="edge")
+def robust_focal(image: NDArray[np.float64], region: NDArray[np.bool_] | None = None) -> float:
+    """The largest 3 x 3 box mean of the image (the mean over the 3 x 3 pixels centred on the
+    maximum of the box-smoothed image) among the pixels of ``region`` (default: all), e.g.
+    ``Simulation.focal_region``; pixels without signal (NaN) are left out of each mean."""
+    padded = np.pad(np.asarray(image, dtype=np.float64), 1, mode="edge")
     n0, n1 = image.shape
-    smooth = sum(padded[a:a + n0, b:b + n1] for a in range(3) for b in range(3)) / 9.0
-    return float(smooth.max())
+    boxes = np.stack([padded[a:a + n0, b:b + n1] for a in range(3) for b in range(3)])
+    counts = np.sum(np.isfinite(boxes), axis=0)
+    smooth = np.where(counts > 0, np.nansum(boxes, axis=0) / np.maximum(counts, 1), np.nan)
+    if region is not None:
+        smooth = np.where(region, smooth, np.nan)
+    return float(np.nanmax(smooth))
 
 
 def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float64]], ArrayLike], iterations: int = 2,
@@ -91,8 +97,9 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
     first = np.asarray(image, dtype=np.float64)
     images: list[NDArray[np.float64]] = [first, *[np.asarray(e, dtype=np.float64) for e in extra]]
     knowns: list[NDArray[np.float64] | None] = [as_phases(known, "known")] + [as_phases(k, f"extra_known[{i}]") for i, k in enumerate(extra_k)]
-    steps = [LoopStep(correction_rad=np.zeros(sim.n_groups), focal_measured_rad=float(np.max(first)),
-                      focal_robust_rad=robust_focal(first))]
+    region = sim.focal_region
+    steps = [LoopStep(correction_rad=np.zeros(sim.n_groups), focal_measured_rad=sim.focal_arfi(first)[0],
+                      focal_robust_rad=robust_focal(first, region))]
     kept, margin = 0, 0.0
     for _ in range(int(iterations)):
         est = sim.estimate(images, knowns, **estimate_options)
@@ -101,12 +108,13 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
             break
         added = -correction
         new = np.asarray(acquire(added), dtype=np.float64)
-        if new.shape != first.shape or not np.all(np.isfinite(new)):
-            raise ValueError(f"acquire: returned an image of shape {new.shape} (or with NaN); expected {first.shape}")
+        if new.shape != first.shape or np.any(np.isinf(new)) or not np.any(np.isfinite(new)):
+            raise ValueError(f"acquire: returned an image of shape {new.shape} (or with infinite values, or all NaN); "
+                             f"expected {first.shape}")
         images.append(new)
         knowns.append(added)
-        steps.append(LoopStep(correction_rad=correction, focal_measured_rad=float(np.max(new)),
-                              focal_robust_rad=robust_focal(new), estimate=est))
+        steps.append(LoopStep(correction_rad=correction, focal_measured_rad=sim.focal_arfi(new)[0],
+                              focal_robust_rad=robust_focal(new, region), estimate=est))
         margin = margin_sigma * np.sqrt(2.0) * est.noise_floor / 3.0
         if steps[-1].focal_robust_rad > steps[kept].focal_robust_rad + margin:
             kept = len(steps) - 1

@@ -50,6 +50,19 @@ class Prediction:
     """Focal |p| of the reference steering minus ``phases_rad`` through the skull."""
     optimal_pa: float
     """The most any phases give through the skull at this drive amplitude: ``sum |h_skull|``."""
+    skull_responses: NDArray[np.complex128]
+    """Per element, ``h_skull``: its complex pressure (Pa) at the target through the skull when it
+    alone is driven with a unit phasor."""
+
+    def pressure_with(self, phases_rad: ArrayLike) -> float:
+        """Focal |p| (Pa) at the target through this prediction's skull when the array drives the
+        reference steering minus ``phases_rad`` (one per element): e.g. an estimate's, another
+        prediction's, or zeros for the uncorrected beam; exact in the model."""
+        phases = np.asarray(phases_rad, dtype=np.float64)
+        if phases.shape != self.skull_responses.shape or not np.all(np.isfinite(phases)):
+            raise ValueError(f"phases_rad: must hold {self.skull_responses.size} finite values (one per element), "
+                             f"got shape {phases.shape}")
+        return float(abs(np.sum(self.skull_responses * np.exp(1j * (self.reference_steering_rad - phases)))))
 
     def correction_rad(self, steering_rad: NDArray[np.float64]) -> NDArray[np.float64]:
         """Phases to add to a simulation's own ``steering_rad`` to drive the corrected array

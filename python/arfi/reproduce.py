@@ -150,7 +150,7 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         corrected_phases = applied - correction[sim.groups]
         aberrated = sim.arfi_image(applied)
         corrected = sim.arfi_image(corrected_phases)
-        f_i, f_a, f_c = float(ideal.max()), float(aberrated.max()), float(corrected.max())
+        f_i, f_a, f_c = (sim.focal_arfi(img)[0] for img in (ideal, aberrated, corrected))
         rows.append(Row(
             experiment=f"{case}-aberration", repeat=r + 1, seed=s, evaluations=est.evaluations, seconds=est.seconds,
             final_cost=est.cost, broadening_width_mm=cal.broadening_width_mm, focal_ideal_rad=f_i,

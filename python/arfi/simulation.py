@@ -227,9 +227,30 @@ class Simulation:
     def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
         """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).
 
-        ``noise_rad`` adds seeded Gaussian noise (same seed, same noise)."""
+        ``noise_rad`` adds seeded Gaussian noise (same seed, same noise). Pixels without MR signal
+        (bone; see ``imaged``) are NaN, as a scanner leaves them: use ``focal_arfi`` or
+        ``np.nanmax`` rather than ``max``."""
         noise = as_number(noise_rad, "noise_rad", 0.0)
         return self._core.arfi_image(as_phases(phases), noise, as_count(seed, "seed"))
+
+    def focal_arfi(self, image: ArrayLike) -> tuple[float, tuple[int, int]]:
+        """The focal ARFI of an image (rad) and its pixel (i, j): the largest imaged pixel within
+        the scenario's ``[arfi] focal_search_radius_mm`` of the target in the image plane (bone,
+        scalp or a side lobe farther away never stand in for the focus). Raises ValueError when
+        no imaged pixel lies there."""
+        return self._core.focal_arfi(as_image(image, "image"))
+
+    @property
+    def focal_region(self) -> NDArray[np.bool_]:
+        """The pixels within ``[arfi] focal_search_radius_mm`` of the target in the image plane,
+        shape (n_u, n_v): where ``focal_arfi`` looks for the focus."""
+        return self._core.focal_region()
+
+    @property
+    def imaged(self) -> NDArray[np.bool_]:
+        """Which pixels of the MR image are imaged, shape (n_u, n_v): at least half of the pixel
+        (over the slice) is tissue with MR signal (not bone)."""
+        return self._core.imaged()
 
     def skull_phases(self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0,
                      jitter_rad: float = 0.5) -> NDArray[np.float64]:

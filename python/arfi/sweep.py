@@ -57,9 +57,9 @@ def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
     _, groups_truth, applied = study_aberration(sim, trial.case, s)
     images, known = study_images(sim, applied, trial.noise_rad, s, trial.images - 1)
     est = model.estimate(images, known, method=trial.method, seed=s)
-    focal_ideal = float(sim.arfi_image().max())
-    focal_aberrated = float(sim.arfi_image(applied).max())
-    focal_corrected = float(sim.arfi_image(applied - est.phases_rad[sim.groups]).max())
+    focal_ideal = sim.focal_arfi(sim.arfi_image())[0]
+    focal_aberrated = sim.focal_arfi(sim.arfi_image(applied))[0]
+    focal_corrected = sim.focal_arfi(sim.arfi_image(applied - est.phases_rad[sim.groups]))[0]
     return {
         **asdict(trial),
         "recovered_fraction": recovered_fraction(focal_corrected, focal_ideal),

@@ -280,3 +280,50 @@ def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, caps
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "--prior-transmission" in err and bad in err, err
     assert not (tmp_path / "x.npy").exists()
+
+
+def test_an_estimate_with_a_prior_that_the_images_contradict_recommends_the_prediction(tmp_path, capsys):
+    # Images broadened far more than the model (W = 6 mm against 2.7): no phases explain them
+    # (MODEL MISMATCH). With a prior, the estimate is then not the correction to apply: the line
+    # says so, --out-phases holds the prediction and the JSON names it.
+    blurred = arfi.Scenario.default().to_dict()
+    blurred["arfi"]["broadening_width_mm"] = 6.0
+    sim = arfi.Simulation(arfi.Scenario.from_dict(blurred))
+    truth = sim.condense(sim.skull_phases(seed=4))
+    image = tmp_path / "m.nii.gz"
+    arfi.write_arfi_image(image, sim.arfi_image(truth, 0.02, 1), sim.mr_affine_mm, sim.mr_volume_shape)
+    prior = truth + 0.2 * np.cos(np.arange(16))
+    np.save(tmp_path / "prior.npy", prior)
+    assert main(["estimate", "--image", str(image), "--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3",
+                 "--out-phases", str(tmp_path / "out.npy"), "--json", str(tmp_path / "e.json")]) == 0
+    out = capsys.readouterr().out
+    result = json.loads((tmp_path / "e.json").read_text())
+    assert result["model_mismatch"] and result["prior_used"] and result["recommended"] == "prediction", result["misfit"]
+    assert "NOT to be applied" in out and "prediction" in out and "out.npy" in out, out
+    assert np.allclose(np.load(tmp_path / "out.npy"), prior) and np.allclose(result["recommended_phases_rad"], prior)
+    # Without the contradiction the estimate is what it recommends.
+    good = tmp_path / "good.nii.gz"
+    plain = arfi.Simulation()
+    arfi.write_arfi_image(good, plain.arfi_image(truth, 0.02, 1), plain.mr_affine_mm, plain.mr_volume_shape)
+    assert main(["estimate", "--image", str(good), "--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3",
+                 "--out-phases", str(tmp_path / "out.npy"), "--json", str(tmp_path / "e.json")]) == 0
+    result = json.loads((tmp_path / "e.json").read_text())
+    assert not result["model_mismatch"] and result["recommended"] == "estimate"
+    assert np.allclose(np.load(tmp_path / "out.npy"), result["phases_rad"])
+
+
+def test_images_with_pixels_without_signal_are_read_and_fitted(tmp_path, sim, ideal):
+    # NaN marks a pixel without MR signal (bone, a masked-out pixel): read as NaN, fitted without
+    # it; infinity is refused naming the file.
+    image = ideal.copy()
+    image[:, :10] = np.nan
+    path = tmp_path / "m.nii.gz"
+    arfi.write_arfi_image(path, image, sim.mr_affine_mm, sim.mr_volume_shape)
+    read, _, _ = arfi.read_arfi_image(path)
+    assert np.array_equal(np.isnan(read), np.isnan(image))
+    assert main(["calibrate", "--image", str(path), "--json", str(tmp_path / "c.json")]) == 0
+    assert json.loads((tmp_path / "c.json").read_text())["broadening_width_mm"] == pytest.approx(2.7, abs=0.05)
+    image[0, 0] = np.inf
+    arfi.write_arfi_image(path, image, sim.mr_affine_mm, sim.mr_volume_shape)
+    with pytest.raises(ValueError, match="infinite"):
+        arfi.read_arfi_image(path)

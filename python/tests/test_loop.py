@@ -57,6 +57,13 @@ def test_robust_focal_is_the_mean_around_the_peak():
     assert robust_focal(image) == pytest.approx(1.0)
     image[3:6, 3:6] = 2.0
     assert robust_focal(image) == pytest.approx(2.0)
+    # Pixels without signal are left out of each mean; a region keeps a brighter place elsewhere out.
+    image[4, 4] = np.nan
+    assert robust_focal(image) == pytest.approx(2.0)
+    image[0, 0] = 50.0
+    region = np.zeros((9, 9), dtype=bool)
+    region[2:7, 2:7] = True
+    assert robust_focal(image, region) == pytest.approx(2.0) and robust_focal(image) > 2.0
 
 
 def test_loop2_rejects_bad_arguments(sim, ideal):

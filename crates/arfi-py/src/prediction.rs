@@ -10,7 +10,8 @@ use pyo3::types::PyDict;
 /// Builds the scenario's simulation and predicts at `target_mm` (default: the focus), by
 /// reciprocity (see `has_core::prediction`): dict with `phases_rad`, `transmission`,
 /// `reference_steering_rad` (per element), `target_mm` and the focal pressures (Pa)
-/// `reference_pa`, `reference_optimal_pa`, `uncorrected_pa`, `ray_steering_pa`, `corrected_pa`, `optimal_pa`.
+/// `reference_pa`, `reference_optimal_pa`, `uncorrected_pa`, `ray_steering_pa`, `corrected_pa`, `optimal_pa`,
+/// and `skull_responses` (complex Pa per unit drive, per element).
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None))]
 pub(crate) fn predict<'py>(
@@ -34,5 +35,6 @@ pub(crate) fn predict<'py>(
     d.set_item("corrected_pa", p.corrected_pressure)?;
     d.set_item("optimal_pa", p.optimal_pressure)?;
     d.set_item("reference_optimal_pa", p.reference_optimal_pressure)?;
+    d.set_item("skull_responses", p.skull_responses.into_pyarray(py))?;
     Ok(d)
 }

@@ -199,6 +199,23 @@ impl CoreSimulation {
         Ok(img.into_pyarray(py))
     }
 
+    /// The focal ARFI of an image: its largest imaged (not NaN) pixel within the focal search
+    /// radius of the target, as (value in rad, (i, j)).
+    fn focal_arfi(&self, image: PyReadonlyArray2<'_, f64>) -> PyResult<(f64, (usize, usize))> {
+        let (ij, value) = self.inner.focal_arfi(&image.as_array().to_owned(), "image").map_err(to_py)?;
+        Ok((value, ij))
+    }
+
+    /// The pixels within the focal search radius of the target in the image plane, shape (n_u, n_v).
+    fn focal_region<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<bool>> {
+        self.inner.focal_region().into_pyarray(py)
+    }
+
+    /// Which pixels of the scenario's MR image are imaged (tissue with MR signal), shape (n_u, n_v).
+    fn imaged<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<bool>>> {
+        Ok(self.inner.sampler().map_err(to_py)?.imaged().clone().into_pyarray(py))
+    }
+
     /// The same simulation with broadening width W (mm) and amplitude (rad·m³/N).
     fn with_calibration(&self, broadening_width_mm: f64, amplitude: f64) -> PyResult<Self> {
         let inner = self.inner.with_calibration(broadening_width_mm * 1e-3, amplitude).map_err(to_py)?;

@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = model.expect("repeats >= 1");
     let k = &model.cost.terms[0].kernel;
     let (u, v) = (k.pixels[0].clone(), k.pixels[1].clone());
-    let mask = mask_pixels(&meas[0].image, sim.mask_fraction);
+    let mask = mask_pixels(&meas[0].image, sim.mask_fraction, &sim.focal_region());
     let (mut sources_s, mut march_s, mut kernel_s) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..repeats {
         let (t, sources) = secs(|| sim.group_sources(&sim.groups, &[]));

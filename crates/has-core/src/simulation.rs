@@ -9,7 +9,7 @@ use crate::inverse::phase::wrap;
 use crate::memory;
 use crate::physics::grid::{fft_friendly, Grid};
 use crate::physics::medium::{Material, Medium};
-use crate::physics::mr::{add_noise, Broadening, MrGeometry, MrSampler};
+use crate::physics::mr::{add_noise, focal_peak, Broadening, MrGeometry, MrSampler};
 use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec, Recording};
 use crate::physics::source::{source_plane_z, SourceModel};
 use crate::physics::steering::steering_phases;
@@ -63,6 +63,9 @@ pub struct Simulation {
     /// Focal-zone level (paper Eq. 4): fits use the pixels above this fraction of each image's
     /// maximum that are connected to it.
     pub mask_fraction: f64,
+    /// Radius (m, in the image plane) around the target within which an image's focal maximum is
+    /// sought (see [`Simulation::focal_region`]).
+    pub focal_search_radius: f64,
     /// Standard deviation of the Gaussian noise the scenario assumes on ARFI phase images
     /// (`[arfi] noise_rad`), rad.
     pub noise: f64,
@@ -145,15 +148,19 @@ impl Simulation {
             (Some(a), _) => Ok(a),
             (None, Err(e)) => Err(e.clone()),
             (None, Ok(sampler)) => {
-                let peak = sampler.force_image(&ideal.window)?.iter().copied().fold(0.0, f64::max);
-                if peak > 0.0 {
-                    Ok(r.ideal_focal_phase / peak)
-                } else {
-                    Err(HasError::invalid(
+                let mut force = sampler.force_image(&ideal.window)?;
+                force.zip_mut_with(sampler.imaged(), |f, &imaged| *f = if imaged { *f } else { f64::NAN });
+                match focal_peak(&force, &r.mr.pixels_near(r.focus, r.focal_search_radius)) {
+                    Some((_, peak)) if peak > 0.0 => Ok(r.ideal_focal_phase / peak),
+                    _ => Err(HasError::invalid(
                         "mr",
-                        "the ideal beam exerts no radiation force in the MR slice (no attenuating material there?): \
-                         fields can be simulated, MR-ARFI images cannot",
-                    ))
+                        format!(
+                            "the ideal beam exerts no radiation force in the MR slice on imaged tissue within \
+                             arfi.focal_search_radius_mm = {:.1} of the focus (no attenuating soft tissue there?): fields can be \
+                             simulated, MR-ARFI images cannot",
+                            r.focal_search_radius * 1e3
+                        ),
+                    )),
                 }
             }
         };
@@ -178,6 +185,7 @@ impl Simulation {
             sampler,
             amplitude,
             mask_fraction: r.mask_fraction,
+            focal_search_radius: r.focal_search_radius,
             noise: r.noise,
             reflections: r.grid.reflections.unwrap_or(false),
         })
@@ -436,14 +444,42 @@ impl Simulation {
     /// ```
     pub fn arfi_image(&self, added: &[f64]) -> Result<Array2<f64>> {
         let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
-        Ok(self.sampler()?.force_image(&rec.window)? * self.amplitude()?)
+        let sampler = self.sampler()?;
+        let mut image = sampler.force_image(&rec.window)? * self.amplitude()?;
+        image.zip_mut_with(sampler.imaged(), |v, &imaged| *v = if imaged { *v } else { f64::NAN });
+        Ok(image)
     }
 
-    /// An MR-ARFI image with seeded Gaussian noise of `noise` rad added.
+    /// An MR-ARFI image with seeded Gaussian noise of `noise` rad added (NaN stays NaN).
     pub fn noisy_arfi_image(&self, added: &[f64], noise: f64, seed: u64) -> Result<Array2<f64>> {
         let mut img = self.arfi_image(added)?;
         add_noise(&mut img, noise, seed)?;
         Ok(img)
+    }
+
+    /// The pixels within [`Simulation::focal_search_radius`] of the focus in the image plane,
+    /// `(n_u, n_v)`: where an image's focal maximum is sought.
+    pub fn focal_region(&self) -> Array2<bool> {
+        self.mr.pixels_near(self.focus, self.focal_search_radius)
+    }
+
+    /// The focal ARFI of an image (paper's metric): its largest imaged pixel within the focal
+    /// region ([`Simulation::focal_region`]), with that pixel's index; an error naming `name` when
+    /// no imaged pixel lies there.
+    pub fn focal_arfi(&self, image: &Array2<f64>, name: &str) -> Result<((usize, usize), f64)> {
+        focal_peak(image, &self.focal_region()).ok_or_else(|| {
+            HasError::invalid(
+                name,
+                format!(
+                    "has no imaged pixel (all NaN: no MR signal) within {:.1} mm of the target ({:.1}, {:.1}, {:.1}) mm in its \
+                     plane (arfi.focal_search_radius_mm)",
+                    self.focal_search_radius * 1e3,
+                    self.focus[0] * 1e3,
+                    self.focus[1] * 1e3,
+                    self.focus[2] * 1e3
+                ),
+            )
+        })
     }
 
     /// Marches several sources in one batch, keeping the MR window.

@@ -86,15 +86,16 @@ def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
 
 
 def image_peak(sim: Simulation, image: np.ndarray) -> tuple[float, list[float]]:
-    """Maximum of an ARFI image and its pixel centre (mm, transducer frame)."""
-    idx = np.unravel_index(int(np.argmax(image)), image.shape)
+    """The focal ARFI of an image (its largest imaged pixel near the target) and that pixel's
+    centre (mm, transducer frame)."""
+    value, idx = sim.focal_arfi(image)
     vox = np.zeros(3)
     shape = sim.mr_volume_shape
     axes = [a for a in range(3) if shape[a] != 1]
     for a, i in zip(axes, idx):
         vox[a] = i
     pos = sim.mr_affine_mm @ np.append(vox, 1.0)
-    return float(image[idx]), [float(v) for v in pos[:3]]
+    return float(value), [float(v) for v in pos[:3]]
 
 
 def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | None]:

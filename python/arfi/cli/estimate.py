@@ -53,7 +53,9 @@ def register(sub: Any) -> None:
                    "'transmission'), or .npy or text with one value per element. The model then drives each element at its "
                    "transmission relative to the mean, so that a model of the head without its skull weighs the elements "
                    "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude)")
-    p.add_argument("--out-phases", dest="out_phases", metavar="F.npy", help="write the estimated group phases")
+    p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
+                   help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
+                   "MISMATCH (the images are not explained), the prediction itself (JSON 'recommended' says which)")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
                    "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
@@ -104,7 +106,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
               f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
               f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
-    if e.model_mismatch:
+    # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
+    use_prediction = e.model_mismatch and e.prior_used and prior is not None
+    if use_prediction:
+        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+              f"the model does not explain the images, so this estimate is NOT to be applied: the prediction (--prior) is "
+              f"the safer correction"
+              + (f" and is what {args.out_phases} holds" if args.out_phases else "")
+              + ". Check the scenario against the images (arfi diagnose), then estimate again.")
+    elif e.model_mismatch:
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
               f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
               f"the focus: check it with an image taken with the correction applied (loop 2).")
@@ -114,8 +124,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest}); "
               f"expected focus after the correction {n['expected_focus_now']:.2f} of the ideal now, {n['expected_focus']:.2f} "
               f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
+    recommended = prior if use_prediction else e.phases_rad
     if args.out_phases:
-        save_npy(args.out_phases, e.phases_rad)
+        save_npy(args.out_phases, recommended)
     if args.suggest:
         save_npy(args.suggest, e.suggested_phases_rad)
     if args.report:
@@ -128,5 +139,6 @@ def run(args: argparse.Namespace) -> int:
     prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
     if transmission is not None:
         prior_settings["prior_transmission"] = args.prior_transmission
-    finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
+    finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total,
+                  "recommended": "prediction" if use_prediction else "estimate", "recommended_phases_rad": recommended})
     return 0

@@ -554,14 +554,21 @@ impl BasisCache {
     ) -> Result<ElementModel> {
         let margin = if nuisance.background_phase { margin.max(BACKGROUND_MARGIN) } else { margin };
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
-        let every: Vec<(usize, usize)> =
-            if nuisance.background_phase { u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect() } else { vec![] };
+        let every = |image: &Array2<f64>| -> Vec<(usize, usize)> {
+            u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect()
+        };
         let mut terms = Vec::with_capacity(measurements.len());
         for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
             let offset = known_per_element(sim, &meas.known)
                 .map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
             let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
-            let pixels = if nuisance.background_phase { &every } else { mask };
+            let box_pixels;
+            let pixels = if nuisance.background_phase {
+                box_pixels = every(&meas.image);
+                &box_pixels
+            } else {
+                mask
+            };
             terms.push(ElementTerm {
                 mask: pixels.iter().map(local).collect(),
                 measured: pixels.iter().map(|&ij| meas.image[ij]).collect(),

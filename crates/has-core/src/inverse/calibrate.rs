@@ -2,7 +2,8 @@
 //!
 //! The model image is `A · (F ⊛ g_W)` sampled on the MR pixels; for each width W the amplitude A
 //! is the linear least-squares fit over the focal zone (pixels above `mask_fraction` of the
-//! measured maximum connected to it) dilated by half the largest width searched, and W minimises
+//! measured focal maximum connected to it) dilated by half the largest width searched (imaged
+//! pixels only), and W minimises
 //! the remaining squared difference (a scan, then golden-section refinement).
 
 use crate::error::{require_positive, HasError, Result};
@@ -40,7 +41,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal
     // still constrain the width through the tails.
-    let zone = mask_pixels(image, mask_fraction);
+    let zone = mask_pixels(image, mask_fraction, &sim.focal_region());
     let m = sim.mr.matrix;
     let px = sim.mr.pixel_size();
     let reach = [(0.5 * max_width / px[0]).ceil() as usize, (0.5 * max_width / px[1]).ceil() as usize];
@@ -50,7 +51,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         u0.saturating_sub(reach[0])..u1.saturating_add(reach[0]).min(m[0]),
         v0.saturating_sub(reach[1])..v1.saturating_add(reach[1]).min(m[1]),
     );
-    let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).collect();
+    let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect();
     let measured: Vec<f64> = mask.iter().map(|&ij| image[ij]).collect();
     let fit = |w: f64| -> Result<(f64, f64)> {
         let f = sim.sampler()?.with_broadening(w)?.apply(&power)?;

@@ -283,12 +283,14 @@ pub fn suggest_focus_shift(
     let now = fisher(cost, phases, noise)?;
     let b = focal_fields(&cost.basis);
     let expected_focus_now = expected_focus(&error_covariance(&now, spread)?, &b)?;
-    let nv = cost.sampler().pixels[1].len();
+    let box_ = &cost.sampler().pixels;
+    let nv = box_[1].len();
+    let region = sim.focal_region().slice(ndarray::s![box_[0].clone(), box_[1].clone()]).to_owned();
     let mut candidates = Vec::with_capacity(shifts_m.len());
     for &shift in shifts_m {
         let offset = sim.focus_shift_phases(shift)?;
         let image = cost.predicted_image(phases, &offset)?;
-        let mask: Vec<usize> = mask_pixels(&image, sim.mask_fraction).iter().map(|&(i, j)| i * nv + j).collect();
+        let mask: Vec<usize> = mask_pixels(&image, sim.mask_fraction, &region).iter().map(|&(i, j)| i * nv + j).collect();
         let added = information(&image_jacobian(cost, phases, &offset, &mask)?, noise);
         let expected = expected_focus(&error_covariance(&(&now + &added), spread)?, &b)?;
         candidates.push(Candidate { shift, expected_focus: expected });

@@ -1,6 +1,7 @@
 //! Homogeneous materials and the acoustic properties at a point.
 
 use crate::error::{require_in_range, require_non_negative, require_positive, Result};
+use crate::physics::tissue::MrResponse;
 
 /// Nepers per decibel: 1 dB = ln(10)/20 Np.
 pub const NP_PER_DB: f64 = std::f64::consts::LN_10 / 20.0;
@@ -36,12 +37,16 @@ pub struct Material {
     pub attenuation_db_cm_mhz: f64,
     /// Frequency exponent y of the power law (1 = linear).
     pub attenuation_power: f64,
+    /// How the material shows in MR-ARFI images (default: by its sound speed,
+    /// [`MrResponse::for_sound_speed`]).
+    pub mr: MrResponse,
 }
 
 impl Material {
     /// Validates the acoustic parameters.
     pub fn new(name: &str, sound_speed: f64, density: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
-        let m = Material { name: name.to_string(), sound_speed, density, attenuation_db_cm_mhz, attenuation_power: 1.0 };
+        let mr = MrResponse::for_sound_speed(sound_speed);
+        let m = Material { name: name.to_string(), sound_speed, density, attenuation_db_cm_mhz, attenuation_power: 1.0, mr };
         m.validate()?;
         Ok(m)
     }
@@ -53,7 +58,7 @@ impl Material {
         require_positive(&p("density_kg_m3"), self.density)?;
         require_non_negative(&p("attenuation_db_cm_mhz"), self.attenuation_db_cm_mhz)?;
         require_non_negative(&p("attenuation_power"), self.attenuation_power)?;
-        Ok(())
+        self.mr.validate(&format!("material '{}'", self.name))
     }
 
     /// Amplitude attenuation coefficient alpha (Np/m) at `frequency` (Hz).

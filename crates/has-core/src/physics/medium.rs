@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use crate::physics::material::{attenuation_np_m, require_sound_speed};
 pub use crate::physics::material::{Material, Properties, NP_PER_DB};
+use crate::physics::tissue::MrResponse;
 
 /// The geometry of a region (metres, transducer frame).
 #[derive(Debug, Clone, PartialEq)]
@@ -339,6 +340,21 @@ impl Medium {
             }
         }
         self.materials[self.material_at(x, y, z)].properties(frequency)
+    }
+
+    /// How the tissue at a point shows in MR-ARFI images: the CT's class where it holds tissue,
+    /// else the material's (a voxel map's voxel by its sound speed,
+    /// [`MrResponse::for_sound_speed`]).
+    pub fn mr_response_at(&self, x: f64, y: f64, z: f64) -> MrResponse {
+        if let Some(r) = self.ct.as_ref().and_then(|ct| ct.mr_response_at([x, y, z])) {
+            return r;
+        }
+        if let Some(v) = &self.voxels {
+            if let Some(i) = v.index(x, y, z) {
+                return MrResponse::for_sound_speed(v.sound_speed[i]);
+            }
+        }
+        self.materials[self.material_at(x, y, z)].mr
     }
 
     /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).

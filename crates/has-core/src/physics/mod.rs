@@ -1,6 +1,6 @@
 //! The physics layer: the simulation grid, media (with CT-derived skulls), transducers and their steering, the source
 //! plane (Rayleigh projection of curved elements), the FFTs, Hybrid Angular Spectrum
-//! propagation, and the MR-ARFI forward model after the pressure field.
+//! propagation, and the MR-ARFI forward model after the pressure field with the tissues' MR response.
 
 pub mod aberration;
 pub mod ct;
@@ -13,4 +13,5 @@ pub mod propagation;
 pub mod rayleigh;
 pub mod source;
 pub mod steering;
+pub mod tissue;
 pub mod transducer;

@@ -2,13 +2,16 @@
 //! slice, Gaussian broadening (paper Eq. 2–3), area average onto MR pixels, amplitude, noise.
 //!
 //! Radiation force density (paper Eq. 1) with the plane-wave intensity `I = |p|² / (2·rho·c)`:
-//! `F = 2·alpha·I / c = alpha·|p|² / (rho·c²)` (N/m³). Everything after `|p|²` is linear, so the
-//! map from `|p|²` samples to the image is one fixed operator, [`MrSampler`].
+//! `F = 2·alpha·I / c = alpha·|p|² / (rho·c²)` (N/m³), weighted by each tissue's displacement
+//! scale (bone absorbs but does not move, [`crate::physics::tissue`]). Everything after `|p|²` is
+//! linear, so the map from `|p|²` samples to the image is one fixed operator, [`MrSampler`].
+//! Pixels without MR signal (mostly bone) are absent from images: NaN.
 
 use crate::error::{require_non_negative, require_positive, HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
 use crate::physics::propagation::Window;
+use crate::physics::tissue::IMAGED_FRACTION;
 use ndarray::Array2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -105,6 +108,16 @@ impl MrGeometry {
         s
     }
 
+    /// Pixels whose centres lie within `radius` (m) of `point` (m, transducer frame) in the image
+    /// plane (the distance along the slice normal is not counted).
+    pub fn pixels_near(&self, point: [f64; 3], radius: f64) -> Array2<bool> {
+        let ax = self.plane.axes();
+        Array2::from_shape_fn((self.matrix[0], self.matrix[1]), |(i, j)| {
+            let (du, dv) = (self.pixel_center(0, i) - point[ax[0]], self.pixel_center(1, j) - point[ax[1]]);
+            du * du + dv * dv <= radius * radius
+        })
+    }
+
     /// The 4 x 4 affine mapping NIfTI voxel indices of [`MrGeometry::volume_shape`] to the
     /// transducer frame in millimetres.
     pub fn affine_mm(&self) -> [[f64; 4]; 4] {
@@ -129,9 +142,12 @@ pub struct Broadening {
 }
 
 /// The linear map from `|p|²` samples in a grid window to MR pixels, without the amplitude:
-/// `image[u, v] = Σ_s w_s · Σ_{a,b} M_u[u, a] · M_v[v, b] · coef · |p|²`, where `coef = alpha / (rho·c²)`,
-/// `w_s` the slice profile, and `M = P·G` pixel averaging after Gaussian broadening along each
-/// image axis. A sampler may cover only a box of pixels ([`MrSampler::restrict`]).
+/// `image[u, v] = Σ_s w_s · Σ_{a,b} M_u[u, a] · M_v[v, b] · coef · |p|²`, where
+/// `coef = s_d · alpha / (rho·c²)` with the tissue's displacement scale `s_d`, `w_s` the slice
+/// profile, and `M = P·G` pixel averaging after Gaussian broadening along each image axis. A
+/// pixel is imaged where at least [`IMAGED_FRACTION`] of the part of it the window covers (over
+/// the slice) is tissue with MR signal. A sampler may cover only a box of pixels
+/// ([`MrSampler::restrict`]).
 #[derive(Debug, Clone)]
 pub struct MrSampler {
     /// The image geometry it samples onto.
@@ -142,8 +158,10 @@ pub struct MrSampler {
     pub window: Window,
     /// The pixels produced: ranges along u and v.
     pub pixels: [Range<usize>; 2],
-    /// Force coefficient `alpha / (rho·c²)` per window sample (plane, row, column).
+    /// Displacement coefficient `s_d·alpha / (rho·c²)` per window sample (plane, row, column).
     force_coefficient: Vec<f64>,
+    /// Which of the pixels produced are imaged (tissue with MR signal), `(n_u, n_v)`.
+    imaged: Array2<bool>,
     /// Slice-profile weights along the slice normal (sums to the covered fraction of the slice).
     slab_weights: Vec<f64>,
     /// Window sample coordinates along u and v (m) and their spacings.
@@ -201,15 +219,25 @@ impl MrSampler {
         }
         let window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
         let mut force_coefficient = Vec::with_capacity(window.len());
+        let mut signal = Vec::with_capacity(window.len());
         for n in window.planes.clone() {
             for j in window.rows.clone() {
                 for i in window.cols.clone() {
-                    let p = medium.properties_at(grid.x(i), grid.y(j), grid.z(n), frequency);
-                    force_coefficient.push(p.force_coefficient());
+                    let (x, y, z) = (grid.x(i), grid.y(j), grid.z(n));
+                    let tissue = medium.mr_response_at(x, y, z);
+                    force_coefficient.push(tissue.displacement_scale * medium.properties_at(x, y, z, frequency).force_coefficient());
+                    signal.push(if tissue.signal { 1.0 } else { 0.0 });
                 }
             }
         }
         let pixels = [0..geometry.matrix[0], 0..geometry.matrix[1]];
+        let averages = [0, 1].map(|k| {
+            let centres: Vec<f64> = pixels[k].clone().map(|i| geometry.pixel_center(k, i)).collect();
+            pixel_average(&centres, geometry.pixel_size()[k], &samples[k], spacing[k])
+        });
+        let cover = |q: &[f64]| averages[0].dot(&slab_map(&window, ax, &slab_weights, |s| q[s]).t()).dot(&averages[1].t());
+        let (with_signal, covered) = (cover(&signal), cover(&vec![1.0; window.len()]));
+        let imaged = ndarray::Zip::from(&with_signal).and(&covered).map_collect(|&s, &c| s >= IMAGED_FRACTION * c - 1e-12);
         let m = [
             axis_operator(geometry, 0, pixels[0].clone(), &samples[0], spacing[0], broadening.width, 0.0),
             axis_operator(geometry, 1, pixels[1].clone(), &samples[1], spacing[1], broadening.width, 0.0),
@@ -220,6 +248,7 @@ impl MrSampler {
             window,
             pixels,
             force_coefficient,
+            imaged,
             slab_weights,
             samples,
             spacing,
@@ -281,7 +310,15 @@ impl MrSampler {
         }
         s.window = Window { planes: ranges[2].clone(), rows: ranges[1].clone(), cols: ranges[0].clone() };
         s.force_coefficient = self.window.extract(&self.force_coefficient, &s.window);
+        let (u0, v0) = (self.pixels[0].start, self.pixels[1].start);
+        s.imaged =
+            self.imaged.slice(ndarray::s![wanted[0].start - u0..wanted[0].end - u0, wanted[1].start - v0..wanted[1].end - v0]).to_owned();
         Ok(s)
+    }
+
+    /// Which pixels of [`MrSampler::pixels`] are imaged (tissue with MR signal), `(n_u, n_v)`.
+    pub fn imaged(&self) -> &Array2<bool> {
+        &self.imaged
     }
 
     /// The image `(n_u, n_v)` of force density (N/m³), broadened and pixel-averaged, from the
@@ -298,21 +335,7 @@ impl MrSampler {
         if q.len() != w.len() {
             return Err(HasError::invalid("window", format!("has {} samples, expected {}", q.len(), w.len())));
         }
-        let ax = self.geometry.plane.axes();
-        // Collapse the slice-normal axis into a 2-D map indexed [b][a] (v-axis, u-axis samples).
-        let dims = [w.cols.len(), w.rows.len(), w.planes.len()]; // sizes along x, y, z
-        let (na, nb) = (dims[ax[0]], dims[ax[1]]);
-        let mut map = Array2::<f64>::zeros((nb, na));
-        for n in 0..dims[2] {
-            for j in 0..dims[1] {
-                for i in 0..dims[0] {
-                    let s = (n * dims[1] + j) * dims[0] + i;
-                    let idx = [i, j, n];
-                    let val = q[s] * self.force_coefficient[s] * self.slab_weights[idx[ax[2]]];
-                    map[[idx[ax[1]], idx[ax[0]]]] += val;
-                }
-            }
-        }
+        let map = slab_map(w, self.geometry.plane.axes(), &self.slab_weights, |s| q[s] * self.force_coefficient[s]);
         // image[u, v] = Σ_a Σ_b M_u[u, a] · map[b, a] · M_v[v, b]
         Ok(self.m[0].dot(&map.t()).dot(&self.m[1].t()))
     }
@@ -341,6 +364,33 @@ impl MrSampler {
         }
         Ok(q)
     }
+}
+
+/// The window samples `f(s)` collapsed along the slice normal with the slice profile `w`: a map
+/// indexed `[b][a]` (samples along image axes v and u).
+fn slab_map(w: &Window, ax: [usize; 3], slab_weights: &[f64], f: impl Fn(usize) -> f64) -> Array2<f64> {
+    let dims = [w.cols.len(), w.rows.len(), w.planes.len()]; // sizes along x, y, z
+    let mut map = Array2::<f64>::zeros((dims[ax[1]], dims[ax[0]]));
+    for n in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let s = (n * dims[1] + j) * dims[0] + i;
+                let idx = [i, j, n];
+                map[[idx[ax[1]], idx[ax[0]]]] += f(s) * slab_weights[idx[ax[2]]];
+            }
+        }
+    }
+    map
+}
+
+/// The imaged pixel with the largest value among `region` (pixels without signal, NaN, are
+/// skipped): its index and value; `None` when the region holds no imaged pixel.
+pub fn focal_peak(image: &Array2<f64>, region: &Array2<bool>) -> Option<((usize, usize), f64)> {
+    image
+        .indexed_iter()
+        .filter(|(ij, v)| v.is_finite() && region.get(*ij).copied().unwrap_or(false))
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(ij, v)| (ij, *v))
 }
 
 /// `M = P·G` along image axis `k`: Gaussian broadening on the samples, then the area average over
@@ -417,7 +467,8 @@ pub fn add_noise(image: &mut Array2<f64>, sigma: f64, seed: u64) -> Result<()> {
 /// differences of neighbouring pixels along u (the standard deviation for white Gaussian noise;
 /// differences cancel a constant or slowly varying background phase) over the pixel pairs
 /// outside `exclude` (u and v ranges around the focus), or over the whole image when fewer than
-/// 50 pairs remain (the median ignores the few pairs on the focus).
+/// 50 pairs remain (the median ignores the few pairs on the focus). Pairs with a pixel without
+/// signal (NaN) are skipped.
 pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2]) -> f64 {
     let (nu, nv) = image.dim();
     let pairs = |outside: bool| -> Vec<f64> {
@@ -425,8 +476,9 @@ pub fn noise_floor(image: &Array2<f64>, exclude: &[Range<usize>; 2]) -> f64 {
         for j in 0..nv {
             for i in 0..nu.saturating_sub(1) {
                 let inside = |i: usize| exclude[0].contains(&i) && exclude[1].contains(&j);
-                if !outside || !(inside(i) || inside(i + 1)) {
-                    d.push(image[[i + 1, j]] - image[[i, j]]);
+                let diff = image[[i + 1, j]] - image[[i, j]];
+                if diff.is_finite() && (!outside || !(inside(i) || inside(i + 1))) {
+                    d.push(diff);
                 }
             }
         }
@@ -495,6 +547,33 @@ mod tests {
         assert_eq!(g.volume_shape(), [128, 96, 1]);
         let g = MrGeometry { plane: MrPlane::Yz, ..g };
         assert_eq!(g.volume_shape(), [1, 128, 96]);
+    }
+
+    #[test]
+    fn the_noise_floor_skips_pixels_without_signal() {
+        // Seeded noise of 0.02 rad on 128 x 96 pixels, a third of them NaN (no signal): the floor
+        // comes from the imaged pairs alone (with NaN pairs it would be NaN); 1.4826·MAD over
+        // ~8000 pairs scatters by about 1.5 %.
+        let mut a = Array2::zeros((128, 96));
+        add_noise(&mut a, 0.02, 11).unwrap();
+        a.slice_mut(ndarray::s![.., ..32]).fill(f64::NAN);
+        let floor = noise_floor(&a, &[0..0, 0..0]);
+        assert!((floor - 0.02).abs() < 0.001, "{floor}");
+    }
+
+    #[test]
+    fn focal_peak_looks_only_near_the_target_among_imaged_pixels() {
+        let g = MrGeometry { plane: MrPlane::Xy, center: [0.0, 0.0, 0.085], fov: [0.18, 0.135], matrix: [128, 96], slice_thickness: 3e-3 };
+        let region = g.pixels_near([0.01, 0.0, 0.085], 0.02);
+        let mut image = Array2::zeros((128, 96));
+        image[[10, 10]] = 5.0; // a hot pixel 70 mm away: a skull ring, scalp
+        image[[71, 48]] = f64::NAN; // the brightest place near the target has no signal
+        image[[72, 48]] = 0.6;
+        assert_eq!(focal_peak(&image, &region), Some(((72, 48), 0.6)));
+        // 20 mm about (10, 0) mm: pixel 71 is centred at x = 10.55 mm, pixel 85 at 30.2 mm.
+        assert!(region[[71, 48]] && !region[[85, 48]] && !region[[10, 10]]);
+        image.fill(f64::NAN);
+        assert_eq!(focal_peak(&image, &region), None);
     }
 
     #[test]

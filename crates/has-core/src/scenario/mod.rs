@@ -158,6 +158,14 @@ pub struct MaterialSpec {
     /// Exponent y of `a0·f^y` (default 1: linear in frequency).
     #[serde(default = "d::one")]
     pub attenuation_power: f64,
+    /// Whether the material gives MR signal (default: false for bone-like materials, sound speed
+    /// from 1800 m/s on; true otherwise). Pixels without signal are absent (NaN) from MR-ARFI images.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mr_signal: Option<bool>,
+    /// Displacement per unit radiation force relative to soft tissue (default: 0 for bone-like
+    /// materials, 1 otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub displacement_scale: Option<f64>,
 }
 
 /// `[medium]`.
@@ -284,6 +292,11 @@ pub struct ArfiSpec {
     /// maximum that are connected to it (default 0.05).
     #[serde(default = "d::mask")]
     pub mask_fraction: f64,
+    /// Radius (mm, in the image plane) around the target within which an image's focal maximum
+    /// is sought: the focal ARFI, the seed of the focal zone and the ideal amplitude (default 20).
+    /// Keeps the skull, scalp or a far side lobe from standing in for the focus.
+    #[serde(default = "d::focal_search")]
+    pub focal_search_radius_mm: f64,
     /// Standard deviation of the Gaussian noise on the ARFI phase image, rad (default 0.02).
     #[serde(default = "d::noise")]
     pub noise_rad: f64,
@@ -300,6 +313,7 @@ impl Default for ArfiSpec {
         ArfiSpec {
             broadening_width_mm: d::width(),
             mask_fraction: d::mask(),
+            focal_search_radius_mm: d::focal_search(),
             noise_rad: d::noise(),
             ideal_focal_phase_rad: d::focal_phase(),
             amplitude_rad_m3_per_n: None,
@@ -350,6 +364,9 @@ mod d {
     pub fn noise() -> f64 {
         0.02
     }
+    pub fn focal_search() -> f64 {
+        20.0
+    }
     pub fn focal_phase() -> f64 {
         0.6
     }
@@ -383,6 +400,8 @@ fn water() -> MaterialSpec {
         density_kg_m3: 1000.0,
         attenuation_db_cm_mhz: 0.0,
         attenuation_power: 1.0,
+        mr_signal: None,
+        displacement_scale: None,
     }
 }
 
@@ -398,6 +417,8 @@ fn phantom_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
             density_kg_m3: 1040.0,
             attenuation_db_cm_mhz: 0.46,
             attenuation_power: 1.0,
+            mr_signal: None,
+            displacement_scale: None,
         },
     ];
     let regions = vec![RegionSpec {

@@ -5,6 +5,7 @@ use super::{GridSpec, Scenario, TransducerSpec};
 use crate::error::{require_non_negative, require_positive, HasError, Result};
 use crate::physics::medium::{Material, Medium, Region, Shape};
 use crate::physics::mr::{MrGeometry, MrPlane};
+use crate::physics::tissue::MrResponse;
 use crate::physics::transducer::{cap_depth, ElementShape, Transducer};
 
 /// The scenario in SI units, validated.
@@ -35,6 +36,9 @@ pub struct Resolved {
     /// Focal-zone level (paper Eq. 4): fraction of each image's maximum above which connected
     /// pixels enter the fits.
     pub mask_fraction: f64,
+    /// Radius (m, in the image plane) around the target within which an image's focal maximum is
+    /// sought.
+    pub focal_search_radius: f64,
     /// Standard deviation of the Gaussian noise on ARFI phase images, rad.
     pub noise: f64,
     /// Focal ARFI phase of the ideal (unaberrated) beam, rad; sets the amplitude unless given.
@@ -74,6 +78,7 @@ impl Scenario {
         if !(a.mask_fraction.is_finite() && a.mask_fraction > 0.0 && a.mask_fraction < 1.0) {
             return Err(HasError::invalid("arfi.mask_fraction", format!("must lie in (0, 1), got {}", a.mask_fraction)));
         }
+        require_positive("arfi.focal_search_radius_mm", a.focal_search_radius_mm)?;
         if let Some(v) = a.amplitude_rad_m3_per_n {
             require_positive("arfi.amplitude_rad_m3_per_n", v)?;
         }
@@ -104,6 +109,7 @@ impl Scenario {
             mr,
             broadening_width: a.broadening_width_mm * 1e-3,
             mask_fraction: a.mask_fraction,
+            focal_search_radius: a.focal_search_radius_mm * 1e-3,
             noise: a.noise_rad,
             ideal_focal_phase: a.ideal_focal_phase_rad,
             amplitude: a.amplitude_rad_m3_per_n,
@@ -123,12 +129,17 @@ impl Scenario {
             if materials[..i].iter().any(|o| o.name == m.name) {
                 return Err(HasError::invalid("material.name", format!("'{}' is given twice", m.name)));
             }
+            let default_mr = MrResponse::for_sound_speed(m.sound_speed_m_s);
             let mut mat = Material {
                 name: m.name.clone(),
                 sound_speed: m.sound_speed_m_s,
                 density: m.density_kg_m3,
                 attenuation_db_cm_mhz: m.attenuation_db_cm_mhz,
                 attenuation_power: m.attenuation_power,
+                mr: MrResponse {
+                    signal: m.mr_signal.unwrap_or(default_mr.signal),
+                    displacement_scale: m.displacement_scale.unwrap_or(default_mr.displacement_scale),
+                },
             };
             mat.validate()?;
             mat.name = m.name.clone();

@@ -3,6 +3,7 @@
 
 use super::{ArfiKernel, HybridCost, Term};
 use crate::error::{HasError, Result};
+use crate::physics::mr::focal_peak;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use std::ops::Range;
@@ -37,35 +38,39 @@ pub const MAX_KERNEL_GROUPS: usize = 256;
 /// enough that squared residuals summed over every pixel stay finite.
 pub const MAX_PHASE: f64 = 1e6;
 
-/// Checks a measured image against the scenario's MR geometry.
+/// Checks a measured image against the scenario's MR geometry: NaN marks a pixel without MR
+/// signal (left out of every fit); other values must be finite MR phases, with a positive focal
+/// maximum near the target ([`Simulation::focal_arfi`]).
 pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
     let m = sim.mr.matrix;
     if image.dim() != (m[0], m[1]) {
         return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
     }
-    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
-        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v}")));
+    if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| v.is_infinite()) {
+        return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v} (NaN marks a pixel without signal; infinity is no phase)")));
     }
     if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| v.abs() > MAX_PHASE) {
         return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v:e} rad, beyond any MR phase (|phase| <= {MAX_PHASE} rad)")));
     }
-    if !(image.iter().copied().fold(f64::MIN, f64::max) > 0.0) {
-        return Err(HasError::invalid(name, "has no positive pixel (all-zero or inverted image?)"));
+    let (_, peak) = sim.focal_arfi(image, name)?;
+    if !(peak > 0.0) {
+        return Err(HasError::invalid(name, "has no positive pixel near the target (all-zero or inverted image?)"));
     }
     Ok(())
 }
 
-/// The focal zone (paper Eq. 4): the pixels above `fraction` of the image maximum that are
-/// connected (4-neighbours) to the maximum. Isolated noise spikes elsewhere are left out. Both
-/// are measured from the image's median (its background level: the focal zone covers a small
-/// part of the image), so that a background phase offset does not flood the mask over the
-/// background (with zero background: `fraction` of the maximum).
-pub fn mask_pixels(image: &Array2<f64>, fraction: f64) -> Vec<(usize, usize)> {
+/// The focal zone (paper Eq. 4): the pixels above `fraction` of the image's focal maximum (its
+/// largest imaged pixel within `region`, the pixels near the target) that are connected
+/// (4-neighbours) to it. Isolated noise spikes elsewhere and pixels without signal (NaN) are
+/// left out. Both are measured from the image's median (its background level: the focal zone
+/// covers a small part of the image), so that a background phase offset does not flood the mask
+/// over the background (with zero background: `fraction` of the maximum).
+pub fn mask_pixels(image: &Array2<f64>, fraction: f64, region: &Array2<bool>) -> Vec<(usize, usize)> {
     let (nu, nv) = image.dim();
-    let Some((peak, &max)) = image.indexed_iter().max_by(|a, b| a.1.total_cmp(b.1)) else {
+    let Some((peak, max)) = focal_peak(image, region) else {
         return vec![];
     };
-    let mut values: Vec<f64> = image.iter().copied().collect();
+    let mut values: Vec<f64> = image.iter().copied().filter(|v| v.is_finite()).collect();
     let mid = values.len() / 2;
     let background = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
     let level = background + fraction * (max - background);
@@ -138,12 +143,13 @@ pub fn masks_and_box(sim: &Simulation, measurements: &[Measurement], mask_fracti
         return Err(HasError::invalid("images", "need at least one image"));
     }
     let m = sim.mr.matrix;
+    let region = sim.focal_region();
     let masks: Vec<Vec<(usize, usize)>> = measurements
         .iter()
         .enumerate()
         .map(|(k, meas)| {
             check_image(sim, &meas.image, &format!("image[{k}]"))?;
-            Ok(mask_pixels(&meas.image, mask_fraction))
+            Ok(mask_pixels(&meas.image, mask_fraction, &region))
         })
         .collect::<Result<_>>()?;
     let all = masks.iter().flatten();
@@ -167,4 +173,24 @@ fn group_constant(per_element: &[f64], groups: &[usize], g: usize) -> Option<Vec
         }
     }
     value.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_focal_zone_grows_from_the_focus_near_the_target_over_imaged_pixels() {
+        // A focus of 0.6 rad at (20, 20) with a shoulder, a brighter spot far away (outside the
+        // region: skull or scalp) and a NaN pixel inside the shoulder: the zone is the focus and
+        // its shoulder less the NaN pixel, at 5 % of the focal maximum.
+        let mut image = Array2::zeros((40, 40));
+        image[[20, 20]] = 0.6;
+        image[[21, 20]] = 0.3;
+        image[[19, 20]] = f64::NAN;
+        image[[2, 2]] = 3.0;
+        image[[3, 2]] = 2.0;
+        let region = Array2::from_shape_fn((40, 40), |(i, j)| (i as f64 - 20.0).hypot(j as f64 - 20.0) < 10.0);
+        assert_eq!(mask_pixels(&image, 0.05, &region), vec![(20, 20), (21, 20)]);
+    }
 }

@@ -194,8 +194,8 @@ impl<'a> Forward<'a> {
         img
     }
 
-    /// Sum of squared differences over every pixel of every image (infinite when the model
-    /// cannot be evaluated).
+    /// Sum of squared differences over every imaged pixel of every image (infinite when the
+    /// model cannot be evaluated).
     pub(super) fn cost(&self, e: &Effects, measured: &[Array2<f64>]) -> f64 {
         match self.images(e) {
             Ok(imgs) => sum_squares(&imgs, measured),
@@ -222,7 +222,7 @@ impl<'a> Forward<'a> {
         let mut a = vec![vec![0.0; m + 1]; m];
         for (img, (f, d)) in force.iter().zip(measured).enumerate() {
             let fixed = self.compose(f.clone(), &base);
-            for ((i, j), y) in d.indexed_iter() {
+            for ((i, j), y) in d.indexed_iter().filter(|(_, y)| y.is_finite()) {
                 let r = y - fixed[[i, j]];
                 let mut cols = [0.0; 4];
                 for (c, &k) in cols.iter_mut().zip(linear) {
@@ -250,8 +250,10 @@ impl<'a> Forward<'a> {
     }
 }
 
+/// `Σ (model - measured)²` over the imaged pixels (measured pixels without signal, NaN, are left
+/// out).
 fn sum_squares(model: &[Array2<f64>], measured: &[Array2<f64>]) -> f64 {
-    model.iter().zip(measured).map(|(m, d)| m.iter().zip(d).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sum()
+    model.iter().zip(measured).map(|(m, d)| m.iter().zip(d).filter(|(_, b)| b.is_finite()).map(|(a, b)| (a - b).powi(2)).sum::<f64>()).sum()
 }
 
 /// The MR window extended by [`SLICE_REACH_MM`] plus the slice half-thickness and a sample on each

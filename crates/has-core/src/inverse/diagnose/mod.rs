@@ -142,7 +142,7 @@ pub struct Diagnosis {
     pub cost_final: f64,
     /// Noise standard deviation from the image backgrounds (rad, RMS over the images).
     pub noise_floor: f64,
-    /// Pixels over all images.
+    /// Imaged pixels (with MR signal) over all images.
     pub n_pixels: usize,
     /// The model's image of each measurement before the first step (rad).
     pub models_initial: Vec<Array2<f64>>,
@@ -217,7 +217,7 @@ pub fn diagnose(
     let knowns: Vec<Vec<f64>> = measurements.iter().map(|m| m.known.clone()).collect();
     let measured: Vec<Array2<f64>> = measurements.iter().map(|m| m.image.clone()).collect();
     let forward = Forward::new(sim, &knowns)?;
-    let n: usize = measured.iter().map(|m| m.len()).sum();
+    let n: usize = measured.iter().map(|m| m.iter().filter(|v| v.is_finite()).count()).sum();
     let initial = Effects::none(sim);
     let models_initial = forward.images(&initial)?;
     let cost_initial = forward.cost(&initial, &measured);

@@ -140,12 +140,22 @@ impl Estimate {
     }
 }
 
+/// Misfit above which an unexplained residual counts as a model mismatch, however significant
+/// statistically: below it the residual the model leaves has an RMS under √0.2 ≈ 0.45 of the
+/// noise, and acts on the fitted phases at most as extra noise of that RMS would (their error
+/// grows by at most √1.2 - 1 ≈ 10 %). Real images always hold some such residual (a CT's
+/// transmissions, a slightly wrong width), and with thousands of pixels the chi² test alone
+/// would flag it every time.
+pub const MATERIAL_MISFIT: f64 = 1.2;
+
 /// The misfit of an image cost `fit` (rad²) over `n` pixels with `k` parameters fitted and
-/// noise `noise` (rad, at least 1e-4): `J / (n·sigma²)`, and whether `J` lies above the 95 %
-/// point of `sigma²·chi²(n - k)` (the model cannot explain the images).
+/// noise `noise` (rad, at least 1e-4): `J / (n·sigma²)`, and whether the model cannot explain
+/// the images: `J` above the 95 % point of `sigma²·chi²(n - k)` and the misfit above
+/// [`MATERIAL_MISFIT`].
 pub fn misfit(fit: f64, n: usize, k: usize, noise: f64) -> (f64, bool) {
     let sigma2 = noise.max(MIN_NOISE_RAD).powi(2);
-    (fit / (n as f64 * sigma2), fit > sigma2 * chi2_95(n.saturating_sub(k).max(1)))
+    let misfit = fit / (n as f64 * sigma2);
+    (misfit, fit > sigma2 * chi2_95(n.saturating_sub(k).max(1)) && misfit > MATERIAL_MISFIT)
 }
 
 /// The largest value of the kernel's image (the focal ARFI) for group phases.

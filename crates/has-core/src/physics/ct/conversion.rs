@@ -9,10 +9,12 @@
 //! - `H ≥ bone_from_hu` is bone, converted by the chosen [`BoneModel`].
 //!
 //! As in the planning tools that use these relations, the conversion acts on bone only; soft tissue
-//! and coupling are given materials.
+//! and coupling are given materials. In MR-ARFI images bone is dark and still, soft tissue has its
+//! material's response, and coupling voxels the scenario's ([`HuConversion::mr_response`]).
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
 use crate::physics::material::{attenuation_np_m, Material, Properties};
+use crate::physics::tissue::MrResponse;
 
 /// Hounsfield units a CT may hold: below −1100 or above 4000 a value is not a calibrated HU of
 /// tissue (air is −1000, the densest cortical bone about 3000); metal implants are out of scope.
@@ -130,6 +132,9 @@ pub struct HuConversion {
     pub coupling_below_hu: f64,
     /// From this HU on a voxel is bone (default 300).
     pub bone_from_hu: f64,
+    /// Whether bone voxels take the soft tissue's acoustic properties (the head without its
+    /// skull, [`HuConversion::without_bone`]); they stay bone in MR images either way.
+    pub bone_as_soft_tissue: bool,
     /// Soft tissue between the two thresholds (default: brain, 1546 m/s, 1040 kg/m³, 0.6
     /// dB/cm/MHz; Duck, Physical Properties of Tissue, 1990).
     pub soft_tissue: Material,
@@ -160,6 +165,7 @@ impl HuConversion {
             bone,
             coupling_below_hu: -500.0,
             bone_from_hu: 300.0,
+            bone_as_soft_tissue: false,
             soft_tissue: Material::new("brain", 1546.0, 1040.0, 0.6)?,
             porosity_attenuation: Porosity::default(),
         })
@@ -171,7 +177,7 @@ impl HuConversion {
         let (lo, hi) = HU_RANGE;
         require_in_range("ct.coupling_below_hu", self.coupling_below_hu, lo, hi, "calibrated HU")?;
         if self.bone_from_hu != f64::INFINITY {
-            // (infinite: no bone, see `without_bone`)
+            // (infinite: a CT read without bone)
             require_in_range("ct.bone_from_hu", self.bone_from_hu, lo, hi, "calibrated HU")?;
         }
         if self.bone_from_hu <= self.coupling_below_hu {
@@ -194,7 +200,7 @@ impl HuConversion {
         if hu < self.coupling_below_hu {
             return None;
         }
-        if hu < self.bone_from_hu {
+        if hu < self.bone_from_hu || self.bone_as_soft_tissue {
             return Some(self.soft_tissue.properties(frequency));
         }
         let (sound_speed, density, a0) = match &self.bone {
@@ -218,12 +224,25 @@ impl HuConversion {
     /// The same conversion with bone read as soft tissue: the head without its skull, the
     /// reference of a CT-based prediction.
     pub fn without_bone(&self) -> Self {
-        HuConversion { bone_from_hu: f64::INFINITY, ..self.clone() }
+        HuConversion { bone_as_soft_tissue: true, ..self.clone() }
+    }
+
+    /// How a voxel of `hu` shows in MR-ARFI images; `None` for the coupling medium (the
+    /// scenario's materials apply there). Bone is bone here also in [`HuConversion::without_bone`]:
+    /// the model of the head without its skull images what a scanner images.
+    pub fn mr_response(&self, hu: f64) -> Option<MrResponse> {
+        if hu < self.coupling_below_hu {
+            None
+        } else if hu < self.bone_from_hu {
+            Some(self.soft_tissue.mr)
+        } else {
+            Some(MrResponse::BONE)
+        }
     }
 
     /// The lowest sound speed a voxel can get (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
-        let bone = if self.bone_from_hu.is_finite() {
+        let bone = if self.bone_from_hu.is_finite() && !self.bone_as_soft_tissue {
             self.properties(self.bone_from_hu, 1e6).map_or(f64::INFINITY, |p| p.sound_speed)
         } else {
             f64::INFINITY
@@ -260,6 +279,22 @@ mod tests {
         // Linear in frequency: half the Np/m at 500 kHz.
         let (a1, a05) = (c.properties(1000.0, 1e6).unwrap().attenuation, c.properties(1000.0, 5e5).unwrap().attenuation);
         assert!((a05 / a1 - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bone_stays_dark_and_still_in_mr_images_when_read_as_soft_tissue() {
+        // The head without its skull has the soft tissue's acoustics in the bone voxels, but a
+        // scanner still images bone there: the model of an estimate with a CT prior must leave
+        // the same pixels out as the patient's images do.
+        let c = HuConversion::named("aubry2003").unwrap();
+        let soft = c.without_bone();
+        assert!(close(tissue(&soft, 1000.0), (1546.0, 1040.0, 0.6)));
+        for conversion in [&c, &soft] {
+            assert_eq!(conversion.mr_response(1000.0), Some(MrResponse::BONE));
+            assert_eq!(conversion.mr_response(40.0), Some(MrResponse::SOFT));
+            assert_eq!(conversion.mr_response(-900.0), None);
+        }
+        assert_eq!(soft.min_sound_speed(), 1546.0);
     }
 
     #[test]

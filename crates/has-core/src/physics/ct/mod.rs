@@ -24,6 +24,7 @@ use crate::error::{HasError, Result};
 use crate::nifti::Volume;
 use crate::physics::grid::Grid;
 use crate::physics::material::Properties;
+use crate::physics::tissue::MrResponse;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -202,6 +203,11 @@ impl CtMedium {
     /// (outside the CT, or a coupling voxel).
     pub fn properties_at(&self, p: [f64; 3], frequency: f64) -> Option<Properties> {
         self.conversion.properties(self.hu_at(p)?, frequency)
+    }
+
+    /// The MR-ARFI response at a point (m), `None` where the scenario's own medium applies.
+    pub fn mr_response_at(&self, p: [f64; 3]) -> Option<MrResponse> {
+        self.conversion.mr_response(self.hu_at(p)?)
     }
 
     /// Sample points per axis for a cell of `size` (m); a cell up to 0.1 % wider than a voxel

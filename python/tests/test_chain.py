@@ -1,0 +1,109 @@
+"""The clinical chain through a head, run as a user runs it (README, tutorial step 10): a head CT,
+``arfi predict``, MR-ARFI images of a patient whose skull the CT gets wrong, ``arfi estimate`` with
+the prediction as prior and its transmission, and the corrected focus through the patient's skull.
+
+The patient: bone 10 % faster than the CT conversion says and the head 1.5 mm off its
+registration, imaged with the reference steering (the prediction's), three images (in focus and
+defocused by ±5 mm) at 0.02 rad noise. Scored exactly at the target by the patient's own
+prediction (``Prediction.pressure_with``: the sum of each element's response through the real
+skull), as a fraction of the most any phases give there.
+
+Tolerances: the images' 0.02 rad noise moves a per-element estimate by a few hundredths of a
+radian around the prior; that costs under 0.01 of the focus (measured 0.003 at most over the seeds
+here), so the estimate must never fall more than 0.01 below the prediction alone. 0.95 of the
+optimum is the issue's floor; the 220 kHz phantom's predictions reach 0.99.
+
+1 mm CT voxels (clinical CTs have 0.5-1 mm) and 256 elements keep a seed at about 35 s; ``ARFI_FULL_SWEEPS=1`` runs five
+seeds instead of two.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import nibabel as nib
+import numpy as np
+import pytest
+
+from arfi.cli import main
+from arfi.prediction import predict
+from arfi.scenario import Scenario
+from arfi.simulation import Simulation
+
+SEEDS = [0, 1, 2, 3, 4] if os.environ.get("ARFI_FULL_SWEEPS") == "1" else [0, 3]
+
+
+def head_scenarios(d: Path, seed: int) -> None:
+    """Writes the tutorial's three scenarios for phantom ``seed`` at 220 kHz, 256 elements, the
+    target at (10, 0, 140) mm: ``head.toml`` (the CT as read), ``patient.toml`` (the real head) and
+    ``model.toml`` (the estimate's model: the head without its skull)."""
+    assert main(["phantom", "--out", str(d / "head_ct.nii.gz"), "--scenario-out", str(d / "head.toml"), "--array",
+                 "hemisphere", "--thickness-mm", "4", "12", "--voxel-mm", "1", "--seed", str(seed)]) == 0
+    text = (d / "head.toml").read_text().replace("elements = 1024", "elements = 256") \
+        .replace("frequency_hz = 650000.0", "frequency_hz = 220000.0") \
+        .replace("position_mm = [0.0, 0.0, 150.0]", "position_mm = [10.0, 0.0, 140.0]")
+    (d / "head.toml").write_text(text)
+    (d / "patient.toml").write_text(text.replace("[ct]\n", "[ct]\nbone_sound_speed_m_s = 3190.0\nsteer_without_bone = true\n")
+                                    .replace("[[1, 0, 0, 0]", "[[1, 0, 0, 1.5]"))
+    (d / "model.toml").write_text(text.replace("[ct]\n", "[ct]\nwithout_bone = true\n"))
+
+
+def run_chain(d: Path, seed: int) -> dict[str, float]:
+    """The tutorial's commands; returns the fractions of the optimum and the estimate's JSON."""
+    head_scenarios(d, seed)
+    f = lambda name: str(d / name)  # noqa: E731
+    assert main(["predict", "--scenario", f("head.toml"), "--out", f("prior.npy"), "--json", f("prediction.json")]) == 0
+    for k, shift in enumerate([None, "5", "-5"]):
+        extra = [] if shift is None else ["--focus-shift-mm", "0", "0", shift]
+        assert main(["simulate", "--scenario", f("patient.toml"), *extra, "--noise-rad", "0.02", "--seed", str(k + 1),
+                     "--out", f(f"a{k}.nii.gz")]) == 0
+    assert main(["estimate", "--scenario", f("model.toml"), "--groups", "256", "--image", f("a0.nii.gz"), "--image",
+                 f("a1.nii.gz"), "--image", f("a2.nii.gz"), "--prior", f("prior.npy"), "--prior-std-rad", "0.15",
+                 "--prior-transmission", f("prediction.json"), "--fit-nuisance", "amplitude", "--out-phases",
+                 f("estimate.npy"), "--json", f("estimate.json")]) == 0
+    truth = predict(Scenario.load(d / "patient.toml"))
+    fraction = lambda phases: truth.pressure_with(phases) / truth.optimal_pa  # noqa: E731
+    return {"uncorrected": fraction(np.zeros(256)), "prediction": fraction(np.load(d / "prior.npy")),
+            "estimate": fraction(np.load(d / "estimate.npy")), **json.loads((d / "estimate.json").read_text())}
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_the_chain_through_a_head_corrects_as_documented(tmp_path, capsys, seed):
+    r = run_chain(tmp_path, seed)
+    line = (f"seed {seed}: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, estimate "
+            f"{r['estimate']:.3f} of the optimum; misfit {r['misfit']:.2f}, scale {r['nuisance']['scale']:.3f}")
+    out = capsys.readouterr().out
+    print(line)
+    # The images were fitted on the brain around the target, at their own scale: the skull's loss
+    # is in the images already (both are calibrated at their own ideal focus), so the fitted
+    # scale is about 1 (a model showing bone's force as displacement fitted the skull ring at a
+    # scale of about 100).
+    assert 0.7 < r["nuisance"]["scale"] < 1.4, line
+    assert not r["model_mismatch"] and r["recommended"] == "estimate", line
+    assert r["estimate"] >= 0.95 and r["estimate"] >= r["prediction"] - 0.01, line
+    # `simulate` reports the focus at the target, not a hotter place in the skull or scalp.
+    for reported in [ln for ln in out.splitlines() if ln.startswith("simulate:")]:
+        x, y, _ = (float(v) for v in reported.split(" at (")[1].split(")")[0].split(","))
+        assert np.hypot(x - 10.0, y) <= 8.0, reported
+
+
+def test_images_through_a_head_leave_the_bone_out(tmp_path, capsys):
+    # The patient's in-focus image: bone pixels are NaN in the NIfTI, the focal maximum lies at the
+    # target, and the brain around it is imaged. The model of the head without its skull leaves out
+    # the same pixels as the head it was read from (bone is bone to the scanner whatever the
+    # model's acoustics).
+    head_scenarios(tmp_path, 1)
+    image = tmp_path / "a.nii.gz"
+    assert main(["simulate", "--scenario", str(tmp_path / "patient.toml"), "--noise-rad", "0", "--out", str(image)]) == 0
+    data = np.squeeze(np.asarray(nib.load(str(image)).get_fdata()))
+    patient = Simulation(Scenario.load(tmp_path / "patient.toml"))
+    dark = ~patient.imaged
+    assert dark.sum() > 100 and np.all(np.isnan(data[dark])) and np.all(np.isfinite(data[~dark]))
+    as_read, model = (Simulation(Scenario.load(tmp_path / name)) for name in ("head.toml", "model.toml"))
+    assert np.array_equal(model.imaged, as_read.imaged) and not as_read.imaged.all()
+    value, (i, j) = patient.focal_arfi(data)
+    x, y = (patient.mr_affine_mm @ np.array([i, j, 0, 1.0]))[:2]
+    assert value == pytest.approx(0.6, abs=1e-6) and np.hypot(x - 10.0, y) < 4.0, (value, x, y)
+    assert "focal ARFI phase 0.600 rad" in capsys.readouterr().out
