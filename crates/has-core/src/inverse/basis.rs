@@ -538,9 +538,9 @@ impl BasisCache {
     }
 
     /// [`build_element_model`] on the kept basis when it covers the images' pixel box, set up
-    /// to fit `nuisance`: a background plane is fitted on every pixel of the box (its margin at
-    /// least [`BACKGROUND_MARGIN`] pixels), and W or the shift need a wider window
-    /// ([`Nuisance::window_width`]).
+    /// to fit `nuisance`: a fitted amplitude or background plane is fitted on every pixel of the
+    /// box (its margin at least [`BACKGROUND_MARGIN`] pixels; see [`fits_whole_box`]), and W or
+    /// the shift need a wider window ([`Nuisance::window_width`]).
     #[allow(clippy::too_many_arguments)]
     pub fn element_model(
         &self,
@@ -552,7 +552,8 @@ impl BasisCache {
         progress: Option<&(dyn Fn(usize, usize) + Sync)>,
         cancel: Option<&AtomicBool>,
     ) -> Result<ElementModel> {
-        let margin = if nuisance.background_phase { margin.max(BACKGROUND_MARGIN) } else { margin };
+        let whole_box = fits_whole_box(nuisance);
+        let margin = if whole_box { margin.max(BACKGROUND_MARGIN) } else { margin };
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
         let every = |image: &Array2<f64>| -> Vec<(usize, usize)> {
             u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect()
@@ -563,7 +564,7 @@ impl BasisCache {
                 .map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
             let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
             let box_pixels;
-            let pixels = if nuisance.background_phase {
+            let pixels = if whole_box {
                 box_pixels = every(&meas.image);
                 &box_pixels
             } else {
@@ -581,6 +582,21 @@ impl BasisCache {
         cost.fit_background = nuisance.background_phase;
         Ok(ElementModel { cost, noise })
     }
+}
+
+/// Whether the per-element cost of `nuisance` is fitted on every pixel of the box rather than on
+/// each image's focal-zone mask.
+///
+/// The mask keeps the pixels of the measured image above a level connected to its peak, so in its
+/// faint outskirts it keeps the pixels whose noise happens to be positive: there the measured
+/// values are biased upwards (by about `sigma` where the signal is below the noise). A model
+/// image with a known scale pays for that bias at the focus; with a fitted amplitude it does not,
+/// and the bias favours model beams that are weaker and broader (phases that defocus the beam,
+/// the scale raised to match the peak), which a smooth prior lets the estimate reach cheaply
+/// (`tests/prior.rs`). A fitted background plane needs the pixels outside the focal zone as well.
+/// Pixels without signal (NaN) are left out either way.
+pub fn fits_whole_box(nuisance: &Nuisance) -> bool {
+    nuisance.amplitude || nuisance.background_phase
 }
 
 /// Known phases per element from values per element, per group of `sim`, or per default group
