@@ -5,7 +5,9 @@
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::estimate::{condense, phase_error, wrap};
 use has_core::inverse::estimation::{estimate_aberration, EstimateRequest};
+use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
+use has_core::inverse::smooth_prior::error_modes;
 use has_core::physics::aberration::SkullScreen;
 use has_core::{Scenario, Simulation};
 use ndarray::Array2;
@@ -17,6 +19,12 @@ use std::sync::OnceLock;
 fn sim() -> &'static Simulation {
     static SIM: OnceLock<Simulation> = OnceLock::new();
     SIM.get_or_init(|| Simulation::new(&Scenario::default()).expect("default scenario"))
+}
+
+/// Seeds of a sweep: `1..=ci` in the default run, `1..=full` with `ARFI_FULL_SWEEPS=1` set (CI
+/// time).
+fn seeds(ci: u64, full: u64) -> std::ops::RangeInclusive<u64> {
+    1..=if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { full } else { ci }
 }
 
 fn peak(img: &Array2<f64>) -> f64 {
@@ -117,7 +125,8 @@ fn prior_lengths_per_group_and_per_element() {
 /// known group phases instead it gave 0.796, 0.870, 0.850, 0.843, 0.877, and the independent
 /// prior 0.63–0.79 (mean 0.72, below the prediction alone: 1024 free phases fit the noise).
 /// Asserted: every seed at least 0.85 and 0.03 above the prediction alone (margins for rounding
-/// differences of the single-precision basis across machines).
+/// differences of the single-precision basis across machines). Seed 1 in the default run (each
+/// seed marches 1024 element fields twice), 1–5 with `ARFI_FULL_SWEEPS=1`.
 ///
 /// From the aberrated image alone (one acquisition) the estimate must be the prediction itself,
 /// exactly: measured 2026-11-25, the posterior optimum of that one image left 0.53 against the
@@ -130,7 +139,7 @@ fn per_element_with_a_smooth_prior_and_defocused_images_lifts_a_prediction_of_0_
     per_element.set_groups((0..n).collect()).unwrap();
     let positions = s.transducer.reference_points();
     let ideal = peak(&s.arfi_image(&[]).unwrap());
-    for seed in 1..=5u64 {
+    for seed in seeds(1, 5) {
         let truth = SkullScreen::default().phases(&positions, seed).unwrap();
         let recovered = |est: &[f64]| {
             let c: Vec<f64> = truth.iter().zip(est).map(|(t, e)| t - e).collect();
@@ -154,5 +163,90 @@ fn per_element_with_a_smooth_prior_and_defocused_images_lifts_a_prediction_of_0_
         let (alone, post) = (recovered(&prediction), recovered(&r.estimate.phases));
         println!("seed {seed}: prediction alone {alone:.3}, with 4 images {post:.3} ({} evaluations)", r.estimate.evaluations);
         assert!(r.prior_used && post > 0.85 && post > alone + 0.03, "seed {seed}: {post:.3} vs prediction alone {alone:.3}");
+    }
+}
+
+/// A 256-element hemisphere (150 mm radius of curvature, out to 60°) at 220 kHz focused 150 mm
+/// deep, in water with a brain-like attenuating slab from 90 to 210 mm: the transcranial
+/// geometry without bone.
+fn hemisphere() -> Simulation {
+    let text = "frequency_hz = 220000.0\n\
+        [transducer]\nkind = \"hemisphere\"\nradius_of_curvature_mm = 150.0\npolar_angle_max_deg = 60.0\nelements = 256\n\
+        [focus]\nposition_mm = [0.0, 0.0, 150.0]\n\
+        [[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\nattenuation_db_cm_mhz = 0.0\n\
+        [[material]]\nname = \"brain\"\nsound_speed_m_s = 1540.0\ndensity_kg_m3 = 1040.0\nattenuation_db_cm_mhz = 0.6\n\
+        [[region]]\nmaterial = \"brain\"\nshape = \"slab\"\nz_min_mm = 90.0\nz_max_mm = 210.0\n";
+    Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap()
+}
+
+/// A seeded smooth field with the covariance a smooth prior of `std_rad` over `length` (m)
+/// claims ([`error_modes`] with standard normal coefficients).
+fn smooth_field(positions: &[[f64; 3]], std_rad: f64, length: f64, seed: u64) -> Vec<f64> {
+    let modes = error_modes(positions, std_rad, length).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(0xf1e1d ^ seed);
+    let a: Vec<f64> = modes.iter().map(|_| Normal::new(0.0, 1.0).unwrap().sample(&mut rng)).collect();
+    (0..positions.len()).map(|e| modes.iter().zip(&a).map(|(w, c)| w[e] * c).sum()).collect()
+}
+
+/// Per element with a smooth prior and a fitted image scale, the transcranial case of the
+/// README (a CT prediction as prior ±0.5 rad over 40 mm, three images at 0.02 rad, the images
+/// weaker than the bone-free model by the skull's transmission, `--fit-nuisance amplitude`):
+/// the estimate must never end below the prediction alone by more than the noise explains.
+///
+/// Hemisphere of 256 elements ([`hemisphere`]), a skull-like truth (15 mm, 4 rad peak to peak,
+/// 0.2 rad jitter), a prediction whose error is a smooth field of 0.15 rad over 40 mm (so the
+/// prediction alone gives 0.99–1.0 of the ideal focus, as in the README's case), images of the
+/// truth in focus and with the focus moved ±5 mm along the axis, at 0.3 of the model's scale
+/// (focal ARFI 0.18 rad) with 0.02 rad noise.
+///
+/// Tolerance 0.06 of the ideal focus: under its own weights, noise moves the posterior optimum
+/// by at most half the prior's spread in any direction (a direction of data precision `r` times
+/// the prior's moves by `g/(1 + r)` with `g ~ N(0, r)`: variance `r/(1 + r)²` ≤ 1/4 of the prior's),
+/// so by at most `S/2 = 0.25` rad RMS over the elements, a focal loss of at most
+/// `1 - exp(-(S/2)²) = 0.06`. Measured on seeds 1–4 (prediction alone 0.996, 0.994, 0.995,
+/// 0.992): fitted on the focal-zone masks the estimate left 0.780, 0.661, 0.774, 0.821, the fitted
+/// scale raised to 0.46–0.57 (see [`has_core::inverse::basis::fits_whole_box`]); fitted on every
+/// pixel of the box, 0.987, 0.963, 0.996, 0.989 (scale 0.29–0.31, at most 0.031 below). Every
+/// seed failed before, so seed 1 runs by default (one estimate on 256 elements), 1–4 with
+/// `ARFI_FULL_SWEEPS=1`.
+#[test]
+fn a_smooth_prior_with_a_fitted_scale_is_never_worse_than_the_prediction_beyond_the_noise() {
+    let s = hemisphere();
+    let n = s.n_elements();
+    let mut per_element = s.clone();
+    per_element.set_groups((0..n).collect()).unwrap();
+    let positions = s.transducer.reference_points();
+    let ideal = peak(&s.arfi_image(&[]).unwrap());
+    let (std_rad, length, transmission, noise) = (0.5, 40e-3, 0.3, 0.02);
+    for seed in seeds(1, 4) {
+        let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
+        let recovered = |est: &[f64]| {
+            let c: Vec<f64> = truth.iter().zip(est).map(|(t, e)| t - e).collect();
+            peak(&s.arfi_image(&c).unwrap()) / ideal
+        };
+        let image = |known: Vec<f64>, k: u64| {
+            let added: Vec<f64> = truth.iter().zip(&known).map(|(t, d)| t + d).collect();
+            let mut img = s.arfi_image(&added).unwrap() * transmission;
+            let mut rng = ChaCha8Rng::seed_from_u64(100 * seed + k);
+            let normal = Normal::new(0.0, noise).unwrap();
+            img.mapv_inplace(|v| v + normal.sample(&mut rng));
+            Measurement { image: img, known }
+        };
+        let m: Vec<Measurement> = [0.0, 5e-3, -5e-3]
+            .into_iter()
+            .enumerate()
+            .map(|(k, dz)| image(s.focus_shift_phases([0.0, 0.0, dz]).unwrap(), k as u64))
+            .collect();
+        let error = smooth_field(&positions, 0.15, length, seed);
+        let prediction: Vec<f64> = truth.iter().zip(&error).map(|(t, e)| t + e).collect();
+        let prior = Prior::new(prediction.clone(), std_rad).unwrap().with_correlation_length(length).unwrap();
+        let nuisance = Nuisance { amplitude: true, ..Nuisance::default() };
+        let request = EstimateRequest { prior: Some(prior), nuisance, seed, ..EstimateRequest::default() };
+        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+        let (alone, post) = (recovered(&prediction), recovered(&r.estimate.phases));
+        let scale = r.nuisance.as_ref().map_or(f64::NAN, |f| f.scale);
+        println!("seed {seed}: prediction alone {alone:.3}, posterior {post:.3} (fitted scale {scale:.3})");
+        assert!(r.prior_used && !r.kept_prediction, "seed {seed}");
+        assert!(post >= alone - 0.06, "seed {seed}: {post:.3} vs prediction alone {alone:.3}");
     }
 }
