@@ -97,11 +97,11 @@ def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, 
     return bg, im
 
 
-def section_figure(section: Any, titles: Sequence[str], focal_z_mm: float) -> Any:
+def section_figure(section: Any, titles: Sequence[str], target_mm: Sequence[float]) -> Any:
     """A row of x–z sections, one per drive, on one pressure scale: that of the focal region
-    (the largest |p| within 15 mm of ``focal_z_mm``; the field before a skull, often stronger, is
-    drawn saturated), cropped across to where the medium differs from the source plane's or the
-    beam exceeds 10 % of its peak (10 mm margin)."""
+    (the largest |p| within 15 mm of the target's (x, z); the field in the water, scalp or skull,
+    often stronger, is drawn saturated), cropped across to where the medium differs from the
+    source plane's or the beam exceeds 10 % of its peak (10 mm margin)."""
     plt = pyplot()
     p = np.abs(section.pressure).max(axis=(0, 1))
     c = section.sound_speed_m_s
@@ -109,7 +109,7 @@ def section_figure(section: Any, titles: Sequence[str], focal_z_mm: float) -> An
     margin = int(round(10.0 / (section.x_mm[1] - section.x_mm[0])))
     columns = slice(max(busy[0] - margin, 0), min(busy[-1] + margin + 1, c.shape[1]))
     fig, ax = plt.subplots(1, len(titles), figsize=(5.0 * len(titles) + 1.8, 4.6), squeeze=False, layout="constrained")
-    near = np.abs(section.z_mm - focal_z_mm) <= 15.0
+    near = np.hypot(section.x_mm[None, :] - target_mm[0], section.z_mm[:, None] - target_mm[2]) <= 15.0
     vmax = float(np.abs(section.pressure[:, near]).max()) if near.any() else float(np.abs(section.pressure).max())
     for k, t in enumerate(titles):
         bg, im = show_section(ax[0][k], section, k, t, vmax, columns)
@@ -192,28 +192,33 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
 
 
 def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
-    """Report of a simulated field: |p| (MPa) on the plane, axes in mm; |p| along the beam axis;
-    with ``phases``, the element map of the phases added to the steering; the beam on the x–z
-    section through the plane's peak over the sound speed (one more march)."""
+    """Report of a simulated field: |p| (MPa) on the plane, axes in mm, its colour scale set by
+    the focal peak near the target (hotter places saturate); |p| along the beam's axis (the line
+    from the array's centre through the target) with the target's depth marked; with ``phases``,
+    the element map of the phases added to the steering; the beam on the x–z section through the
+    target over the sound speed (one more march)."""
     plt = pyplot()
     out = _report_dir(out)
+    focus = field.focus()
     fig, ax = plt.subplots(1, 3 if phases is not None else 2, figsize=(17 if phases is not None else 11, 4.4))
     x, y = field.x_mm, field.y_mm
     dx, dy = x[1] - x[0], y[1] - y[0]
-    im = ax[0].imshow(np.abs(field.pressure) / 1e6, origin="lower", cmap="inferno",
+    im = ax[0].imshow(np.abs(field.pressure) / 1e6, origin="lower", cmap="inferno", vmin=0.0, vmax=focus["plane_peak_pa"] / 1e6,
                       extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2])
-    ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm", xlabel="x (mm)", ylabel="y (mm)")
-    fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)")
+    ax[0].plot(focus["plane_peak_x_mm"], focus["plane_peak_y_mm"], "c+", ms=10)
+    ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm (+: focal peak)", xlabel="x (mm)", ylabel="y (mm)")
+    fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)", extend="max")
     ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)
-    ax[1].axvline(field.z_mm, color="0.5", ls="--", lw=0.8)
-    ax[1].set(title="|p| on the beam axis", xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
+    ax[1].axvline(field.target_mm[2], color="0.5", ls="--", lw=0.8)
+    t = field.target_mm
+    ax[1].set(title=f"|p| on the line from the array's centre to ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}) mm (--: target)",
+              xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
     if phases is not None:
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
-    peak_y = float(field.y_mm[np.unravel_index(int(np.argmax(np.abs(field.pressure))), field.pressure.shape)[0]])
-    section = sim.section(phases, y_mm=peak_y)
-    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"], field.z_mm)
-    figures.append(("the beam on the x–z section through the peak, over the sound speed",
+    section = sim.section(phases, y_mm=field.target_mm[1])
+    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"], field.target_mm)
+    figures.append(("the beam on the x–z section through the target, over the sound speed",
                     save_figure(fig, out / "field_section.png")))
     return _verb_page(out, "field", values, figures)
 
@@ -233,7 +238,7 @@ def predict_report(out: str | Path, sim: Any, prediction: Any, values: dict[str,
     best = prediction.optimal_pa
     fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in
                                    [("uncorrected", prediction.uncorrected_pa), ("straight-ray CT steering", prediction.ray_steering_pa),
-                                    ("predicted correction", prediction.corrected_pa)]], prediction.target_mm[2])
+                                    ("predicted correction", prediction.corrected_pa)]], prediction.target_mm)
     figures = [(f"the beam through the skull on the section y = {section.y_mm:.1f} mm", save_figure(fig, out / "predict_section.png"))]
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
     element_map(fig, ax[0], sim, prediction.phases_rad, "predicted aberration (subtract to correct)")

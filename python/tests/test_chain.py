@@ -107,3 +107,22 @@ def test_images_through_a_head_leave_the_bone_out(tmp_path, capsys):
     x, y = (patient.mr_affine_mm @ np.array([i, j, 0, 1.0]))[:2]
     assert value == pytest.approx(0.6, abs=1e-6) and np.hypot(x - 10.0, y) < 4.0, (value, x, y)
     assert "focal ARFI phase 0.600 rad" in capsys.readouterr().out
+
+
+def test_field_through_a_head_reports_the_focus_at_the_target(tmp_path, capsys):
+    # The patient's field: the focal peak is the lobe at the target (within a pixel diagonal of
+    # the 0.97 mm grid and a wavelength, 7 mm, along the axis at 220 kHz), and any hotter place is
+    # named by what it is, never brain: the skull, the scalp or the water in front of the head.
+    head_scenarios(tmp_path, 1)
+    js = tmp_path / "f.json"
+    assert main(["field", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "f.npz"), "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    r = json.loads(js.read_text())
+    assert r["peak_to_target_mm"] < 1.5 and abs(r["axis_peak_z_mm"] - 140.0) < 7.0, r
+    hottest = [ln for ln in out.splitlines() if "hottest" in ln]
+    for line in hottest:
+        assert line.split("hottest on the ")[1].split(":")[1].split(",")[0].strip() in {"skull", "scalp", "water"}, line
+    for key in ("plane", "axis"):
+        assert (r[f"{key}_hottest_pa"] is None) == (f"{key}_hottest_tissue" not in r)
+    data = np.load(tmp_path / "f.npz")
+    assert np.allclose(data["axis_x_mm"], data["axis_z_mm"] * 10.0 / 140.0)

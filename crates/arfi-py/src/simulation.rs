@@ -165,8 +165,21 @@ impl CoreSimulation {
         d.set_item("z_mm", f.z * 1e3)?;
         d.set_item("axis_pressure", f.axis_pressure.into_pyarray(py))?;
         d.set_item("axis_z_mm", mm(&f.axis_z).into_pyarray(py))?;
+        d.set_item("axis_x_mm", f.axis_xy.iter().map(|p| p[0] * 1e3).collect::<Vec<f64>>().into_pyarray(py))?;
+        d.set_item("axis_y_mm", f.axis_xy.iter().map(|p| p[1] * 1e3).collect::<Vec<f64>>().into_pyarray(py))?;
         d.set_item("surface_pressure_pa", f.surface_pressure)?;
+        d.set_item("target_mm", self.inner.focus.map(|v| v * 1e3).to_vec())?;
         Ok(d)
+    }
+
+    /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the
+    /// soft tissue's material where a CT holds tissue, else the material's name.
+    fn tissue_at(&self, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
+        let p = points_mm.as_array();
+        if p.ncols() != 3 || p.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("points_mm", format!("must be finite points of shape (n, 3), got shape {:?}", p.shape())));
+        }
+        Ok(p.rows().into_iter().map(|r| self.inner.medium.tissue_at(r[0] * 1e-3, r[1] * 1e-3, r[2] * 1e-3)).collect())
     }
 
     /// Pressure on the x–z section nearest `y_mm` (default: the focus's) for each drive in

@@ -98,10 +98,13 @@ pub struct Field {
     pub y: Vec<f64>,
     /// z of the plane (m).
     pub z: f64,
-    /// Complex pressure amplitude (Pa) on the beam axis (x = y = 0), one per grid plane.
+    /// Complex pressure amplitude (Pa) on the beam's axis, one per grid plane: the line from the
+    /// array's centre (the origin) through the focus (x = y = 0 for a focus on the z axis).
     pub axis_pressure: Vec<C64>,
     /// z of each sample of `axis_pressure`, m.
     pub axis_z: Vec<f64>,
+    /// x and y of each sample of `axis_pressure`, m.
+    pub axis_xy: Vec<[f64; 2]>,
     /// Pressure amplitude on every element face (Pa).
     pub surface_pressure: f64,
 }
@@ -403,7 +406,9 @@ impl Simulation {
             return Err(HasError::invalid("z_mm", format!("must lie within the grid, {:.1} to {:.1} mm", g.z0 * 1e3, g.z(g.nz - 1) * 1e3)));
         }
         let plane = g.plane_index(z);
-        let spec = RecordSpec { planes: vec![plane], axis: true, reflections: self.reflections, ..RecordSpec::default() };
+        let slope = self.axis_slope();
+        let spec =
+            RecordSpec { planes: vec![plane], axis: true, axis_slope: slope, reflections: self.reflections, ..RecordSpec::default() };
         let mut rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
@@ -412,9 +417,20 @@ impl Simulation {
             y: (0..g.ny).map(|j| g.y(j)).collect(),
             z: g.z(plane),
             axis_z: (0..rec.axis.len()).map(|n| g.z(n)).collect(),
+            axis_xy: (0..rec.axis.len()).map(|n| [slope[0] * g.z(n), slope[1] * g.z(n)]).collect(),
             axis_pressure: rec.axis,
             surface_pressure: self.source.face_pressure,
         })
+    }
+
+    /// Lateral offset per unit depth of the beam's axis, the line from the array's centre (the
+    /// origin of the transducer frame) through the focus (zero for a focus on the z axis).
+    pub fn axis_slope(&self) -> [f64; 2] {
+        if self.focus[2] > 0.0 {
+            [self.focus[0] / self.focus[2], self.focus[1] / self.focus[2]]
+        } else {
+            [0.0, 0.0]
+        }
     }
 
     /// Each element's complex pressure (Pa) at `target` (m, transducer frame; between grid points,

@@ -10,14 +10,16 @@ import numpy as np
 
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, write_npz
-from arfi.simulation import Simulation
+from arfi.focal import describe_tissue
+from arfi.simulation import Field, Simulation
 
 
 def register(sub: Any) -> None:
     """Adds the verb to the subcommands ``sub``."""
     p = sub.add_parser("field", help="complex pressure on a plane and the beam axis (.npz)",
                        description="Simulate the beam (HAS) and write the complex pressure amplitude (Pa) on the "
-                       "plane z = Z and along the beam axis.",
+                       "plane z = Z and along the beam's axis (the line from the array's centre through the target). "
+                       "Prints the focal peak near the target, and names any hotter place (skull, scalp, water) as such.",
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
@@ -28,6 +30,27 @@ def register(sub: Any) -> None:
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
                   "through the plane's peak over the sound speed: one more march)")
     p.set_defaults(run=run)
+
+
+def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> list[str]:
+    """The printed summary: the focal peak near the target on the plane and along the beam's axis,
+    any hotter place named by its tissue (which ``focus`` gains as ``*_hottest_tissue``), and the
+    propagation model."""
+    t = tuple(focus["target_mm"])
+    lines = [f"field: plane z = {f.z_mm:.2f} mm: focal peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
+             f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm, {focus['peak_to_target_mm']:.2f} mm "
+             f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
+             f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"]
+    for where, key in (("on the plane", "plane"), ("on the axis", "axis")):
+        if focus[f"{key}_hottest_pa"] is not None:
+            p = focus[f"{key}_hottest_mm"]
+            point = [*p, f.z_mm] if len(p) == 2 else p
+            tissue = describe_tissue(sim.tissue_at, point, t)
+            focus[f"{key}_hottest_tissue"] = tissue
+            lines.append(f"field: hottest {where}: {tissue}, {focus[f'{key}_hottest_pa'] / 1e6:.3f} MPa at "
+                         f"({point[0]:.1f}, {point[1]:.1f}, {point[2]:.1f}) mm (not the focus)")
+    lines.append(f"field: {sim.propagation_summary()}")
+    return lines
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,16 +72,13 @@ def run(args: argparse.Namespace) -> int:
             "z_mm": np.float64(f.z_mm),
             "axis_pressure": f.axis_pressure,
             "axis_z_mm": f.axis_z_mm,
+            "axis_x_mm": f.axis_x_mm,
+            "axis_y_mm": f.axis_y_mm,
             "surface_pressure_pa": np.float64(f.surface_pressure_pa),
         },
     )
     focus = f.focus()
-    print(
-        f"field: plane z = {f.z_mm:.2f} mm, peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
-        f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm; axis peak "
-        f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {args.out}\n"
-        f"field: {sim.propagation_summary()}"
-    )
+    print("\n".join(focus_lines(sim, f, focus, args.out)))
     if args.report:
         from arfi.report import field_report
 

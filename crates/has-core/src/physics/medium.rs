@@ -357,6 +357,19 @@ impl Medium {
         self.materials[self.material_at(x, y, z)].mr
     }
 
+    /// The name of the tissue at a point: the CT's class where it holds tissue (`"bone"` or its
+    /// soft tissue's material name), `"voxel map"` inside a voxel map, else the material's name.
+    pub fn tissue_at(&self, x: f64, y: f64, z: f64) -> String {
+        let ct = self.ct.as_ref().and_then(|ct| Some(ct.conversion.tissue_name(ct.hu_at([x, y, z])?)?.to_string()));
+        if let Some(name) = ct {
+            return name;
+        }
+        if self.voxels.as_ref().is_some_and(|v| v.index(x, y, z).is_some()) {
+            return "voxel map".into();
+        }
+        self.materials[self.material_at(x, y, z)].name.clone()
+    }
+
     /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
         let m = self.materials.iter().map(|m| m.sound_speed).fold(f64::INFINITY, f64::min);

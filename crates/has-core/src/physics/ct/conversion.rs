@@ -240,6 +240,18 @@ impl HuConversion {
         }
     }
 
+    /// The name of the tissue a voxel of `hu` is: `"bone"`, the soft tissue's material name, or
+    /// `None` for the coupling medium.
+    pub fn tissue_name(&self, hu: f64) -> Option<&str> {
+        if hu < self.coupling_below_hu {
+            None
+        } else if hu < self.bone_from_hu {
+            Some(&self.soft_tissue.name)
+        } else {
+            Some("bone")
+        }
+    }
+
     /// The lowest sound speed a voxel can get (sets the shortest wavelength).
     pub fn min_sound_speed(&self) -> f64 {
         let bone = if self.bone_from_hu.is_finite() && !self.bone_as_soft_tissue {

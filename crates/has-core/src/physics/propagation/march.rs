@@ -17,8 +17,12 @@ use std::ops::Range;
 pub struct RecordSpec {
     /// Planes to keep whole, `(ny, nx)` each (in increasing plane order).
     pub planes: Vec<usize>,
-    /// Keep the on-axis sample (`nx/2`, `ny/2`) of every plane.
+    /// Keep a sample of every plane on the beam's axis: the line through the origin (the array's
+    /// centre) `x = axis_slope[0]·z`, `y = axis_slope[1]·z`, bilinearly interpolated between
+    /// pixels (on the pixel `nx/2`, `ny/2` for a zero slope: the z axis).
     pub axis: bool,
+    /// Lateral offset per unit depth (dx/dz, dy/dz) of the recorded axis (see `axis`).
+    pub axis_slope: [f64; 2],
     /// Keep a box of samples: planes × rows × columns.
     pub window: Option<Window>,
     /// Keep the power `∫ |p|² / (2·Z) dA` (W) of the forward wave through every plane (inside a
@@ -92,6 +96,23 @@ impl RecordSpec {
     }
 }
 
+/// The field on one plane (`(ny, nx)`) at lateral position (x, y) (m), bilinearly interpolated
+/// between the four pixels around it (exactly a pixel's value on it); zero outside the grid.
+pub(crate) fn bilinear(g: &Grid, field: &[C64], x: f64, y: f64) -> C64 {
+    let (u, v) = (x / g.dx + (g.nx / 2) as f64, y / g.dy + (g.ny / 2) as f64);
+    let (i0, j0) = (u.floor(), v.floor());
+    let (fu, fv) = (u - i0, v - j0);
+    let at = |i: f64, j: f64| {
+        if i < 0.0 || j < 0.0 || i >= g.nx as f64 || j >= g.ny as f64 {
+            C64::new(0.0, 0.0)
+        } else {
+            field[j as usize * g.nx + i as usize]
+        }
+    };
+    let row = |j: f64| at(i0, j) * (1.0 - fu) + if fu > 0.0 { at(i0 + 1.0, j) * fu } else { C64::new(0.0, 0.0) };
+    row(j0) * (1.0 - fv) + if fv > 0.0 { row(j0 + 1.0) * fv } else { C64::new(0.0, 0.0) }
+}
+
 /// How many round trips of the reverberation a march adds.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum RoundTrips {
@@ -140,7 +161,8 @@ impl<'a> Recorder<'a> {
             self.rec.planes[i].iter_mut().zip(field).for_each(|(a, b)| *a += b);
         }
         if self.spec.axis {
-            self.rec.axis[n] += field[(g.ny / 2) * g.nx + g.nx / 2];
+            let z = g.z(n);
+            self.rec.axis[n] += bilinear(g, field, self.spec.axis_slope[0] * z, self.spec.axis_slope[1] * z);
         }
         if let Some(w) = self.spec.window.as_ref().filter(|w| w.planes.contains(&n)) {
             let (nr, nc) = (w.rows.len(), w.cols.len());
