@@ -68,7 +68,7 @@ def test_field_in_lossless_water_needs_no_mr_model(tmp_path):
         sim.arfi_image()
 
 
-def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):
+def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path, sim):
     known = tmp_path / "known.txt"
     known.write_text("\n".join(str(v) for v in np.linspace(-1, 1, 16)))
     out = tmp_path / "m.nii.gz"
@@ -81,11 +81,10 @@ def test_simulate_writes_nifti_with_affine_and_sidecar(tmp_path):
     np.testing.assert_allclose(side["applied_phases_rad"], np.linspace(-1, 1, 16))
     result = json.loads(js.read_text())
     assert result["focal_arfi_rad"] == pytest.approx(image.max(), rel=1e-6)
-    sim = arfi.Simulation()
     np.testing.assert_allclose(image, sim.arfi_image(np.linspace(-1, 1, 16)), atol=1e-6)
 
 
-def test_simulate_focus_shift_records_per_element_known_phases(tmp_path):
+def test_simulate_focus_shift_records_per_element_known_phases(tmp_path, sim):
     # A defocused diversity image: the focus-shift phases plus any --known-phases, per element, in
     # the sidecar; the image is the one the Python API gives for the same phases.
     known = tmp_path / "known.txt"
@@ -94,7 +93,6 @@ def test_simulate_focus_shift_records_per_element_known_phases(tmp_path):
     assert main(["simulate", "--focus-shift-mm", "0", "0", "5", "--known-phases", str(known), "--noise-rad", "0",
                  "--out", str(out)]) == 0
     image, _, side = arfi.read_arfi_image(out)
-    sim = arfi.Simulation()
     expected = sim.element_phases(np.linspace(-1, 1, 16)) + sim.focus_shift_phases((0.0, 0.0, 5.0))
     np.testing.assert_allclose(side["applied_phases_rad"], expected)
     np.testing.assert_allclose(image, sim.arfi_image(expected), atol=1e-6)
@@ -141,11 +139,10 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, make, args, match):
 
 
 @pytest.fixture(scope="module")
-def measured(tmp_path_factory):
+def measured(tmp_path_factory, sim, ideal):
     """A noise-free MR-ARFI image of the default scenario."""
     path = tmp_path_factory.mktemp("measured") / "m.nii.gz"
-    sim = arfi.Simulation()
-    arfi.write_arfi_image(path, sim.arfi_image(), sim.mr_affine_mm, sim.mr_volume_shape)
+    arfi.write_arfi_image(path, ideal, sim.mr_affine_mm, sim.mr_volume_shape)
     return path
 
 
@@ -253,11 +250,10 @@ def test_image_axes_follow_the_mr_plane():
     assert image_extent_mm(sim, np.zeros((11, 41))) == [-11.0, 11.0, 79.75, 100.25]
 
 
-def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, capsys):
+def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, capsys, sim):
     # Images of an array whose elements reach the focus unevenly (as through a skull): the model
     # weighted by that transmission (relative to its mean) explains them; the unweighted one
     # cannot (noise-free, so the weighted fit's cost is near 0).
-    sim = arfi.Simulation()
     element = np.arange(sim.n_elements)
     t = 0.2 + 0.8 * (element % 64) / 63.0 * (element // 512 + 1) / 2.0
     truth = sim.condense(sim.skull_phases(seed=2))

@@ -11,10 +11,9 @@ from arfi.cli import main
 from arfi.io import write_arfi_image
 
 
-def test_cli_diagnose_names_the_missing_broadening(tmp_path):
+def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
     # The paper's story: a model without broadening (W = 0, calibration file) meets an image
     # with W = 2.7 mm; the workflow names `broadening` with W within 0.2 mm and stops.
-    sim = arfi.Simulation()
     image = tmp_path / "m.nii.gz"
     assert main(["simulate", "--noise-rad", "0.02", "--seed", "5", "--out", str(image)]) == 0
     cal = tmp_path / "cal.json"

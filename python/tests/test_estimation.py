@@ -54,8 +54,7 @@ def test_estimate_rejects_bad_arguments(sim, ideal):
         sim.estimate(ideal, max_evaluations=0)
 
 
-def test_cli_calibrate_then_estimate(tmp_path):
-    sim = arfi.Simulation()
+def test_cli_calibrate_then_estimate(tmp_path, sim):
     truth = sim.condense(sim.skull_phases(5))
     np.save(tmp_path / "ab.npy", truth)
     d = str(tmp_path)
@@ -73,8 +72,7 @@ def test_cli_calibrate_then_estimate(tmp_path):
     np.testing.assert_allclose(np.load(tmp_path / "e.npy"), e["phases_rad"])
 
 
-def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path):
-    sim = arfi.Simulation()
+def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path, sim):
     truth = sim.condense(sim.skull_phases(6))
     d = str(tmp_path)
     np.save(tmp_path / "ab.npy", truth)
@@ -103,12 +101,11 @@ def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path):
         ("good", ["calibrate", "--image", "{d}/good.nii.gz", "--max-width-mm", "-1"], "max_width_mm: must be a finite number > 0"),
     ],
 )
-def test_bad_estimation_input_is_one_line_exit_2(tmp_path, setup, args, match):
+def test_bad_estimation_input_is_one_line_exit_2(tmp_path, sim, ideal, setup, args, match):
     import nibabel as nib
 
-    sim = arfi.Simulation() if setup != "none" else None
-    if sim is not None:
-        good = sim.arfi_image()
+    if setup != "none":
+        good = ideal
         aff = sim.mr_affine_mm
         data = {"small": np.ones((10, 10, 1)), "nan": np.full((128, 96, 1), np.nan), "zero": np.zeros((128, 96, 1)),
                 "shifted": good[:, :, None], "badside": good[:, :, None], "good": good[:, :, None],

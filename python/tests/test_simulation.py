@@ -178,10 +178,9 @@ def test_focus_shift_phases_move_the_focus_where_asked(sim):
         sim.focus_shift_phases((0.0, 1.0))
 
 
-def test_section_takes_one_drive_or_several():
+def test_section_takes_one_drive_or_several(sim):
     # None, one vector, a list with None entries or a 2-D array: one section per drive, the
     # steering alone wherever None; the focus is the section's peak (85 mm from the array).
-    sim = arfi.Simulation()
     truth = sim.condense(sim.skull_phases(seed=1))
     one, both = sim.section(), sim.section([None, truth])
     assert one.pressure.shape[0] == 1 and both.pressure.shape[0] == 2
@@ -195,10 +194,9 @@ def test_section_takes_one_drive_or_several():
         sim.section([None, [np.nan] * 16])
 
 
-def test_element_amplitudes_weight_the_elements_linearly():
+def test_element_amplitudes_weight_the_elements_linearly(sim):
     # The march is linear in the drives: the fields of amplitudes a and 1 - a add up to the whole
     # array's (to 1e-9 of the peak: double-precision sums), and amplitudes of 1 change nothing.
-    sim = arfi.Simulation()
     a = np.random.default_rng(3).uniform(0.0, 1.0, sim.n_elements)
     whole = sim.field().pressure
     part, rest = (sim.with_element_amplitudes(v).field().pressure for v in (a, 1.0 - a))
