@@ -9,9 +9,10 @@
 //!
 //! Measured on 2026-11-24 with ARFI_FULL_SWEEPS=1 (seeds 1–5, 820 s): see the test's comment.
 
+use has_core::inverse::basis::BasisCache;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::diagnose::{effect_images, Effects};
-use has_core::inverse::estimation::{estimate_aberration, EstimateReport, EstimateRequest};
+use has_core::inverse::estimation::{estimate_aberration_with, EstimateReport, EstimateRequest};
 use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
@@ -43,10 +44,12 @@ fn peak(img: &Array2<f64>) -> f64 {
     img.iter().copied().fold(f64::MIN, f64::max)
 }
 
-/// Seeds: 1–2 in the default run, 1–5 with `ARFI_FULL_SWEEPS=1` (CI time: each seed takes about
-/// two minutes on two cores).
+/// Seeds: 1 in the default run, 1–5 with `ARFI_FULL_SWEEPS=1` (CI time: each seed takes about
+/// two minutes on two cores). Every assertion holds for each seed (no rate), and seed 1 is the
+/// closest to the limits (0.856 of the ideal focus against the 0.85 required, the model as it is
+/// recovering least, 0.642), so it fails first if the nuisance fit breaks.
 fn seeds() -> std::ops::RangeInclusive<u64> {
-    1..=if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { 5 } else { 2 }
+    1..=if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { 5 } else { 1 }
 }
 
 /// A seeded random value in `lo..hi` with a random sign.
@@ -95,19 +98,35 @@ fn case(seed: u64) -> Case {
     Case { truth, measurements, offsets, prediction }
 }
 
-/// Focal ARFI of the data's simulation after subtracting `estimate`, over its ideal.
+/// Focal ARFI of the data's simulation after subtracting `estimate`, over its ideal (marched
+/// once on the fine grid and kept).
 fn recovered(truth: &[f64], estimate: &[f64]) -> f64 {
+    static IDEAL: OnceLock<f64> = OnceLock::new();
     let d = data_sim();
+    let ideal = *IDEAL.get_or_init(|| peak(&d.arfi_image(&[]).unwrap()));
     let corrected: Vec<f64> = truth.iter().zip(estimate).map(|(t, e)| t - e).collect();
-    peak(&d.arfi_image(&corrected).unwrap()) / peak(&d.arfi_image(&[]).unwrap())
+    peak(&d.arfi_image(&corrected).unwrap()) / ideal
+}
+
+/// The per-element model, and one element basis cache per set of nuisance fitted (the basis
+/// depends on the pixel box and the views fitted): with several seeds whose images give the same
+/// box the 1024 element marches run once per cache, not once per estimate. A cache only hands
+/// back a basis built for the same simulation, box and window, so the estimates are unchanged.
+fn per_element() -> &'static (Simulation, [BasisCache; 2]) {
+    static PER_ELEMENT: OnceLock<(Simulation, [BasisCache; 2])> = OnceLock::new();
+    PER_ELEMENT.get_or_init(|| {
+        let mut s = model().clone();
+        s.set_groups((0..s.n_elements()).collect()).unwrap();
+        (s, Default::default())
+    })
 }
 
 fn estimate(c: &Case, nuisance: Nuisance, seed: u64) -> EstimateReport {
-    let mut per_element = model().clone();
-    per_element.set_groups((0..per_element.n_elements()).collect()).unwrap();
+    let (sim, caches) = per_element();
+    let cache = &caches[usize::from(nuisance.any())];
     let prior = Prior::new(c.prediction.clone(), 0.8).unwrap().with_correlation_length(15e-3).unwrap();
     let request = EstimateRequest { prior: Some(prior), seed, nuisance, ..EstimateRequest::default() };
-    estimate_aberration(&per_element, &c.measurements, &request, None, None).unwrap()
+    estimate_aberration_with(sim, &c.measurements, &request, cache, None, None).unwrap()
 }
 
 /// Measured 2026-11-24, seeds 1–5: prediction alone 0.718/0.718/0.737/0.702/0.825; the model as
