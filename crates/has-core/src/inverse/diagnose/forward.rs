@@ -36,8 +36,11 @@ pub(super) struct Forward<'a> {
     samplers: Recent<u64, Slice>,
 }
 
-/// A small cache of the last [`CACHED`] values computed (pure functions of their keys, so a
-/// hit returns what a recomputation would).
+/// A small cache of the [`CACHED`] values used last (pure functions of their keys, so a hit
+/// returns what a recomputation would). The least recently used is dropped: the current model's
+/// field state, read by every image-space fit, stays while the field candidates fitted beside it
+/// (16 dropped groups, a Brent search) pass through (dropping the oldest inserted re-marched it
+/// after every six of theirs).
 struct Recent<K, V>(Mutex<Vec<(K, V)>>);
 
 impl<K: PartialEq + Clone, V: Clone> Recent<K, V> {
@@ -47,7 +50,14 @@ impl<K: PartialEq + Clone, V: Clone> Recent<K, V> {
 
     /// The value for `key`, computed by `make` when it is not held.
     fn get_or_try(&self, key: &K, make: impl FnOnce() -> Result<V>) -> Result<V> {
-        if let Some(v) = self.0.lock().ok().and_then(|c| c.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone())) {
+        let hit = self.0.lock().ok().and_then(|mut c| {
+            let i = c.iter().position(|(k, _)| k == key)?;
+            let entry = c.remove(i);
+            let v = entry.1.clone();
+            c.push(entry);
+            Some(v)
+        });
+        if let Some(v) = hit {
             return Ok(v);
         }
         let v = make()?;
