@@ -151,7 +151,7 @@ pub const MATERIAL_MISFIT: f64 = 1.2;
 /// The misfit of an image cost `fit` (rad²) over `n` pixels with `k` parameters fitted and
 /// noise `noise` (rad, at least 1e-4): `J / (n·sigma²)`, and whether the model cannot explain
 /// the images: `J` above the 95 % point of `sigma²·chi²(n - k)` and the misfit above
-/// [`MATERIAL_MISFIT`].
+/// `MATERIAL_MISFIT`.
 pub fn misfit(fit: f64, n: usize, k: usize, noise: f64) -> (f64, bool) {
     let sigma2 = noise.max(MIN_NOISE_RAD).powi(2);
     let misfit = fit / (n as f64 * sigma2);
