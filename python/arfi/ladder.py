@@ -38,20 +38,20 @@ from arfi.simulation import Simulation
 #: ideal focal ARFI (0.85 of the focal pressure: ARFI scales with intensity).
 PREDICTION_ERROR = {"correlation_length_mm": 15.0, "peak_to_peak_rad": 5.0, "jitter_rad": 0.3}
 #: The expected error per predicted phase that the posterior is given (rad). Smaller than the
-#: error's RMS, which includes jitter no image resolves: measured 2026-11-24 per element on
-#: seeds 1–3, a 0.8 rad smooth prior recovered 0.80, 0.87, 0.85 and a 1.3 rad one 0.77, 0.86, 0.81.
+#: error's RMS, which includes jitter no image resolves, so a prior of the full RMS lets the images'
+#: noise move the phases more than they inform them (BENCHMARKS.md, "Ladder constants").
 PREDICTION_STD_RAD = 0.8
 #: Per element, the prediction's errors are given to the posterior as a smooth field correlated
-#: over the error model's length (``prior_correlation_mm``): measured 2026-11-24 over seeds 1–5,
-#: 4 images lift the prediction's 0.74 to 0.85 this way, and to only 0.72 with independent errors.
+#: over the error model's length (``prior_correlation_mm``): 1024 independent errors are more than
+#: 4 images determine, a smooth field is not (BENCHMARKS.md, "Ladder constants").
 PREDICTION_CORRELATION_MM = PREDICTION_ERROR["correlation_length_mm"]
 #: Extra acquisitions per repeat for the loop-2 and diversity rungs.
 EXTRA_IMAGES = 3
 
 #: Per element (the 1024 case) the diversity images are defocused: the focus moved along the beam
-#: axis by these (mm) with known phases (``Simulation.focus_shift_phases``). Measured 2026-11-24
-#: with the smooth prior, seeds 1–5: 0.88, 0.91, 0.89, 0.89, 0.87 of the ideal focus, against 0.80,
-#: 0.87, 0.85, 0.84, 0.88 with three images of random known group phases.
+#: axis by these (mm) with known phases (``Simulation.focus_shift_phases``). A defocused beam stays
+#: bright over more pixels and tells an aberration from its twin, so it informs more per image
+#: than random known group phases (BENCHMARKS.md, "Ladder constants").
 DEFOCUS_MM = (5.0, -5.0, 10.0)
 
 RUNGS = ["single image (paper)", "loop 2", "diversity", "CT-like prediction alone", "prediction + MR-ARFI"]

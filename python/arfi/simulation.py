@@ -288,10 +288,8 @@ class Simulation:
         transducer frame, mm): the steering phases for the shifted target minus the current ones.
         Added to an acquisition (``arfi_image(aberration + p)``, ``arfi simulate --known-phases``)
         they give a displaced or, along z, a defocused diversity image: the classic phase-diversity
-        choice (Gonsalves 1982). Per element, with a prediction as smooth prior, three defocused
-        images (focus moved by +5, -5 and +10 mm) recovered 0.87–0.91 of the ideal focus (mean
-        0.885, seeds 1–5) where three images with random group phases recovered 0.80–0.88 (mean
-        0.85), measured 2026-11-24."""
+        choice (Gonsalves 1982); per element they inform more than images with random known
+        group phases (BENCHMARKS.md, "Ladder constants")."""
         return self._core.focus_shift_phases(as_point_mm(shift_mm, "shift_mm"))
 
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
