@@ -152,7 +152,7 @@ impl Simulation {
             (None, Err(e)) => Err(e.clone()),
             (None, Ok(sampler)) => {
                 let mut force = sampler.force_image(&ideal.window)?;
-                force.zip_mut_with(sampler.imaged(), |f, &imaged| *f = if imaged { *f } else { f64::NAN });
+                sampler.blank_unimaged(&mut force);
                 match focal_peak(&force, &r.mr.pixels_near(r.focus, r.focal_search_radius)) {
                     Some((_, peak)) if peak > 0.0 => Ok(r.ideal_focal_phase / peak),
                     _ => Err(HasError::invalid(
@@ -462,7 +462,7 @@ impl Simulation {
         let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
         let sampler = self.sampler()?;
         let mut image = sampler.force_image(&rec.window)? * self.amplitude()?;
-        image.zip_mut_with(sampler.imaged(), |v, &imaged| *v = if imaged { *v } else { f64::NAN });
+        sampler.blank_unimaged(&mut image);
         Ok(image)
     }
 

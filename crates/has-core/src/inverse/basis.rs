@@ -12,7 +12,7 @@
 //! of threads).
 
 use crate::error::{HasError, Result};
-use crate::inverse::cost::{masks_and_box, Measurement, Objective};
+use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement, Objective};
 use crate::inverse::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::mr::MrSampler;
@@ -555,9 +555,6 @@ impl BasisCache {
         let whole_box = fits_whole_box(nuisance);
         let margin = if whole_box { margin.max(BACKGROUND_MARGIN) } else { margin };
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
-        let every = |image: &Array2<f64>| -> Vec<(usize, usize)> {
-            u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect()
-        };
         let mut terms = Vec::with_capacity(measurements.len());
         for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
             let offset = known_per_element(sim, &meas.known)
@@ -565,7 +562,7 @@ impl BasisCache {
             let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
             let box_pixels;
             let pixels = if whole_box {
-                box_pixels = every(&meas.image);
+                box_pixels = imaged_pixels(&meas.image, u.clone(), v.clone());
                 &box_pixels
             } else {
                 mask

@@ -7,7 +7,7 @@
 //! the remaining squared difference (a scan, then golden-section refinement).
 
 use crate::error::{require_positive, HasError, Result};
-use crate::inverse::cost::{check_image, mask_pixels};
+use crate::inverse::cost::{check_image, imaged_pixels, mask_pixels};
 use crate::physics::mr::noise_floor;
 use crate::physics::propagation::RecordSpec;
 use crate::simulation::Simulation;
@@ -51,7 +51,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         u0.saturating_sub(reach[0])..u1.saturating_add(reach[0]).min(m[0]),
         v0.saturating_sub(reach[1])..v1.saturating_add(reach[1]).min(m[1]),
     );
-    let mask: Vec<(usize, usize)> = u.clone().flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect();
+    let mask = imaged_pixels(image, u.clone(), v.clone());
     let measured: Vec<f64> = mask.iter().map(|&ij| image[ij]).collect();
     let fit = |w: f64| -> Result<(f64, f64)> {
         let f = sim.sampler()?.with_broadening(w)?.apply(&power)?;

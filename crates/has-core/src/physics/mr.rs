@@ -321,6 +321,16 @@ impl MrSampler {
         &self.imaged
     }
 
+    /// Sets the pixels of `image` (the sampler's pixel box) that are not imaged to NaN, as a
+    /// scanner leaves them.
+    pub fn blank_unimaged(&self, image: &mut Array2<f64>) {
+        image.zip_mut_with(&self.imaged, |v, &imaged| {
+            if !imaged {
+                *v = f64::NAN
+            }
+        });
+    }
+
     /// The image `(n_u, n_v)` of force density (N/m³), broadened and pixel-averaged, from the
     /// recorded window of the complex pressure.
     pub fn force_image(&self, window_field: &[num_complex::Complex64]) -> Result<Array2<f64>> {

@@ -12,7 +12,9 @@ mod kernel;
 mod model;
 
 pub use kernel::ArfiKernel;
-pub use model::{build_model, check_image, mask_pixels, masks_and_box, MaskedBox, Measurement, Model, MAX_KERNEL_GROUPS, MAX_PHASE};
+pub use model::{
+    build_model, check_image, imaged_pixels, mask_pixels, masks_and_box, MaskedBox, Measurement, Model, MAX_KERNEL_GROUPS, MAX_PHASE,
+};
 
 use crate::error::{HasError, Result};
 use num_complex::Complex64 as C64;

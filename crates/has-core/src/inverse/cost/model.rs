@@ -92,6 +92,11 @@ pub fn mask_pixels(image: &Array2<f64>, fraction: f64, region: &Array2<bool>) ->
     out
 }
 
+/// The imaged pixels (not NaN) of `image` in the box `u x v`, row-major.
+pub fn imaged_pixels(image: &Array2<f64>, u: Range<usize>, v: Range<usize>) -> Vec<(usize, usize)> {
+    u.flat_map(|i| v.clone().map(move |j| (i, j))).filter(|&ij| image[ij].is_finite()).collect()
+}
+
 /// Builds the joint cost of `measurements` for the simulation's groups: masks at `mask_fraction`
 /// of each image's maximum, one pixel box around all masks (plus `margin` pixels), kernels from
 /// one batched march per distinct known-phase pattern (patterns constant within groups reuse the

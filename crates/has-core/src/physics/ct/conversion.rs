@@ -121,6 +121,13 @@ fn schneider_density(hu: f64) -> f64 {
     rho.max(1000.0)
 }
 
+/// The three classes of CT voxel (see the module docs).
+enum HuClass {
+    Coupling,
+    Soft,
+    Bone,
+}
+
 /// A conversion from HU to acoustic properties (see the module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct HuConversion {
@@ -197,11 +204,11 @@ impl HuConversion {
     /// (the scenario's regions and background apply there). Bone attenuation is linear in
     /// frequency, as the published laws are; soft tissue follows its material's power law.
     pub fn properties(&self, hu: f64, frequency: f64) -> Option<Properties> {
-        if hu < self.coupling_below_hu {
-            return None;
-        }
-        if hu < self.bone_from_hu || self.bone_as_soft_tissue {
-            return Some(self.soft_tissue.properties(frequency));
+        match self.class(hu) {
+            HuClass::Coupling => return None,
+            HuClass::Soft => return Some(self.soft_tissue.properties(frequency)),
+            HuClass::Bone if self.bone_as_soft_tissue => return Some(self.soft_tissue.properties(frequency)),
+            HuClass::Bone => {}
         }
         let (sound_speed, density, a0) = match &self.bone {
             BoneModel::Porosity(p) => {
@@ -231,24 +238,31 @@ impl HuConversion {
     /// scenario's materials apply there). Bone is bone here also in [`HuConversion::without_bone`]:
     /// the model of the head without its skull images what a scanner images.
     pub fn mr_response(&self, hu: f64) -> Option<MrResponse> {
-        if hu < self.coupling_below_hu {
-            None
-        } else if hu < self.bone_from_hu {
-            Some(self.soft_tissue.mr)
-        } else {
-            Some(MrResponse::BONE)
+        match self.class(hu) {
+            HuClass::Coupling => None,
+            HuClass::Soft => Some(self.soft_tissue.mr),
+            HuClass::Bone => Some(MrResponse::BONE),
         }
     }
 
     /// The name of the tissue a voxel of `hu` is: `"bone"`, the soft tissue's material name, or
     /// `None` for the coupling medium.
     pub fn tissue_name(&self, hu: f64) -> Option<&str> {
+        match self.class(hu) {
+            HuClass::Coupling => None,
+            HuClass::Soft => Some(&self.soft_tissue.name),
+            HuClass::Bone => Some("bone"),
+        }
+    }
+
+    /// The class of a voxel of `hu` by the thresholds (see the module docs).
+    fn class(&self, hu: f64) -> HuClass {
         if hu < self.coupling_below_hu {
-            None
+            HuClass::Coupling
         } else if hu < self.bone_from_hu {
-            Some(&self.soft_tissue.name)
+            HuClass::Soft
         } else {
-            Some("bone")
+            HuClass::Bone
         }
     }
 
