@@ -259,7 +259,7 @@ def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, caps
     truth = sim.condense(sim.skull_phases(seed=2))
     image = tmp_path / "m.nii.gz"
     arfi.write_arfi_image(image, sim.with_element_amplitudes(t / t.mean()).arfi_image(truth), sim.mr_affine_mm, sim.mr_volume_shape)
-    (tmp_path / "prediction.json").write_text(json.dumps({"transmission": list(t)}))
+    (tmp_path / "prediction.json").write_text(json.dumps({"transmission": list(t), "target_mm": list(sim.focus_mm)}))
     costs = {}
     for name, extra in [("plain", []), ("weighted", ["--prior-transmission", str(tmp_path / "prediction.json")])]:
         assert main(["estimate", "--image", str(image), "--json", str(tmp_path / f"{name}.json"), *extra]) == 0
@@ -270,7 +270,10 @@ def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, caps
     np.save(tmp_path / "short.npy", t[:10])
     np.save(tmp_path / "negative.npy", -t)
     (tmp_path / "other.json").write_text(json.dumps({"phases_rad": [0.0]}))
-    for bad in ["short.npy", "negative.npy", "other.json", "missing.json"]:
+    # Predicted for a target 2 mm from the scenario's focus: each element's wave crosses other bone.
+    elsewhere = (np.asarray(sim.focus_mm) + [2.0, 0.0, 0.0]).tolist()
+    (tmp_path / "elsewhere.json").write_text(json.dumps({"transmission": list(t), "target_mm": elsewhere}))
+    for bad in ["short.npy", "negative.npy", "other.json", "missing.json", "elsewhere.json"]:
         assert main(["estimate", "--image", str(image), "--prior-transmission", str(tmp_path / bad),
                      "--out-phases", str(tmp_path / "x.npy")]) == 2
         err = capsys.readouterr().err.strip()

@@ -40,8 +40,14 @@ def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> 
     assert 0.0 < n["expected_focus_now"] <= n["expected_focus"] <= 1.0, n
     np.testing.assert_allclose(e.suggested_phases_rad, small.focus_shift_phases(n["focus_shift_mm"]), atol=1e-12)
     assert json.loads(json.dumps(e.to_dict()))["next_acquisition"]["focus_shift_mm"] == n["focus_shift_mm"]
-    # Not asked, or a group estimate: no per-element suggestion.
-    assert el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, max_evaluations=20).next_acquisition is None
+    # Not asked: an ambiguous posterior (one image, a loose prior) still comes with the acquisition
+    # that would settle it; an unambiguous one (a tight prior) and a group estimate come without.
+    loose = el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, max_evaluations=20)
+    assert loose.ambiguous and loose.next_acquisition is not None
+    np.testing.assert_allclose(loose.suggested_phases_rad, small.focus_shift_phases(loose.next_acquisition["focus_shift_mm"]),
+                               atol=1e-12)
+    tight = el.estimate([image], [None], prior=prediction, prior_std_rad=0.05, max_evaluations=20)
+    assert not tight.ambiguous and tight.next_acquisition is None, tight.worst_recovery
     assert small.estimate(image, suggest=True).next_acquisition is None
 
 

@@ -405,15 +405,15 @@ impl CoreSimulation {
             estimate_aberration_with(&self.inner, &measurements, &request, &self.basis, Some(&cancel), Some(&report))
         })?
         .map_err(to_py)?;
-        let (e, a, model) = (&r.estimate, &r.assessment, &r.model);
+        let (e, a) = (&r.estimate, &r.assessment);
         let d = PyDict::new(py);
         d.set_item("n_pixels", r.n_pixels)?;
         d.set_item("scale", r.scale)?;
         if let Some(g) = &r.group_phases {
             d.set_item("group_phases_rad", g.clone().into_pyarray(py))?;
-            d.set_item("underdetermined", r.underdetermined)?;
-            d.set_item("kept_prediction", r.kept_prediction)?;
         }
+        d.set_item("underdetermined", r.underdetermined)?;
+        d.set_item("kept_prediction", r.kept_prediction)?;
         d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
         d.set_item("cost", r.image_cost)?;
         d.set_item("prior_used", r.prior_used)?;
@@ -425,7 +425,7 @@ impl CoreSimulation {
         d.set_item("ambiguous", a.ambiguous)?;
         d.set_item("stop", e.stop.name())?;
         d.set_item("method", request.method.name())?;
-        d.set_item("noise_floor", model.noise)?;
+        d.set_item("noise_floor", r.noise)?;
         d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
         d.set_item("margin", a.margin)?;
         d.set_item("worst_recovery", a.worst_recovery)?;

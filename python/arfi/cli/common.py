@@ -58,25 +58,31 @@ def read_optional_phases(path: str | None, name: str) -> np.ndarray | None:
     return None if path is None else read_phases(path, name)
 
 
-def read_transmission(path: str) -> np.ndarray:
-    """Per-element amplitudes from ``--prior-transmission``: the JSON of ``arfi predict`` (its
-    ``transmission``), or a vector file (.npy or text); finite and non-negative."""
+def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Per-element amplitudes from ``--prior-transmission`` (finite and non-negative), and the
+    target (mm) they were predicted for: the JSON of ``arfi predict`` (its ``transmission`` and
+    ``target_mm``), or a vector file (.npy or text; no target)."""
     name = "--prior-transmission"
+    target = None
     if path.endswith(".json"):
         p = Path(path)
         if not p.is_file():
             raise FileNotFoundError(f"{name}: {p}: no such file")
         try:
-            values = np.asarray(json.loads(p.read_text(encoding="utf-8"))["transmission"], dtype=np.float64)
+            d = json.loads(p.read_text(encoding="utf-8"))
+            values = np.asarray(d["transmission"], dtype=np.float64)
+            target = None if d.get("target_mm") is None else np.asarray(d["target_mm"], dtype=np.float64)
         except (ValueError, KeyError, TypeError) as e:
             raise ValueError(f"{name}: {p}: not the JSON of arfi predict (no 'transmission': {e})") from None
         if values.ndim != 1 or values.size == 0 or not np.all(np.isfinite(values)):
             raise ValueError(f"{name}: {p}: 'transmission' must be a non-empty list of finite numbers")
+        if target is not None and (target.shape != (3,) or not np.all(np.isfinite(target))):
+            raise ValueError(f"{name}: {p}: 'target_mm' must be three finite numbers")
     else:
         values = read_phases(path, name)
     if np.any(values < 0) or not np.any(values > 0):
         raise ValueError(f"{name}: {path}: transmissions must be non-negative, and not all zero")
-    return values
+    return values, target
 
 
 def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:

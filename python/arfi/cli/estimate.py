@@ -7,8 +7,15 @@ import sys
 import time
 from typing import Any
 
+import numpy as np
+
 from arfi.cli.common import (add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
                              read_optional_phases, read_transmission, save_npy)
+
+TARGET_TOLERANCE_MM = 0.5
+"""How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
+fraction of the focal spot's width (2.3 mm at 650 kHz), over which each element's wave crosses
+the same bone."""
 
 
 def register(sub: Any) -> None:
@@ -52,7 +59,8 @@ def register(sub: Any) -> None:
                    help="each element's predicted transmission through the skull: the JSON of arfi predict (its "
                    "'transmission'), or .npy or text with one value per element. The model then drives each element at its "
                    "transmission relative to the mean, so that a model of the head without its skull weighs the elements "
-                   "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude)")
+                   "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude). The JSON's "
+                   "'target_mm' must lie within 0.5 mm of the scenario's focus")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
                    "MISMATCH (the images are not explained), the prediction itself (JSON 'recommended' says which)")
@@ -69,12 +77,20 @@ def run(args: argparse.Namespace) -> int:
             npy_path(path, option)  # before the estimate, so that neither is written when one is wrong
     t = time.perf_counter()
     prior = read_optional_phases(args.prior, "--prior")
-    transmission = read_transmission(args.prior_transmission) if args.prior_transmission else None
+    transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     sim = calibrated_simulation(args)
     if transmission is not None:
         if len(transmission) != sim.n_elements:
             raise ValueError(f"--prior-transmission: {args.prior_transmission}: has {len(transmission)} values for "
                              f"{sim.n_elements} elements")
+        # Each element's transmission is its wave's at the point predicted for; a focus elsewhere
+        # (beyond a fraction of the focal spot) crosses the skull elsewhere.
+        if predicted_at is not None and np.linalg.norm(predicted_at - sim.focus_mm) > TARGET_TOLERANCE_MM:
+            x, y, z = predicted_at
+            fx, fy, fz = sim.focus_mm
+            raise ValueError(f"--prior-transmission: {args.prior_transmission}: predicted for the target ({x:.1f}, {y:.1f}, "
+                             f"{z:.1f}) mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at "
+                             f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
@@ -103,9 +119,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
     elif e.ambiguous:
-        print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a correction "
-              f"could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the "
-              f"suggested known phases added (suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}).")
+        where = f"suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}"
+        if kind == "element" and e.prior_used:
+            print(f"estimate: AMBIGUOUS: the images and the prior leave the element phases uncertain: the correction is "
+                  f"expected to leave {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the suggested "
+                  f"known phases added (the next acquisition below; {where}).")
+        else:
+            print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a "
+                  f"correction could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image "
+                  f"with the suggested known phases added ({where}).")
     # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
     use_prediction = e.model_mismatch and e.prior_used and prior is not None
     if use_prediction:
@@ -121,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     if e.next_acquisition is not None:
         n = e.next_acquisition
         x, y, z = n["focus_shift_mm"]
-        print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest}); "
+        print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest or 'suggested_phases_rad in the JSON'}); "
               f"expected focus after the correction {n['expected_focus_now']:.2f} of the ideal now, {n['expected_focus']:.2f} "
               f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
     recommended = prior if use_prediction else e.phases_rad

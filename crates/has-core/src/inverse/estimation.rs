@@ -6,7 +6,7 @@
 use crate::error::{HasError, Result};
 use crate::inverse::basis::{known_per_element, BasisCache, ElementCost, ElementTerm};
 use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
-use crate::inverse::estimate::{misfit, Assessment, Estimate, Estimator, Minimum, Stop};
+use crate::inverse::estimate::{chi2_95, misfit, Assessment, Estimate, Estimator, Minimum, RivalSolution, Stop};
 use crate::inverse::information::{
     error_covariance, expected_focus, focal_fields, suggest_focus_shift, ShiftSuggestion, Spread, CANDIDATE_SHIFTS_MM,
 };
@@ -17,6 +17,9 @@ use crate::inverse::smooth_prior::SmoothErrors;
 use crate::inverse::view_fit::fit_view;
 use crate::simulation::Simulation;
 use ndarray::Array2;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
 use std::sync::atomic::AtomicBool;
 
 /// The optimiser.
@@ -125,11 +128,11 @@ impl EstimateRequest {
 pub struct EstimateReport {
     /// One phase per group of the simulation (per element when its groups are its elements).
     pub estimate: Estimate,
-    /// Ambiguity and misfit, judged on the group model (for per-element estimates, on the
-    /// warm start's default groups).
+    /// Ambiguity and misfit, judged on the group model (per element: ambiguity on the warm
+    /// start's default groups, or with a prior on the element posterior; misfit on the elements).
     pub assessment: Assessment,
-    /// The group model the assessment used (masks, noise, kernels).
-    pub model: Model,
+    /// Noise standard deviation of the image backgrounds (rad): the noise floor of the costs.
+    pub noise: f64,
     /// Pixels the estimate was fitted on.
     pub n_pixels: usize,
     /// The fitted amplitude scale (1 unless `fit_scale`; per element: 1).
@@ -242,7 +245,7 @@ pub fn estimate_aberration_with(
         image_cost: model.cost.cost(&estimate.phases),
         estimate,
         assessment,
-        model,
+        noise: model.noise,
         group_phases: None,
         underdetermined: false,
         kept_prediction: false,
@@ -426,8 +429,9 @@ fn merged(first: Estimate, later: Estimate) -> Estimate {
 /// [`ELEMENT_EVALUATIONS`], or [`VIEW_ELEMENT_EVALUATIONS`] when W or the shift is fitted). With a prior whose errors are correlated ([`Prior::with_correlation_length`]) the
 /// element stage searches only smooth corrections of the prediction
 /// ([`SmoothPosterior`]). With a prior and [`one_acquisition`] the prediction is kept,
-/// unsearched. The assessment is that of the group stage. `prior`: one predicted phase per
-/// element.
+/// unsearched. The assessment is that of the group stage, or with a prior the element
+/// posterior's ([`element_posterior_assessment`]), which an ambiguous one completes with the next
+/// acquisition ([`suggest_focus_shift`]). `prior`: one predicted phase per element.
 fn estimate_per_element(
     sim: &Simulation,
     measurements: &[Measurement],
@@ -447,22 +451,25 @@ fn estimate_per_element(
             ),
         ));
     }
-    let mut grouped = sim.clone();
-    grouped.set_groups(sim.transducer.default_groups())?;
-    let group_prior = prior.as_ref().map(|p| p.condensed(&grouped.groups)).transpose()?;
     let positions = sim.transducer.reference_points();
-    let sigma = point_reflection(&positions, &grouped.groups);
-    let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
-    let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
-    group_model.cost.fit_scale = request.fit_scale;
-    let (group, mut assessment) = fit_groups(&group_model, warm.clone(), group_prior.as_ref(), sigma.as_deref(), request, cancel)?;
-    // With a prior the element search starts from the prediction: a default-group fit to
-    // element-level data pulls the group phases away from it (measured 2026-11-24, seed 1 of
-    // a 1024-element skull screen: the group posterior's spread 0.27 of the ideal focus against the
-    // prediction's 0.84), and both starts reach the same element posterior optimum.
-    let start = match &prior {
-        Some(p) => p.mean().to_vec(),
-        None => grouped.element_phases(&group.phases)?,
+    let warm = estimator(request, Method::Lbfgs, None)?;
+    // Without a prior the element search starts from a fit of the array's default groups (and
+    // that fit's assessment is the estimate's). With one it starts from the prediction: a
+    // default-group fit to element-level data pulls the group phases away from it (measured
+    // seed 1 of a 1024-element skull screen: the group posterior's spread 0.27 of the ideal
+    // focus against the prediction's 0.84), and the assessment is the element posterior's.
+    let (start, group_stage) = match &prior {
+        Some(p) => (p.mean().to_vec(), None),
+        None => {
+            let mut grouped = sim.clone();
+            grouped.set_groups(sim.transducer.default_groups())?;
+            let sigma = point_reflection(&positions, &grouped.groups);
+            let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
+            let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
+            group_model.cost.fit_scale = request.fit_scale;
+            let (group, assessment) = fit_groups(&group_model, warm, None, sigma.as_deref(), request, cancel)?;
+            (grouped.element_phases(&group.phases)?, Some((group.phases, assessment)))
+        }
     };
     let nuisance = request.fitted_nuisance();
     let model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
@@ -480,6 +487,13 @@ fn estimate_per_element(
         FittedNuisance { fitted: nuisance, scale: linear.scale, broadening_width_mm: w, shift_mm: shift, background: linear.background }
     });
     let n_pixels = cost.n_pixels();
+    let (group_phases, mut assessment) = match group_stage {
+        Some((phases, assessment)) => (Some(phases), assessment),
+        None => {
+            let p = prior.as_ref().ok_or_else(|| HasError::invalid("prior", "a per-element estimate without a group stage needs one"))?;
+            (None, element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, cancel)?)
+        }
+    };
     // One image's masked pixels cannot determine more phases than they number (without a prior).
     let underdetermined = prior.is_none() && n_pixels < sim.n_elements();
     assessment.ambiguous |= underdetermined;
@@ -489,7 +503,8 @@ fn estimate_per_element(
     let fitted_phases = if prior.is_some() { 0 } else { sim.n_elements() - 1 };
     (assessment.misfit, assessment.mismatch) = misfit(image_cost, n_pixels, fitted_phases, model.noise);
     assessment.mismatch &= !kept_prediction;
-    let suggestion = if request.suggest {
+    // An ambiguous posterior comes with the acquisition that would settle it.
+    let suggestion = if request.suggest || (prior.is_some() && assessment.ambiguous) {
         let spread = Spread::for_prior(prior.as_ref(), &positions)?;
         let mut shifts = Vec::new();
         for shift in CANDIDATE_SHIFTS_MM.map(|s| s.map(|v| v * 1e-3)) {
@@ -513,14 +528,81 @@ fn estimate_per_element(
         nuisance: fitted,
         estimate: elements,
         assessment,
-        model: group_model,
+        noise: model.noise,
         n_pixels,
         scale: 1.0,
-        group_phases: Some(group.phases),
+        group_phases,
         underdetermined,
         kept_prediction,
         prior_used: prior.is_some(),
         suggestion,
+    })
+}
+
+/// Starts of the exploration of a per-element posterior ([`element_posterior_assessment`]).
+pub const POSTERIOR_STARTS: usize = 4;
+
+/// Evaluations of each exploring search (at most the estimate's own budget).
+pub const POSTERIOR_START_EVALUATIONS: usize = 60;
+
+/// The assessment of a per-element estimate with a prior: [`POSTERIOR_STARTS`] L-BFGS searches
+/// of the element posterior (independent errors of the prior's std about its mean) from seeded
+/// draws of that prior; every end point whose image cost lies within `sigma²·chi²_0.95(G - 1)`
+/// of the best (the margin of an estimate without a prior) is a solution the images cannot tell
+/// from the estimate, and is scored, as for groups, by the focus the estimate's correction would
+/// leave were it the truth (the element basis's image of their difference, peak over peak).
+/// The draws sample what the prior allows; a smooth prior's starts are drawn independently per
+/// element (wider than it allows: a conservative search). Misfit and mismatch are the caller's.
+/// (A Gaussian approximation at the estimate does not serve: near a corrected focus the
+/// focal intensity is stationary in the phases, so what its height tells of them is of second
+/// order and the Fisher information misses it.)
+#[allow(clippy::too_many_arguments)]
+fn element_posterior_assessment(
+    cost: &ElementCost,
+    noise: f64,
+    prior: &Prior,
+    estimate: &Estimate,
+    budget: usize,
+    threshold: f64,
+    seed: u64,
+    cancel: Option<&AtomicBool>,
+) -> Result<Assessment> {
+    let g = estimate.phases.len();
+    let independent = Prior::new(prior.mean().to_vec(), prior.std_rad())?;
+    let posterior = Posterior::new(cost, noise, &independent)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x9057_e410);
+    let normal = Normal::new(0.0, prior.std_rad()).map_err(|e| HasError::invalid("prior_std_rad", e.to_string()))?;
+    let search = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(budget.min(POSTERIOR_START_EVALUATIONS).max(1))?;
+    let mut points = vec![estimate.phases.clone()];
+    for _ in 0..POSTERIOR_STARTS {
+        let start: Vec<f64> = prior.mean().iter().map(|m| wrap(m + normal.sample(&mut rng))).collect();
+        points.push(search.clone().with_start(start)?.run(&posterior, cancel)?.phases);
+    }
+    let fits: Vec<f64> = points.iter().map(|p| cost.cost(p)).collect();
+    let best = fits.iter().copied().fold(f64::INFINITY, f64::min);
+    let margin = noise.max(MIN_NOISE_RAD).powi(2) * chi2_95(g.saturating_sub(1).max(1));
+    let focal = |phases: &[f64]| -> Result<f64> {
+        Ok(cost.basis.image(phases)?.iter().copied().filter(|v| v.is_finite()).fold(f64::MIN, f64::max))
+    };
+    let ideal = focal(&vec![0.0; g])?;
+    let mut candidates: Vec<RivalSolution> = Vec::new();
+    for (p, &fit) in points.iter().zip(&fits).filter(|(_, &f)| f <= best + margin) {
+        if candidates.iter().any(|c| phase_error(&c.phases, p) < 0.05) {
+            continue;
+        }
+        let residual: Vec<f64> = p.iter().zip(&estimate.phases).map(|(t, e)| t - e).collect();
+        candidates.push(RivalSolution { phases: p.clone(), cost: fit, predicted_recovery: focal(&residual)? / ideal });
+    }
+    let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+    Ok(Assessment {
+        ambiguous: worst_recovery < threshold,
+        margin,
+        candidates,
+        worst_recovery,
+        suggested_phases: vec![0.0; g],
+        suggested_separation: 0.0,
+        misfit: f64::NAN,
+        mismatch: false,
     })
 }
 

@@ -34,7 +34,8 @@ pub struct Assessment {
     pub margin: f64,
     /// The distinct solutions within the margin, the best estimate among them.
     pub candidates: Vec<RivalSolution>,
-    /// The smallest `predicted_recovery` over the candidates (1 when there is one).
+    /// The smallest `predicted_recovery` over the candidates (1 when there is one); per element
+    /// with a prior, the focus expected under the posterior's spread about the estimate.
     pub worst_recovery: f64,
     /// Known group phases (rad) to add for one more acquisition that best separates the
     /// candidates.
