@@ -147,12 +147,12 @@ fn prior_lengths_per_group_and_per_element() {
 #[test]
 fn per_element_with_a_smooth_prior_and_defocused_images_lifts_a_prediction_of_0_7_above_0_85() {
     let s = sim();
-    let per_element = per_element(&s);
+    let per_element = per_element(s);
     let positions = s.transducer.reference_points();
     let ideal = peak(&s.arfi_image(&[]).unwrap());
     for seed in seeds(1, 5) {
         let truth = SkullScreen::default().phases(&positions, seed).unwrap();
-        let recovered = |est: &[f64]| focus_left(&s, &truth, est, ideal);
+        let recovered = |est: &[f64]| focus_left(s, &truth, est, ideal);
         let mut m = vec![Measurement { image: s.noisy_arfi_image(&truth, 0.02, seed).unwrap(), known: vec![] }];
         for (k, dz) in [5e-3, -5e-3, 10e-3].into_iter().enumerate() {
             let known = s.focus_shift_phases([0.0, 0.0, dz]).unwrap();

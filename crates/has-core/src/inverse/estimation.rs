@@ -572,7 +572,7 @@ fn element_posterior_assessment(
     let posterior = Posterior::new(cost, noise, &independent)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x9057_e410);
     let normal = Normal::new(0.0, prior.std_rad()).map_err(|e| HasError::invalid("prior_std_rad", e.to_string()))?;
-    let search = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(budget.min(POSTERIOR_START_EVALUATIONS).max(1))?;
+    let search = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(budget.clamp(1, POSTERIOR_START_EVALUATIONS))?;
     let mut points = vec![estimate.phases.clone()];
     for _ in 0..POSTERIOR_STARTS {
         let start: Vec<f64> = prior.mean().iter().map(|m| wrap(m + normal.sample(&mut rng))).collect();
