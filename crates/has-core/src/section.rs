@@ -47,7 +47,7 @@ impl Simulation {
         if added.is_empty() {
             return Err(HasError::invalid("phases", "needs at least one drive"));
         }
-        let sources = added.iter().map(|a| self.source_field(a)).collect::<Result<Vec<_>>>()?;
+        let sources = self.source_fields(added)?;
         let window = Window { planes: 0..g.nz, rows: row..row + 1, cols: 0..g.nx };
         let spec = RecordSpec { window: Some(window), reflections: self.reflections, ..RecordSpec::default() };
         let recordings = self.plan.propagate_batch(&sources, &spec)?;

@@ -366,6 +366,28 @@ impl Simulation {
         self.source.field(&drive)
     }
 
+    /// [`Simulation::source_field`] of several drives, the projection's kernel evaluated once for
+    /// all of those that add phases ([`SourceModel::fields`]).
+    pub fn source_fields(&self, added: &[Vec<f64>]) -> Result<Vec<Vec<C64>>> {
+        let mut drives = Vec::new();
+        for a in added.iter().filter(|a| a.iter().any(|&v| v != 0.0)) {
+            crate::error::require_finite("phases", a)?;
+            let extra = self.element_phases(a)?;
+            drives.push(extra.iter().enumerate().map(|(e, p)| self.drive(e, *p)).collect::<Vec<_>>());
+        }
+        let mut projected = self.source.fields(&drives)?.into_iter();
+        added
+            .iter()
+            .map(|a| {
+                if a.iter().any(|&v| v != 0.0) {
+                    projected.next().ok_or_else(|| HasError::invalid("phases", "lost a drive"))
+                } else {
+                    self.source_field(a)
+                }
+            })
+            .collect()
+    }
+
     /// One source plane per group: steering plus `known` element phases (rad; empty = none) on
     /// that group's elements, nothing elsewhere. They add up to the whole array's source.
     pub fn group_sources(&self, groups: &[usize], known: &[f64]) -> Result<Vec<Vec<C64>>> {

@@ -53,9 +53,13 @@ def run(args: argparse.Namespace) -> int:
     result = p.to_dict()
     if args.report:
         from arfi.report import predict_report
+        from arfi.scenario import Scenario
         from arfi.simulation import Simulation
 
-        predict_report(args.report, Simulation(scenario), p,
+        # The report images no MR-ARFI: an amplitude given spares its calibration march.
+        fields_only = scenario.to_dict()
+        fields_only.setdefault("arfi", {}).setdefault("amplitude_rad_m3_per_n", 1.0)
+        predict_report(args.report, Simulation(Scenario.from_dict(fields_only, scenario.base_dir)), p,
                        {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad), "seconds": seconds,
                         **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()}})
     finish(args, {"out": args.out, **result, "seconds": seconds})

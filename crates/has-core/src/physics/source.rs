@@ -102,31 +102,47 @@ impl SourceModel {
     /// Pressure (Pa) on the first plane, row-major `(ny, nx)`, for element drive `phasors`
     /// (element `e` radiates `face_pressure · phasors[e]`). Zero phasors cost nothing.
     pub fn field(&self, phasors: &[C64]) -> Result<Vec<C64>> {
-        if phasors.len() != self.footprints.len() {
-            return Err(HasError::invalid("phasors", format!("has {} values for {} elements", phasors.len(), self.footprints.len())));
+        Ok(self.fields(std::slice::from_ref(&phasors.to_vec()))?.remove(0))
+    }
+
+    /// [`SourceModel::field`] of several drives at once (`phasors[drive][element]`, one plane
+    /// each): the Rayleigh kernel of the projected elements, the costly part, is evaluated once
+    /// for all of them. An element costs nothing where every drive leaves it at zero.
+    pub fn fields(&self, phasors: &[Vec<C64>]) -> Result<Vec<Vec<C64>>> {
+        if let Some(p) = phasors.iter().find(|p| p.len() != self.footprints.len()) {
+            return Err(HasError::invalid("phasors", format!("has {} values for {} elements", p.len(), self.footprints.len())));
         }
-        let g = &self.grid;
-        let mut out = vec![C64::new(0.0, 0.0); g.lateral_len()];
-        let mut points: Vec<(SurfacePoint, C64)> = Vec::new();
-        for (fp, &a) in self.footprints.iter().zip(phasors) {
-            if a == C64::new(0.0, 0.0) {
+        let zero = C64::new(0.0, 0.0);
+        let mut out = vec![vec![zero; self.grid.lateral_len()]; phasors.len()];
+        let mut positions: Vec<[f64; 3]> = Vec::new();
+        let mut weights: Vec<Vec<C64>> = vec![Vec::new(); phasors.len()];
+        for (e, fp) in self.footprints.iter().enumerate() {
+            let drives: Vec<C64> = phasors.iter().map(|p| p[e] * self.face_pressure).collect();
+            if drives.iter().all(|&a| a == zero) {
                 continue;
             }
-            let a = a * self.face_pressure;
-            match fp {
-                Footprint::Raster(px) => px.iter().for_each(|&(i, w)| out[i as usize] += a * w),
-                Footprint::Points(p) => points.extend(p.iter().map(|q| (*q, a))),
-                Footprint::Plane(p) => out.iter_mut().zip(p).for_each(|(o, p)| *o += a * p),
+            for (o, &a) in out.iter_mut().zip(&drives) {
+                match fp {
+                    Footprint::Raster(px) => px.iter().for_each(|&(i, w)| o[i as usize] += a * w),
+                    Footprint::Plane(p) => o.iter_mut().zip(p).for_each(|(o, p)| *o += a * p),
+                    Footprint::Points(_) => {}
+                }
+            }
+            for q in fp.points() {
+                positions.push(q.position);
+                weights.iter_mut().zip(&drives).for_each(|(w, a)| w.push(a * q.area));
             }
         }
-        if !points.is_empty() {
-            self.add_rayleigh(&points, &mut out);
+        if !positions.is_empty() {
+            self.add_rayleigh(&positions, &weights, &mut out);
         }
         Ok(out)
     }
 
-    /// Adds the Rayleigh integral of `points` (drive `a`) at every pixel of the plane: one rayon
-    /// task per row, each a single-precision blocked sum ([`crate::physics::rayleigh`]).
+    /// Adds the Rayleigh integral of the points at `positions` with each set of `weights` (drive
+    /// × area, `weights[set][point]`) at every pixel of the plane `out[set]`: one rayon task per
+    /// row, each a single-precision blocked sum ([`crate::physics::rayleigh`]; one set:
+    /// [`Sources::row`], several: [`Sources::row_many`], the kernel evaluated once).
     ///
     /// Where the grid is finer than λ/2, the sum runs on every `r`-th pixel (spacing at most λ/2)
     /// and is Fourier-interpolated onto the rest ([`fourier_upsample`]): the waves that leave the
@@ -134,17 +150,22 @@ impl SourceModel {
     /// alias is the evanescent near field of the elements closest to the plane (λ/2 before it).
     /// `r = 2` at the default λ/4 spacing: a quarter of the work, and for the hemisphere of
     /// `tests/hemisphere.rs` the same focal field to four digits as the sum at every pixel.
-    fn add_rayleigh(&self, points: &[(SurfacePoint, C64)], out: &mut [C64]) {
+    fn add_rayleigh(&self, positions: &[[f64; 3]], weights: &[Vec<C64>], out: &mut [Vec<C64>]) {
         let g = &self.grid;
-        let weighted: Vec<([f64; 3], C64)> = points.iter().map(|(p, a)| (p.position, a * p.area)).collect();
-        let sources = Sources::new(&weighted, g.z0, self.wavenumber, self.attenuation);
+        let first: Vec<([f64; 3], C64)> = positions.iter().copied().zip(weights[0].iter().copied()).collect();
+        let sources = Sources::new(&first, g.z0, self.wavenumber, self.attenuation);
         let r = self.coarsening();
         let (cx, cy) = (g.nx / r, g.ny / r);
         let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
-        let mut coarse = vec![C64::new(0.0, 0.0); cx * cy];
-        coarse.par_chunks_mut(cx).enumerate().for_each(|(j, row)| row.copy_from_slice(&sources.row(&xs, g.y(r * j))));
-        let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
-        out.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
+        let rows: Vec<Vec<Vec<C64>>> = (0..cy)
+            .into_par_iter()
+            .map(|j| if weights.len() == 1 { vec![sources.row(&xs, g.y(r * j))] } else { sources.row_many(weights, &xs, g.y(r * j)) })
+            .collect();
+        for (set, o) in out.iter_mut().enumerate() {
+            let mut coarse: Vec<C64> = rows.iter().flat_map(|row| row[set].iter().copied()).collect();
+            let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
+            o.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
+        }
     }
 
     /// The coarsening `r` of the Rayleigh sums: the largest whole number with `r·dx ≤ λ/2` that

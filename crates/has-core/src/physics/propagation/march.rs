@@ -84,6 +84,11 @@ pub struct Recording {
 }
 
 impl RecordSpec {
+    /// Whether nothing is to be kept (a march for it would be wasted).
+    pub fn records_nothing(&self) -> bool {
+        self.planes.is_empty() && !self.axis && self.window.is_none() && !self.power
+    }
+
     pub(super) fn last_plane(&self, nz: usize) -> usize {
         let mut last = self.planes.iter().copied().max().unwrap_or(0);
         if let Some(w) = &self.window {

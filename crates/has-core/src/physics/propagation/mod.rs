@@ -230,7 +230,13 @@ impl HasPlan {
         if let Some(z) = plan.zone {
             plan.zone = Some(Zone { round_trips: plan.round_trips_needed(reference, z), ..z });
         }
-        let rec = if plan.zone.is_some() || spec.reflections { plan.propagate_here(reference, spec) } else { recorder.finish() };
+        // The one-way march above is the recording unless the reverberation or the reflections
+        // add to it (and a recording of nothing needs no march).
+        let rec = if (plan.zone.is_some() || spec.reflections) && !spec.records_nothing() {
+            plan.propagate_here(reference, spec)
+        } else {
+            recorder.finish()
+        };
         Ok((plan, rec))
     }
 
