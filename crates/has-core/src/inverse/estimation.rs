@@ -452,28 +452,32 @@ fn estimate_per_element(
         ));
     }
     let positions = sim.transducer.reference_points();
-    let warm = estimator(request, Method::Lbfgs, None)?;
+    let time_limit = estimator(request, Method::Lbfgs, None)?.time_limit;
     // Without a prior the element search starts from a fit of the array's default groups (and
     // that fit's assessment is the estimate's). With one it starts from the prediction: a
     // default-group fit to element-level data pulls the group phases away from it (measured
     // seed 1 of a 1024-element skull screen: the group posterior's spread 0.27 of the ideal
     // focus against the prediction's 0.84), and the assessment is the element posterior's.
-    let (start, group_stage) = match &prior {
-        Some(p) => (p.mean().to_vec(), None),
+    let warm_start = match &prior {
+        Some(p) => WarmStart::Prediction(p),
         None => {
             let mut grouped = sim.clone();
             grouped.set_groups(sim.transducer.default_groups())?;
             let sigma = point_reflection(&positions, &grouped.groups);
-            let warm = estimator(request, Method::Lbfgs, sigma.clone())?;
+            let est = estimator(request, Method::Lbfgs, sigma.clone())?;
             let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
             group_model.cost.fit_scale = request.fit_scale;
-            let (group, assessment) = fit_groups(&group_model, warm, None, sigma.as_deref(), request, cancel)?;
-            (grouped.element_phases(&group.phases)?, Some((group.phases, assessment)))
+            let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, cancel)?;
+            WarmStart::Groups { elements: grouped.element_phases(&group.phases)?, groups: group.phases, assessment }
         }
+    };
+    let start = match &warm_start {
+        WarmStart::Prediction(p) => p.mean().to_vec(),
+        WarmStart::Groups { elements, .. } => elements.clone(),
     };
     let nuisance = request.fitted_nuisance();
     let model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
-    let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(warm.time_limit);
+    let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(time_limit);
     let default_budget = if nuisance.view() { VIEW_ELEMENT_EVALUATIONS } else { ELEMENT_EVALUATIONS };
     let budget = request.max_evaluations.unwrap_or(default_budget);
     let kept_prediction = prior.is_some() && one_acquisition(&model.cost.terms);
@@ -487,10 +491,9 @@ fn estimate_per_element(
         FittedNuisance { fitted: nuisance, scale: linear.scale, broadening_width_mm: w, shift_mm: shift, background: linear.background }
     });
     let n_pixels = cost.n_pixels();
-    let (group_phases, mut assessment) = match group_stage {
-        Some((phases, assessment)) => (Some(phases), assessment),
-        None => {
-            let p = prior.as_ref().ok_or_else(|| HasError::invalid("prior", "a per-element estimate without a group stage needs one"))?;
+    let (group_phases, mut assessment) = match warm_start {
+        WarmStart::Groups { groups, assessment, .. } => (Some(groups), assessment),
+        WarmStart::Prediction(p) => {
             (None, element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, cancel)?)
         }
     };
@@ -537,6 +540,14 @@ fn estimate_per_element(
         prior_used: prior.is_some(),
         suggestion,
     })
+}
+
+/// Where a per-element search starts, and what judges its ambiguity.
+enum WarmStart<'a> {
+    /// The default-group estimate spread to the elements (no prior): its assessment.
+    Groups { elements: Vec<f64>, groups: Vec<f64>, assessment: Assessment },
+    /// The prediction of the prior: judged on the element posterior.
+    Prediction(&'a Prior),
 }
 
 /// Starts of the exploration of a per-element posterior ([`element_posterior_assessment`]).
