@@ -551,10 +551,10 @@ enum WarmStart<'a> {
 }
 
 /// Starts of the exploration of a per-element posterior ([`element_posterior_assessment`]).
-pub const POSTERIOR_STARTS: usize = 4;
+const POSTERIOR_STARTS: usize = 4;
 
 /// Evaluations of each exploring search (at most the estimate's own budget).
-pub const POSTERIOR_START_EVALUATIONS: usize = 60;
+const POSTERIOR_START_EVALUATIONS: usize = 60;
 
 /// The assessment of a per-element estimate with a prior: [`POSTERIOR_STARTS`] L-BFGS searches
 /// of the element posterior (independent errors of the prior's std about its mean) from seeded
