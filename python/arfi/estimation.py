@@ -38,8 +38,8 @@ class Estimate:
     evaluations: int
     seconds: float
     ambiguous: bool
-    """True when clearly different solutions fit within the noise, or (per element with a prior) the posterior's spread
-    leaves an expected focus below 0.9 (see ``worst_recovery`` and ``suggested_phases_rad``)."""
+    """True when clearly different solutions fit within the noise (see ``worst_recovery`` and ``suggested_phases_rad``);
+    per element with a prior, end points of searches of the element posterior from draws of the prior."""
     method: str
     stop: str
     """Why the search ended: ``"converged"``, ``"evaluation limit"``, ``"time limit"``, ``"interrupted"``, or
@@ -49,16 +49,15 @@ class Estimate:
     scale: float
     margin: float
     worst_recovery: float
-    """The least focus (of the ideal) a correction with ``phases_rad`` leaves if another candidate were the truth;
-    per element with a prior (one candidate), the focus it is expected to leave under the posterior's spread (Fisher
-    information of the images and the prior, linearised). ``ambiguous`` when below 0.9."""
+    """The least focus (of the ideal) a correction with ``phases_rad`` leaves if another candidate were the truth
+    (1 with one candidate); ``ambiguous`` when below 0.9."""
     candidate_phases_rad: list[list[float]]
     candidate_costs: list[float]
     candidate_recoveries: list[float]
     suggested_phases_rad: NDArray[np.float64]
     """Known group phases to add for one more acquisition that would best separate the candidates; per element with
     ``suggest=True`` (or with a prior, when ``ambiguous``), the known per-element phases of ``next_acquisition``; per
-    element with a prior otherwise zeros (one candidate: nothing to separate)."""
+    element with a prior otherwise zeros."""
     suggested_separation: float
     cost_history: NDArray[np.float64] = field(repr=False)
     misfit: float = float("nan")

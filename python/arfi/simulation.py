@@ -342,8 +342,8 @@ class Simulation:
         With one group per element (``with_groups(n_elements)``, the CLI's ``--groups 1024``)
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
         element, about 15 s for 1024), warm-started by the estimate on the default 16 groups (with a
-        prior it starts from the prediction, and ``ambiguous`` is judged on the posterior's spread about the
-        estimate: ``worst_recovery``);
+        prior it starts from the prediction, and ``ambiguous`` is judged on searches of the element posterior
+        from draws of the prior: ``worst_recovery``);
         ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress`` prints the basis
         marching to stderr.
 

@@ -354,38 +354,34 @@ impl Simulation {
     /// Source plane for the steering plus `added` phases (per element or per group; empty or all
     /// zero = none, the kept steered plane).
     pub fn source_field(&self, added: &[f64]) -> Result<Vec<C64>> {
-        crate::error::require_finite("phases", added)?;
-        if added.iter().all(|&a| a == 0.0) {
-            if !added.is_empty() {
-                self.element_phases(added)?; // the length is still checked
-            }
-            return Ok(self.steered_source.to_vec());
+        match self.added_drive(added)? {
+            None => Ok(self.steered_source.to_vec()),
+            Some(drive) => self.source.field(&drive),
         }
-        let extra = self.element_phases(added)?;
-        let drive: Vec<C64> = extra.iter().enumerate().map(|(e, a)| self.drive(e, *a)).collect();
-        self.source.field(&drive)
     }
 
     /// [`Simulation::source_field`] of several drives, the projection's kernel evaluated once for
     /// all of those that add phases ([`SourceModel::fields`]).
     pub fn source_fields(&self, added: &[Vec<f64>]) -> Result<Vec<Vec<C64>>> {
-        let mut drives = Vec::new();
-        for a in added.iter().filter(|a| a.iter().any(|&v| v != 0.0)) {
-            crate::error::require_finite("phases", a)?;
-            let extra = self.element_phases(a)?;
-            drives.push(extra.iter().enumerate().map(|(e, p)| self.drive(e, *p)).collect::<Vec<_>>());
+        let drives = added.iter().map(|a| self.added_drive(a)).collect::<Result<Vec<_>>>()?;
+        let (with_phases, phasors): (Vec<usize>, Vec<Vec<C64>>) =
+            drives.into_iter().enumerate().filter_map(|(i, d)| d.map(|d| (i, d))).unzip();
+        let mut out = vec![self.steered_source.to_vec(); added.len()];
+        for (i, field) in with_phases.into_iter().zip(self.source.fields(&phasors)?) {
+            out[i] = field;
         }
-        let mut projected = self.source.fields(&drives)?.into_iter();
-        added
-            .iter()
-            .map(|a| {
-                if a.iter().any(|&v| v != 0.0) {
-                    projected.next().ok_or_else(|| HasError::invalid("phases", "lost a drive"))
-                } else {
-                    self.source_field(a)
-                }
-            })
-            .collect()
+        Ok(out)
+    }
+
+    /// The element drives (steering plus `added`, per element or per group) when `added` holds
+    /// any phase, `None` for none (the steered source serves); `added` is checked either way.
+    fn added_drive(&self, added: &[f64]) -> Result<Option<Vec<C64>>> {
+        crate::error::require_finite("phases", added)?;
+        if added.is_empty() {
+            return Ok(None);
+        }
+        let extra = self.element_phases(added)?;
+        Ok(added.iter().any(|&a| a != 0.0).then(|| extra.iter().enumerate().map(|(e, a)| self.drive(e, *a)).collect()))
     }
 
     /// One source plane per group: steering plus `known` element phases (rad; empty = none) on

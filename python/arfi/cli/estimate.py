@@ -119,15 +119,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
     elif e.ambiguous:
-        where = f"suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}"
-        if kind == "element" and e.prior_used:
-            print(f"estimate: AMBIGUOUS: the images and the prior leave the element phases uncertain: the correction is "
-                  f"expected to leave {e.worst_recovery:.2f} of the ideal focus. Acquire one more image with the suggested "
-                  f"known phases added (the next acquisition below; {where}).")
-        else:
-            print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a "
-                  f"correction could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image "
-                  f"with the suggested known phases added ({where}).")
+        where = ("the next acquisition below; " if e.next_acquisition is not None else "") + \
+            f"suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}"
+        print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a "
+              f"correction could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image "
+              f"with the suggested known phases added ({where}).")
     # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
     use_prediction = e.model_mismatch and e.prior_used and prior is not None
     if use_prediction:

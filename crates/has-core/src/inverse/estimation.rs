@@ -6,7 +6,7 @@
 use crate::error::{HasError, Result};
 use crate::inverse::basis::{known_per_element, BasisCache, ElementCost, ElementTerm};
 use crate::inverse::cost::{build_model, Measurement, Model, Objective, MAX_KERNEL_GROUPS};
-use crate::inverse::estimate::{chi2_95, misfit, Assessment, Estimate, Estimator, Minimum, RivalSolution, Stop};
+use crate::inverse::estimate::{chi2_95, misfit, rival_solutions, Assessment, Estimate, Estimator, Minimum, Stop};
 use crate::inverse::information::{
     error_covariance, expected_focus, focal_fields, suggest_focus_shift, ShiftSuggestion, Spread, CANDIDATE_SHIFTS_MM,
 };
@@ -584,27 +584,18 @@ fn element_posterior_assessment(
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x9057_e410);
     let normal = Normal::new(0.0, prior.std_rad()).map_err(|e| HasError::invalid("prior_std_rad", e.to_string()))?;
     let search = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(budget.clamp(1, POSTERIOR_START_EVALUATIONS))?;
-    let mut points = vec![estimate.phases.clone()];
+    let mut ends = vec![estimate.phases.clone()];
     for _ in 0..POSTERIOR_STARTS {
         let start: Vec<f64> = prior.mean().iter().map(|m| wrap(m + normal.sample(&mut rng))).collect();
-        points.push(search.clone().with_start(start)?.run(&posterior, cancel)?.phases);
+        ends.push(search.clone().with_start(start)?.run(&posterior, cancel)?.phases);
     }
-    let fits: Vec<f64> = points.iter().map(|p| cost.cost(p)).collect();
-    let best = fits.iter().copied().fold(f64::INFINITY, f64::min);
+    // Rivals are judged on the images' cost, as without a prior.
+    let points: Vec<Minimum> = ends.into_iter().map(|phases| Minimum { cost: cost.cost(&phases), phases }).collect();
     let margin = noise.max(MIN_NOISE_RAD).powi(2) * chi2_95(g.saturating_sub(1).max(1));
     let focal = |phases: &[f64]| -> Result<f64> {
         Ok(cost.basis.image(phases)?.iter().copied().filter(|v| v.is_finite()).fold(f64::MIN, f64::max))
     };
-    let ideal = focal(&vec![0.0; g])?;
-    let mut candidates: Vec<RivalSolution> = Vec::new();
-    for (p, &fit) in points.iter().zip(&fits).filter(|(_, &f)| f <= best + margin) {
-        if candidates.iter().any(|c| phase_error(&c.phases, p) < 0.05) {
-            continue;
-        }
-        let residual: Vec<f64> = p.iter().zip(&estimate.phases).map(|(t, e)| t - e).collect();
-        candidates.push(RivalSolution { phases: p.clone(), cost: fit, predicted_recovery: focal(&residual)? / ideal });
-    }
-    let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+    let (candidates, worst_recovery) = rival_solutions(&points, margin, &estimate.phases, focal)?;
     Ok(Assessment {
         ambiguous: worst_recovery < threshold,
         margin,

@@ -34,8 +34,7 @@ pub struct Assessment {
     pub margin: f64,
     /// The distinct solutions within the margin, the best estimate among them.
     pub candidates: Vec<RivalSolution>,
-    /// The smallest `predicted_recovery` over the candidates (1 when there is one); per element
-    /// with a prior, the focus expected under the posterior's spread about the estimate.
+    /// The smallest `predicted_recovery` over the candidates (1 when there is one).
     pub worst_recovery: f64,
     /// Known group phases (rad) to add for one more acquisition that best separates the
     /// candidates.
@@ -112,18 +111,7 @@ impl Estimate {
             let run = lbfgs_run(objective, frame.search(&twin(&self.phases, sig)), 10, 3000, None, None)?;
             points.push(Minimum { phases: frame.report(&run.params), cost: run.cost });
         }
-        let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
-        let ideal = focal(&model.base, &vec![0.0; g])?;
-        let mut candidates: Vec<RivalSolution> = Vec::new();
-        for p in points.iter().filter(|p| p.cost <= best + margin) {
-            if candidates.iter().any(|c| phase_error(&c.phases, &p.phases) < 0.05) {
-                continue;
-            }
-            let residual: Vec<f64> = p.phases.iter().zip(&self.phases).map(|(t, e)| t - e).collect();
-            let predicted_recovery = focal(&model.base, &residual)? / ideal;
-            candidates.push(RivalSolution { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
-        }
-        let worst_recovery = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+        let (candidates, worst_recovery) = rival_solutions(&points, margin, &self.phases, |phases| focal(&model.base, phases))?;
         let (suggested_phases, suggested_separation) = propose_diversity(model, &candidates, 64, seed)?;
         // The best image fit among the plausible solutions (with images alone: the best cost).
         let fit = candidates.iter().map(|c| model.cost.cost(&c.phases)).fold(f64::INFINITY, f64::min);
@@ -139,6 +127,32 @@ impl Estimate {
             mismatch,
         })
     }
+}
+
+/// The distinct solutions among `points` whose cost lies within `margin` of the best (one per
+/// cluster of RMS phase difference under 0.05 rad, the first found), each scored by the focus
+/// the `estimate`'s correction would leave were it the truth, `focus(p - estimate) / focus(0)`
+/// (`focus`: the largest value of the model's image for phases), and the smallest such score
+/// (1 when there is none).
+pub fn rival_solutions(
+    points: &[Minimum],
+    margin: f64,
+    estimate: &[f64],
+    focus: impl Fn(&[f64]) -> Result<f64>,
+) -> Result<(Vec<RivalSolution>, f64)> {
+    let best = points.iter().map(|p| p.cost).fold(f64::INFINITY, f64::min);
+    let ideal = focus(&vec![0.0; estimate.len()])?;
+    let mut candidates: Vec<RivalSolution> = Vec::new();
+    for p in points.iter().filter(|p| p.cost <= best + margin) {
+        if candidates.iter().any(|c| phase_error(&c.phases, &p.phases) < 0.05) {
+            continue;
+        }
+        let residual: Vec<f64> = p.phases.iter().zip(estimate).map(|(t, e)| t - e).collect();
+        let predicted_recovery = focus(&residual)? / ideal;
+        candidates.push(RivalSolution { phases: p.phases.clone(), cost: p.cost, predicted_recovery });
+    }
+    let worst = candidates.iter().map(|c| c.predicted_recovery).fold(1.0, f64::min);
+    Ok((candidates, worst))
 }
 
 /// Misfit above which an unexplained residual counts as a model mismatch, however significant

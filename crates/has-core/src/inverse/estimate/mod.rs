@@ -10,7 +10,7 @@ mod assess;
 mod problem;
 mod solvers;
 
-pub use assess::{chi2_95, misfit, propose_diversity, Assessment, RivalSolution};
+pub use assess::{chi2_95, misfit, propose_diversity, rival_solutions, Assessment, RivalSolution};
 use problem::Problem;
 use solvers::{lbfgs_run, restarted_nelder_mead};
 
