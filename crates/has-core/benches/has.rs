@@ -147,28 +147,30 @@ fn model(sim: &Simulation, measurements: &[Measurement]) -> Model {
     build_model(sim, measurements, sim.mask_fraction, 3).unwrap()
 }
 
-/// One HAS slab step on 180 x 180: FFT, propagator, inverse FFT, screen ([`Fft2::filter`] as
-/// the march calls it), the unit of every march.
+/// One HAS slab step: FFT, propagator, inverse FFT, screen ([`Fft2::filter`] as the march calls
+/// it), the unit of every march; on 180 x 180 (the paper's phantom) and 540 x 540 (a 650 kHz
+/// hemisphere through a head).
 fn bench_has_step(c: &mut Criterion) {
-    let (nx, ny) = (180, 180);
-    let fft = Fft2::new(nx, ny);
-    let input = pseudo_random_field(nx * ny);
-    let propagator = pseudo_random_field(nx * ny);
-    let screen = pseudo_random_field(nx * ny);
-    let mut g = c.benchmark_group("has_step_180x180");
-    g.sample_size(50).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
-    for parallel in [false, true] {
-        let mut ws = fft.workspace(parallel);
-        let name = if parallel { "filter_parallel" } else { "filter_serial" };
-        g.bench_function(name, |b| {
-            b.iter_batched_ref(
-                || input.clone(),
-                |field| fft.filter(field, &mut ws, None, &propagator, Some(&screen)),
-                BatchSize::PerIteration,
-            )
-        });
+    for n in [180, 540] {
+        let fft = Fft2::new(n, n);
+        let input = pseudo_random_field(n * n);
+        let propagator = pseudo_random_field(n * n);
+        let screen = pseudo_random_field(n * n);
+        let mut g = c.benchmark_group(format!("has_step_{n}x{n}"));
+        g.sample_size(if n > 200 { 20 } else { 50 }).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+        for parallel in [false, true] {
+            let mut ws = fft.workspace(parallel);
+            let name = if parallel { "filter_parallel" } else { "filter_serial" };
+            g.bench_function(name, |b| {
+                b.iter_batched_ref(
+                    || input.clone(),
+                    |field| fft.filter(field, &mut ws, None, &propagator, Some(&screen)),
+                    BatchSize::PerIteration,
+                )
+            });
+        }
+        g.finish();
     }
-    g.finish();
 }
 
 /// Cost and cost + gradient for 1024 groups (one per element): the field-basis model of

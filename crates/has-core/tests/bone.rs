@@ -415,6 +415,30 @@ fn reverberating_marches_are_linear() {
     assert_eq!(rs[0], rs[1], "a batch marches each source the same way");
 }
 
+/// The plan's build counts the round trips on its reference and records that march on the way
+/// (one march fewer; with reflections it marches again): the recording must be the very march
+/// `propagate` makes with the count, bit for bit, whatever is recorded (planes before, inside and
+/// beyond the layer, the axis, a window across it, the reflections), and a recording that stops
+/// before the layer changes nothing.
+#[test]
+fn the_build_records_its_reference_as_propagate_does() {
+    use has_core::physics::propagation::Window;
+    let g = Grid::new(64, 64, 0.375e-3, 0.375e-3, 120, 6.5e-3 / 17.0, 0.0).unwrap();
+    let resolved = scenario(&[CORTICAL], g.z(40) * 1e3).resolve().unwrap();
+    let reference: Vec<C64> = (0..g.lateral_len()).map(|i| C64::from_polar(1.0, 0.01 * (i % 64) as f64)).collect();
+    let window = Window { planes: 30..70, rows: 20..40, cols: 10..50 };
+    let specs = [
+        RecordSpec { planes: vec![20, 50, 100], axis: true, ..RecordSpec::default() },
+        RecordSpec { window: Some(window), reflections: true, ..RecordSpec::default() },
+        RecordSpec { planes: vec![10], ..RecordSpec::default() },
+    ];
+    for spec in &specs {
+        let (plan, built) = HasPlan::build(&g, &resolved.medium, F, &reference, &HasOptions::default(), spec).unwrap();
+        assert!(plan.reverberation().is_some_and(|z| z.2 > 0), "no reverberation: {:?}", plan.reverberation());
+        assert_eq!(built, plan.propagate(&reference, spec).unwrap(), "{spec:?}");
+    }
+}
+
 /// A small planar array in water with one extra slab of `material` (TOML body) at `z_mm`.
 fn small_with_slab(material: &str, z_mm: [f64; 2]) -> Scenario {
     let text = format!(

@@ -202,7 +202,13 @@ mod tests {
 
     #[test]
     fn fused_filter_is_bit_identical_to_the_separate_steps() {
-        let (nx, ny) = (12, 10);
+        // 40 x 36: rows and columns spread over several parallel chunks.
+        for (nx, ny) in [(12, 10), (40, 36)] {
+            fused_filter_matches_separate_steps(nx, ny);
+        }
+    }
+
+    fn fused_filter_matches_separate_steps(nx: usize, ny: usize) {
         let wave = |k: usize, a: f64| C64::new((a * k as f64).sin(), (0.3 * a * k as f64).cos());
         let x: Vec<C64> = (0..nx * ny).map(|k| wave(k, 0.7)).collect();
         let pre: Vec<C64> = (0..nx * ny).map(|k| wave(k, 0.4)).collect();

@@ -181,6 +181,15 @@ impl<'a> Recorder<'a> {
         }
     }
 
+    /// Adds what `other` (a recorder of the same spec) recorded.
+    fn absorb(&mut self, other: Recorder) {
+        let (rec, more) = (&mut self.rec, other.rec);
+        rec.planes.iter_mut().zip(&more.planes).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(a, b)| *a += b));
+        rec.axis.iter_mut().zip(&more.axis).for_each(|(a, b)| *a += b);
+        rec.window.iter_mut().zip(&more.window).for_each(|(a, b)| *a += b);
+        rec.power.iter_mut().zip(&more.power).for_each(|(a, b)| *a += b);
+    }
+
     /// Sets the power of the forward wave `field` through plane `n` (impedance of `slab`).
     pub(super) fn power(&mut self, n: usize, slab: &SliceProperties, field: &[C64]) {
         if self.spec.power && n <= self.last {
@@ -356,9 +365,19 @@ impl HasPlan {
                 };
                 let mut leaving = vec![C64::new(0.0, 0.0); g.lateral_len()];
                 while done < cap && !inside.is_empty() {
-                    let (b, u) = sweeper.backward(std::mem::take(&mut inside), z.first, z.first..z.last + 1, None, &mut rec);
+                    // Counting, a backward sweep is kept only if its round trip is added, so
+                    // that the recording equals the march with that many trips.
+                    let mut trial = tolerance.map(|_| Recorder::new(g, spec, last));
+                    let (b, u) =
+                        sweeper.backward(std::mem::take(&mut inside), z.first, z.first..z.last + 1, None, trial.as_mut().unwrap_or(&mut rec));
+                    if tolerance.is_some_and(|t| norm(&u) < t) {
+                        break;
+                    }
+                    if let Some(t) = trial {
+                        rec.absorb(t);
+                    }
                     leaving.iter_mut().zip(&b).for_each(|(l, b)| *l += b);
-                    if tolerance.is_some_and(|t| norm(&u) < t) || u.is_empty() {
+                    if u.is_empty() {
                         break;
                     }
                     let start = u[0].0;
@@ -387,10 +406,12 @@ impl HasPlan {
         (rec.finish(), done)
     }
 
-    /// The round trips the reference beam needs (see [`super::REVERBERATION_TOLERANCE`]).
-    pub(super) fn round_trips_needed(&self, reference: &[C64], zone: super::Zone) -> usize {
-        let spec = RecordSpec { planes: vec![zone.last], ..RecordSpec::default() };
-        self.march(reference.to_vec(), &spec, true, RoundTrips::UntilBelow(super::REVERBERATION_TOLERANCE)).1
+    /// The round trips the reference beam needs (see [`super::REVERBERATION_TOLERANCE`]) and
+    /// its recording for `spec` with that many: the same as [`HasPlan::propagate`] once the
+    /// zone holds the count, if `spec` reaches the zone (`spec.last_plane(nz) >= zone.first`)
+    /// and asks for no reflections. The count does not depend on `spec`.
+    pub(super) fn round_trips_needed(&self, reference: &[C64], spec: &RecordSpec) -> (Recording, usize) {
+        self.march(reference.to_vec(), spec, true, RoundTrips::UntilBelow(super::REVERBERATION_TOLERANCE))
     }
 }
 

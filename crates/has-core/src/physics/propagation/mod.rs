@@ -227,15 +227,23 @@ impl HasPlan {
         recorder.add(last, &field);
         recorder.power(last, plan.slab_properties(last), &field);
         plan.zone = plan.reverberation_zone();
+        // The march that counts the round trips records what `spec` asks when it reaches the
+        // zone (not with reflections: the waves left in the zone when counting stops differ from
+        // those of the march with the count, and they are sent back to the source); else the
+        // one-way march above is the recording unless the reverberation or the reflections add
+        // to it (and a recording of nothing needs no march).
+        let mut counted = None;
         if let Some(z) = plan.zone {
-            plan.zone = Some(Zone { round_trips: plan.round_trips_needed(reference, z), ..z });
+            let reaches = !spec.records_nothing() && !spec.reflections && spec.last_plane(grid.nz) >= z.first;
+            let to_count = if reaches { spec.clone() } else { RecordSpec { planes: vec![z.last], ..RecordSpec::default() } };
+            let (rec, round_trips) = plan.round_trips_needed(reference, &to_count);
+            plan.zone = Some(Zone { round_trips, ..z });
+            counted = reaches.then_some(rec);
         }
-        // The one-way march above is the recording unless the reverberation or the reflections
-        // add to it (and a recording of nothing needs no march).
-        let rec = if (plan.zone.is_some() || spec.reflections) && !spec.records_nothing() {
-            plan.propagate_here(reference, spec)
-        } else {
-            recorder.finish()
+        let rec = match counted {
+            Some(rec) => rec,
+            None if (plan.zone.is_some() || spec.reflections) && !spec.records_nothing() => plan.propagate_here(reference, spec),
+            None => recorder.finish(),
         };
         Ok((plan, rec))
     }
