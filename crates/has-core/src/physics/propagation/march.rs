@@ -368,8 +368,13 @@ impl HasPlan {
                     // Counting, a backward sweep is kept only if its round trip is added, so
                     // that the recording equals the march with that many trips.
                     let mut trial = tolerance.map(|_| Recorder::new(g, spec, last));
-                    let (b, u) =
-                        sweeper.backward(std::mem::take(&mut inside), z.first, z.first..z.last + 1, None, trial.as_mut().unwrap_or(&mut rec));
+                    let (b, u) = sweeper.backward(
+                        std::mem::take(&mut inside),
+                        z.first,
+                        z.first..z.last + 1,
+                        None,
+                        trial.as_mut().unwrap_or(&mut rec),
+                    );
                     if tolerance.is_some_and(|t| norm(&u) < t) {
                         break;
                     }
