@@ -39,13 +39,14 @@ fn element_basis_images_gradient_and_estimate() {
     let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
     let basis = &model.cost.basis;
 
-    // The basis reproduces the direct HAS image: single-precision storage of the fields bounds
-    // the relative error near 1e-7 of the peak; 1e-6 leaves room.
+    // The basis reproduces the direct HAS image: the fields are marched and stored in single
+    // precision (a few 1e-6 of the peak in the field, about twice that in |p|²: see
+    // `single_precision_march_matches_the_double_precision_one`); 2e-5 leaves room.
     let direct = sim.arfi_image(&truth).unwrap();
     let p = &basis.sampler.pixels;
     let from_basis = basis.image(&truth).unwrap();
     let err = (&from_basis - &direct.slice(ndarray::s![p[0].clone(), p[1].clone()])).iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-    assert!(err < 1e-6 * peak(&direct), "basis image error {err:e}");
+    assert!(err < 2e-5 * peak(&direct), "basis image error {err:e}");
 
     assert_gradient(&model.cost);
 
@@ -58,7 +59,7 @@ fn element_basis_images_gradient_and_estimate() {
     let err = (&basis_weighted.image(&truth).unwrap() - &direct_weighted.slice(ndarray::s![q[0].clone(), q[1].clone()]))
         .iter()
         .fold(0.0_f64, |m, x| m.max(x.abs()));
-    assert!(err < 1e-6 * peak(&direct_weighted), "weighted basis image error {err:e}");
+    assert!(err < 2e-5 * peak(&direct_weighted), "weighted basis image error {err:e}");
     assert!(peak(&direct_weighted) < 0.9 * peak(&direct), "the amplitudes (mean 0.6) must weaken the image");
 
     // Estimation: the 16-group estimate, expanded to elements, warm-starts L-BFGS on all 256

@@ -53,7 +53,7 @@ fn jacobian_matches_central_differences_of_the_basis_images() {
         let scale = column.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         assert!(scale > 0.0, "element {e} has no effect on the image");
         // Central differences err by h²/6·|∂³d| (about 2e-5 of the column here) and by the
-        // single-precision basis (about 1e-7 of the peak, divided by h): 1e-3 leaves room.
+        // single-precision basis (a few 1e-6 of the peak, divided by h): 1e-3 leaves room.
         for (row, &p) in term.mask.iter().enumerate() {
             let fd = (up[p] - down[p]) / (2.0 * h);
             assert!((column[row] - fd).abs() < 1e-3 * scale, "element {e} pixel {p}: {} vs {fd}", column[row]);

@@ -18,7 +18,7 @@ use crate::memory;
 use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
 use ndarray::{s, Array2};
-use num_complex::Complex64 as C64;
+use num_complex::{Complex32 as C32, Complex64 as C64};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -84,6 +84,9 @@ impl FieldBasis {
         };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
+        // Kept in single precision: marched in it too where the march is one-way.
+        let window = &sampler.window;
+        let single = if sim.reflections { None } else { sim.plan.single_precision(window.planes.end - 1) };
         for start in (0..n).step_by(BATCH) {
             if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                 return Err(HasError::Interrupted);
@@ -96,11 +99,19 @@ impl FieldBasis {
                     sim.source.field(&drive)
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let recordings = sim.plan.propagate_batch(&sources, &spec)?;
-            for (k, rec) in recordings.iter().enumerate() {
-                for (s, p) in rec.window.iter().enumerate() {
-                    re[[s, start + k]] = p.re as f32;
-                    im[[s, start + k]] = p.im as f32;
+            let windows: Vec<Vec<C32>> = match &single {
+                Some(plan) => plan.window_batch(&sources, window),
+                None => sim
+                    .plan
+                    .propagate_batch(&sources, &spec)?
+                    .iter()
+                    .map(|r| r.window.iter().map(|p| C32::new(p.re as f32, p.im as f32)).collect())
+                    .collect(),
+            };
+            for (k, w) in windows.iter().enumerate() {
+                for (s, p) in w.iter().enumerate() {
+                    re[[s, start + k]] = p.re;
+                    im[[s, start + k]] = p.im;
                 }
             }
             if let Some(f) = progress {

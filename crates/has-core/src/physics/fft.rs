@@ -3,35 +3,36 @@
 //! Planned once ([`Fft2::new`]); every transform takes a caller-owned [`FftWorkspace`], so the
 //! propagation loop does not allocate. No normalisation is applied: a forward then an inverse
 //! transform multiplies by `nx·ny`. Frequencies are in FFT order (see [`crate::physics::grid::Grid::wavenumber`]).
+//! Double precision by default; `Fft2<f32>` serves marches kept in single precision.
 
-use num_complex::Complex64 as C64;
+use num_complex::Complex;
 use rayon::prelude::*;
-use rustfft::{Fft, FftPlanner};
+use rustfft::{Fft, FftNum, FftPlanner};
 use std::sync::Arc;
 
 /// Row-major `(ny, nx)` 2-D FFT plans; the spectrum is left transposed, `(nx, ny)`.
 #[derive(Clone)]
-pub struct Fft2 {
+pub struct Fft2<T: FftNum = f64> {
     /// Samples along x (row length).
     pub nx: usize,
     /// Samples along y (number of rows).
     pub ny: usize,
-    fwd_x: Arc<dyn Fft<f64>>,
-    inv_x: Arc<dyn Fft<f64>>,
-    fwd_y: Arc<dyn Fft<f64>>,
-    inv_y: Arc<dyn Fft<f64>>,
+    fwd_x: Arc<dyn Fft<T>>,
+    inv_x: Arc<dyn Fft<T>>,
+    fwd_y: Arc<dyn Fft<T>>,
+    inv_y: Arc<dyn Fft<T>>,
     scratch_len: usize,
 }
 
 /// Buffers for one field's transforms: the transposed spectrum and per-chunk FFT scratch.
-pub struct FftWorkspace {
+pub struct FftWorkspace<T: FftNum = f64> {
     /// The spectrum in transposed layout `(nx, ny)` after [`Fft2::forward`].
-    pub spectrum: Vec<C64>,
-    scratch: Vec<Vec<C64>>,
+    pub spectrum: Vec<Complex<T>>,
+    scratch: Vec<Vec<Complex<T>>>,
     parallel: bool,
 }
 
-impl Fft2 {
+impl<T: FftNum> Fft2<T> {
     /// Plans the four 1-D transforms.
     pub fn new(nx: usize, ny: usize) -> Self {
         let mut planner = FftPlanner::new();
@@ -45,24 +46,21 @@ impl Fft2 {
 
     /// A workspace; `parallel` spreads rows over the rayon pool (use for a single field, not inside
     /// an already parallel batch).
-    pub fn workspace(&self, parallel: bool) -> FftWorkspace {
+    pub fn workspace(&self, parallel: bool) -> FftWorkspace<T> {
         let chunks = if parallel { (2 * rayon::current_num_threads()).clamp(1, self.nx.min(self.ny)) } else { 1 };
-        FftWorkspace {
-            spectrum: vec![C64::new(0.0, 0.0); self.nx * self.ny],
-            scratch: vec![vec![C64::new(0.0, 0.0); self.scratch_len]; chunks],
-            parallel,
-        }
+        let zero = Complex::new(T::zero(), T::zero());
+        FftWorkspace { spectrum: vec![zero; self.nx * self.ny], scratch: vec![vec![zero; self.scratch_len]; chunks], parallel }
     }
 
     /// `field` (ny, nx) → `ws.spectrum` (nx, ny), unnormalised. `field` is overwritten.
-    pub fn forward(&self, field: &mut [C64], ws: &mut FftWorkspace) {
+    pub fn forward(&self, field: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         rows(&*self.fwd_x, field, self.nx, &mut ws.scratch, ws.parallel);
         transpose(field, &mut ws.spectrum, self.ny, self.nx, ws.parallel);
         rows(&*self.fwd_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
     }
 
     /// `ws.spectrum` (nx, ny) → `field` (ny, nx), unnormalised. The spectrum is overwritten.
-    pub fn inverse(&self, ws: &mut FftWorkspace, field: &mut [C64]) {
+    pub fn inverse(&self, ws: &mut FftWorkspace<T>, field: &mut [Complex<T>]) {
         rows(&*self.inv_y, &mut ws.spectrum, self.ny, &mut ws.scratch, ws.parallel);
         transpose(&ws.spectrum, field, self.nx, self.ny, ws.parallel);
         rows(&*self.inv_x, field, self.nx, &mut ws.scratch, ws.parallel);
@@ -73,40 +71,53 @@ impl Fft2 {
     /// [`Fft2::inverse`], with `kernel` in the transposed layout `(nx, ny)`; `None`: no factor.
     /// The multiplies are fused into the row passes (the same operations in the same order, so the
     /// result is bit-identical to the separate calls): 3 passes over the data instead of 6–7.
-    pub fn filter(&self, field: &mut [C64], ws: &mut FftWorkspace, pre: Option<&[C64]>, kernel: &[C64], post: Option<&[C64]>) {
+    pub fn filter(
+        &self,
+        field: &mut [Complex<T>],
+        ws: &mut FftWorkspace<T>,
+        pre: Option<&[Complex<T>]>,
+        kernel: &[Complex<T>],
+        post: Option<&[Complex<T>]>,
+    ) {
         let FftWorkspace { spectrum, scratch, parallel } = ws;
         let (fwd_x, inv_x, fwd_y, inv_y) = (&*self.fwd_x, &*self.inv_x, &*self.fwd_y, &*self.inv_y);
         row_chunks(field, self.nx, scratch, *parallel, |row, at, s| {
             if let Some(pre) = pre {
-                row.iter_mut().zip(&pre[at..]).for_each(|(x, t)| *x *= *t);
+                row.iter_mut().zip(&pre[at..]).for_each(|(x, t)| *x = *x * *t);
             }
             fwd_x.process_with_scratch(row, s);
         });
         transpose(field, spectrum, self.ny, self.nx, *parallel);
         row_chunks(spectrum, self.ny, scratch, *parallel, |row, at, s| {
             fwd_y.process_with_scratch(row, s);
-            row.iter_mut().zip(&kernel[at..]).for_each(|(x, k)| *x *= *k);
+            row.iter_mut().zip(&kernel[at..]).for_each(|(x, k)| *x = *x * *k);
             inv_y.process_with_scratch(row, s);
         });
         transpose(spectrum, field, self.nx, self.ny, *parallel);
         row_chunks(field, self.nx, scratch, *parallel, |row, at, s| {
             inv_x.process_with_scratch(row, s);
             if let Some(post) = post {
-                row.iter_mut().zip(&post[at..]).for_each(|(x, p)| *x *= *p);
+                row.iter_mut().zip(&post[at..]).for_each(|(x, p)| *x = *x * *p);
             }
         });
     }
 }
 
 /// In-place FFT of every length-`len` row of `data`.
-fn rows(fft: &dyn Fft<f64>, data: &mut [C64], len: usize, scratch: &mut [Vec<C64>], parallel: bool) {
+fn rows<T: FftNum>(fft: &dyn Fft<T>, data: &mut [Complex<T>], len: usize, scratch: &mut [Vec<Complex<T>>], parallel: bool) {
     row_chunks(data, len, scratch, parallel, |row, _, s| fft.process_with_scratch(row, s));
 }
 
 /// Calls `f(row, start, scratch)` on every length-`len` row of `data` (`start`: the row's first
 /// sample in `data`), the rows spread over the pool in one chunk per scratch buffer when `parallel`.
-fn row_chunks(data: &mut [C64], len: usize, scratch: &mut [Vec<C64>], parallel: bool, f: impl Fn(&mut [C64], usize, &mut [C64]) + Sync) {
-    let chunk = |(d, s, first): (&mut [C64], &mut Vec<C64>, usize)| {
+fn row_chunks<T: FftNum>(
+    data: &mut [Complex<T>],
+    len: usize,
+    scratch: &mut [Vec<Complex<T>>],
+    parallel: bool,
+    f: impl Fn(&mut [Complex<T>], usize, &mut [Complex<T>]) + Sync,
+) {
+    let chunk = |(d, s, first): (&mut [Complex<T>], &mut Vec<Complex<T>>, usize)| {
         for (i, row) in d.chunks_exact_mut(len).enumerate() {
             f(row, first + i * len, s);
         }
@@ -120,9 +131,9 @@ fn row_chunks(data: &mut [C64], len: usize, scratch: &mut [Vec<C64>], parallel: 
 }
 
 /// `dst[c·rows + r] = src[r·cols + c]`, in 32 x 32 blocks.
-pub fn transpose(src: &[C64], dst: &mut [C64], rows: usize, cols: usize, parallel: bool) {
+pub fn transpose<V: Copy + Send + Sync>(src: &[V], dst: &mut [V], rows: usize, cols: usize, parallel: bool) {
     const B: usize = 32;
-    let block = |(cb, out): (usize, &mut [C64])| {
+    let block = |(cb, out): (usize, &mut [V])| {
         let c0 = cb * B;
         let nc = out.len() / rows;
         for r0 in (0..rows).step_by(B) {
@@ -142,9 +153,10 @@ pub fn transpose(src: &[C64], dst: &mut [C64], rows: usize, cols: usize, paralle
 }
 
 /// `a[i] *= b[i]`.
-pub fn multiply<T: Copy + Send + Sync>(a: &mut [C64], b: &[T], parallel: bool)
+pub fn multiply<A, B>(a: &mut [A], b: &[B], parallel: bool)
 where
-    C64: std::ops::MulAssign<T>,
+    A: Copy + Send + Sync + std::ops::MulAssign<B>,
+    B: Copy + Send + Sync,
 {
     const CHUNK: usize = 8192;
     if parallel {
@@ -157,6 +169,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use num_complex::Complex64 as C64;
 
     /// Direct O(N²) DFT, the slow obvious reference.
     fn dft2(x: &[C64], nx: usize, ny: usize) -> Vec<C64> {

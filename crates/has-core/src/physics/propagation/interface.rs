@@ -21,7 +21,8 @@
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
-use num_complex::Complex64 as C64;
+use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
+use rustfft::FftNum;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -69,26 +70,31 @@ pub const MAX_PLAN_PAIRS: usize = 64;
 #[derive(Default)]
 pub(crate) struct Coefficients(HashMap<(Key, Key), Arc<Vec<C64>>>);
 
-/// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one.
-pub(crate) struct Interface {
+/// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one
+/// (in double precision, or single for a single-precision march).
+pub(crate) struct Interface<T: FftNum = f64> {
     /// Largest normal-incidence `|R|` on the plane (how strongly it reflects).
     pub strength: f64,
-    kind: Kind,
+    kind: Kind<T>,
 }
 
-enum Kind {
+enum Kind<T: FftNum> {
     /// `R(x, y)` applied pixel by pixel.
-    Pointwise(Vec<f64>),
+    Pointwise(Vec<T>),
     /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
-    Spectral(Vec<Pair>),
+    Spectral(Vec<Pair<T>>),
 }
 
-struct Pair {
+struct Pair<T: FftNum> {
     /// The pixels of this pair; `None`: every pixel.
     pixels: Option<Vec<u32>>,
     /// `R_ab(kx, ky) / (nx·ny)` in the transposed spectrum layout `(nx, ny)`.
-    coefficient: Arc<Vec<C64>>,
+    coefficient: Arc<Vec<Complex<T>>>,
 }
+
+/// Single-precision copies of spectral coefficients, by the address of the double-precision one
+/// (shared between interfaces as the originals are).
+pub(crate) type SingleCoefficients = HashMap<usize, Arc<Vec<C32>>>;
 
 /// Properties of one pixel as exact bits (equal bits: the same material).
 type Key = [u64; 3];
@@ -101,6 +107,26 @@ fn key(s: &SliceProperties, i: usize) -> Key {
 }
 
 impl Interface {
+    /// The same operator in single precision.
+    pub(crate) fn single(&self, shared: &mut SingleCoefficients) -> Interface<f32> {
+        let kind = match &self.kind {
+            Kind::Pointwise(r) => Kind::Pointwise(r.iter().map(|&r| r as f32).collect()),
+            Kind::Spectral(pairs) => Kind::Spectral(
+                pairs
+                    .iter()
+                    .map(|p| Pair {
+                        pixels: p.pixels.clone(),
+                        coefficient: shared
+                            .entry(Arc::as_ptr(&p.coefficient) as usize)
+                            .or_insert_with(|| Arc::new(p.coefficient.iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()))
+                            .clone(),
+                    })
+                    .collect(),
+            ),
+        };
+        Interface { strength: self.strength, kind }
+    }
+
     /// The interface from slab `from` into slab `to`, or `None` where they are equal.
     pub fn new(
         grid: &Grid,
@@ -156,30 +182,34 @@ impl Interface {
             .collect();
         Some(Interface { strength, kind: Kind::Spectral(pairs) })
     }
+}
 
+impl<T: FftNum> Interface<T> {
     /// `out ← R ⊛ p`: the wave reflected by this interface from the incident wave `p` (for a
     /// wave crossing in the other direction, the reflection is `-R ⊛ p`). `out` and `work` are
     /// as long as `p`; `work` is overwritten.
-    pub fn reflect(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
+    pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
             Kind::Pointwise(r) => out.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r),
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
                 fft.forward(work, ws);
                 let spectrum = ws.spectrum.clone();
-                out.fill(C64::new(0.0, 0.0));
+                out.fill(Complex::new(T::zero(), T::zero()));
                 for pair in pairs {
                     ws.spectrum.iter_mut().zip(&spectrum).zip(pair.coefficient.iter()).for_each(|((s, a), r)| *s = a * r);
                     fft.inverse(ws, work);
                     match &pair.pixels {
-                        None => out.iter_mut().zip(work.iter()).for_each(|(o, w)| *o += w),
-                        Some(px) => px.iter().for_each(|&i| out[i as usize] += work[i as usize]),
+                        None => out.iter_mut().zip(work.iter()).for_each(|(o, w)| *o = *o + w),
+                        Some(px) => px.iter().for_each(|&i| out[i as usize] = out[i as usize] + work[i as usize]),
                     }
                 }
             }
         }
     }
+}
 
+impl Interface {
     /// `out ← Rᵀ p`, the transpose of [`Interface::reflect`]: `Σ_pairs IFFT(R_ab · FFT(M_ab · p))`
     /// (each pair's pixels taken before its filter, not after; `R_ab` depends on `kx² + ky²`
     /// only, so the filter is its own transpose). `work` is overwritten.

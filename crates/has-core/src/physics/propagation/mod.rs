@@ -34,10 +34,12 @@
 mod interface;
 mod march;
 mod point;
+mod single;
 mod transpose;
 
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
+pub use single::SinglePlan;
 
 use crate::error::{HasError, Result};
 use crate::physics::fft::Fft2;
