@@ -151,7 +151,7 @@ fn model(sim: &Simulation, measurements: &[Measurement]) -> Model {
 /// it), the unit of every march; on 180 x 180 (the paper's phantom) and 540 x 540 (a 650 kHz
 /// hemisphere through a head).
 fn bench_has_step(c: &mut Criterion) {
-    for n in [180, 540] {
+    for n in [180, 256, 360, 540] {
         let fft = Fft2::new(n, n);
         let input = pseudo_random_field(n * n);
         let propagator = pseudo_random_field(n * n);

@@ -57,19 +57,24 @@ impl HasPlan {
 }
 
 impl SinglePlan {
-    /// Marches each source (the field on plane 0, one rayon task each) and keeps `window`
-    /// (row-major plane, row, column), as [`HasPlan::propagate_batch`] does with a
-    /// [`super::RecordSpec`] asking for that window alone. `window` must end at or before the
+    /// Marches each source (the field on plane 0) and keeps `window` (row-major plane, row,
+    /// column), as [`HasPlan::propagate_batch`] does with a [`super::RecordSpec`] asking for that
+    /// window alone (and spread over the pool as it does). `window` must end at or before the
     /// plan's last plane.
     pub fn window_batch(&self, sources: &[Vec<C64>], window: &Window) -> Vec<Vec<C32>> {
         use rayon::prelude::*;
-        sources.par_iter().map(|s| self.window(s, window)).collect()
+        if self.fft.nx * self.fft.ny >= super::SEQUENTIAL_BATCH_SAMPLES {
+            let mut out = Vec::with_capacity(sources.len());
+            super::march::in_pool(|| out = sources.iter().map(|s| self.window(s, window, true)).collect());
+            return out;
+        }
+        sources.par_iter().map(|s| self.window(s, window, false)).collect()
     }
 
-    fn window(&self, source: &[C64], window: &Window) -> Vec<C32> {
+    fn window(&self, source: &[C64], window: &Window, parallel: bool) -> Vec<C32> {
         let nx = self.nx;
         let mut field = single(source);
-        let mut ws = self.fft.workspace(false);
+        let mut ws = self.fft.workspace(parallel);
         let zero = C32::new(0.0, 0.0);
         let (mut reflected, mut work) = (vec![zero; field.len()], vec![zero; field.len()]);
         let mut out = Vec::with_capacity(window.len());
