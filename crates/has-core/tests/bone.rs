@@ -463,6 +463,8 @@ fn single_precision_march_matches_the_double_precision_one() {
     let (plan, _) = HasPlan::build(&g, &soft.medium, F, &focused, &HasOptions::default(), &RecordSpec::default()).unwrap();
     assert!(plan.reverberation().is_none(), "{:?}", plan.reverberation());
     let double = plan.propagate(&focused, &spec).unwrap().window;
+    // The steps' operators in single precision: each distinct propagator and screen once.
+    assert!(plan.single_precision_bytes(99).is_some_and(|b| b >= 2 * g.lateral_len() as u64 * 8));
     let single = plan.single_precision(99).unwrap().window_batch(std::slice::from_ref(&focused), &window).remove(0);
     let peak = double.iter().map(|v| v.norm()).fold(0.0, f64::max);
     let error = double.iter().zip(&single).map(|(d, s)| (d - C64::new(s.re as f64, s.im as f64)).norm()).fold(0.0, f64::max) / peak;
@@ -473,6 +475,7 @@ fn single_precision_march_matches_the_double_precision_one() {
     let (plan, _) = HasPlan::build(&g, &bone.medium, F, &focused, &HasOptions::default(), &RecordSpec::default()).unwrap();
     let first = plan.reverberation().expect("the bone plate reverberates").0;
     assert!(plan.single_precision(first).is_none() && plan.single_precision(first - 1).is_some());
+    assert!(plan.single_precision_bytes(first).is_none());
 }
 
 /// A small planar array in water with one extra slab of `material` (TOML body) at `z_mm`.

@@ -71,10 +71,14 @@ impl FieldBasis {
         };
         let n = sim.n_elements();
         let s_len = sampler.window.len();
-        let bytes = (s_len * n) as u64 * 8;
+        // Kept in single precision: marched in it too where the march is one-way, with the
+        // plan's steps to the window in single precision besides the basis.
+        let window = &sampler.window;
+        let last = window.planes.end - 1;
+        let steps_bytes = if sim.reflections { None } else { sim.plan.single_precision_bytes(last) };
         memory::check(
             || format!("a field basis of {s_len} samples x {n} elements"),
-            bytes,
+            (s_len * n) as u64 * 8 + steps_bytes.unwrap_or(0),
             "estimate fewer groups, or give the MR slice a smaller field of view or matrix",
         )?;
         let spec = crate::physics::propagation::RecordSpec {
@@ -84,9 +88,7 @@ impl FieldBasis {
         };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
-        // Kept in single precision: marched in it too where the march is one-way.
-        let window = &sampler.window;
-        let single = if sim.reflections { None } else { sim.plan.single_precision(window.planes.end - 1) };
+        let single = steps_bytes.and_then(|_| sim.plan.single_precision(last));
         for start in (0..n).step_by(BATCH) {
             if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                 return Err(HasError::Interrupted);

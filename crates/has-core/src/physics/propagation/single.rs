@@ -37,9 +37,7 @@ impl HasPlan {
     /// plane is not one-way (a reverberating layer begins at or before it). Operators shared
     /// between steps stay shared.
     pub fn single_precision(&self, last: usize) -> Option<SinglePlan> {
-        if self.zone.is_some_and(|z| z.first <= last) || last >= self.grid.nz {
-            return None;
-        }
+        self.single_precision_bytes(last)?;
         let mut arrays: HashMap<usize, Arc<Vec<C32>>> = HashMap::new();
         let mut shared = |a: &Arc<Vec<C64>>| arrays.entry(Arc::as_ptr(a) as usize).or_insert_with(|| Arc::new(single(a))).clone();
         let mut coefficients = SingleCoefficients::new();
@@ -53,6 +51,22 @@ impl HasPlan {
             })
             .collect();
         Some(SinglePlan { nx: self.grid.nx, fft: Fft2::new(self.grid.nx, self.grid.ny), steps })
+    }
+}
+
+impl HasPlan {
+    /// About the bytes [`HasPlan::single_precision`] holds for plane `last` (each distinct
+    /// propagator and screen once, and every interface as a full plane, 8 bytes per sample), or
+    /// `None` where it is refused.
+    pub fn single_precision_bytes(&self, last: usize) -> Option<u64> {
+        if self.zone.is_some_and(|z| z.first <= last) || last >= self.grid.nz {
+            return None;
+        }
+        let steps = &self.steps[..last];
+        let arrays: std::collections::HashSet<usize> =
+            steps.iter().flat_map(|s| [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize]).collect();
+        let planes = arrays.len() + steps.iter().filter(|s| s.interface.is_some()).count();
+        Some((planes * self.grid.lateral_len()) as u64 * 8)
     }
 }
 
