@@ -16,6 +16,7 @@ use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement, Objective}
 use crate::inverse::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::mr::MrSampler;
+use crate::physics::propagation::single;
 use crate::simulation::Simulation;
 use ndarray::{s, Array2};
 use num_complex::{Complex32 as C32, Complex64 as C64};
@@ -88,7 +89,7 @@ impl FieldBasis {
         };
         let mut re = Array2::<f32>::zeros((s_len, n));
         let mut im = Array2::<f32>::zeros((s_len, n));
-        let single = steps_bytes.and_then(|_| sim.plan.single_precision(last));
+        let single_plan = steps_bytes.and_then(|_| sim.plan.single_precision(last));
         for start in (0..n).step_by(BATCH) {
             if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                 return Err(HasError::Interrupted);
@@ -101,14 +102,9 @@ impl FieldBasis {
                     sim.source.field(&drive)
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let windows: Vec<Vec<C32>> = match &single {
+            let windows: Vec<Vec<C32>> = match &single_plan {
                 Some(plan) => plan.window_batch(&sources, window),
-                None => sim
-                    .plan
-                    .propagate_batch(&sources, &spec)?
-                    .iter()
-                    .map(|r| r.window.iter().map(|p| C32::new(p.re as f32, p.im as f32)).collect())
-                    .collect(),
+                None => sim.plan.propagate_batch(&sources, &spec)?.iter().map(|r| single(&r.window)).collect(),
             };
             for (k, w) in windows.iter().enumerate() {
                 for (s, p) in w.iter().enumerate() {

@@ -92,10 +92,6 @@ struct Pair<T: FftNum> {
     coefficient: Arc<Vec<Complex<T>>>,
 }
 
-/// Single-precision copies of spectral coefficients, by the address of the double-precision one
-/// (shared between interfaces as the originals are).
-pub(crate) type SingleCoefficients = HashMap<usize, Arc<Vec<C32>>>;
-
 /// Properties of one pixel as exact bits (equal bits: the same material).
 type Key = [u64; 3];
 
@@ -107,22 +103,14 @@ fn key(s: &SliceProperties, i: usize) -> Key {
 }
 
 impl Interface {
-    /// The same operator in single precision.
-    pub(crate) fn single(&self, shared: &mut SingleCoefficients) -> Interface<f32> {
+    /// The same operator in single precision; `copy` gives each spectral coefficient's
+    /// single-precision copy (shared as the originals are).
+    pub(crate) fn single(&self, copy: &mut impl FnMut(&Arc<Vec<C64>>) -> Arc<Vec<C32>>) -> Interface<f32> {
         let kind = match &self.kind {
             Kind::Pointwise(r) => Kind::Pointwise(r.iter().map(|&r| r as f32).collect()),
-            Kind::Spectral(pairs) => Kind::Spectral(
-                pairs
-                    .iter()
-                    .map(|p| Pair {
-                        pixels: p.pixels.clone(),
-                        coefficient: shared
-                            .entry(Arc::as_ptr(&p.coefficient) as usize)
-                            .or_insert_with(|| Arc::new(p.coefficient.iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()))
-                            .clone(),
-                    })
-                    .collect(),
-            ),
+            Kind::Spectral(pairs) => {
+                Kind::Spectral(pairs.iter().map(|p| Pair { pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect())
+            }
         };
         Interface { strength: self.strength, kind }
     }

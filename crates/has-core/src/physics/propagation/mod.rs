@@ -39,6 +39,7 @@ mod transpose;
 
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
+pub(crate) use single::single;
 pub use single::SinglePlan;
 
 use crate::error::{HasError, Result};
@@ -66,6 +67,12 @@ pub const REVERBERATION_TOLERANCE: f64 = 1e-3;
 /// 2 cores: 540² takes 2.2 ms per step split against 4.8 ms on one core; 256² 0.57 ms against
 /// 0.76 ms, which two fields at once still beat).
 pub const SEQUENTIAL_BATCH_SAMPLES: usize = 1 << 17;
+
+/// Whether a batch of fields of `samples` per plane marches one field after another
+/// ([`SEQUENTIAL_BATCH_SAMPLES`]).
+fn in_sequence(samples: usize) -> bool {
+    samples >= SEQUENTIAL_BATCH_SAMPLES
+}
 
 /// At most this many round trips (a layer with near-total reflection and no loss).
 pub const MAX_ROUND_TRIPS: usize = 32;
@@ -316,7 +323,7 @@ impl HasPlan {
         for s in sources {
             self.check(s, spec)?;
         }
-        if sources.len() == 1 || self.grid.lateral_len() >= SEQUENTIAL_BATCH_SAMPLES {
+        if sources.len() == 1 || in_sequence(self.grid.lateral_len()) {
             return sources.iter().map(|s| self.propagate(s, spec)).collect();
         }
         Ok(sources.par_iter().map(|s| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0).collect())

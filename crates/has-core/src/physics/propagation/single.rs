@@ -7,7 +7,7 @@
 //! few 1e-6 of the peak after about a hundred (tested against the double-precision march), far
 //! below any MR image's noise.
 
-use super::interface::{Interface, SingleCoefficients};
+use super::interface::Interface;
 use super::march::Window;
 use super::HasPlan;
 use crate::physics::fft::Fft2;
@@ -17,7 +17,6 @@ use std::sync::Arc;
 
 /// A plan's steps up to one plane, in single precision ([`HasPlan::single_precision`]).
 pub struct SinglePlan {
-    nx: usize,
     fft: Fft2<f32>,
     steps: Vec<SingleStep>,
 }
@@ -28,7 +27,8 @@ struct SingleStep {
     screen: Arc<Vec<C32>>,
 }
 
-fn single(v: &[C64]) -> Vec<C32> {
+/// `v` rounded to single precision.
+pub(crate) fn single(v: &[C64]) -> Vec<C32> {
     v.iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
 }
 
@@ -37,36 +37,35 @@ impl HasPlan {
     /// plane is not one-way (a reverberating layer begins at or before it). Operators shared
     /// between steps stay shared.
     pub fn single_precision(&self, last: usize) -> Option<SinglePlan> {
-        self.single_precision_bytes(last)?;
-        let mut arrays: HashMap<usize, Arc<Vec<C32>>> = HashMap::new();
-        let mut shared = |a: &Arc<Vec<C64>>| arrays.entry(Arc::as_ptr(a) as usize).or_insert_with(|| Arc::new(single(a))).clone();
-        let mut coefficients = SingleCoefficients::new();
-        // Plane `last` is recorded on arrival: its interface is not crossed, nor its slab stepped.
-        let steps = self.steps[..last]
+        let steps = self.one_way_steps(last)?;
+        let mut copies: HashMap<usize, Arc<Vec<C32>>> = HashMap::new();
+        let mut copy = |a: &Arc<Vec<C64>>| copies.entry(Arc::as_ptr(a) as usize).or_insert_with(|| Arc::new(single(a))).clone();
+        let steps = steps
             .iter()
             .map(|s| SingleStep {
-                interface: s.interface.as_ref().map(|i| i.single(&mut coefficients)),
-                propagator: shared(&s.propagator),
-                screen: shared(&s.screen),
+                interface: s.interface.as_ref().map(|i| i.single(&mut copy)),
+                propagator: copy(&s.propagator),
+                screen: copy(&s.screen),
             })
             .collect();
-        Some(SinglePlan { nx: self.grid.nx, fft: Fft2::new(self.grid.nx, self.grid.ny), steps })
+        Some(SinglePlan { fft: Fft2::new(self.grid.nx, self.grid.ny), steps })
     }
-}
 
-impl HasPlan {
     /// About the bytes [`HasPlan::single_precision`] holds for plane `last` (each distinct
     /// propagator and screen once, and every interface as a full plane, 8 bytes per sample), or
     /// `None` where it is refused.
     pub fn single_precision_bytes(&self, last: usize) -> Option<u64> {
-        if self.zone.is_some_and(|z| z.first <= last) || last >= self.grid.nz {
-            return None;
-        }
-        let steps = &self.steps[..last];
+        let steps = self.one_way_steps(last)?;
         let arrays: std::collections::HashSet<usize> =
             steps.iter().flat_map(|s| [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize]).collect();
         let planes = arrays.len() + steps.iter().filter(|s| s.interface.is_some()).count();
         Some((planes * self.grid.lateral_len()) as u64 * 8)
+    }
+
+    /// The steps a march to plane `last` takes (plane `last` is recorded on arrival: its
+    /// interface is not crossed, nor its slab stepped), where that march is one-way.
+    fn one_way_steps(&self, last: usize) -> Option<&[super::Step]> {
+        (last < self.grid.nz && !self.zone.is_some_and(|z| z.first <= last)).then(|| &self.steps[..last])
     }
 }
 
@@ -77,7 +76,7 @@ impl SinglePlan {
     /// plan's last plane.
     pub fn window_batch(&self, sources: &[Vec<C64>], window: &Window) -> Vec<Vec<C32>> {
         use rayon::prelude::*;
-        if self.fft.nx * self.fft.ny >= super::SEQUENTIAL_BATCH_SAMPLES {
+        if super::in_sequence(self.fft.nx * self.fft.ny) {
             let mut out = Vec::with_capacity(sources.len());
             super::march::in_pool(|| out = sources.iter().map(|s| self.window(s, window, true)).collect());
             return out;
@@ -86,7 +85,7 @@ impl SinglePlan {
     }
 
     fn window(&self, source: &[C64], window: &Window, parallel: bool) -> Vec<C32> {
-        let nx = self.nx;
+        let nx = self.fft.nx;
         let mut field = single(source);
         let mut ws = self.fft.workspace(parallel);
         let zero = C32::new(0.0, 0.0);
