@@ -53,6 +53,12 @@ class Prediction:
     skull_responses: NDArray[np.complex128]
     """Per element, ``h_skull``: its complex pressure (Pa) at the target through the skull when it
     alone is driven with a unit phasor."""
+    bone_speed_sensitivity_rad_per_percent: NDArray[np.float64] | None = None
+    """Per element, how ``phases_rad`` moves (rad) per percent of the CT conversion's bone sound
+    speed (``predict(..., bone_speed_sensitivity=True)``; else None): a finite difference over
+    +10 % through the wave model, its weighted common phase removed. ``s`` times it is the
+    prediction's error if the conversion's bone is ``s`` percent off: give it to an estimate as a
+    prior mode (``prior_modes``; the CLI's ``--prior-bone-speed-std-percent``)."""
 
     def pressure_with(self, phases_rad: ArrayLike) -> float:
         """Focal |p| (Pa) at the target through this prediction's skull when the array drives the
@@ -84,16 +90,19 @@ class Prediction:
                 "corrected": self.corrected_pa,
                 "optimal": self.optimal_pa,
             },
-        }
+        } | ({} if self.bone_speed_sensitivity_rad_per_percent is None
+             else {"bone_speed_sensitivity_rad_per_percent": self.bone_speed_sensitivity_rad_per_percent.tolist()})
 
 
-def predict(scenario: Scenario, target_mm: ArrayLike | None = None) -> Prediction:
+def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_sensitivity: bool = False) -> Prediction:
     """Simulates ``scenario`` (which needs a ``[ct]``) and predicts each element's aberration at
     ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs the
     scenario's simulation, two transposed marches and one transposed projection, whatever the
     number of elements; the skull's plan is dropped before the reference's is built, so that
     they are never held at once. The ARFI amplitude is not calibrated (a prediction makes no
-    image), which spares a march through a reverberating head."""
+    image), which spares a march through a reverberating head. ``bone_speed_sensitivity`` also
+    gives :attr:`Prediction.bone_speed_sensitivity_rad_per_percent` (needs the porosity
+    conversion, ``aubry2003``), at the cost of one more simulation of the skull."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
-    d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target)
+    d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target, bool(bone_speed_sensitivity))
     return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})

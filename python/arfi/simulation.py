@@ -15,7 +15,7 @@ from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.focal import axis_focus, plane_focus
 from arfi.scenario import Scenario
-from arfi.validate import as_count, as_image, as_number, as_phases, as_point_mm, nuisance_names, real_array
+from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
@@ -331,6 +331,7 @@ class Simulation:
         prior_correlation_mm: float | None = None,
         fit_nuisance: str | Sequence[str] | None = None,
         suggest: bool = False,
+        prior_modes: ArrayLike | None = None,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
@@ -363,6 +364,14 @@ class Simulation:
         phase, squared-exponential correlation, in the reduced-rank form of Solin & Särkkä 2020):
         element-scale detail the images cannot resolve stays as predicted instead of being
         fitted to noise. Group estimates keep the independent prior of the group means.
+
+        ``prior_modes`` (per element, with ``prior_correlation_mm``): error modes of known shape,
+        an array of shape ``(modes, n_elements)`` in rad, each the change of the predicted phases
+        when one input of the prediction is off by one standard deviation: e.g.
+        ``20 * prediction.bone_speed_sensitivity_rad_per_percent`` for a CT conversion whose bone
+        sound speed may be off by 20 %. Each mode's coefficient (a standard normal a priori) is
+        fitted with the smooth corrections, so one misjudged constant that moves every phase is
+        one number for the images to find.
 
         Per element, a prior and one acquisition (one image, or repeats with the same known
         phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot
@@ -408,9 +417,11 @@ class Simulation:
         std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad", 0.0, low_open=True)
         length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm", 0.0, low_open=True)
         nuisance = nuisance_names(fit_nuisance)
+        modes = None if prior_modes is None else as_modes(prior_modes, self.n_elements)
         d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress), prior=prior_array, prior_std_rad=std,
-                                prior_correlation_mm=length, fit_nuisance=nuisance, suggest=bool(suggest))
+                                prior_correlation_mm=length, fit_nuisance=nuisance, suggest=bool(suggest),
+                                prior_modes=modes)
         return Estimate(**d)
 
     def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,

@@ -44,6 +44,19 @@ def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.floa
     return np.ascontiguousarray(a)
 
 
+def as_modes(modes: ArrayLike, n: int, name: str = "prior_modes") -> NDArray[np.float64]:
+    """Error modes (rad) as a C-contiguous float64 array of shape (modes, n): one row per mode, a
+    single 1-D mode taken as one row. Raises ValueError naming `name`."""
+    a = real_array(modes, name)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != n or a.shape[0] == 0:
+        raise ValueError(f"{name}: must have shape (modes, {n}) (one value per element in each mode), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return np.ascontiguousarray(a)
+
+
 def as_number(value: Any, name: str, low: float = -np.inf, low_open: bool = False) -> float:
     """A finite real number >= ``low`` (> ``low`` when ``low_open``). Raises ValueError naming `name`."""
     try:

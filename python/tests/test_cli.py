@@ -281,6 +281,42 @@ def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, caps
     assert not (tmp_path / "x.npy").exists()
 
 
+def test_estimate_refuses_a_bone_speed_prior_it_cannot_fit(tmp_path, capsys, sim):
+    # --prior-bone-speed-std-percent needs the prediction's sensitivity (its JSON from predict
+    # --bone-speed-sensitivity), a prior correlated over the aperture and a positive std: one
+    # line each, exit 2, nothing written.
+    image = tmp_path / "m.nii.gz"
+    arfi.write_arfi_image(image, sim.arfi_image(None), sim.mr_affine_mm, sim.mr_volume_shape)
+    n = sim.n_elements
+    np.save(tmp_path / "prior.npy", np.zeros(n))
+    plain = {"transmission": [1.0] * n, "target_mm": list(sim.focus_mm)}
+    (tmp_path / "plain.json").write_text(json.dumps(plain))
+    (tmp_path / "short.json").write_text(json.dumps({**plain, "bone_speed_sensitivity_rad_per_percent": [0.01] * 3}))
+    (tmp_path / "full.json").write_text(json.dumps({**plain, "bone_speed_sensitivity_rad_per_percent": [0.01] * n}))
+    prior = ["--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3", "--groups", str(n)]
+    cases = [
+        (["--prior-correlation-mm", "30"], "--prior-transmission"),
+        (["--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "plain.json")], "bone_speed_sensitivity"),
+        (["--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "short.json")], f"{n} finite numbers"),
+        (["--prior-transmission", str(tmp_path / "full.json")], "--prior-correlation-mm"),
+    ]
+    for extra, says in cases:
+        assert main(["estimate", "--image", str(image), *prior, *extra, "--prior-bone-speed-std-percent", "20",
+                     "--out-phases", str(tmp_path / "x.npy")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "--prior-bone-speed-std-percent" in err and says in err, err
+    assert main(["estimate", "--image", str(image), *prior, "--prior-correlation-mm", "30", "--prior-transmission",
+                 str(tmp_path / "full.json"), "--prior-bone-speed-std-percent", "-5", "--out-phases", str(tmp_path / "x.npy")]) == 2
+    assert "must be a finite number > 0" in capsys.readouterr().err
+    assert not (tmp_path / "x.npy").exists()
+    # The Python API names the parameter.
+    with pytest.raises(ValueError, match="prior_modes"):
+        sim.with_groups(n).estimate(sim.arfi_image(None), prior=np.zeros(n), prior_std_rad=0.3, prior_correlation_mm=30,
+                                    prior_modes=np.zeros((1, 5)))
+    with pytest.raises(ValueError, match="prior_modes"):
+        sim.with_groups(n).estimate(sim.arfi_image(None), prior=np.zeros(n), prior_std_rad=0.3, prior_modes=np.zeros(n))
+
+
 def test_an_estimate_with_a_prior_that_the_images_contradict_recommends_the_prediction(tmp_path, capsys):
     # Images broadened far more than the model (W = 6 mm against 2.7): no phases explain them
     # (MODEL MISMATCH). With a prior, the estimate is then not the correction to apply: the line

@@ -2,7 +2,7 @@
 
 use crate::error::to_py;
 use crate::scenario::parse_scenario;
-use has_core::prediction::predict_scenario;
+use has_core::prediction::{self, predict_scenario};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -11,19 +11,28 @@ use pyo3::types::PyDict;
 /// reciprocity (see `has_core::prediction`): dict with `phases_rad`, `transmission`,
 /// `reference_steering_rad` (per element), `target_mm` and the focal pressures (Pa)
 /// `reference_pa`, `reference_optimal_pa`, `uncorrected_pa`, `ray_steering_pa`, `corrected_pa`, `optimal_pa`,
-/// and `skull_responses` (complex Pa per unit drive, per element).
+/// and `skull_responses` (complex Pa per unit drive, per element); with
+/// `bone_speed_sensitivity`, also `bone_speed_sensitivity_rad_per_percent` (per element; one
+/// more simulation of the skull), else that key is `None`.
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None))]
+#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false))]
 pub(crate) fn predict<'py>(
     py: Python<'py>,
     text: &str,
     format: &str,
     base_dir: Option<&str>,
     target_mm: Option<[f64; 3]>,
+    bone_speed_sensitivity: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scenario = parse_scenario(text, format, base_dir)?;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
-    let p = py.detach(|| predict_scenario(&scenario, target)).map_err(to_py)?;
+    let (p, sensitivity) = py
+        .detach(|| {
+            let p = predict_scenario(&scenario, target)?;
+            let g = if bone_speed_sensitivity { Some(prediction::bone_speed_sensitivity(&scenario, &p)?) } else { None };
+            Ok::<_, has_core::HasError>((p, g))
+        })
+        .map_err(to_py)?;
     let d = PyDict::new(py);
     d.set_item("phases_rad", p.phases.into_pyarray(py))?;
     d.set_item("transmission", p.transmission.into_pyarray(py))?;
@@ -36,5 +45,6 @@ pub(crate) fn predict<'py>(
     d.set_item("optimal_pa", p.optimal_pressure)?;
     d.set_item("reference_optimal_pa", p.reference_optimal_pressure)?;
     d.set_item("skull_responses", p.skull_responses.into_pyarray(py))?;
+    d.set_item("bone_speed_sensitivity_rad_per_percent", sensitivity.map(|g| g.into_pyarray(py)))?;
     Ok(d)
 }

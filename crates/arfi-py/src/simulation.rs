@@ -354,7 +354,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -374,6 +374,7 @@ impl CoreSimulation {
         prior_correlation_mm: Option<f64>,
         fit_nuisance: Option<Vec<String>>,
         suggest: bool,
+        prior_modes: Option<PyReadonlyArray2<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let measurements = measurements(images, known)?;
         let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
@@ -381,6 +382,11 @@ impl CoreSimulation {
         let prior = match (prior, prior_correlation_mm) {
             (Some(p), Some(l)) => Some(p.with_correlation_length(l * 1e-3).map_err(to_py)?),
             (None, Some(_)) => return Err(invalid("prior_correlation_mm", "was given without a prior")),
+            (p, None) => p,
+        };
+        let prior = match (prior, prior_modes) {
+            (Some(p), Some(m)) => Some(p.with_modes(m.as_array().rows().into_iter().map(|r| r.to_vec()).collect()).map_err(to_py)?),
+            (None, Some(_)) => return Err(invalid("prior_modes", "were given without a prior")),
             (p, None) => p,
         };
         let request = EstimateRequest {

@@ -85,6 +85,25 @@ def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
     return values, target
 
 
+def read_bone_speed_sensitivity(path: str | None, n_elements: int) -> np.ndarray:
+    """The per-element bone speed sensitivity (rad per percent) in the JSON of ``arfi predict
+    --bone-speed-sensitivity`` given as ``--prior-transmission``, for
+    ``--prior-bone-speed-std-percent``."""
+    name = "--prior-bone-speed-std-percent"
+    if path is None or not path.endswith(".json"):
+        raise UsageError(f"{name}: needs --prior-transmission with the JSON of arfi predict --bone-speed-sensitivity")
+    try:
+        d = json.loads(Path(path).read_text(encoding="utf-8"))
+        values = np.asarray(d["bone_speed_sensitivity_rad_per_percent"], dtype=np.float64)
+    except (ValueError, KeyError, TypeError):
+        raise UsageError(f"{name}: {path} holds no 'bone_speed_sensitivity_rad_per_percent': make it with "
+                         f"arfi predict --bone-speed-sensitivity --json") from None
+    if values.shape != (n_elements,) or not np.all(np.isfinite(values)):
+        raise UsageError(f"{name}: {path}: 'bone_speed_sensitivity_rad_per_percent' must hold {n_elements} finite numbers "
+                         f"(one per element)")
+    return values
+
+
 def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Writes ``--json`` when asked."""
     if args.json:

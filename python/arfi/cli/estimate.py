@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from arfi.cli.common import (add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
-                             read_optional_phases, read_transmission, save_npy)
+from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
+                             read_bone_speed_sensitivity, read_optional_phases, read_transmission, save_npy)
 
 TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
@@ -61,6 +61,11 @@ def register(sub: Any) -> None:
                    "transmission relative to the mean, so that a model of the head without its skull weighs the elements "
                    "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude). The JSON's "
                    "'target_mm' must lie within 0.5 mm of the scenario's focus")
+    p.add_argument("--prior-bone-speed-std-percent", type=float, dest="prior_bone_speed_std_percent", metavar="P",
+                   help="the CT conversion's bone sound speed may be off by about P percent: fit that error's mode over "
+                   "the aperture (the prediction's bone_speed_sensitivity_rad_per_percent times a coefficient, P percent "
+                   "a priori) with the smooth corrections. Needs --prior-correlation-mm and --prior-transmission with the "
+                   "JSON of arfi predict --bone-speed-sensitivity; per-element estimates only")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
                    "MISMATCH (the images are not explained), the prediction itself (JSON 'recommended' says which)")
@@ -92,18 +97,28 @@ def run(args: argparse.Namespace) -> int:
                              f"{z:.1f}) mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at "
                              f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
+    modes = None
+    if args.prior_bone_speed_std_percent is not None:
+        std = args.prior_bone_speed_std_percent
+        if not (np.isfinite(std) and std > 0):
+            raise UsageError(f"--prior-bone-speed-std-percent: must be a finite number > 0, got {std:g}")
+        if prior is None or args.prior_correlation_mm is None:
+            raise UsageError("--prior-bone-speed-std-percent: needs --prior with --prior-correlation-mm (the mode is fitted "
+                             "with the prior's smooth corrections)")
+        modes = std * read_bone_speed_sensitivity(args.prior_transmission, sim.n_elements)[None, :]
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
                      progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
                      prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance,
-                     suggest=bool(args.suggest))
+                     suggest=bool(args.suggest), prior_modes=modes)
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
+             + (f", bone speed +-{args.prior_bone_speed_std_percent:g} %" if modes is not None else "")
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.nuisance is not None:
         n = e.nuisance
@@ -154,7 +169,8 @@ def run(args: argparse.Namespace) -> int:
         model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
                    "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
-    prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
+    prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm,
+                      "prior_bone_speed_std_percent": args.prior_bone_speed_std_percent} if e.prior_used else {}
     if transmission is not None:
         prior_settings["prior_transmission"] = args.prior_transmission
     finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total,

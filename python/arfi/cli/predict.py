@@ -6,6 +6,8 @@ import argparse
 import time
 from typing import Any
 
+import numpy as np
+
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
 from arfi.prediction import predict
 
@@ -25,6 +27,11 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
     p.add_argument("--target-mm", type=float, nargs=3, dest="target_mm", metavar=("X", "Y", "Z"),
                    help="point to predict for, transducer frame (default: the focus)")
+    p.add_argument("--bone-speed-sensitivity", action="store_true", dest="bone_speed_sensitivity",
+                   help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
+                        "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the error mode "
+                        "arfi estimate fits with --prior-bone-speed-std-percent. One more simulation of the skull "
+                        "(about as long as the prediction); needs conversion = \"aubry2003\"")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
                   "phase and transmission; simulates the skull again: about as long as the prediction)")
@@ -38,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
                          "arfi phantom writes a synthetic one")
     t = time.perf_counter()
-    p = predict(scenario, args.target_mm)
+    p = predict(scenario, args.target_mm, bone_speed_sensitivity=args.bone_speed_sensitivity)
     seconds = time.perf_counter() - t
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm
@@ -50,6 +57,10 @@ def run(args: argparse.Namespace) -> int:
         f"{p.reference_pa / 1e6:.3f} MPa without the skull, {p.reference_pa / p.reference_optimal_pa:.2f} of what that head "
         f"allows) in {seconds:.1f} s"
     )
+    if p.bone_speed_sensitivity_rad_per_percent is not None:
+        g = p.bone_speed_sensitivity_rad_per_percent
+        print(f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
+              f"({np.abs(g).max():.3f} at most)")
     result = p.to_dict()
     if args.report:
         from arfi.report import predict_report

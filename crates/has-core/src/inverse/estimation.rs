@@ -205,6 +205,20 @@ pub fn estimate_aberration_with(
     cancel: Option<&AtomicBool>,
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<EstimateReport> {
+    if let Some(p) = request.prior.as_ref().filter(|p| !p.modes().is_empty()) {
+        if !per_element(sim) {
+            return Err(HasError::invalid(
+                "prior_modes",
+                format!("are fitted by per-element estimates only (one group per element, {})", sim.n_elements()),
+            ));
+        }
+        if p.correlation_length().is_none() {
+            return Err(HasError::invalid(
+                "prior_modes",
+                "need a correlation length (prior_correlation_mm): the modes are fitted with the prior's smooth corrections",
+            ));
+        }
+    }
     if per_element(sim) {
         let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
         return estimate_per_element(sim, measurements, request, prior, basis, cancel, progress);

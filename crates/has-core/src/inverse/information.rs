@@ -32,7 +32,7 @@ use crate::inverse::basis::{ElementCost, FieldBasis};
 use crate::inverse::cost::mask_pixels;
 use crate::inverse::linear::spd_inverse;
 use crate::inverse::prior::Prior;
-use crate::inverse::smooth_prior::error_modes;
+use crate::inverse::smooth_prior::{error_modes, SmoothErrors};
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
@@ -75,7 +75,8 @@ pub const CANDIDATE_SHIFTS_MM: [[f64; 3]; 15] = [
 pub enum Spread {
     /// Independent errors of this std (rad), e.g. an independent prior's.
     Independent(f64),
-    /// Smooth error modes (one vector over the elements per mode, coefficients N(0, 1)).
+    /// Smooth error modes, with a prior's modes of known shape (one vector over the elements per
+    /// mode, coefficients N(0, 1)).
     Smooth(Vec<Vec<f64>>),
 }
 
@@ -87,7 +88,7 @@ impl Spread {
     pub fn for_prior(prior: Option<&Prior>, positions: &[[f64; 3]]) -> Result<Spread> {
         match prior {
             Some(p) => match p.correlation_length() {
-                Some(l) => Ok(Spread::Smooth(error_modes(positions, p.std_rad(), l)?)),
+                Some(_) => Ok(Spread::Smooth(SmoothErrors::new(p, positions)?.into_modes())),
                 None => Ok(Spread::Independent(p.std_rad())),
             },
             None => {

@@ -29,6 +29,8 @@ pub struct Prior {
     std_rad: f64,
     /// Length over which the errors are correlated (m); none: independent per phase.
     correlation_length: Option<f64>,
+    /// Error modes of known shape ([`Prior::with_modes`]), one value per predicted phase each.
+    modes: Vec<Vec<f64>>,
 }
 
 impl Prior {
@@ -44,7 +46,7 @@ impl Prior {
         if !(std_rad.is_finite() && std_rad > 0.0) {
             return Err(HasError::invalid("prior_std_rad", format!("must be a finite number > 0, got {std_rad}")));
         }
-        Ok(Prior { mean, std_rad, correlation_length: None })
+        Ok(Prior { mean, std_rad, correlation_length: None, modes: Vec::new() })
     }
 
     /// The same prior with errors that form a smooth field over the aperture, correlated over
@@ -59,10 +61,40 @@ impl Prior {
         Ok(self)
     }
 
-    /// The same prior (expected error, correlation) on other predicted phases `mean`, checked
-    /// as [`Prior::new`] checks them.
+    /// The same prior with error modes of known shape added to the smooth field: each mode `g`
+    /// (rad, one value per predicted phase: the change of the predicted phases when one of the
+    /// prediction's inputs is off by one standard deviation, e.g. the CT conversion's bone sound
+    /// speed) adds `a·g` with `a ~ N(0, 1)` to the error `W·a` of the smooth prior (see
+    /// [`crate::inverse::smooth_prior`]). A per-element estimate then fits each mode's
+    /// coefficient with the smooth corrections: an error spread over the whole aperture by one
+    /// misjudged constant is one number for the images to find, not hundreds. Needs a
+    /// correlation length when used; group estimates keep the independent prior of the group
+    /// means, without the modes.
+    pub fn with_modes(mut self, modes: Vec<Vec<f64>>) -> Result<Self> {
+        for (m, g) in modes.iter().enumerate() {
+            if g.len() != self.mean.len() {
+                return Err(HasError::invalid(
+                    "prior_modes",
+                    format!("mode {m} has {} values for {} predicted phases", g.len(), self.mean.len()),
+                ));
+            }
+            if g.iter().any(|v| !v.is_finite()) {
+                return Err(HasError::invalid("prior_modes", format!("mode {m} holds a value that is not finite")));
+            }
+        }
+        self.modes = modes;
+        Ok(self)
+    }
+
+    /// The error modes of known shape ([`Prior::with_modes`]).
+    pub fn modes(&self) -> &[Vec<f64>] {
+        &self.modes
+    }
+
+    /// The same prior (expected error, correlation, modes) on other predicted phases `mean`,
+    /// checked as [`Prior::new`] checks them; modes must then be given per phase of `mean`.
     pub fn with_mean(&self, mean: Vec<f64>) -> Result<Self> {
-        Ok(Prior { correlation_length: self.correlation_length, ..Prior::new(mean, self.std_rad)? })
+        Prior { correlation_length: self.correlation_length, ..Prior::new(mean, self.std_rad)? }.with_modes(self.modes.clone())
     }
 
     /// The length over which the errors are correlated (m), if they are.

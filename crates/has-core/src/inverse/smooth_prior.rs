@@ -80,7 +80,8 @@ pub struct SmoothErrors {
 
 impl SmoothErrors {
     /// The error modes of `prior`, which must have a correlation length, at `positions` (one per
-    /// predicted phase).
+    /// predicted phase): the smooth field's, then the prior's modes of known shape
+    /// ([`Prior::with_modes`]).
     pub fn new(prior: &Prior, positions: &[[f64; 3]]) -> Result<Self> {
         if prior.mean().len() != positions.len() {
             return Err(HasError::invalid(
@@ -90,7 +91,14 @@ impl SmoothErrors {
         }
         let length =
             prior.correlation_length().ok_or_else(|| HasError::invalid("prior_correlation_mm", "is required for a smooth prior"))?;
-        Ok(SmoothErrors { mean: prior.mean().to_vec(), modes: error_modes(positions, prior.std_rad(), length)? })
+        let mut modes = error_modes(positions, prior.std_rad(), length)?;
+        modes.extend(prior.modes().iter().cloned());
+        Ok(SmoothErrors { mean: prior.mean().to_vec(), modes })
+    }
+
+    /// The modes `W` (one vector over the phases per mode).
+    pub fn into_modes(self) -> Vec<Vec<f64>> {
+        self.modes
     }
 
     /// Number of smooth modes.
@@ -191,7 +199,14 @@ mod tests {
         // Analytic gradient against (U(a + h) - U(a - h)) / 2h, h = 1e-6: agreement to 1e-6
         // relative (the O(h²) truncation error of derivatives of order one).
         let pos = grid(8, 5e-3);
-        let prior = Prior::new((0..64).map(|i| 0.1 * i as f64).collect(), 0.5).unwrap().with_correlation_length(20e-3).unwrap();
+        // With a mode of known shape too: its coefficient is one more parameter of U.
+        let mode: Vec<f64> = (0..64).map(|i| 0.02 * i as f64 - 0.6).collect();
+        let prior = Prior::new((0..64).map(|i| 0.1 * i as f64).collect(), 0.5)
+            .unwrap()
+            .with_correlation_length(20e-3)
+            .unwrap()
+            .with_modes(vec![mode])
+            .unwrap();
         let like = Cosines((0..64).map(|i| (i as f64).sin()).collect());
         let errors = SmoothErrors::new(&prior, &pos).unwrap();
         let post = errors.posterior(&like, 0.3).unwrap();
@@ -206,5 +221,27 @@ mod tests {
         }
         assert!(SmoothErrors::new(&Prior::new(vec![0.0; 64], 0.5).unwrap(), &pos).is_err());
         assert!(SmoothErrors::new(&prior, &pos[..63]).is_err());
+    }
+
+    #[test]
+    fn a_mode_of_known_shape_adds_its_vector_after_the_smooth_modes() {
+        // Coefficient 1 on the last mode and 0 elsewhere must give the prediction plus that
+        // mode exactly (it enters as given, not rescaled), and the smooth modes are those of the
+        // prior without it. Modes of the wrong length or with NaN are refused by name.
+        let pos = grid(8, 5e-3);
+        let mean: Vec<f64> = (0..64).map(|i| 0.05 * i as f64).collect();
+        let mode: Vec<f64> = (0..64).map(|i| (0.3 * i as f64).cos()).collect();
+        let plain = Prior::new(mean.clone(), 0.5).unwrap().with_correlation_length(20e-3).unwrap();
+        let with = plain.clone().with_modes(vec![mode.clone()]).unwrap();
+        let (e0, e1) = (SmoothErrors::new(&plain, &pos).unwrap(), SmoothErrors::new(&with, &pos).unwrap());
+        assert_eq!(e1.n_modes(), e0.n_modes() + 1);
+        let mut a = vec![0.0; e1.n_modes()];
+        a[e0.n_modes()] = 1.0;
+        for ((p, m), g) in e1.phases(&a).iter().zip(&mean).zip(&mode) {
+            assert!((p - m - g).abs() < 1e-12);
+        }
+        assert_eq!(with.with_mean(mean.clone()).unwrap().modes(), &[mode][..]);
+        assert!(plain.clone().with_modes(vec![vec![0.0; 63]]).unwrap_err().to_string().starts_with("prior_modes"));
+        assert!(plain.with_modes(vec![vec![f64::NAN; 64]]).unwrap_err().to_string().starts_with("prior_modes"));
     }
 }
