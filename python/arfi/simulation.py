@@ -371,7 +371,9 @@ class Simulation:
         ``20 * prediction.bone_speed_sensitivity_rad_per_percent`` for a CT conversion whose bone
         sound speed may be off by 20 %. Each mode's coefficient (a standard normal a priori) is
         fitted with the smooth corrections, so one misjudged constant that moves every phase is
-        one number for the images to find.
+        one number for the images to find. With a fitted image scale the images pin it only
+        loosely: on a 650 kHz head phantom it lifted a poor prediction from 0.85 to 0.94 of the
+        best focus and cost a good one 0.015 (README, CT-based prediction).
 
         Per element, a prior and one acquisition (one image, or repeats with the same known
         phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot

@@ -65,7 +65,10 @@ def register(sub: Any) -> None:
                    help="the CT conversion's bone sound speed may be off by about P percent: fit that error's mode over "
                    "the aperture (the prediction's bone_speed_sensitivity_rad_per_percent times a coefficient, P percent "
                    "a priori) with the smooth corrections. Needs --prior-correlation-mm and --prior-transmission with the "
-                   "JSON of arfi predict --bone-speed-sensitivity; per-element estimates only")
+                   "JSON of arfi predict --bone-speed-sensitivity; per-element estimates only. The images pin the mode's "
+                   "coefficient only loosely (the fitted image scale takes most of what a better focus changes): it lifted "
+                   "a poor prediction by 0.09 of the focus and cost a good one 0.015, so use it where the conversion is in "
+                   "doubt")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
                    "MISMATCH (the images are not explained), the prediction itself (JSON 'recommended' says which)")
