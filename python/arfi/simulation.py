@@ -373,7 +373,8 @@ class Simulation:
         fitted with the smooth corrections, so one misjudged constant that moves every phase is
         one number for the images to find. With a fitted image scale the images pin it only
         loosely: on a 650 kHz head phantom it lifted a poor prediction from 0.85 to 0.94 of the
-        best focus and cost a good one 0.015 (README, CT-based prediction).
+        best focus and cost a good one 0.015 (README, CT-based prediction). ``ambiguous`` is
+        judged on draws of the prior without the modes.
 
         Per element, a prior and one acquisition (one image, or repeats with the same known
         phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot

@@ -308,6 +308,10 @@ def test_estimate_refuses_a_bone_speed_prior_it_cannot_fit(tmp_path, capsys, sim
     assert main(["estimate", "--image", str(image), *prior, "--prior-correlation-mm", "30", "--prior-transmission",
                  str(tmp_path / "full.json"), "--prior-bone-speed-std-percent", "-5", "--out-phases", str(tmp_path / "x.npy")]) == 2
     assert "must be a finite number > 0" in capsys.readouterr().err
+    assert main(["estimate", "--image", str(image), "--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3",
+                 "--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "full.json"),
+                 "--prior-bone-speed-std-percent", "20", "--out-phases", str(tmp_path / "x.npy")]) == 2
+    assert "per-element estimates only" in capsys.readouterr().err
     assert not (tmp_path / "x.npy").exists()
     # The Python API names the parameter.
     with pytest.raises(ValueError, match="prior_modes"):

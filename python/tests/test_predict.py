@@ -146,7 +146,7 @@ def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head,
     g = np.asarray(d["bone_speed_sensitivity_rad_per_percent"])
     scenario = Scenario.load(head / "head.toml")
     faster = scenario.to_dict()
-    faster["ct"]["bone_sound_speed_m_s"] = 2900.0 * 1.05
+    faster["ct"]["bone_sound_speed_m_s"] = faster["ct"].get("bone_sound_speed_m_s", 2900.0) * 1.05  # 2900: aubry2003's
     moved = predict(Scenario.from_dict(faster, scenario.base_dir))
     w = np.abs(np.asarray(d["transmission"]))
     change = np.angle(np.exp(1j * (moved.phases_rad - np.asarray(d["phases_rad"]))))

@@ -28,6 +28,9 @@ pub(crate) fn predict<'py>(
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
     let (p, sensitivity) = py
         .detach(|| {
+            if bone_speed_sensitivity {
+                prediction::bone_sound_speed(&scenario)?;
+            }
             let p = predict_scenario(&scenario, target)?;
             let g = if bone_speed_sensitivity { Some(prediction::bone_speed_sensitivity(&scenario, &p)?) } else { None };
             Ok::<_, has_core::HasError>((p, g))

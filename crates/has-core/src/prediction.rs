@@ -147,14 +147,7 @@ pub const BONE_SPEED_STEP: f64 = 0.1;
 /// simulation of the skull (plan, march, projection) beyond `prediction`'s, which must have been
 /// made from `scenario`. Refused without the porosity conversion (the constant is its own).
 pub fn bone_speed_sensitivity(scenario: &Scenario, prediction: &Prediction) -> Result<Vec<f64>> {
-    let ct = scenario.ct.as_ref().ok_or_else(|| HasError::invalid("ct", "a bone speed sensitivity needs a CT of the head ([ct])"))?;
-    if ct.conversion != "aubry2003" {
-        return Err(HasError::invalid(
-            "ct.conversion",
-            format!("'{}' has no bone sound speed: the bone speed sensitivity needs conversion = \"aubry2003\"", ct.conversion),
-        ));
-    }
-    let base = ct.bone_sound_speed_m_s.unwrap_or(crate::physics::ct::Porosity::default().bone_sound_speed);
+    let base = bone_sound_speed(scenario)?;
     let mut faster = scenario.clone();
     if let Some(c) = faster.ct.as_mut() {
         c.bone_sound_speed_m_s = Some(base * (1.0 + BONE_SPEED_STEP));
@@ -169,4 +162,18 @@ pub fn bone_speed_sensitivity(scenario: &Scenario, prediction: &Prediction) -> R
     let change: Vec<C64> = moved.iter().zip(h).map(|(m, h)| m * h.conj()).collect();
     let common = change.iter().sum::<C64>().arg();
     Ok(change.iter().map(|c| wrap(c.arg() - common) / (100.0 * BONE_SPEED_STEP)).collect())
+}
+
+/// The CT conversion's bone sound speed (m/s) in `scenario`, or why it has none for
+/// [`bone_speed_sensitivity`] (no `[ct]`, or a conversion other than the porosity model's):
+/// checked before a prediction that is to be followed by it.
+pub fn bone_sound_speed(scenario: &Scenario) -> Result<f64> {
+    let ct = scenario.ct.as_ref().ok_or_else(|| HasError::invalid("ct", "a bone speed sensitivity needs a CT of the head ([ct])"))?;
+    if ct.conversion != "aubry2003" {
+        return Err(HasError::invalid(
+            "ct.conversion",
+            format!("'{}' has no bone sound speed: the bone speed sensitivity needs conversion = \"aubry2003\"", ct.conversion),
+        ));
+    }
+    Ok(ct.bone_sound_speed_m_s.unwrap_or(crate::physics::ct::Porosity::default().bone_sound_speed))
 }

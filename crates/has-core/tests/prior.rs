@@ -344,4 +344,10 @@ fn a_mode_of_known_shape_in_the_prior_is_fitted_as_one_number() {
     let err = |sim: &Simulation, p: Prior| estimate_aberration(sim, &m, &request(p), None, None).unwrap_err().to_string();
     assert!(err(&per_element, independent.clone()).starts_with("prior_modes"));
     assert!(err(&s, independent.with_correlation_length(30e-3).unwrap()).starts_with("prior_modes"));
+    let short = Prior::new(prediction.clone(), 0.3).unwrap().with_correlation_length(30e-3).unwrap().with_modes(vec![vec![0.1; 10]]);
+    assert!(err(&per_element, short.unwrap()).starts_with("prior_modes"));
+    // Predicted phases per default group are spread to the elements; the modes stay per element.
+    let per_group = condense(&prediction, &s.groups).unwrap();
+    let spread = Prior::new(per_group, 0.3).unwrap().with_correlation_length(30e-3).unwrap().with_modes(vec![mode]).unwrap();
+    assert!(estimate_aberration(&per_element, &m, &request(spread), None, None).is_ok());
 }

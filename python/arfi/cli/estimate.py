@@ -105,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
         std = args.prior_bone_speed_std_percent
         if not (np.isfinite(std) and std > 0):
             raise UsageError(f"--prior-bone-speed-std-percent: must be a finite number > 0, got {std:g}")
+        if sim.n_groups != sim.n_elements:
+            raise UsageError(f"--prior-bone-speed-std-percent: fitted by per-element estimates only (--groups {sim.n_elements})")
         if prior is None or args.prior_correlation_mm is None:
             raise UsageError("--prior-bone-speed-std-percent: needs --prior with --prior-correlation-mm (the mode is fitted "
                              "with the prior's smooth corrections)")

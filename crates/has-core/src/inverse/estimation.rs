@@ -218,6 +218,12 @@ pub fn estimate_aberration_with(
                 "need a correlation length (prior_correlation_mm): the modes are fitted with the prior's smooth corrections",
             ));
         }
+        if let Some(g) = p.modes().iter().find(|g| g.len() != sim.n_elements()) {
+            return Err(HasError::invalid(
+                "prior_modes",
+                format!("have {} values each; expected {} (one per element)", g.len(), sim.n_elements()),
+            ));
+        }
     }
     if per_element(sim) {
         let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;

@@ -67,16 +67,14 @@ impl Prior {
     /// speed) adds `a·g` with `a ~ N(0, 1)` to the error `W·a` of the smooth prior (see
     /// [`crate::inverse::smooth_prior`]). A per-element estimate then fits each mode's
     /// coefficient with the smooth corrections: an error spread over the whole aperture by one
-    /// misjudged constant is one number for the images to find, not hundreds. Needs a
-    /// correlation length when used; group estimates keep the independent prior of the group
-    /// means, without the modes.
+    /// misjudged constant is one number for the images to find, not hundreds. Modes hold one
+    /// value per element (checked by the estimate, also when the predicted phases are given per
+    /// group and spread to the elements); they need a correlation length, and group estimates
+    /// refuse them. The ambiguity check's draws of the prior do not explore them.
     pub fn with_modes(mut self, modes: Vec<Vec<f64>>) -> Result<Self> {
         for (m, g) in modes.iter().enumerate() {
-            if g.len() != self.mean.len() {
-                return Err(HasError::invalid(
-                    "prior_modes",
-                    format!("mode {m} has {} values for {} predicted phases", g.len(), self.mean.len()),
-                ));
+            if g.len() != modes[0].len() {
+                return Err(HasError::invalid("prior_modes", format!("mode {m} has {} values, mode 0 {}", g.len(), modes[0].len())));
             }
             if g.iter().any(|v| !v.is_finite()) {
                 return Err(HasError::invalid("prior_modes", format!("mode {m} holds a value that is not finite")));
@@ -92,9 +90,9 @@ impl Prior {
     }
 
     /// The same prior (expected error, correlation, modes) on other predicted phases `mean`,
-    /// checked as [`Prior::new`] checks them; modes must then be given per phase of `mean`.
+    /// checked as [`Prior::new`] checks them.
     pub fn with_mean(&self, mean: Vec<f64>) -> Result<Self> {
-        Prior { correlation_length: self.correlation_length, ..Prior::new(mean, self.std_rad)? }.with_modes(self.modes.clone())
+        Ok(Prior { correlation_length: self.correlation_length, modes: self.modes.clone(), ..Prior::new(mean, self.std_rad)? })
     }
 
     /// The length over which the errors are correlated (m), if they are.

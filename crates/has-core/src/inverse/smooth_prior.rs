@@ -91,6 +91,9 @@ impl SmoothErrors {
         }
         let length =
             prior.correlation_length().ok_or_else(|| HasError::invalid("prior_correlation_mm", "is required for a smooth prior"))?;
+        if let Some(g) = prior.modes().iter().find(|g| g.len() != positions.len()) {
+            return Err(HasError::invalid("prior_modes", format!("have {} values each; expected {}", g.len(), positions.len())));
+        }
         let mut modes = error_modes(positions, prior.std_rad(), length)?;
         modes.extend(prior.modes().iter().cloned());
         Ok(SmoothErrors { mean: prior.mean().to_vec(), modes })
@@ -241,7 +244,9 @@ mod tests {
             assert!((p - m - g).abs() < 1e-12);
         }
         assert_eq!(with.with_mean(mean.clone()).unwrap().modes(), &[mode][..]);
-        assert!(plain.clone().with_modes(vec![vec![0.0; 63]]).unwrap_err().to_string().starts_with("prior_modes"));
+        let short = plain.clone().with_modes(vec![vec![0.0; 63]]).unwrap();
+        assert!(SmoothErrors::new(&short, &pos).unwrap_err().to_string().starts_with("prior_modes"));
+        assert!(plain.clone().with_modes(vec![vec![0.0; 64], vec![0.0; 63]]).unwrap_err().to_string().starts_with("prior_modes"));
         assert!(plain.with_modes(vec![vec![f64::NAN; 64]]).unwrap_err().to_string().starts_with("prior_modes"));
     }
 }
