@@ -83,9 +83,14 @@ fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
 /// from the ideal image, which a prediction does not use (through a reverberating head that is
 /// one whole march more: about 5 s of a 650 kHz hemisphere's prediction).
 pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result<Prediction> {
-    let mut fields_only = scenario.clone();
-    fields_only.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
-    predict(Simulation::new(&fields_only)?, target)
+    predict(fields_only(scenario.clone())?, target)
+}
+
+/// The simulation of `scenario` with the ARFI amplitude given (1 unless it sets one), so that
+/// it is not calibrated from an ideal image: for predictions, which make none.
+fn fields_only(mut scenario: Scenario) -> Result<Simulation> {
+    scenario.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
+    Simulation::new(&scenario)
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
@@ -152,9 +157,7 @@ pub fn bone_speed_sensitivity(scenario: &Scenario, prediction: &Prediction) -> R
     if let Some(c) = faster.ct.as_mut() {
         c.bone_sound_speed_m_s = Some(base * (1.0 + BONE_SPEED_STEP));
     }
-    faster.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
-    let sim = Simulation::new(&faster)?;
-    let moved = sim.source.transposed(&reciprocal_field(&sim.plan, prediction.target, sim.reflections)?)?;
+    let moved = fields_only(faster)?.element_responses(prediction.target)?;
     let h = &prediction.skull_responses;
     if moved.len() != h.len() {
         return Err(HasError::invalid("prediction", format!("has {} elements; the scenario has {}", h.len(), moved.len())));
