@@ -184,6 +184,13 @@ fn bench_estimation_1024(c: &mut Criterion) {
     g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(8));
     g.bench_function("cost_1024_elements", |b| b.iter(|| m.cost.cost(black_box(&x))));
     g.bench_function("cost_and_gradient_1024_elements", |b| b.iter(|| m.cost.cost_and_gradient(black_box(&x))));
+    // The clinical case: the focus and three defocused acquisitions (+5, -5, +10 mm).
+    let mut four = meas.clone();
+    for dz in [5e-3, -5e-3, 10e-3] {
+        four.push(Measurement { image: meas[0].image.clone(), known: sim.focus_shift_phases([0.0, 0.0, dz]).unwrap() });
+    }
+    let m4 = build_element_model(&sim, &four, sim.mask_fraction, 0, None, None).unwrap();
+    g.bench_function("cost_and_gradient_1024_elements_4_images", |b| b.iter(|| m4.cost.cost_and_gradient(black_box(&x))));
     g.finish();
 }
 

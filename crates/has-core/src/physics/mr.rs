@@ -202,7 +202,7 @@ impl MrSampler {
                 let half = 0.5 * geometry.slice_thickness;
                 (geometry.center[a] - half - d, geometry.center[a] + half + d)
             };
-            let range = index_range(&c, lo, hi);
+            let mut range = index_range(&c, lo, hi);
             if range.is_empty() {
                 return Err(HasError::invalid("mr", "the MR slice lies outside the simulation grid"));
             }
@@ -213,7 +213,12 @@ impl MrSampler {
             } else {
                 let t = geometry.slice_thickness;
                 let lo = geometry.center[a] - 0.5 * t;
-                slab_weights = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
+                let weights: Vec<f64> = local.iter().map(|&s| overlap(s, d, lo, lo + t) / t).collect();
+                // Planes whose cells miss the slice add nothing to any image: not recorded.
+                let first = weights.iter().position(|&w| w > 0.0).unwrap_or(0);
+                let last = weights.iter().rposition(|&w| w > 0.0).map_or(first, |l| l + 1);
+                slab_weights = weights[first..last].to_vec();
+                range = range.start + first..range.start + last;
             }
             ranges[a] = range;
         }
