@@ -52,6 +52,13 @@ LONG_RUNS = {
 }
 
 
+def default_sigint() -> None:
+    """In the child before it starts: Ctrl-C's default action. A shell without job control
+    starts background jobs with SIGINT ignored, and Python then installs no KeyboardInterrupt
+    handler, so the test would measure the shell, not arfi."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupt(code: str, after_s: float = 2.0) -> tuple[float, subprocess.CompletedProcess]:
     """Starts `code` in a fresh interpreter, sends SIGINT once it is running; returns the
     seconds from the signal to the exit, and the finished process."""
@@ -61,7 +68,8 @@ def interrupt(code: str, after_s: float = 2.0) -> tuple[float, subprocess.Comple
         "img = sim.arfi_image(sim.condense(sim.skull_phases(3)), noise_rad=0.02, seed=1)\n"
         "print('running', flush=True)\n" + code + "\n"
     )
-    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=default_sigint)
     assert p.stdout is not None and p.stdout.readline().strip() == "running"
     time.sleep(after_s)
     t = time.perf_counter()
@@ -83,7 +91,8 @@ def test_ctrl_c_on_the_cli_exits_130_and_leaves_no_output(tmp_path):
     out = tmp_path / "phases.npy"
     p = subprocess.Popen([sys.executable, "-m", "arfi", "estimate", "--image", str(image), "--method", "pso",
                           "--max-evaluations", "1000000", "--out-phases", str(out), "--json", str(tmp_path / "e.json")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
+                         preexec_fn=default_sigint)
     time.sleep(4.0)
     t = time.perf_counter()
     p.send_signal(signal.SIGINT)
