@@ -3,10 +3,11 @@
 //! imaginary parts, row-major, single precision) and a few columns `V` or `H` (one per image).
 //!
 //! A general matrix product packs `B` on every call, which at a few columns costs more than the
-//! multiplications (three quarters of an estimate's time went to packing); these loops read each
-//! row of `B` once per call instead. Sums run in [`LANES`] single-precision partial sums, in a
-//! fixed order: the same bits for any number of threads. Compiled for AVX2 with fused
-//! multiply-adds too, chosen at run time (the crate builds for baseline x86-64).
+//! multiplications (more than half of a per-element estimate's time went to packing); these loops
+//! read each row of `B` once per call instead. Sums run in [`LANES`] single-precision partial
+//! sums, in a fixed order: on one CPU the same bits for any number of threads. Compiled for AVX2
+//! with fused multiply-adds too, chosen at run time (the crate builds for baseline x86-64); the
+//! fused and plain variants round differently.
 
 use num_complex::Complex32 as C32;
 use std::ops::Range;
@@ -193,12 +194,17 @@ mod tests {
         (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
     }
 
-    /// Both products against plain double-precision sums, with an element count that leaves a
-    /// remainder after the lanes, five columns (a pass of four and one), a zero row of `H` and rows from the middle of `B`. Tolerance:
-    /// 1e-5 of the sum of the terms' magnitudes (single-precision rounding over 101 terms in 8
-    /// lanes is below 1e-6 of it; a wrong index or sign is of order 1).
+    /// Both products, in the variant this CPU runs and in the plain one, against plain
+    /// double-precision sums, with an element count that leaves a remainder after the lanes, five
+    /// columns (a pass of four and one), a zero row of `H` and rows from the middle of `B`.
+    /// Tolerance: 1e-5 of the sum of the terms' magnitudes (single-precision rounding over 101
+    /// terms in 8 lanes is below 1e-6 of it; a wrong index or sign is of order 1).
     #[test]
     fn the_products_match_double_precision_sums() {
+        type Fields = fn(Split, Range<usize>, &[(Vec<f32>, Vec<f32>)]) -> Vec<C32>;
+        type BackProject = fn(Split, Range<usize>, &[C32], usize) -> Vec<(Vec<f32>, Vec<f32>)>;
+        let variants: [(&str, Fields, BackProject); 2] =
+            [("chosen", fields, back_project), ("plain", fields_with::<Plain>, back_project_with::<Plain>)];
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let (n_rows, n, k) = (23, 101, 5);
         let (re, im) = (random(&mut rng, n_rows * n), random(&mut rng, n_rows * n));
@@ -206,30 +212,32 @@ mod tests {
         let bz = |r: usize, e: usize| C64::new(f64::from(re[r * n + e]), f64::from(im[r * n + e]));
         let v: Vec<(Vec<f32>, Vec<f32>)> = (0..k).map(|_| (random(&mut rng, n), random(&mut rng, n))).collect();
         let rows = 5..19;
-        let p = fields(b, rows.clone(), &v);
-        for (i, r) in rows.clone().enumerate() {
-            for (c, (vr, vi)) in v.iter().enumerate() {
-                let terms: Vec<C64> = (0..n).map(|e| bz(r, e) * C64::new(f64::from(vr[e]), f64::from(vi[e]))).collect();
-                let scale: f64 = terms.iter().map(|t| t.norm()).sum();
-                let exact: C64 = terms.iter().sum();
-                let got = C64::new(f64::from(p[i * k + c].re), f64::from(p[i * k + c].im));
-                assert!((got - exact).norm() < 1e-5 * scale, "P[{r}, {c}] = {got} against {exact}");
-            }
-        }
         let mut h: Vec<C32> = (0..rows.len() * k).map(|_| C32::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))).collect();
         h[3 * k..4 * k].fill(C32::new(0.0, 0.0));
-        let c = back_project(b, rows.clone(), &h, k);
-        for (col, (cr, ci)) in c.iter().enumerate() {
-            for e in 0..n {
-                let terms: Vec<C64> = rows
-                    .clone()
-                    .enumerate()
-                    .map(|(i, r)| bz(r, e) * C64::new(f64::from(h[i * k + col].re), f64::from(h[i * k + col].im)))
-                    .collect();
-                let scale: f64 = terms.iter().map(|t| t.norm()).sum();
-                let exact: C64 = terms.iter().sum();
-                let got = C64::new(f64::from(cr[e]), f64::from(ci[e]));
-                assert!((got - exact).norm() < 1e-5 * scale, "C_{col}[{e}] = {got} against {exact}");
+        for (name, fields, back_project) in variants {
+            let p = fields(b, rows.clone(), &v);
+            for (i, r) in rows.clone().enumerate() {
+                for (c, (vr, vi)) in v.iter().enumerate() {
+                    let terms: Vec<C64> = (0..n).map(|e| bz(r, e) * C64::new(f64::from(vr[e]), f64::from(vi[e]))).collect();
+                    let scale: f64 = terms.iter().map(|t| t.norm()).sum();
+                    let exact: C64 = terms.iter().sum();
+                    let got = C64::new(f64::from(p[i * k + c].re), f64::from(p[i * k + c].im));
+                    assert!((got - exact).norm() < 1e-5 * scale, "{name}: P[{r}, {c}] = {got} against {exact}");
+                }
+            }
+            let c = back_project(b, rows.clone(), &h, k);
+            for (col, (cr, ci)) in c.iter().enumerate() {
+                for e in 0..n {
+                    let terms: Vec<C64> = rows
+                        .clone()
+                        .enumerate()
+                        .map(|(i, r)| bz(r, e) * C64::new(f64::from(h[i * k + col].re), f64::from(h[i * k + col].im)))
+                        .collect();
+                    let scale: f64 = terms.iter().map(|t| t.norm()).sum();
+                    let exact: C64 = terms.iter().sum();
+                    let got = C64::new(f64::from(cr[e]), f64::from(ci[e]));
+                    assert!((got - exact).norm() < 1e-5 * scale, "{name}: C_{col}[{e}] = {got} against {exact}");
+                }
             }
         }
     }
