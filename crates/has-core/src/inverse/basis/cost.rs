@@ -7,7 +7,7 @@ use crate::error::{HasError, Result};
 use crate::inverse::cost::Objective;
 use crate::physics::mr::MrSampler;
 use ndarray::Array2;
-use num_complex::Complex64 as C64;
+use num_complex::{Complex32 as C32, Complex64 as C64};
 use std::sync::Arc;
 
 /// One image as the per-element cost sees it.
@@ -246,8 +246,7 @@ impl Objective for ElementCost {
         let b = &self.basis;
         let (nu, nv) = (self.sampler.pixels[0].len(), self.sampler.pixels[1].len());
         let (n_s, k) = (b.n_samples(), self.terms.len());
-        let mut hr = Array2::<f32>::zeros((n_s, k));
-        let mut hi = Array2::<f32>::zeros((n_s, k));
+        let mut h_all = vec![C32::new(0.0, 0.0); n_s * k];
         let mut total = 0.0;
         for (c, (res, t)) in self.residuals(&model, &linear).iter().zip(&self.terms).enumerate() {
             // The linear nuisance sits at its least-squares optimum: its own change does not
@@ -262,11 +261,10 @@ impl Objective for ElementCost {
             };
             // H = h ∘ conj(p)
             for (n, hv) in h.iter().enumerate() {
-                hr[[n, c]] = (hv * f64::from(pr[[n, c]])) as f32;
-                hi[[n, c]] = (-hv * f64::from(pi[[n, c]])) as f32;
+                h_all[n * k + c] = C32::new((hv * f64::from(pr[[n, c]])) as f32, (-hv * f64::from(pi[[n, c]])) as f32);
             }
         }
-        let (cr, ci) = b.back_project(&hr, &hi);
+        let (cr, ci) = b.back_project(&h_all, k);
         let offsets: Vec<&[f64]> = self.terms.iter().map(|t| t.offset.as_slice()).collect();
         let grad = (0..phases.len())
             .map(|e| {

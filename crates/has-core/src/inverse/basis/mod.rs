@@ -25,7 +25,7 @@ use crate::physics::propagation::single;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::{Complex32 as C32, Complex64 as C64};
-use products::Split;
+use products::{Column, Split};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -159,7 +159,7 @@ impl FieldBasis {
     /// samples x images.
     pub(crate) fn fields(&self, vr: &Array2<f32>, vi: &Array2<f32>) -> (Array2<f32>, Array2<f32>) {
         let k = vr.ncols();
-        let columns: Vec<(Vec<f32>, Vec<f32>)> = (0..k).map(|c| (vr.column(c).to_vec(), vi.column(c).to_vec())).collect();
+        let columns: Vec<Column> = (0..k).map(|c| Column::new(vr.column(c).to_vec(), vi.column(c).to_vec())).collect();
         let b = self.split();
         let blocks = self.map_blocks(|rows| products::fields(b, rows, &columns));
         let mut pr = Array2::zeros((self.n_samples(), k));
@@ -170,14 +170,11 @@ impl FieldBasis {
         (pr, pi)
     }
 
-    /// `C = Bᵀ·H` for sample columns `H` (samples x images), summed block by block in order.
-    fn back_project(&self, hr: &Array2<f32>, hi: &Array2<f32>) -> (Array2<f64>, Array2<f64>) {
-        let k = hr.ncols();
+    /// `C = Bᵀ·H` for sample columns `H` (row-major, samples x `k` images), summed block by block
+    /// in order.
+    fn back_project(&self, h: &[C32], k: usize) -> (Array2<f64>, Array2<f64>) {
         let b = self.split();
-        let blocks = self.map_blocks(|rows| {
-            let h: Vec<C32> = rows.clone().flat_map(|s| (0..k).map(move |c| C32::new(hr[[s, c]], hi[[s, c]]))).collect();
-            products::back_project(b, rows, &h, k)
-        });
+        let blocks = self.map_blocks(|rows| products::back_project(b, rows.clone(), &h[rows.start * k..rows.end * k], k));
         let mut cr = Array2::<f64>::zeros((self.n_elements(), k));
         let mut ci = Array2::<f64>::zeros((self.n_elements(), k));
         for block in blocks {

@@ -67,9 +67,20 @@ fn wide() -> bool {
 /// Columns handled in one pass over a row of `B`.
 const PASS: usize = 4;
 
-/// `P[r, c] = Σ_e B[r, e]·V_c[e]` for rows `rows` of `b` and columns `v` (each a pair of real
-/// and imaginary parts, one value per element); row-major, `rows.len()` x `v.len()`.
-pub(super) fn fields(b: Split, rows: Range<usize>, v: &[(Vec<f32>, Vec<f32>)]) -> Vec<C32> {
+/// One column of `V` as [`fields`] reads it: the real part, the imaginary part and its negation
+/// (one value per element each), so that each complex product is four multiply-adds.
+pub(super) struct Column([Vec<f32>; 3]);
+
+impl Column {
+    pub(super) fn new(re: Vec<f32>, im: Vec<f32>) -> Self {
+        let negated = im.iter().map(|x| -x).collect();
+        Column([re, im, negated])
+    }
+}
+
+/// `P[r, c] = Σ_e B[r, e]·V_c[e]` for rows `rows` of `b` and columns `v`; row-major,
+/// `rows.len()` x `v.len()`.
+pub(super) fn fields(b: Split, rows: Range<usize>, v: &[Column]) -> Vec<C32> {
     #[cfg(target_arch = "x86_64")]
     if wide() {
         // SAFETY: the CPU has AVX2 and FMA (checked on the line above).
@@ -80,19 +91,16 @@ pub(super) fn fields(b: Split, rows: Range<usize>, v: &[(Vec<f32>, Vec<f32>)]) -
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn fields_wide(b: Split, rows: Range<usize>, v: &[(Vec<f32>, Vec<f32>)]) -> Vec<C32> {
+fn fields_wide(b: Split, rows: Range<usize>, v: &[Column]) -> Vec<C32> {
     fields_with::<Fused>(b, rows, v)
 }
 
 #[inline(always)]
-fn fields_with<M: MulAdd>(b: Split, rows: Range<usize>, v: &[(Vec<f32>, Vec<f32>)]) -> Vec<C32> {
-    // Columns as (re, im, -im): each complex product is then four multiply-adds.
-    let negated: Vec<Vec<f32>> = v.iter().map(|(_, im)| im.iter().map(|x| -x).collect()).collect();
-    let columns: Vec<[&[f32]; 3]> = v.iter().zip(&negated).map(|((re, im), neg)| [re.as_slice(), im.as_slice(), neg.as_slice()]).collect();
+fn fields_with<M: MulAdd>(b: Split, rows: Range<usize>, v: &[Column]) -> Vec<C32> {
     let mut out = Vec::with_capacity(rows.len() * v.len());
     for r in rows {
         let row = b.row(r);
-        for pass in columns.chunks(PASS) {
+        for pass in v.chunks(PASS) {
             match pass {
                 [a, b, c, d] => out.extend(row_dots::<M, 4>(row, [a, b, c, d])),
                 [a, b, c] => out.extend(row_dots::<M, 3>(row, [a, b, c])),
@@ -105,9 +113,9 @@ fn fields_with<M: MulAdd>(b: Split, rows: Range<usize>, v: &[(Vec<f32>, Vec<f32>
     out
 }
 
-/// One row of `B` times `C` columns (re, im, -im), in [`LANES`] partial sums per column.
+/// One row of `B` times `C` columns, in [`LANES`] partial sums per column.
 #[inline(always)]
-fn row_dots<M: MulAdd, const C: usize>((br, bi): (&[f32], &[f32]), v: [&[&[f32]; 3]; C]) -> [C32; C] {
+fn row_dots<M: MulAdd, const C: usize>((br, bi): (&[f32], &[f32]), v: [&Column; C]) -> [C32; C] {
     let n = br.len();
     let body = n - n % LANES;
     let (mut re, mut im) = ([[0f32; LANES]; C], [[0f32; LANES]; C]);
@@ -115,7 +123,7 @@ fn row_dots<M: MulAdd, const C: usize>((br, bi): (&[f32], &[f32]), v: [&[&[f32];
         let span = start..start + LANES;
         let (a, c) = (&br[span.clone()], &bi[span.clone()]);
         for k in 0..C {
-            let [x, y, ny] = v[k].map(|part| &part[span.clone()]);
+            let [x, y, ny] = v[k].0.each_ref().map(|part| &part[span.clone()]);
             for l in 0..LANES {
                 re[k][l] = M::madd(c[l], ny[l], M::madd(a[l], x[l], re[k][l]));
                 im[k][l] = M::madd(c[l], x[l], M::madd(a[l], y[l], im[k][l]));
@@ -123,7 +131,7 @@ fn row_dots<M: MulAdd, const C: usize>((br, bi): (&[f32], &[f32]), v: [&[&[f32];
         }
     }
     std::array::from_fn(|k| {
-        let [x, y, _] = v[k];
+        let [x, y, _] = &v[k].0;
         for e in body..n {
             re[k][0] += br[e] * x[e] - bi[e] * y[e];
             im[k][0] += br[e] * y[e] + bi[e] * x[e];
@@ -201,7 +209,7 @@ mod tests {
     /// terms in 8 lanes is below 1e-6 of it; a wrong index or sign is of order 1).
     #[test]
     fn the_products_match_double_precision_sums() {
-        type Fields = fn(Split, Range<usize>, &[(Vec<f32>, Vec<f32>)]) -> Vec<C32>;
+        type Fields = fn(Split, Range<usize>, &[Column]) -> Vec<C32>;
         type BackProject = fn(Split, Range<usize>, &[C32], usize) -> Vec<(Vec<f32>, Vec<f32>)>;
         let variants: [(&str, Fields, BackProject); 2] =
             [("chosen", fields, back_project), ("plain", fields_with::<Plain>, back_project_with::<Plain>)];
@@ -211,11 +219,12 @@ mod tests {
         let b = Split { re: &re, im: &im, cols: n };
         let bz = |r: usize, e: usize| C64::new(f64::from(re[r * n + e]), f64::from(im[r * n + e]));
         let v: Vec<(Vec<f32>, Vec<f32>)> = (0..k).map(|_| (random(&mut rng, n), random(&mut rng, n))).collect();
+        let columns: Vec<Column> = v.iter().map(|(re, im)| Column::new(re.clone(), im.clone())).collect();
         let rows = 5..19;
         let mut h: Vec<C32> = (0..rows.len() * k).map(|_| C32::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))).collect();
         h[3 * k..4 * k].fill(C32::new(0.0, 0.0));
         for (name, fields, back_project) in variants {
-            let p = fields(b, rows.clone(), &v);
+            let p = fields(b, rows.clone(), &columns);
             for (i, r) in rows.clone().enumerate() {
                 for (c, (vr, vi)) in v.iter().enumerate() {
                     let terms: Vec<C64> = (0..n).map(|e| bz(r, e) * C64::new(f64::from(vr[e]), f64::from(vi[e]))).collect();
