@@ -16,7 +16,7 @@ use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::{build_model, Measurement, Model, Objective};
 use has_core::inverse::estimate::{condense, Estimator};
 use has_core::physics::aberration::SkullScreen;
-use has_core::physics::fft::{multiply, Fft2};
+use has_core::physics::fft::{each_pair, Fft2};
 use has_core::physics::propagation::RecordSpec;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
@@ -128,7 +128,7 @@ fn bench_breakdown(c: &mut Criterion) {
     for parallel in [false, true] {
         let name = if parallel { "multiply_parallel" } else { "multiply_serial" };
         g.bench_function(name, |b| {
-            b.iter_batched_ref(|| source.clone(), |f| multiply(f, black_box(&screen), parallel), BatchSize::PerIteration)
+            b.iter_batched_ref(|| source.clone(), |f| each_pair(parallel, f, black_box(&screen), |x, y| *x *= y), BatchSize::PerIteration)
         });
     }
     g.finish();

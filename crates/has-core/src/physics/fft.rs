@@ -32,6 +32,13 @@ pub struct FftWorkspace<T: FftNum = f64> {
     parallel: bool,
 }
 
+impl<T: FftNum> FftWorkspace<T> {
+    /// Whether its transforms spread rows over the pool (see [`Fft2::workspace`]).
+    pub fn is_parallel(&self) -> bool {
+        self.parallel
+    }
+}
+
 impl<T: FftNum> Fft2<T> {
     /// Plans the four 1-D transforms.
     pub fn new(nx: usize, ny: usize) -> Self {
@@ -152,17 +159,26 @@ pub fn transpose<V: Copy + Send + Sync>(src: &[V], dst: &mut [V], rows: usize, c
     }
 }
 
-/// `a[i] *= b[i]`.
-pub fn multiply<A, B>(a: &mut [A], b: &[B], parallel: bool)
-where
-    A: Copy + Send + Sync + std::ops::MulAssign<B>,
-    B: Copy + Send + Sync,
-{
-    const CHUNK: usize = 8192;
+/// Samples per task of the element-wise loops spread over the pool.
+const CHUNK: usize = 1 << 14;
+
+/// `f(a, b)` for each pair of samples, spread over the pool when `parallel` (each sample alone:
+/// the same result with any number of threads).
+pub fn each_pair<A: Send, B: Sync>(parallel: bool, a: &mut [A], b: &[B], f: impl Fn(&mut A, &B) + Sync) {
     if parallel {
-        a.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y));
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(a, b)| f(a, b)));
     } else {
-        a.iter_mut().zip(b).for_each(|(x, y)| *x *= *y);
+        a.iter_mut().zip(b).for_each(|(a, b)| f(a, b));
+    }
+}
+
+/// `f` of each sample, collected; spread over the pool when `parallel` (a new buffer is written,
+/// and its pages first touched, by every thread at once).
+pub fn map_collect<A: Sync, B: Send>(parallel: bool, a: &[A], f: impl Fn(&A) -> B + Sync + Send) -> Vec<B> {
+    if parallel {
+        a.par_iter().with_min_len(CHUNK).map(f).collect()
+    } else {
+        a.iter().map(f).collect()
     }
 }
 
@@ -231,11 +247,11 @@ mod tests {
             let f = Fft2::new(nx, ny);
             let mut ws = f.workspace(parallel);
             let mut separate = x.clone();
-            multiply(&mut separate, &pre, parallel);
+            each_pair(parallel, &mut separate, &pre, |x, y| *x *= y);
             f.forward(&mut separate, &mut ws);
-            multiply(&mut ws.spectrum, &kernel, parallel);
+            each_pair(parallel, &mut ws.spectrum, &kernel, |x, y| *x *= y);
             f.inverse(&mut ws, &mut separate);
-            multiply(&mut separate, &post, parallel);
+            each_pair(parallel, &mut separate, &post, |x, y| *x *= y);
             let mut fused = x.clone();
             f.filter(&mut fused, &mut ws, Some(&pre), &kernel, Some(&post));
             assert_eq!(fused, separate, "parallel = {parallel}");

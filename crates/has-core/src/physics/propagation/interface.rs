@@ -18,7 +18,7 @@
 //! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
 //! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
 
-use crate::physics::fft::{Fft2, FftWorkspace};
+use crate::physics::fft::{each_pair, Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
 use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
@@ -178,7 +178,10 @@ impl<T: FftNum> Interface<T> {
     /// as long as `p`; `work` is overwritten.
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
-            Kind::Pointwise(r) => out.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r),
+            Kind::Pointwise(r) => {
+                out.copy_from_slice(p);
+                each_pair(ws.is_parallel(), out, r, |o, &r| *o = *o * r);
+            }
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
                 fft.forward(work, ws);

@@ -4,13 +4,72 @@
 //! Recorded values are the total pressure on the plane: at an interface plane, the side before
 //! the interface (incident forward wave plus the backward wave leaving it), which equals the side
 //! after it by pressure continuity.
+//!
+//! A march runs in the precision of the operators it is given ([`Operators`]): the plan's own
+//! (double precision) or a [`super::SinglePlan`]'s; it records in double precision either way.
 
-use super::HasPlan;
-use crate::physics::fft::FftWorkspace;
+use super::interface::Interface;
+use super::{HasPlan, Zone};
+use crate::physics::fft::{each_pair, map_collect, Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
-use num_complex::Complex64 as C64;
+use num_complex::{Complex, Complex64 as C64};
+use rustfft::num_traits::NumAssign;
+use rustfft::FftNum;
 use std::ops::Range;
+
+/// A real type a march runs in: `f64`, or `f32` for a single-precision march.
+pub(crate) trait Real: FftNum + NumAssign + Into<f64> {}
+impl Real for f32 {}
+impl Real for f64 {}
+
+/// What a march needs of a plan, in the precision `T` it marches in.
+pub(super) trait Operators<T: Real>: Sync {
+    /// The grid marched on.
+    fn grid(&self) -> &Grid;
+    /// The reverberation zone and its round trips.
+    fn zone(&self) -> Option<Zone>;
+    /// The 2-D FFTs.
+    fn fft(&self) -> &Fft2<T>;
+    /// The interface at plane `n`, if any.
+    fn interface(&self, n: usize) -> Option<&Interface<T>>;
+    /// The propagator and the screen of the step through slab `s` (plane `s` to `s + 1`).
+    fn step(&self, s: usize) -> (&[Complex<T>], &[Complex<T>]);
+    /// The properties of the slab the beam crossed to reach plane `n`.
+    fn slab(&self, n: usize) -> &SliceProperties;
+}
+
+impl Operators<f64> for HasPlan {
+    fn grid(&self) -> &Grid {
+        &self.grid
+    }
+    fn zone(&self) -> Option<Zone> {
+        self.zone
+    }
+    fn fft(&self) -> &Fft2<f64> {
+        &self.fft
+    }
+    fn interface(&self, n: usize) -> Option<&Interface<f64>> {
+        self.steps.get(n)?.interface.as_deref()
+    }
+    fn step(&self, s: usize) -> (&[C64], &[C64]) {
+        let st = &self.steps[s];
+        (&st.propagator, &st.screen)
+    }
+    fn slab(&self, n: usize) -> &SliceProperties {
+        self.slab_properties(n)
+    }
+}
+
+/// `v` in double precision.
+fn double<T: Real>(v: Complex<T>) -> C64 {
+    C64::new(v.re.into(), v.im.into())
+}
+
+/// A zero of `Complex<T>`.
+fn zero<T: Real>() -> Complex<T> {
+    Complex::new(T::zero(), T::zero())
+}
 
 /// What to keep while marching.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -103,7 +162,7 @@ impl RecordSpec {
 
 /// The field on one plane (`(ny, nx)`) at lateral position (x, y) (m), bilinearly interpolated
 /// between the four pixels around it (exactly a pixel's value on it); zero outside the grid.
-pub(crate) fn bilinear(g: &Grid, field: &[C64], x: f64, y: f64) -> C64 {
+pub(crate) fn bilinear<T: Real>(g: &Grid, field: &[Complex<T>], x: f64, y: f64) -> C64 {
     let (u, v) = (x / g.dx + (g.nx / 2) as f64, y / g.dy + (g.ny / 2) as f64);
     let (i0, j0) = (u.floor(), v.floor());
     let (fu, fv) = (u - i0, v - j0);
@@ -111,7 +170,7 @@ pub(crate) fn bilinear(g: &Grid, field: &[C64], x: f64, y: f64) -> C64 {
         if i < 0.0 || j < 0.0 || i >= g.nx as f64 || j >= g.ny as f64 {
             C64::new(0.0, 0.0)
         } else {
-            field[j as usize * g.nx + i as usize]
+            double(field[j as usize * g.nx + i as usize])
         }
     };
     let row = |j: f64| at(i0, j) * (1.0 - fu) + if fu > 0.0 { at(i0 + 1.0, j) * fu } else { C64::new(0.0, 0.0) };
@@ -157,13 +216,13 @@ impl<'a> Recorder<'a> {
     }
 
     /// Adds `field` (the pressure of one wave on plane `n`).
-    pub(super) fn add(&mut self, n: usize, field: &[C64]) {
+    pub(super) fn add<T: Real>(&mut self, n: usize, field: &[Complex<T>]) {
         let g = self.grid;
         if n > self.last {
             return;
         }
         if let Ok(i) = self.planes.binary_search(&n) {
-            self.rec.planes[i].iter_mut().zip(field).for_each(|(a, b)| *a += b);
+            self.rec.planes[i].iter_mut().zip(field).for_each(|(a, &b)| *a += double(b));
         }
         if self.spec.axis {
             let z = g.z(n);
@@ -176,7 +235,7 @@ impl<'a> Recorder<'a> {
                 self.rec.window[base..base + nc]
                     .iter_mut()
                     .zip(&field[r * g.nx + w.cols.start..r * g.nx + w.cols.end])
-                    .for_each(|(a, b)| *a += b);
+                    .for_each(|(a, &b)| *a += double(b));
             }
         }
     }
@@ -191,52 +250,56 @@ impl<'a> Recorder<'a> {
     }
 
     /// Sets the power of the forward wave `field` through plane `n` (impedance of `slab`).
-    pub(super) fn power(&mut self, n: usize, slab: &SliceProperties, field: &[C64]) {
+    pub(super) fn power<T: Real>(&mut self, n: usize, slab: &SliceProperties, field: &[Complex<T>]) {
         if self.spec.power && n <= self.last {
             let g = self.grid;
-            let p: f64 = field.iter().zip(&slab.sound_speed).zip(&slab.density).map(|((v, c), rho)| v.norm_sqr() / (2.0 * rho * c)).sum();
+            let p: f64 =
+                field.iter().zip(&slab.sound_speed).zip(&slab.density).map(|((&v, c), rho)| double(v).norm_sqr() / (2.0 * rho * c)).sum();
             self.rec.power[n] = p * g.dx * g.dy;
         }
     }
 }
 
 /// Waves starting at given planes, in increasing plane order.
-type Sources = Vec<(usize, Vec<C64>)>;
+type Sources<T> = Vec<(usize, Vec<Complex<T>>)>;
 
 /// Buffers of one march.
-struct Sweeper<'a> {
-    plan: &'a HasPlan,
-    ws: FftWorkspace,
-    work: Vec<C64>,
-    reflected: Vec<C64>,
+struct Sweeper<'a, T: Real, O: Operators<T>> {
+    ops: &'a O,
+    ws: FftWorkspace<T>,
+    work: Vec<Complex<T>>,
+    reflected: Vec<Complex<T>>,
 }
 
-impl<'a> Sweeper<'a> {
-    fn new(plan: &'a HasPlan, parallel: bool) -> Self {
-        let n = plan.grid.lateral_len();
-        Sweeper { plan, ws: plan.fft.workspace(parallel), work: Vec::new(), reflected: vec![C64::new(0.0, 0.0); n] }
+impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
+    fn new(ops: &'a O, parallel: bool) -> Self {
+        let n = ops.grid().lateral_len();
+        Sweeper { ops, ws: ops.fft().workspace(parallel), work: Vec::new(), reflected: vec![zero(); n] }
     }
 
     /// Crosses the interface at plane `n` (if any) in the direction `sign` (+1 forward, -1
     /// backward): `field ← field + sign·R ⊛ field`; returns the reflected wave `sign·R ⊛ field`
     /// when `keep`.
-    fn cross(&mut self, n: usize, field: &mut [C64], sign: f64, keep: bool) -> Option<Vec<C64>> {
-        let interface = self.plan.steps.get(n)?.interface.as_ref()?;
+    fn cross(&mut self, n: usize, field: &mut [Complex<T>], sign: f64, keep: bool) -> Option<Vec<Complex<T>>> {
+        let interface = self.ops.interface(n)?;
         if self.work.len() != field.len() {
-            self.work = vec![C64::new(0.0, 0.0); field.len()];
+            self.work = vec![zero(); field.len()];
         }
-        interface.reflect(&self.plan.fft, field, &mut self.reflected, &mut self.work, &mut self.ws);
+        interface.reflect(self.ops.fft(), field, &mut self.reflected, &mut self.work, &mut self.ws);
+        let (parallel, reflected) = (self.ws.is_parallel(), &self.reflected);
         if sign < 0.0 {
-            self.reflected.iter_mut().for_each(|r| *r = -*r);
+            each_pair(parallel, field, reflected, |f, &r| *f -= r);
+            keep.then(|| map_collect(parallel, reflected, |&r| -r))
+        } else {
+            each_pair(parallel, field, reflected, |f, &r| *f += r);
+            keep.then(|| map_collect(parallel, reflected, |&r| r))
         }
-        field.iter_mut().zip(&self.reflected).for_each(|(f, r)| *f += r);
-        keep.then(|| self.reflected.clone())
     }
 
     /// Propagates `field` through slab `s` (from plane `s` to `s + 1`, or back).
-    fn step(&mut self, s: usize, field: &mut [C64]) {
-        let st = &self.plan.steps[s];
-        self.plan.fft.filter(field, &mut self.ws, None, &st.propagator, Some(&st.screen));
+    fn step(&mut self, s: usize, field: &mut [Complex<T>]) {
+        let (propagator, screen) = self.ops.step(s);
+        self.ops.fft().filter(field, &mut self.ws, None, propagator, Some(screen));
     }
 
     /// Forward sweep from plane `from` to plane `to`. With `entering`, `field` is the incident
@@ -247,15 +310,15 @@ impl<'a> Sweeper<'a> {
     #[allow(clippy::too_many_arguments)]
     fn forward(
         &mut self,
-        field: &mut [C64],
+        field: &mut [Complex<T>],
         from: usize,
         to: usize,
         entering: bool,
-        mut sources: Sources,
+        mut sources: Sources<T>,
         keep: &dyn Fn(usize) -> bool,
         power: bool,
         rec: &mut Recorder,
-    ) -> Sources {
+    ) -> Sources<T> {
         let mut back = Sources::new();
         sources.reverse();
         for n in from..=to {
@@ -265,7 +328,7 @@ impl<'a> Sweeper<'a> {
             if n > from || entering {
                 rec.add(n, field);
                 if power {
-                    rec.power(n, self.plan.slab_properties(n), field);
+                    rec.power(n, self.ops.slab(n), field);
                 }
                 if let Some(r) = self.cross(n, field, 1.0, keep(n)) {
                     back.push((n, r));
@@ -273,7 +336,7 @@ impl<'a> Sweeper<'a> {
             }
             while sources.last().is_some_and(|s| s.0 == n) {
                 let (_, s) = sources.pop().unwrap_or_default();
-                field.iter_mut().zip(&s).for_each(|(f, s)| *f += s);
+                each_pair(self.ws.is_parallel(), field, &s, |f, &s| *f += s);
             }
         }
         back
@@ -285,14 +348,14 @@ impl<'a> Sweeper<'a> {
     /// forward waves reflected at interface planes in `emit`.
     fn backward(
         &mut self,
-        mut sources: Sources,
+        mut sources: Sources<T>,
         bottom: usize,
         emit: Range<usize>,
-        inject: Option<(usize, &[C64])>,
+        inject: Option<(usize, &[Complex<T>])>,
         rec: &mut Recorder,
-    ) -> (Vec<C64>, Sources) {
-        let n = self.plan.grid.lateral_len();
-        let mut b = vec![C64::new(0.0, 0.0); n];
+    ) -> (Vec<Complex<T>>, Sources<T>) {
+        let n = self.ops.grid().lateral_len();
+        let mut b = vec![zero(); n];
         let mut forward = Sources::new();
         let Some(top) = sources.last().map(|s| s.0).max(inject.map(|i| i.0)) else {
             return (b, forward);
@@ -306,14 +369,14 @@ impl<'a> Sweeper<'a> {
             }
             while sources.last().is_some_and(|s| s.0 == m) {
                 let (_, s) = sources.pop().unwrap_or_default();
-                b.iter_mut().zip(&s).for_each(|(b, s)| *b += s);
+                each_pair(self.ws.is_parallel(), &mut b, &s, |b, &s| *b += s);
                 started = true;
             }
             if started {
                 rec.add(m, &b);
             }
             if let Some((_, w)) = inject.filter(|i| i.0 == m) {
-                b.iter_mut().zip(w).for_each(|(b, w)| *b += w);
+                each_pair(self.ws.is_parallel(), &mut b, w, |b, &w| *b += w);
                 started = true;
             }
             if m > bottom && started {
@@ -325,90 +388,101 @@ impl<'a> Sweeper<'a> {
     }
 }
 
+/// Root-sum-square of the samples.
+fn rss<T: Real>(v: &[Complex<T>]) -> f64 {
+    v.iter().map(|&v| double(v).norm_sqr()).sum::<f64>().sqrt()
+}
+
 /// Root-sum-square of the waves' samples.
-fn norm(waves: &Sources) -> f64 {
-    waves.iter().flat_map(|(_, w)| w.iter()).map(|v| v.norm_sqr()).sum::<f64>().sqrt()
+fn norm<T: Real>(waves: &Sources<T>) -> f64 {
+    waves.iter().map(|(_, w)| rss(w).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Marches `field` (the source on plane 0) with the operators `ops` and returns what `spec` asks
+/// for, with the number of reverberation round trips added.
+pub(super) fn march<T: Real, O: Operators<T>>(
+    ops: &O,
+    mut field: Vec<Complex<T>>,
+    spec: &RecordSpec,
+    parallel: bool,
+    trips: RoundTrips,
+) -> (Recording, usize) {
+    let g = ops.grid();
+    let last = spec.last_plane(g.nz);
+    let mut rec = Recorder::new(g, spec, last);
+    let mut sweeper = Sweeper::new(ops, parallel);
+    let zone = ops.zone().filter(|z| z.first <= last);
+    let in_zone = |n: usize| zone.is_some_and(|z| (z.first..=z.last).contains(&n));
+    let keep = |n: usize| spec.reflections || in_zone(n);
+    let (mut outside, mut inside) = (Sources::new(), Sources::new());
+    let mut sort = |waves: Sources<T>, inside: &mut Sources<T>| {
+        for w in waves {
+            if in_zone(w.0) {
+                inside.push(w);
+            } else {
+                outside.push(w);
+            }
+        }
+    };
+    let mut back_exit: Option<(usize, Vec<Complex<T>>)> = None;
+    let mut done = 0;
+    match zone {
+        None => sort(sweeper.forward(&mut field, 0, last, true, Sources::new(), &keep, true, &mut rec), &mut inside),
+        Some(z) => {
+            sort(sweeper.forward(&mut field, 0, z.first, true, Sources::new(), &keep, true, &mut rec), &mut inside);
+            let incident = rss(&field);
+            sort(sweeper.forward(&mut field, z.first, z.last, false, Sources::new(), &keep, true, &mut rec), &mut inside);
+            let (cap, tolerance) = match trips {
+                RoundTrips::Fixed => (z.round_trips, None),
+                RoundTrips::UntilBelow(t) => (super::MAX_ROUND_TRIPS, Some(t * incident)),
+            };
+            let mut leaving = vec![zero(); g.lateral_len()];
+            while done < cap && !inside.is_empty() {
+                // Counting, a backward sweep is kept only if its round trip is added, so
+                // that the recording equals the march with that many trips.
+                let mut trial = tolerance.map(|_| Recorder::new(g, spec, last));
+                let (b, u) =
+                    sweeper.backward(std::mem::take(&mut inside), z.first, z.first..z.last + 1, None, trial.as_mut().unwrap_or(&mut rec));
+                if tolerance.is_some_and(|t| norm(&u) < t) {
+                    break;
+                }
+                if let Some(t) = trial {
+                    rec.absorb(t);
+                }
+                each_pair(parallel, &mut leaving, &b, |l, &b| *l += b);
+                if u.is_empty() {
+                    break;
+                }
+                let start = u[0].0;
+                let mut f = vec![zero(); g.lateral_len()];
+                let back = sweeper.forward(&mut f, start, z.last, false, u, &keep, false, &mut rec);
+                each_pair(parallel, &mut field, &f, |a, &b| *a += b);
+                sort(back, &mut inside);
+                done += 1;
+            }
+            if last > z.last {
+                sort(sweeper.forward(&mut field, z.last, last, false, Sources::new(), &keep, true, &mut rec), &mut inside);
+            }
+            if spec.reflections {
+                back_exit = Some((z.first, leaving));
+            }
+        }
+    }
+    if spec.reflections {
+        outside.append(&mut inside);
+        outside.sort_by_key(|w| w.0);
+        let inject = back_exit.as_ref().map(|(p, w)| (*p, w.as_slice()));
+        if !outside.is_empty() || inject.is_some() {
+            sweeper.backward(outside, 0, 0..0, inject, &mut rec);
+        }
+    }
+    (rec.finish(), done)
 }
 
 impl HasPlan {
-    /// Marches `field` (the source on plane 0) and returns what `spec` asks for, with the number
-    /// of reverberation round trips added.
-    pub(super) fn march(&self, mut field: Vec<C64>, spec: &RecordSpec, parallel: bool, trips: RoundTrips) -> (Recording, usize) {
-        let g = &self.grid;
-        let last = spec.last_plane(g.nz);
-        let mut rec = Recorder::new(g, spec, last);
-        let mut sweeper = Sweeper::new(self, parallel);
-        let zone = self.zone.filter(|z| z.first <= last);
-        let in_zone = |n: usize| zone.is_some_and(|z| (z.first..=z.last).contains(&n));
-        let keep = |n: usize| spec.reflections || in_zone(n);
-        let (mut outside, mut inside) = (Sources::new(), Sources::new());
-        let mut sort = |waves: Sources, inside: &mut Sources| {
-            for w in waves {
-                if in_zone(w.0) {
-                    inside.push(w);
-                } else {
-                    outside.push(w);
-                }
-            }
-        };
-        let mut back_exit: Option<(usize, Vec<C64>)> = None;
-        let mut done = 0;
-        match zone {
-            None => sort(sweeper.forward(&mut field, 0, last, true, Sources::new(), &keep, true, &mut rec), &mut inside),
-            Some(z) => {
-                sort(sweeper.forward(&mut field, 0, z.first, true, Sources::new(), &keep, true, &mut rec), &mut inside);
-                let incident = field.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-                sort(sweeper.forward(&mut field, z.first, z.last, false, Sources::new(), &keep, true, &mut rec), &mut inside);
-                let (cap, tolerance) = match trips {
-                    RoundTrips::Fixed => (z.round_trips, None),
-                    RoundTrips::UntilBelow(t) => (super::MAX_ROUND_TRIPS, Some(t * incident)),
-                };
-                let mut leaving = vec![C64::new(0.0, 0.0); g.lateral_len()];
-                while done < cap && !inside.is_empty() {
-                    // Counting, a backward sweep is kept only if its round trip is added, so
-                    // that the recording equals the march with that many trips.
-                    let mut trial = tolerance.map(|_| Recorder::new(g, spec, last));
-                    let (b, u) = sweeper.backward(
-                        std::mem::take(&mut inside),
-                        z.first,
-                        z.first..z.last + 1,
-                        None,
-                        trial.as_mut().unwrap_or(&mut rec),
-                    );
-                    if tolerance.is_some_and(|t| norm(&u) < t) {
-                        break;
-                    }
-                    if let Some(t) = trial {
-                        rec.absorb(t);
-                    }
-                    leaving.iter_mut().zip(&b).for_each(|(l, b)| *l += b);
-                    if u.is_empty() {
-                        break;
-                    }
-                    let start = u[0].0;
-                    let mut f = vec![C64::new(0.0, 0.0); g.lateral_len()];
-                    let back = sweeper.forward(&mut f, start, z.last, false, u, &keep, false, &mut rec);
-                    field.iter_mut().zip(&f).for_each(|(a, b)| *a += b);
-                    sort(back, &mut inside);
-                    done += 1;
-                }
-                if last > z.last {
-                    sort(sweeper.forward(&mut field, z.last, last, false, Sources::new(), &keep, true, &mut rec), &mut inside);
-                }
-                if spec.reflections {
-                    back_exit = Some((z.first, leaving));
-                }
-            }
-        }
-        if spec.reflections {
-            outside.append(&mut inside);
-            outside.sort_by_key(|w| w.0);
-            let inject = back_exit.as_ref().map(|(p, w)| (*p, w.as_slice()));
-            if !outside.is_empty() || inject.is_some() {
-                sweeper.backward(outside, 0, 0..0, inject, &mut rec);
-            }
-        }
-        (rec.finish(), done)
+    /// Marches `field` (the source on plane 0) in double precision (see [`march`]).
+    pub(super) fn march(&self, field: Vec<C64>, spec: &RecordSpec, parallel: bool, trips: RoundTrips) -> (Recording, usize) {
+        march(self, field, spec, parallel, trips)
     }
 
     /// The round trips the reference beam needs (see [`super::REVERBERATION_TOLERANCE`]) and

@@ -33,6 +33,7 @@
 
 mod interface;
 mod march;
+mod operators;
 mod point;
 mod single;
 mod transpose;
@@ -46,8 +47,9 @@ use crate::error::{HasError, Result};
 use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Medium, SliceProperties};
-use interface::{axial_wavenumber, Coefficients, Interface};
+use interface::{Coefficients, Interface};
 use num_complex::Complex64 as C64;
+use operators::{oblique_toward, propagator, screen, sponge_map, step_screen};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -421,140 +423,4 @@ fn mean_wavenumber(field: &[C64], props: &SliceProperties, omega: f64, quantum: 
         (props.sound_speed.iter().map(|c| omega / c).sum::<f64>() / n, props.attenuation.iter().sum::<f64>() / n)
     };
     ((k / quantum).round() * quantum, (a / quantum).round() * quantum)
-}
-
-/// `exp(i·kz·dz + ᾱ·dz) / (nx·ny)` with `kz = sqrt((k̄ + i·ᾱ)² - kt²)` on the transposed spectrum
-/// layout `(nx, ny)`; with `ᾱ = 0` the plain `exp(i·kz·dz)`. A step back (`dz < 0`, the inverse
-/// of a step) leaves out the evanescent components (`kt > k̄`), which it would amplify.
-fn propagator(g: &Grid, dz: f64, k: f64, alpha: f64) -> Vec<C64> {
-    let norm = 1.0 / (g.nx * g.ny) as f64;
-    let mut h = Vec::with_capacity(g.lateral_len());
-    for i in 0..g.nx {
-        let kx = Grid::wavenumber(i, g.nx, g.dx);
-        for j in 0..g.ny {
-            let ky = Grid::wavenumber(j, g.ny, g.dy);
-            let kt2 = kx * kx + ky * ky;
-            let kz2 = k * k - kt2;
-            h.push(if dz < 0.0 && kz2 < 0.0 {
-                C64::new(0.0, 0.0)
-            } else if alpha == 0.0 {
-                if kz2 >= 0.0 {
-                    C64::from_polar(norm, kz2.sqrt() * dz)
-                } else {
-                    C64::new(norm * (-(-kz2).sqrt() * dz).exp(), 0.0)
-                }
-            } else {
-                let kz = axial_wavenumber(C64::new(k, alpha), kt2);
-                (C64::i() * kz * dz + alpha * dz).exp() * norm
-            });
-        }
-    }
-    h
-}
-
-/// The screen per pixel, `exp(i·φ·dz - (β + sigma)·dz)`. With the angle θ of the waves crossing
-/// the pixel (`sin2`: `sin² θ` per pixel, [`Screen::Oblique`]) and their transverse wavenumber
-/// `kt = k·sin θ` in the pixel's medium, `φ = kz(k) - kz(k̄)` and
-/// `β = alpha/cos θ - ᾱ·(1/cos θ̄ - 1)`, where `kz(k) = sqrt(k² - kt²)`, `cos θ = kz(k)/k` and
-/// `cos θ̄ = kz(k̄)/k̄`: the propagator gives such a wave `kz(k̄)·dz` and the oblique part of the
-/// mean absorption, the screen adds what its own medium gives it along its path. Without
-/// (`None`, [`Screen::Vertical`]), the plain HAS screen `φ = k - k̄`, `β = alpha`.
-/// Computed in parallel over pixels (each pixel alone, so the result does not depend on the
-/// threads): the oblique screen is built anew for every step of a plan.
-fn screen(props: &SliceProperties, sponge: &[f64], omega: f64, k_mean: f64, a_mean: f64, sin2: Option<&[f64]>, dz: f64) -> Vec<C64> {
-    use rayon::prelude::*;
-    props
-        .sound_speed
-        .par_iter()
-        .zip(&props.attenuation)
-        .zip(sponge)
-        .enumerate()
-        .map(|(p, ((c, a), s))| {
-            let k = omega / c;
-            let (phase, absorption) = match sin2 {
-                None => (k - k_mean, *a),
-                Some(sin2) => {
-                    let kt2 = (k * k * sin2[p]).min(MAX_OBLIQUITY_SIN2 * k.min(k_mean).powi(2));
-                    let (kz, kz_mean) = ((k * k - kt2).sqrt(), (k_mean * k_mean - kt2).sqrt());
-                    (kz - kz_mean, a * k / kz - a_mean * (k_mean / kz_mean - 1.0))
-                }
-            };
-            C64::from_polar((-(absorption + s) * dz).exp(), phase * dz)
-        })
-        .collect()
-}
-
-/// The screen of the step from plane `step` to the next through `props`, for a distance `dz` (m;
-/// `grid.dz` for the whole step, less or negative for part of it): with [`Screen::Oblique`] its
-/// directions are those at the step's mid-height, whatever `dz`, so that part of a step is the
-/// same operator over a shorter distance.
-#[allow(clippy::too_many_arguments)]
-fn step_screen(
-    g: &Grid,
-    props: &SliceProperties,
-    sponge: &[f64],
-    omega: f64,
-    mean: (f64, f64),
-    model: Screen,
-    step: usize,
-    dz: f64,
-) -> Vec<C64> {
-    let sin2 = oblique_toward(model, props).map(|toward| obliquity(g, g.z(step) + 0.5 * g.dz, toward));
-    screen(props, sponge, omega, mean.0, mean.1, sin2.as_deref(), dz)
-}
-
-/// The point the screen's rays converge on where a slab's screen depends on the step: an
-/// oblique screen through a slab that is not uniform (in a uniform slab, where `k = k̄` up to
-/// `k̄`'s rounding, the oblique screen is the vertical one, so one screen serves all its steps).
-fn oblique_toward(model: Screen, props: &SliceProperties) -> Option<[f64; 3]> {
-    match model {
-        Screen::Oblique { toward } if !props.is_uniform() => Some(toward),
-        _ => None,
-    }
-}
-
-/// The screen's angle is capped at 80° (`sin² θ ≤ 0.97`, in the slower of the pixel's medium and
-/// the mean): by the focal plane the line to the focus lies across the plane, where the ray
-/// picture fails and `kz` would vanish.
-const MAX_OBLIQUITY_SIN2: f64 = 0.97;
-
-/// `sin² θ` per pixel, row-major `(ny, nx)`, with `θ` the angle against z of the line from the
-/// pixel at height `z` to the point `toward` (m): for a beam focused at that point, the direction
-/// of its rays through the pixel (near the point the field holds every direction; there the beam
-/// is in one medium, where the screen's correction is small). Zero on the line through the point.
-fn obliquity(g: &Grid, z: f64, toward: [f64; 3]) -> Vec<f64> {
-    use rayon::prelude::*;
-    let dz2 = (z - toward[2]).powi(2);
-    (0..g.lateral_len())
-        .into_par_iter()
-        .map(|p| {
-            let rho2 = (g.x(p % g.nx) - toward[0]).powi(2) + (g.y(p / g.nx) - toward[1]).powi(2);
-            if rho2 > 0.0 {
-                rho2 / (rho2 + dz2)
-            } else {
-                0.0
-            }
-        })
-        .collect()
-}
-
-/// The absorbing layer sigma(x, y) (Np/m): quadratic in the depth into the layer.
-fn sponge_map(g: &Grid, o: &HasOptions) -> Vec<f64> {
-    let w = o.sponge_width;
-    let mut s = vec![0.0; g.lateral_len()];
-    if w <= 0.0 {
-        return s;
-    }
-    let depth = |i: usize, n: usize, d: f64| {
-        let from_edge = (i.min(n - 1 - i) as f64) * d;
-        ((w - from_edge) / w).max(0.0)
-    };
-    let peak = 3.0 * o.sponge_strength / w;
-    for j in 0..g.ny {
-        for i in 0..g.nx {
-            let e = depth(i, g.nx, g.dx).max(depth(j, g.ny, g.dy));
-            s[j * g.nx + i] = peak * e * e;
-        }
-    }
-    s
 }
