@@ -429,7 +429,7 @@ fn the_build_records_its_reference_as_propagate_does() {
     let window = Window { planes: 30..70, rows: 20..40, cols: 10..50 };
     let specs = [
         RecordSpec { planes: vec![20, 50, 100], axis: true, ..RecordSpec::default() },
-        RecordSpec { window: Some(window), reflections: true, ..RecordSpec::default() },
+        RecordSpec { window: Some(window.clone()), reflections: true, ..RecordSpec::default() },
         RecordSpec { planes: vec![10], ..RecordSpec::default() },
     ];
     for spec in &specs {
@@ -437,6 +437,21 @@ fn the_build_records_its_reference_as_propagate_does() {
         assert!(plan.reverberation().is_some_and(|z| z.2 > 0), "no reverberation: {:?}", plan.reverberation());
         assert_eq!(built, plan.propagate(&reference, spec).unwrap(), "{spec:?}");
     }
+    // A window alone (an MR slice): the plan keeps that recording and gives it back for the same
+    // source. It is the very march with the count: a march that also records the power (so it
+    // is not the kept one) records the same window bit for bit; another source is marched.
+    let spec = RecordSpec { window: Some(window.clone()), ..RecordSpec::default() };
+    let (plan, built) = HasPlan::build(&g, &resolved.medium, F, &reference, &HasOptions::default(), &spec).unwrap();
+    let marched = plan.propagate(&reference, &RecordSpec { power: true, ..spec.clone() }).unwrap();
+    assert_eq!(built.window, marched.window);
+    assert_eq!(plan.propagate(&reference, &spec).unwrap(), built);
+    let other: Vec<C64> = reference.iter().map(|v| v * C64::new(0.0, 2.0)).collect();
+    let batch = plan.propagate_batch(&[other.clone(), reference.clone()], &spec).unwrap();
+    assert_eq!(batch[1], built);
+    let expected: Vec<C64> = built.window.iter().map(|v| v * C64::new(0.0, 2.0)).collect();
+    let worst = batch[0].window.iter().zip(&expected).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    let peak = expected.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    assert!(worst > 0.0 && worst < 1e-12 * peak, "linear in the source: {worst:.2e} of {peak:.2e}");
 }
 
 /// The single-precision march (element bases) against the double-precision one: through a soft

@@ -15,3 +15,4 @@ pub mod source;
 pub mod steering;
 pub mod tissue;
 pub mod transducer;
+pub mod upsample;

@@ -160,6 +160,16 @@ pub struct HasPlan {
     slabs: Vec<Arc<SliceProperties>>,
     steps: Vec<Step>,
     zone: Option<Zone>,
+    /// The reference beam's recording of a window, kept where the build marched it through the
+    /// reverberation (see [`HasPlan::propagate`]).
+    kept: Option<Arc<Kept>>,
+}
+
+/// A recording of one source, and what it recorded.
+struct Kept {
+    source: Vec<C64>,
+    spec: RecordSpec,
+    recording: Recording,
 }
 
 impl HasPlan {
@@ -209,6 +219,7 @@ impl HasPlan {
             slabs,
             steps: Vec::with_capacity(grid.nz - 1),
             zone: None,
+            kept: None,
         };
         // March the reference one way (single transmission at each interface) to fix the means;
         // without reverberation or reflections that march is the recording asked for.
@@ -263,6 +274,10 @@ impl HasPlan {
             None if (plan.zone.is_some() || spec.reflections) && !spec.records_nothing() => plan.propagate_here(reference, spec),
             None => recorder.finish(),
         };
+        let window_only = spec.window.is_some() && *spec == RecordSpec { window: spec.window.clone(), ..RecordSpec::default() };
+        if plan.zone.is_some() && window_only {
+            plan.kept = Some(Arc::new(Kept { source: reference.to_vec(), spec: spec.clone(), recording: rec.clone() }));
+        }
         Ok((plan, rec))
     }
 
@@ -305,12 +320,23 @@ impl HasPlan {
     }
 
     /// Marches one source from plane 0, keeping what `spec` asks for. Rows of each FFT are spread
-    /// over the rayon pool.
+    /// over the rayon pool. Where the build marched the reference beam through a reverberating
+    /// layer for a window alone, that recording is kept, and the same source with the same `spec`
+    /// returns it without marching again (the same values bit for bit: the march's operations do
+    /// not depend on when it runs).
     pub fn propagate(&self, source: &[C64], spec: &RecordSpec) -> Result<Recording> {
         self.check(source, spec)?;
+        if let Some(rec) = self.kept_recording(source, spec) {
+            return Ok(rec);
+        }
         let mut rec = Recording::default();
         march::in_pool(|| rec = self.propagate_here(source, spec));
         Ok(rec)
+    }
+
+    /// The kept recording (see [`HasPlan::propagate`]) if it is of `source` for `spec`.
+    fn kept_recording(&self, source: &[C64], spec: &RecordSpec) -> Option<Recording> {
+        self.kept.as_ref().filter(|k| k.spec == *spec && k.source == source).map(|k| k.recording.clone())
     }
 
     fn propagate_here(&self, source: &[C64], spec: &RecordSpec) -> Recording {
@@ -328,7 +354,10 @@ impl HasPlan {
         if sources.len() == 1 || in_sequence(self.grid.lateral_len()) {
             return sources.iter().map(|s| self.propagate(s, spec)).collect();
         }
-        Ok(sources.par_iter().map(|s| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0).collect())
+        Ok(sources
+            .par_iter()
+            .map(|s| self.kept_recording(s, spec).unwrap_or_else(|| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0))
+            .collect())
     }
 
     fn check(&self, source: &[C64], spec: &RecordSpec) -> Result<()> {
