@@ -400,6 +400,7 @@ fn rasterise(e: &Surface, g: &Grid) -> Vec<(u32, f64)> {
 mod tests {
     use super::*;
     use crate::physics::transducer::Transducer;
+    use crate::physics::upsample::tests::random;
 
     #[test]
     fn symmetric_cap_projection_matches_the_direct_sum_at_every_pixel() {
@@ -424,16 +425,6 @@ mod tests {
         let err = fast.iter().zip(&slow).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
         eprintln!("[cap projection] max error {err:.2e} of the peak (tol 2e-4)");
         assert!(err < 2e-4, "max error {err:.2e} of the peak");
-    }
-
-    /// Deterministic complex pseudo-random values with parts in [-0.5, 0.5).
-    fn random(n: usize, seed: u64) -> Vec<C64> {
-        let mut s = seed;
-        let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        (0..n).map(|_| C64::new(rnd(), rnd())).collect()
     }
 
     #[test]

@@ -79,7 +79,7 @@ fn upsample_targets(k: usize, c: usize, n: usize) -> Vec<(usize, f64)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -106,7 +106,7 @@ mod tests {
     }
 
     /// Deterministic complex pseudo-random values with parts in [-0.5, 0.5).
-    fn random(n: usize, seed: u64) -> Vec<C64> {
+    pub(crate) fn random(n: usize, seed: u64) -> Vec<C64> {
         let mut s = seed;
         let mut rnd = || {
             s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
