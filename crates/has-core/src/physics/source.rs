@@ -15,7 +15,7 @@ use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::rayleigh::Sources;
 use crate::physics::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
-use crate::physics::upsample::{fourier_upsample, fourier_upsample_transposed};
+pub use crate::physics::upsample::{fourier_upsample, fourier_upsample_transposed};
 use num_complex::{Complex32 as C32, Complex64 as C64};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
@@ -55,8 +55,8 @@ pub struct SourceModel {
     wavenumber: f64,
     attenuation: f64,
     /// The projected elements' planes for unit drive, made by the first field that needs them
-    /// and shared by clones (`None` inside: more than [`PROJECTIONS_MAX_BYTES`]).
-    projections: Arc<OnceLock<Option<Projections>>>,
+    /// and shared by clones.
+    projections: Arc<OnceLock<Projections>>,
 }
 
 /// At most this many bytes of projected elements' planes are kept (see [`SourceModel::fields`]).
@@ -65,12 +65,17 @@ pub const PROJECTIONS_MAX_BYTES: u64 = 1 << 30;
 /// Each projected element's Rayleigh integral for unit drive on the coarse pixels of the sums
 /// ([`SourceModel::add_rayleigh`]), in single precision: a field of any drive is then their
 /// weighted sum, instead of an integral over every quadrature point.
-#[derive(Debug)]
 struct Projections {
     /// The elements projected (those with quadrature points), in increasing order.
     elements: Vec<usize>,
     /// Row-major `(cy, cx)`, one per element of `elements`.
     planes: Vec<Vec<C32>>,
+}
+
+impl std::fmt::Debug for Projections {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Projections({} elements of {} samples)", self.elements.len(), self.planes.first().map_or(0, Vec::len))
+    }
 }
 
 /// The z of the first plane for a transducer: 0 for a planar array, else just in front of the
@@ -159,7 +164,7 @@ impl SourceModel {
         if projected.is_empty() {
             return Ok(out);
         }
-        match self.projections.get_or_init(|| self.project_elements()) {
+        match self.kept_projections() {
             Some(p) => self.add_projected(p, &projected, &mut out),
             None => {
                 let mut positions: Vec<[f64; 3]> = Vec::new();
@@ -174,6 +179,18 @@ impl SourceModel {
             }
         }
         Ok(out)
+    }
+
+    /// The kept projections, made now if they are not yet (outside the lock: the projection runs
+    /// on the pool, whose threads may call for them meanwhile and then project too; the first
+    /// to finish is kept). A refusal is not kept: a later call checks the memory again.
+    fn kept_projections(&self) -> Option<&Projections> {
+        if self.projections.get().is_none() {
+            if let Some(p) = self.project_elements() {
+                let _ = self.projections.set(p);
+            }
+        }
+        self.projections.get()
     }
 
     /// The projected elements' planes ([`Projections`]), or `None` beyond
@@ -466,7 +483,7 @@ mod tests {
         alone[7] = C64::new(0.3, -1.2);
         let drives = [random(n, 5), random(n, 6), alone];
         let fields = model.fields(&drives).unwrap();
-        assert!(model.projections.get().is_some_and(|p| p.as_ref().is_some_and(|p| p.planes.len() == n)));
+        assert!(model.projections.get().is_some_and(|p| p.planes.len() == n));
         for (d, field) in drives.iter().zip(&fields) {
             let mut positions = Vec::new();
             let mut weights = vec![Vec::new()];

@@ -78,8 +78,8 @@ impl FieldBasis {
         };
         let n = sim.n_elements();
         let s_len = sampler.window.len();
-        // Kept in single precision: marched in it too where the march is one-way, with the
-        // plan's steps to the window in single precision besides the basis.
+        // Kept in single precision: marched in it too (the round trips of a reverberating layer
+        // included), with the plan's steps to the window in single precision besides the basis.
         let window = &sampler.window;
         let last = window.planes.end - 1;
         let steps_bytes = if sim.reflections { None } else { sim.plan.single_precision_bytes(last) };

@@ -173,6 +173,21 @@ impl Interface {
 }
 
 impl<T: FftNum> Interface<T> {
+    /// What it holds, as ids of whole planes (arrays as long as the grid's plane): a pointwise
+    /// coefficient map; or each material pair's spectral coefficient (shared between interfaces:
+    /// the same id) and, where pairs split the plane, their pixel lists (one plane's worth).
+    pub(crate) fn planes(&self) -> Vec<usize> {
+        let own = self as *const Self as usize;
+        match &self.kind {
+            Kind::Pointwise(_) => vec![own],
+            Kind::Spectral(pairs) => pairs
+                .iter()
+                .map(|p| Arc::as_ptr(&p.coefficient) as usize)
+                .chain(pairs.iter().any(|p| p.pixels.is_some()).then_some(own))
+                .collect(),
+        }
+    }
+
     /// `out ← R ⊛ p`: the wave reflected by this interface from the incident wave `p` (for a
     /// wave crossing in the other direction, the reflection is `-R ⊛ p`). `out` and `work` are
     /// as long as `p`; `work` is overwritten.

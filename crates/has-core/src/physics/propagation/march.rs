@@ -395,7 +395,7 @@ fn rss<T: Real>(v: &[Complex<T>]) -> f64 {
 
 /// Root-sum-square of the waves' samples.
 fn norm<T: Real>(waves: &Sources<T>) -> f64 {
-    waves.iter().map(|(_, w)| rss(w).powi(2)).sum::<f64>().sqrt()
+    waves.iter().flat_map(|(_, w)| w.iter()).map(|&v| double(v).norm_sqr()).sum::<f64>().sqrt()
 }
 
 /// Marches `field` (the source on plane 0) with the operators `ops` and returns what `spec` asks

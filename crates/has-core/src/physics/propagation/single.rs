@@ -59,14 +59,15 @@ impl HasPlan {
     }
 
     /// About the bytes [`HasPlan::single_precision`] holds for plane `last` (each distinct
-    /// propagator, screen and interface once, each as a full plane of 8 bytes per sample), or
+    /// propagator, screen and interface array once, each as a full plane of 8 bytes per sample:
+    /// a pointwise interface's map, each spectral pair's coefficient, the pairs' pixel lists), or
     /// `None` where it is refused.
     pub fn single_precision_bytes(&self, last: usize) -> Option<u64> {
         let steps = self.steps_to(last)?;
         let arrays: std::collections::HashSet<usize> = steps
             .iter()
             .flat_map(|s| [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize])
-            .chain(steps.iter().filter_map(|s| s.interface.as_ref().map(|i| Arc::as_ptr(i) as usize)))
+            .chain(steps.iter().filter_map(|s| s.interface.as_deref()).flat_map(Interface::planes))
             .collect();
         Some((arrays.len() * self.grid.lateral_len()) as u64 * 8)
     }
