@@ -160,7 +160,7 @@ pub fn transpose<V: Copy + Send + Sync>(src: &[V], dst: &mut [V], rows: usize, c
 }
 
 /// Samples per task of the element-wise loops spread over the pool.
-const CHUNK: usize = 1 << 14;
+pub(crate) const CHUNK: usize = 1 << 14;
 
 /// `f(a, b)` for each pair of samples, spread over the pool when `parallel` (each sample alone:
 /// the same result with any number of threads).

@@ -166,19 +166,23 @@ impl SourceModel {
         }
         match self.kept_projections() {
             Some(p) => self.add_projected(p, &projected, &mut out),
-            None => {
-                let mut positions: Vec<[f64; 3]> = Vec::new();
-                let mut weights: Vec<Vec<C64>> = vec![Vec::new(); phasors.len()];
-                for (e, drives) in &projected {
-                    for q in self.footprints[*e].points() {
-                        positions.push(q.position);
-                        weights.iter_mut().zip(drives).for_each(|(w, a)| w.push(a * q.area));
-                    }
-                }
-                self.add_rayleigh(&positions, &weights, &mut out);
-            }
+            None => self.add_point_sums(&projected, &mut out),
         }
         Ok(out)
+    }
+
+    /// Adds the Rayleigh sums over the quadrature points of the elements in `projected` (each
+    /// element's drives, one per field of `out`): the integral without kept projections.
+    fn add_point_sums(&self, projected: &[(usize, Vec<C64>)], out: &mut [Vec<C64>]) {
+        let mut positions: Vec<[f64; 3]> = Vec::new();
+        let mut weights: Vec<Vec<C64>> = vec![Vec::new(); out.len()];
+        for (e, drives) in projected {
+            for q in self.footprints[*e].points() {
+                positions.push(q.position);
+                weights.iter_mut().zip(drives).for_each(|(w, a)| w.push(a * q.area));
+            }
+        }
+        self.add_rayleigh(&positions, &weights, out);
     }
 
     /// The kept projections, made now if they are not yet (outside the lock: the projection runs
@@ -234,8 +238,7 @@ impl SourceModel {
                     chunk.iter_mut().zip(&plane[c * CHUNK..]).for_each(|(v, q)| *v += a * C64::new(q.re as f64, q.im as f64));
                 }
             });
-            let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
-            o.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
+            self.add_coarse(coarse, o);
         }
     }
 
@@ -262,10 +265,16 @@ impl SourceModel {
             .map(|j| if weights.len() == 1 { vec![sources.row(&xs, g.y(r * j))] } else { sources.row_many(weights, &xs, g.y(r * j)) })
             .collect();
         for (set, o) in out.iter_mut().enumerate() {
-            let mut coarse: Vec<C64> = rows.iter().flat_map(|row| row[set].iter().copied()).collect();
-            let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, cx, cy, r) };
-            o.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
+            self.add_coarse(rows.iter().flat_map(|row| row[set].iter().copied()).collect(), o);
         }
+    }
+
+    /// Adds `coarse` (on every `r`-th pixel, [`SourceModel::coarsening`]) to the plane `out`,
+    /// Fourier-interpolated onto every pixel where `r > 1`.
+    fn add_coarse(&self, mut coarse: Vec<C64>, out: &mut [C64]) {
+        let (g, r) = (&self.grid, self.coarsening());
+        let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, g.nx / r, g.ny / r, r) };
+        out.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
     }
 
     /// The coarsening `r` of the Rayleigh sums: the largest whole number with `r·dx ≤ λ/2` that
@@ -485,16 +494,10 @@ mod tests {
         let fields = model.fields(&drives).unwrap();
         assert!(model.projections.get().is_some_and(|p| p.planes.len() == n));
         for (d, field) in drives.iter().zip(&fields) {
-            let mut positions = Vec::new();
-            let mut weights = vec![Vec::new()];
-            for (e, fp) in model.footprints.iter().enumerate() {
-                for q in fp.points().iter().filter(|_| d[e] != C64::new(0.0, 0.0)) {
-                    positions.push(q.position);
-                    weights[0].push(d[e] * model.face_pressure * q.area);
-                }
-            }
+            let driven: Vec<(usize, Vec<C64>)> =
+                (0..n).filter(|&e| d[e] != C64::new(0.0, 0.0)).map(|e| (e, vec![d[e] * model.face_pressure])).collect();
             let mut direct = vec![vec![C64::new(0.0, 0.0); g.lateral_len()]];
-            model.add_rayleigh(&positions, &weights, &mut direct);
+            model.add_point_sums(&driven, &mut direct);
             let peak = direct[0].iter().map(|v| v.norm()).fold(0.0, f64::max);
             let err = field.iter().zip(&direct[0]).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) / peak;
             assert!(peak > 0.0 && err < 1e-5, "error {err:.1e} of the peak");

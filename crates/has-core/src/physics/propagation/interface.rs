@@ -18,10 +18,11 @@
 //! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
 //! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
 
-use crate::physics::fft::{each_pair, Fft2, FftWorkspace};
+use crate::physics::fft::{Fft2, FftWorkspace, CHUNK};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
 use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
+use rayon::prelude::*;
 use rustfft::FftNum;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -194,8 +195,12 @@ impl<T: FftNum> Interface<T> {
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
             Kind::Pointwise(r) => {
-                out.copy_from_slice(p);
-                each_pair(ws.is_parallel(), out, r, |o, &r| *o = *o * r);
+                let scale = |o: &mut [Complex<T>], p: &[Complex<T>], r: &[T]| o.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r);
+                if ws.is_parallel() {
+                    out.par_chunks_mut(CHUNK).zip(p.par_chunks(CHUNK)).zip(r.par_chunks(CHUNK)).for_each(|((o, p), r)| scale(o, p, r));
+                } else {
+                    scale(out, p, r);
+                }
             }
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);

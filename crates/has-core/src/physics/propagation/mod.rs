@@ -44,7 +44,7 @@ pub(crate) use single::single;
 pub use single::SinglePlan;
 
 use crate::error::{HasError, Result};
-use crate::physics::fft::Fft2;
+use crate::physics::fft::{each_pair, Fft2};
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Medium, SliceProperties};
 use interface::{Coefficients, Interface};
@@ -234,7 +234,7 @@ impl HasPlan {
             recorder.power(step, &plan.slabs[arriving], &field);
             if let Some(i) = &interface {
                 i.reflect(&plan.fft, &field, &mut reflected, &mut work, &mut ws);
-                field.iter_mut().zip(&reflected).for_each(|(f, r)| *f += r);
+                each_pair(ws.is_parallel(), &mut field, &reflected, |f, r| *f += r);
             }
             let props = &plan.slabs[slab];
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
