@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
 from arfi.scenario import Scenario
+from arfi.simulation import Simulation
 from arfi.validate import as_point_mm
 
 
@@ -59,6 +60,11 @@ class Prediction:
     +10 % through the wave model, its weighted common phase removed. ``s`` times it is the
     prediction's error if the conversion's bone is ``s`` percent off: give it to an estimate as a
     prior mode (``prior_modes``; the CLI's ``--prior-bone-speed-std-percent``)."""
+    simulation: Simulation | None = field(default=None, compare=False, repr=False)
+    """The skull's simulation the prediction marched (``predict(..., keep_simulation=True)``; else
+    None): fields, sections and element maps of the predicted drives without building its plan
+    again. Its ARFI amplitude is not calibrated (1 unless the scenario gives one): not for
+    MR-ARFI images."""
 
     def pressure_with(self, phases_rad: ArrayLike) -> float:
         """Focal |p| (Pa) at the target through this prediction's skull when the array drives the
@@ -94,15 +100,25 @@ class Prediction:
              else {"bone_speed_sensitivity_rad_per_percent": self.bone_speed_sensitivity_rad_per_percent.tolist()})
 
 
-def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_sensitivity: bool = False) -> Prediction:
+def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_sensitivity: bool = False,
+            keep_simulation: bool = False) -> Prediction:
     """Simulates ``scenario`` (which needs a ``[ct]``) and predicts each element's aberration at
-    ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs the
-    scenario's simulation, two transposed marches and one transposed projection, whatever the
-    number of elements; the skull's plan is dropped before the reference's is built, so that
-    they are never held at once. The ARFI amplitude is not calibrated (a prediction makes no
-    image), which spares a march through a reverberating head. ``bone_speed_sensitivity`` also
+    ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs two
+    plans (the head without bone, then the skull's), two transposed marches and one transposed
+    projection, whatever the number of elements; each plan is dropped before the next is built,
+    so that two are never held at once. The ARFI amplitude is not calibrated (a prediction makes
+    no image), which spares a march through a reverberating head. ``bone_speed_sensitivity`` also
     gives :attr:`Prediction.bone_speed_sensitivity_rad_per_percent` (needs the porosity
-    conversion, ``aubry2003``), at the cost of one more simulation of the skull."""
+    conversion, ``aubry2003``), at the cost of one more simulation of the skull (built and dropped
+    before the skull's own). ``keep_simulation`` keeps the skull's simulation as
+    :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
-    d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target, bool(bone_speed_sensitivity))
-    return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})
+    d = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target, bool(bone_speed_sensitivity),
+                      bool(keep_simulation))
+    core = d.pop("simulation")
+    kept = None
+    if core is not None:
+        fields_only = scenario.to_dict()
+        fields_only.setdefault("arfi", {}).setdefault("amplitude_rad_m3_per_n", 1.0)
+        kept = Simulation._wrap(Scenario.from_dict(fields_only, scenario.base_dir), core)
+    return Prediction(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"]), "simulation": kept})

@@ -223,12 +223,15 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     return _verb_page(out, "field", values, figures)
 
 
-def predict_report(out: str | Path, sim: Any, prediction: Any, values: dict[str, Any]) -> Path:
-    """Report of a CT-based prediction: the beam through the skull on the x–z section through the
-    target, driven toward the target with the reference steering (uncorrected), the scenario's
-    straight-ray steering and the reference steering minus the prediction (three marches of
-    ``sim``, the skull's simulation); the element maps of the predicted phase and of the
-    transmission."""
+def predict_report(out: str | Path, prediction: Any, values: dict[str, Any]) -> Path:
+    """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
+    skull on the x–z section through the target, driven toward the target with the reference
+    steering (uncorrected), the scenario's straight-ray steering and the reference steering minus
+    the prediction (three marches of the kept skull's simulation, in one batch); the element
+    maps of the predicted phase and of the transmission."""
+    sim = prediction.simulation
+    if sim is None:
+        raise ValueError("prediction: has no simulation; predict with keep_simulation=True to report it")
     plt = pyplot()
     out = _report_dir(out)
     steering = sim.steering_phases_rad

@@ -50,10 +50,14 @@ def test_predicted_phases_applied_by_the_forward_march_give_the_predicted_focus(
     # The prediction sums reciprocal responses; the forward march of the whole array with the
     # correction added must give the same focal pressure (to 1e-4: single-precision Rayleigh sums).
     scenario = Scenario.load(head / "head.toml")
-    p, sim = predict(scenario), Simulation(scenario)
+    p, sim = predict(scenario, keep_simulation=True), Simulation(scenario)
     f = sim.field(p.correction_rad(sim.steering_phases_rad), p.target_mm[2])
     i, j = np.argmin(np.abs(f.x_mm - p.target_mm[0])), np.argmin(np.abs(f.y_mm - p.target_mm[1]))
     assert abs(abs(f.pressure[j, i]) - p.corrected_pa) < 1e-4 * p.corrected_pa
+    # The kept simulation is the skull's: the same march as a fresh one, to the bit.
+    kept = p.simulation.field(p.correction_rad(sim.steering_phases_rad), p.target_mm[2])
+    assert np.array_equal(kept.pressure, f.pressure)
+    assert predict(scenario).simulation is None
     with pytest.raises(ValueError, match="target_mm"):
         predict(scenario, [0.0, 1.0])
     # A target between grid points is predicted where it is (the fields interpolated there), and
@@ -130,6 +134,12 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
     for name in ["predict_section.png", "predict_elements.png", "report.html"]:
         assert (report / name).stat().st_size > 10_000, name
     assert (report / "predict_section.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The report marches the kept skull's simulation; without one it says how to get it.
+    from arfi.report import predict_report
+
+    with pytest.raises(ValueError, match="keep_simulation=True"):
+        predict_report(tmp_path / "r2", predict(Scenario.load(head / "head.toml")), {})
+    assert not (tmp_path / "r2").exists()
 
 
 def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head, tmp_path, capsys):

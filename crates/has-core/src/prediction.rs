@@ -18,10 +18,11 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
+use crate::physics::medium::Medium;
 use crate::physics::propagation::{HasPlan, RecordSpec};
 use crate::physics::steering::steering_phases;
 use crate::scenario::Scenario;
-use crate::simulation::{reciprocal_field, Simulation};
+use crate::simulation::{reciprocal_field, Simulation, Unbuilt};
 use num_complex::Complex64 as C64;
 
 /// The prediction for one target, with the focal pressures it implies (Pa, for the
@@ -83,14 +84,77 @@ fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
 /// from the ideal image, which a prediction does not use (through a reverberating head that is
 /// one whole march more: about 5 s of a 650 kHz hemisphere's prediction).
 pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result<Prediction> {
-    predict(fields_only(scenario.clone())?, target)
+    Ok(predict_scenario_with(scenario, target, PredictionOptions::default())?.prediction)
 }
 
-/// The simulation of `scenario` with the ARFI amplitude given (1 unless it sets one), so that
-/// it is not calibrated from an ideal image: for predictions, which make none.
-fn fields_only(mut scenario: Scenario) -> Result<Simulation> {
+/// What [`predict_scenario_with`] computes beside the prediction.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PredictionOptions {
+    /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
+    pub bone_speed_sensitivity: bool,
+    /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
+    /// one), e.g. to march the predicted correction without building its plan again.
+    pub keep_simulation: bool,
+}
+
+/// A prediction and what its [`PredictionOptions`] asked for.
+pub struct PredictionRun {
+    /// The prediction.
+    pub prediction: Prediction,
+    /// Per element, rad per percent of bone sound speed (see [`bone_speed_sensitivity`]).
+    pub bone_speed_sensitivity: Option<Vec<f64>>,
+    /// The skull's simulation.
+    pub simulation: Option<Simulation>,
+}
+
+/// [`predict_scenario`] with the bone speed sensitivity and the skull's simulation on request.
+/// The plans are built one after another and each dropped before the next (the reference head's,
+/// the faster bone's, then the skull's, kept if asked for): never two at once. The same values
+/// as [`predict`] and [`bone_speed_sensitivity`] to the last bit.
+pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, options: PredictionOptions) -> Result<PredictionRun> {
+    if options.bone_speed_sensitivity {
+        bone_sound_speed(scenario)?;
+    }
+    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    let target = target.unwrap_or(unbuilt.focus());
+    let reference_medium = without_bone(unbuilt.medium())?;
+    let through_reference = {
+        let (plan, _) = HasPlan::build(
+            &unbuilt.grid,
+            &reference_medium,
+            unbuilt.frequency(),
+            &unbuilt.steered_source,
+            &unbuilt.options,
+            &RecordSpec::default(),
+        )?;
+        reciprocal_field(&plan, target, unbuilt.reflections())?
+    };
+    let moved = match options.bone_speed_sensitivity {
+        true => Some(Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(target)?),
+        false => None,
+    };
+    let sim = unbuilt.build()?;
+    let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
+    let mut responses = sim.source.transposed_many(&[through_skull, through_reference])?;
+    let (reference, skull) = (responses.remove(1), responses.remove(0));
+    let reference_steering = steering_phases(&sim.transducer, &reference_medium, sim.frequency, target)?;
+    let prediction = from_responses(target, skull, reference, reference_steering, sim.steering_toward(target)?);
+    let bone_speed_sensitivity = moved.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
+    Ok(PredictionRun { prediction, bone_speed_sensitivity, simulation: options.keep_simulation.then_some(sim) })
+}
+
+/// `scenario` with the ARFI amplitude given (1 unless it sets one), so that its simulation is
+/// not calibrated from an ideal image: for predictions, which make none.
+fn with_amplitude(mut scenario: Scenario) -> Scenario {
     scenario.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
-    Simulation::new(&scenario)
+    scenario
+}
+
+/// The head without its skull, or why a prediction cannot be made without a CT.
+fn without_bone(medium: &Medium) -> Result<Medium> {
+    medium.without_bone().ok_or_else(|| {
+        HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
+    })
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).
@@ -101,9 +165,7 @@ fn fields_only(mut scenario: Scenario) -> Result<Simulation> {
 /// Refused without a `[ct]`.
 pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> {
     let target = target.unwrap_or(sim.focus);
-    let reference_medium = sim.medium.without_bone().ok_or_else(|| {
-        HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
-    })?;
+    let reference_medium = without_bone(&sim.medium)?;
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
     let ray_steering = sim.steering_toward(target)?;
     let steered_source = sim.steered_source().to_vec();
@@ -111,17 +173,28 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let options = plan.options.clone();
     drop(plan);
     let through_reference = {
-        let spec = RecordSpec::default();
-        let (reference_plan, _) = HasPlan::build(&grid, &reference_medium, frequency, &steered_source, &options, &spec)?;
+        let (reference_plan, _) = HasPlan::build(&grid, &reference_medium, frequency, &steered_source, &options, &RecordSpec::default())?;
         reciprocal_field(&reference_plan, target, reflections)?
     };
     let mut responses = source.transposed_many(&[through_skull, through_reference])?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));
     let reference_steering = steering_phases(&transducer, &reference_medium, frequency, target)?;
+    Ok(from_responses(target, skull, reference, reference_steering, ray_steering))
+}
+
+/// The prediction from each element's response at `target` through the skull and through the
+/// reference head (Pa per unit drive), the reference steering and the scenario's own (rad).
+fn from_responses(
+    target: [f64; 3],
+    skull: Vec<C64>,
+    reference: Vec<C64>,
+    reference_steering: Vec<f64>,
+    ray_steering: Vec<f64>,
+) -> Prediction {
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
-    Ok(Prediction {
+    Prediction {
         target,
         reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
         reference_optimal_pressure: reference.iter().map(|h| h.norm()).sum(),
@@ -133,7 +206,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
         transmission,
         reference_steering,
         skull_responses: skull,
-    })
+    }
 }
 
 /// The relative step of the bone sound speed over which [`bone_speed_sensitivity`] takes its
@@ -152,13 +225,22 @@ pub const BONE_SPEED_STEP: f64 = 0.1;
 /// simulation of the skull (plan, march, projection) beyond `prediction`'s, which must have been
 /// made from `scenario`. Refused without the porosity conversion (the constant is its own).
 pub fn bone_speed_sensitivity(scenario: &Scenario, prediction: &Prediction) -> Result<Vec<f64>> {
+    let moved = Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(prediction.target)?;
+    sensitivity(&moved, &prediction.skull_responses)
+}
+
+/// `scenario` with the CT conversion's bone sound speed [`BONE_SPEED_STEP`] higher.
+fn faster_bone(scenario: &Scenario) -> Result<Scenario> {
     let base = bone_sound_speed(scenario)?;
     let mut faster = scenario.clone();
     if let Some(c) = faster.ct.as_mut() {
         c.bone_sound_speed_m_s = Some(base * (1.0 + BONE_SPEED_STEP));
     }
-    let moved = fields_only(faster)?.element_responses(prediction.target)?;
-    let h = &prediction.skull_responses;
+    Ok(faster)
+}
+
+/// The sensitivity from the responses `moved` through the faster bone and `h` through the skull.
+fn sensitivity(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
     if moved.len() != h.len() {
         return Err(HasError::invalid("prediction", format!("has {} elements; the scenario has {}", h.len(), moved.len())));
     }

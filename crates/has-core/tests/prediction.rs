@@ -344,7 +344,7 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     // correlation 0.946. Tolerance: correlation at least 0.93 (the shape over the aperture,
     // which is what an estimate fits the mode's coefficient on) and a slope of 0.9–1.4.
     use has_core::physics::ct::{BoneModel, HuConversion};
-    use has_core::prediction::{bone_speed_sensitivity, BONE_SPEED_STEP};
+    use has_core::prediction::{bone_speed_sensitivity, predict_scenario_with, PredictionOptions, BONE_SPEED_STEP};
     let dir = scratch("bone-speed");
     let (outer_c, inner_c) = ([4e-3, 0.0, 46e-3], [0.0, 0.0, 46e-3]);
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, outer_c, 20e-3, inner_c, 15e-3, f64::INFINITY, 0.5e-3)).unwrap();
@@ -410,5 +410,19 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     assert!(corr > 0.93 && (0.9..1.4).contains(&slope), "slope {slope}, correlation {corr}");
     let soft = bowl_scenario(&dir, "conversion = \"schneider-mast\"\n");
     assert!(bone_speed_sensitivity(&soft, &p).unwrap_err().to_string().starts_with("ct.conversion"));
+    // `arfi predict --bone-speed-sensitivity --report` builds the plans in another order (the
+    // reference head's, the faster bone's, then the skull's, which it keeps): the same values to
+    // the last bit, and the kept simulation is the skull's (its own march of a drive equals a
+    // fresh simulation's).
+    let options = PredictionOptions { bone_speed_sensitivity: true, keep_simulation: true };
+    let run = predict_scenario_with(&scenario, None, options).unwrap();
+    assert_eq!(run.prediction, p);
+    assert_eq!(run.bone_speed_sensitivity.as_deref(), Some(&g[..]));
+    let kept = run.simulation.unwrap();
+    let added: Vec<f64> = (0..kept.n_elements()).map(|e| p.reference_steering[e] - p.phases[e] - kept.steering[e]).collect();
+    assert_eq!(kept.steering, sim.steering);
+    assert_eq!(kept.field(&added, None).unwrap().pressure, sim.field(&added, None).unwrap().pressure);
+    let soft_run = predict_scenario_with(&soft, None, options).err().map(|e| e.to_string());
+    assert!(soft_run.is_some_and(|e| e.starts_with("ct.conversion")));
     std::fs::remove_dir_all(dir).ok();
 }

@@ -45,7 +45,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
                          "arfi phantom writes a synthetic one")
     t = time.perf_counter()
-    p = predict(scenario, args.target_mm, bone_speed_sensitivity=args.bone_speed_sensitivity)
+    # The report draws the beam through the skull: the prediction keeps the skull's simulation for it.
+    p = predict(scenario, args.target_mm, bone_speed_sensitivity=args.bone_speed_sensitivity,
+                keep_simulation=args.report is not None)
     seconds = time.perf_counter() - t
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm
@@ -64,14 +66,9 @@ def run(args: argparse.Namespace) -> int:
     result = p.to_dict()
     if args.report:
         from arfi.report import predict_report
-        from arfi.scenario import Scenario
-        from arfi.simulation import Simulation
 
-        # The report images no MR-ARFI: an amplitude given spares its calibration march.
-        fields_only = scenario.to_dict()
-        fields_only.setdefault("arfi", {}).setdefault("amplitude_rad_m3_per_n", 1.0)
-        predict_report(args.report, Simulation(Scenario.from_dict(fields_only, scenario.base_dir)), p,
-                       {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad), "seconds": seconds,
-                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()}})
+        predict_report(args.report, p, {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad),
+                                        "seconds": seconds,
+                                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()}})
     finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

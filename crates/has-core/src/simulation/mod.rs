@@ -6,18 +6,22 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
-use crate::memory;
-use crate::physics::grid::{fft_friendly, Grid};
+use crate::physics::grid::Grid;
 use crate::physics::medium::{Material, Medium};
-use crate::physics::mr::{add_noise, focal_peak, Broadening, MrGeometry, MrSampler};
-use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec, Recording};
-use crate::physics::source::{source_plane_z, SourceModel};
+use crate::physics::mr::{add_noise, focal_peak, MrGeometry, MrSampler};
+use crate::physics::propagation::{HasPlan, RecordSpec, Recording};
+use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::physics::transducer::Transducer;
-use crate::scenario::{GridSpec, Resolved, Scenario};
+use crate::scenario::Scenario;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
 use std::sync::Arc;
+
+mod build;
+mod grid;
+pub(crate) use build::Unbuilt;
+pub use grid::{choose_grid, with_chosen_grid};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).
@@ -120,78 +124,7 @@ impl Simulation {
     /// # Ok::<(), has_core::HasError>(())
     /// ```
     pub fn new(scenario: &Scenario) -> Result<Self> {
-        let r = scenario.resolve()?;
-        let grid = choose_grid(&r)?;
-        let step = grid.dz.min(0.5e-3);
-        r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, step, r.frequency)?;
-        r.medium.check_on_grid(&grid)?;
-        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
-        let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
-        let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
-        // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
-        let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
-        let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
-        let options = HasOptions {
-            sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
-            interfaces: r.grid.interface_model()?,
-            screen: r.grid.screen_model(r.focus)?,
-            ..HasOptions::default()
-        };
-        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
-        let element_amplitudes = Arc::new(vec![1.0; steering.len()]);
-        let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
-        let reference = source.field(&drive)?;
-        // The ideal image comes from the plan's own march of the reference beam when it sets the
-        // amplitude (free without reverberation; one more march with it).
-        let window = sampler.as_ref().ok().filter(|_| r.amplitude.is_none()).map(|s| s.window.clone());
-        let spec = RecordSpec { window, ..RecordSpec::default() };
-        let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &reference, &options, &spec)?;
-        let steered_source = Arc::new(reference);
-        let amplitude = match (r.amplitude, &sampler) {
-            (Some(a), _) => Ok(a),
-            (None, Err(e)) => Err(e.clone()),
-            (None, Ok(sampler)) => {
-                let mut force = sampler.force_image(&ideal.window)?;
-                sampler.blank_unimaged(&mut force);
-                match focal_peak(&force, &r.mr.pixels_near(r.focus, r.focal_search_radius)) {
-                    Some((_, peak)) if peak > 0.0 => Ok(r.ideal_focal_phase / peak),
-                    _ => Err(HasError::invalid(
-                        "mr",
-                        format!(
-                            "the ideal beam exerts no radiation force in the MR slice on imaged tissue within \
-                             arfi.focal_search_radius_mm = {:.1} of the focus (no attenuating soft tissue there?): fields can be \
-                             simulated, MR-ARFI images cannot",
-                            r.focal_search_radius * 1e3
-                        ),
-                    )),
-                }
-            }
-        };
-        let groups = r.transducer.default_groups();
-        let n_groups = groups.iter().max().map_or(0, |g| g + 1);
-        Ok(Simulation {
-            name: r.name,
-            frequency: r.frequency,
-            grid,
-            medium: r.medium,
-            steering_medium: r.steering_medium,
-            transducer: r.transducer,
-            focus: r.focus,
-            steering,
-            element_amplitudes,
-            groups,
-            n_groups,
-            source,
-            steered_source,
-            plan,
-            mr: r.mr,
-            sampler,
-            amplitude,
-            mask_fraction: r.mask_fraction,
-            focal_search_radius: r.focal_search_radius,
-            noise: r.noise,
-            reflections: r.grid.reflections.unwrap_or(false),
-        })
+        Unbuilt::new(scenario)?.build()
     }
 
     /// The medium whose straight-ray times of flight give the steering: `medium`, or the head
@@ -544,99 +477,4 @@ pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bo
         ));
     };
     plan.transposed(plane, &weights, reflections)
-}
-
-/// The scenario with the `[grid]` it resolves to written out (spacing, step, lateral size, last
-/// plane, absorbing layer, reflections, interface model): a template that simulates as the
-/// scenario does (the spacings to the rounding of their mm values).
-pub fn with_chosen_grid(scenario: &Scenario) -> Result<Scenario> {
-    let r = scenario.resolve()?;
-    let g = choose_grid(&r)?;
-    let mut s = scenario.clone();
-    s.grid = GridSpec {
-        spacing_mm: Some(g.dx * 1e3),
-        step_mm: Some(g.dz * 1e3),
-        lateral_size_mm: Some(g.nx as f64 * g.dx * 1e3),
-        z_max_mm: Some(g.z(g.nz - 1) * 1e3),
-        sponge_width_mm: Some(r.grid.sponge_width_mm.unwrap_or(HasOptions::default().sponge_width * 1e3)),
-        reflections: Some(r.grid.reflections.unwrap_or(false)),
-        interfaces: Some(r.grid.interface_model()?.name().to_string()),
-        screen: Some(r.grid.screen_model(r.focus)?.name().to_string()),
-    };
-    Ok(s)
-}
-
-/// The grid for a scenario: spacing λ_min/4 unless given (refused above λ_min/2), a square
-/// lateral extent covering the aperture (and an off-axis focus) with 20 mm margins, planes from
-/// the source plane to 1.5 x the focal depth and the MR field of view, one of them on the focus.
-pub fn choose_grid(r: &Resolved) -> Result<Grid> {
-    let wavelength = r.medium.min_sound_speed() / r.frequency;
-    let dx = match r.grid.spacing_mm {
-        Some(s) => {
-            let s = s * 1e-3;
-            if s > 0.5 * wavelength {
-                return Err(HasError::invalid(
-                    "grid.spacing_mm",
-                    format!(
-                        "{:.3} mm is too coarse for {:.0} kHz (shortest wavelength {:.3} mm): use at most {:.3} mm (λ/2); {:.3} mm (λ/4) is recommended",
-                        s * 1e3, r.frequency / 1e3, wavelength * 1e3, 0.5 * wavelength * 1e3, 0.25 * wavelength * 1e3
-                    ),
-                ));
-            }
-            s
-        }
-        None => 0.25 * wavelength,
-    };
-    let z0 = source_plane_z(&r.transducer, wavelength, dx);
-    let dz = match r.grid.step_mm {
-        Some(s) if s * 1e-3 > wavelength => {
-            return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)))
-        }
-        Some(s) => s * 1e-3,
-        // At most the lateral spacing, and a whole number of steps to the focal depth, so that a
-        // plane lies exactly on the focus.
-        None if r.focus[2] > z0 + dx => (r.focus[2] - z0) / ((r.focus[2] - z0) / dx).ceil(),
-        None => dx,
-    };
-    let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
-    let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
-    // (1e-9 of a sample below an integer counts as that integer, so that the size and last plane
-    // written out by `with_chosen_grid` give back the same grid.)
-    let n = fft_friendly((size / dx - 1e-9).ceil() as usize);
-    let ax = r.mr.plane.axes();
-    let mr_z_end = if ax[1] == 2 { r.mr.center[2] + 0.5 * r.mr.fov[1] } else { r.mr.center[2] + r.mr.slice_thickness };
-    let z_end = r.grid.z_max_mm.map_or((1.5 * r.focus[2]).max(mr_z_end), |z| z * 1e-3);
-    if z_end <= z0 + dz {
-        return Err(HasError::invalid("grid.z_max_mm", format!("must lie beyond the source plane at {:.1} mm", z0 * 1e3)));
-    }
-    let nz = ((z_end - z0) / dz - 1e-9).ceil() as usize + 1;
-    let bytes = (n * n) as u64 * 16 * 8;
-    if nz > 100_000 {
-        return Err(HasError::invalid("grid.step_mm", format!("{nz} planes to the last one; use a larger step or grid.z_max_mm")));
-    }
-    memory::check(|| format!("a {n} x {n} grid"), bytes, "use a coarser grid.spacing_mm or a smaller grid.lateral_size_mm")?;
-    Grid::new(n, n, dx, dx, nz, dz, z0)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `arfi scenario` writes the chosen grid; read back, it must give the very same grid (sizes
-    /// within 1e-9 of a sample of an integer count are that count).
-    #[test]
-    fn the_written_grid_resolves_to_the_same_grid() {
-        let bowl = "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 64.0\n\
-                    aperture_diameter_mm = 64.0\n[focus]\nposition_mm = [0.0, 0.0, 64.0]\n[grid]\nspacing_mm = 0.375\n";
-        for s in [Scenario::default(), Scenario::from_toml(bowl, None).unwrap()] {
-            let written = Scenario::from_toml(&with_chosen_grid(&s).unwrap().to_toml().unwrap(), None).unwrap();
-            assert!(written.grid.step_mm.is_some() && written.grid.interfaces.as_deref() == Some("angular"));
-            let (a, b) = (choose_grid(&written.resolve().unwrap()).unwrap(), choose_grid(&s.resolve().unwrap()).unwrap());
-            assert_eq!((a.nx, a.ny, a.nz), (b.nx, b.ny, b.nz));
-            // Spacings pass through mm in the file: equal to the last bit or two.
-            for (x, y) in [(a.dx, b.dx), (a.dy, b.dy), (a.dz, b.dz), (a.z0, b.z0)] {
-                assert!((x - y).abs() <= 1e-14 * x.abs().max(y.abs()), "{x} vs {y}");
-            }
-        }
-    }
 }

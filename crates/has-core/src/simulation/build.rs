@@ -1,0 +1,132 @@
+//! A simulation up to its HAS plan: the resolved scenario, the grid, the steering and the
+//! steered source, from which [`Unbuilt::build`] builds the plan (the costly part: one march of
+//! the steered beam, more through reverberating layers). Kept apart so that a caller can build
+//! another plan from the same pieces first (the prediction's head without bone) and never hold
+//! two plans at once.
+
+use super::{choose_grid, Simulation};
+use crate::error::{HasError, Result};
+use crate::physics::grid::Grid;
+use crate::physics::medium::Medium;
+use crate::physics::mr::{focal_peak, Broadening, MrSampler};
+use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
+use crate::physics::source::SourceModel;
+use crate::physics::steering::steering_phases;
+use crate::scenario::{Resolved, Scenario};
+use num_complex::Complex64 as C64;
+use std::sync::Arc;
+
+/// Everything of a [`Simulation`] but its HAS plan and ARFI amplitude.
+pub(crate) struct Unbuilt {
+    r: Resolved,
+    pub(crate) grid: Grid,
+    steering: Vec<f64>,
+    pub(crate) source: SourceModel,
+    pub(crate) options: HasOptions,
+    sampler: Result<MrSampler>,
+    /// The source plane of the steered array: the plan's reference beam.
+    pub(crate) steered_source: Vec<C64>,
+}
+
+impl Unbuilt {
+    /// Resolves the scenario, chooses the grid, steers to the focus and projects the steered
+    /// source; checks the medium before the source plane and on the grid.
+    pub(crate) fn new(scenario: &Scenario) -> Result<Self> {
+        let r = scenario.resolve()?;
+        let grid = choose_grid(&r)?;
+        let step = grid.dz.min(0.5e-3);
+        r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, step, r.frequency)?;
+        r.medium.check_on_grid(&grid)?;
+        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
+        let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
+        let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
+        // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
+        let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
+        let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
+        let options = HasOptions {
+            sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
+            interfaces: r.grid.interface_model()?,
+            screen: r.grid.screen_model(r.focus)?,
+            ..HasOptions::default()
+        };
+        let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
+        let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
+        let steered_source = source.field(&drive)?;
+        Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source })
+    }
+
+    /// The scenario's medium.
+    pub(crate) fn medium(&self) -> &Medium {
+        &self.r.medium
+    }
+
+    /// The steering target (m, transducer frame).
+    pub(crate) fn focus(&self) -> [f64; 3] {
+        self.r.focus
+    }
+
+    /// Driving frequency (Hz).
+    pub(crate) fn frequency(&self) -> f64 {
+        self.r.frequency
+    }
+
+    /// Whether marches add the reflected waves.
+    pub(crate) fn reflections(&self) -> bool {
+        self.r.grid.reflections.unwrap_or(false)
+    }
+
+    /// Builds the HAS plan with the steered beam as reference and, unless the scenario gives the
+    /// ARFI amplitude, calibrates it from the ideal image (the plan's own march of that beam:
+    /// free without reverberation, one more march with it).
+    pub(crate) fn build(self) -> Result<Simulation> {
+        let Unbuilt { r, grid, steering, source, options, sampler, steered_source } = self;
+        let window = sampler.as_ref().ok().filter(|_| r.amplitude.is_none()).map(|s| s.window.clone());
+        let spec = RecordSpec { window, ..RecordSpec::default() };
+        let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &steered_source, &options, &spec)?;
+        let amplitude = match (r.amplitude, &sampler) {
+            (Some(a), _) => Ok(a),
+            (None, Err(e)) => Err(e.clone()),
+            (None, Ok(sampler)) => {
+                let mut force = sampler.force_image(&ideal.window)?;
+                sampler.blank_unimaged(&mut force);
+                match focal_peak(&force, &r.mr.pixels_near(r.focus, r.focal_search_radius)) {
+                    Some((_, peak)) if peak > 0.0 => Ok(r.ideal_focal_phase / peak),
+                    _ => Err(HasError::invalid(
+                        "mr",
+                        format!(
+                            "the ideal beam exerts no radiation force in the MR slice on imaged tissue within \
+                             arfi.focal_search_radius_mm = {:.1} of the focus (no attenuating soft tissue there?): fields can be \
+                             simulated, MR-ARFI images cannot",
+                            r.focal_search_radius * 1e3
+                        ),
+                    )),
+                }
+            }
+        };
+        let groups = r.transducer.default_groups();
+        let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+        Ok(Simulation {
+            name: r.name,
+            frequency: r.frequency,
+            grid,
+            medium: r.medium,
+            steering_medium: r.steering_medium,
+            transducer: r.transducer,
+            focus: r.focus,
+            element_amplitudes: Arc::new(vec![1.0; steering.len()]),
+            steering,
+            groups,
+            n_groups,
+            source,
+            steered_source: Arc::new(steered_source),
+            plan,
+            mr: r.mr,
+            sampler,
+            amplitude,
+            mask_fraction: r.mask_fraction,
+            focal_search_radius: r.focal_search_radius,
+            noise: r.noise,
+            reflections: r.grid.reflections.unwrap_or(false),
+        })
+    }
+}
