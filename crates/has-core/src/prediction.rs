@@ -93,7 +93,9 @@ pub struct PredictionOptions {
     /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
     pub bone_speed_sensitivity: bool,
     /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
-    /// one), e.g. to march the predicted correction without building its plan again.
+    /// one), e.g. to march the predicted correction without building its plan again. Its build
+    /// records the steered beam's x–z section through the target: through reverberating bone the
+    /// plan keeps it, and [`Simulation::section`] of the steered beam there is free.
     pub keep_simulation: bool,
 }
 
@@ -133,7 +135,7 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         true => Some(Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(target)?),
         false => None,
     };
-    let sim = unbuilt.build()?;
+    let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
     let mut responses = sim.source.transposed_many(&[through_skull, through_reference])?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));

@@ -422,6 +422,12 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     let added: Vec<f64> = (0..kept.n_elements()).map(|e| p.reference_steering[e] - p.phases[e] - kept.steering[e]).collect();
     assert_eq!(kept.steering, sim.steering);
     assert_eq!(kept.field(&added, None).unwrap().pressure, sim.field(&added, None).unwrap().pressure);
+    // Its build recorded the steered beam's section through the target (kept through the
+    // shell's reverberation): the same as a fresh simulation's march of it.
+    assert!(kept.propagation().reverberation.is_some_and(|z| z.2 > 0));
+    let (a, b) =
+        (kept.section(&[vec![], added.clone()], Some(target[1])).unwrap(), sim.section(&[vec![], added], Some(target[1])).unwrap());
+    assert_eq!(a.pressure, b.pressure);
     let soft_run = predict_scenario_with(&soft, None, options).err().map(|e| e.to_string());
     assert!(soft_run.is_some_and(|e| e.starts_with("ct.conversion")));
     std::fs::remove_dir_all(dir).ok();

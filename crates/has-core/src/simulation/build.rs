@@ -13,6 +13,7 @@ use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
 use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::scenario::{Resolved, Scenario};
+use crate::section::section_spec;
 use num_complex::Complex64 as C64;
 use std::sync::Arc;
 
@@ -79,9 +80,26 @@ impl Unbuilt {
     /// ARFI amplitude, calibrates it from the ideal image (the plan's own march of that beam:
     /// free without reverberation, one more march with it).
     pub(crate) fn build(self) -> Result<Simulation> {
+        let window = self.sampler.as_ref().ok().filter(|_| self.r.amplitude.is_none()).map(|s| s.window.clone());
+        self.build_recording(RecordSpec { window, ..RecordSpec::default() })
+    }
+
+    /// [`Unbuilt::build`] whose march of the steered beam records the x–z section nearest y =
+    /// `y` (m) when the scenario gives the ARFI amplitude (else the ideal image, to calibrate it):
+    /// through reverberating layers the plan keeps that recording, so that
+    /// [`Simulation::section`] of the steered beam there needs no march of its own.
+    pub(crate) fn build_with_section(self, y: f64) -> Result<Simulation> {
+        if self.r.amplitude.is_none() {
+            return self.build();
+        }
+        let (_, spec) = section_spec(&self.grid, y, self.reflections())?;
+        self.build_recording(spec)
+    }
+
+    /// The build, its march of the steered beam recording `spec` (the MR window when the
+    /// amplitude is to be calibrated).
+    fn build_recording(self, spec: RecordSpec) -> Result<Simulation> {
         let Unbuilt { r, grid, steering, source, options, sampler, steered_source } = self;
-        let window = sampler.as_ref().ok().filter(|_| r.amplitude.is_none()).map(|s| s.window.clone());
-        let spec = RecordSpec { window, ..RecordSpec::default() };
         let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &steered_source, &options, &spec)?;
         let amplitude = match (r.amplitude, &sampler) {
             (Some(a), _) => Ok(a),
