@@ -131,8 +131,13 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         )?;
         reciprocal_field(&plan, target, unbuilt.reflections())?
     };
+    crate::memory::release_freed();
     let moved = match options.bone_speed_sensitivity {
-        true => Some(Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(target)?),
+        true => {
+            let moved = Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(target)?;
+            crate::memory::release_freed();
+            Some(moved)
+        }
         false => None,
     };
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
@@ -174,6 +179,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let Simulation { plan, grid, frequency, source, transducer, reflections, .. } = sim;
     let options = plan.options.clone();
     drop(plan);
+    crate::memory::release_freed();
     let through_reference = {
         let (reference_plan, _) = HasPlan::build(&grid, &reference_medium, frequency, &steered_source, &options, &RecordSpec::default())?;
         reciprocal_field(&reference_plan, target, reflections)?
