@@ -227,8 +227,9 @@ def predict_report(out: str | Path, prediction: Any, values: dict[str, Any]) -> 
     """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
     skull on the x–z section through the target, driven toward the target with the reference
     steering (uncorrected), the scenario's straight-ray steering and the reference steering minus
-    the prediction (three marches of the kept skull's simulation, in one batch); the element
-    maps of the predicted phase and of the transmission."""
+    the prediction (marches of the kept skull's simulation, in one batch; with the target at the
+    focus, the straight-ray drive is the steering itself, which the simulation's build recorded
+    on that section); the element maps of the predicted phase and of the transmission."""
     sim = prediction.simulation
     if sim is None:
         raise ValueError("prediction: has no simulation; predict with keep_simulation=True to report it")
