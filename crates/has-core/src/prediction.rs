@@ -80,9 +80,11 @@ fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
     h.iter().enumerate().map(|(e, h)| h * C64::from_polar(1.0, drive(e))).sum::<C64>().norm()
 }
 
-/// [`predict`] for a scenario: its simulation is built without calibrating the ARFI amplitude
-/// from the ideal image, which a prediction does not use (through a reverberating head that is
-/// one whole march more: about 5 s of a 650 kHz hemisphere's prediction).
+/// The prediction at `target` (m; `None`: the focus) of a scenario with a `[ct]`:
+/// [`predict_scenario_with`] without its options. Its simulations are built without calibrating
+/// the ARFI amplitude from the ideal image, which a prediction does not use (through a
+/// reverberating head that is one whole march more: about 5 s of a 650 kHz hemisphere's
+/// prediction).
 pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result<Prediction> {
     Ok(predict_scenario_with(scenario, target, PredictionOptions::default())?.prediction)
 }
@@ -93,9 +95,10 @@ pub struct PredictionOptions {
     /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
     pub bone_speed_sensitivity: bool,
     /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
-    /// one), e.g. to march the predicted correction without building its plan again. Its build
-    /// records the steered beam's x–z section through the target: through reverberating bone the
-    /// plan keeps it, and [`Simulation::section`] of the steered beam there is free.
+    /// one), e.g. to march the predicted correction without building its plan again. Without
+    /// reflections, its build records the steered beam's x–z section through the target: through
+    /// reverberating bone the plan keeps it, and [`Simulation::section`] of the steered beam there
+    /// is free.
     pub keep_simulation: bool,
 }
 
@@ -110,13 +113,20 @@ pub struct PredictionRun {
 }
 
 /// [`predict_scenario`] with the bone speed sensitivity and the skull's simulation on request.
-/// The plans are built one after another and each dropped before the next (the reference head's,
-/// the faster bone's, then the skull's, kept if asked for): never two at once. The same values
-/// as [`predict`] and [`bone_speed_sensitivity`] to the last bit.
+/// The plans are built one after another, each dropped (and its memory handed back,
+/// [`crate::memory::release_freed`]) before the next unless kept: the faster bone's, the
+/// reference head's, then the skull's; never two at once. The same values as [`predict`] and
+/// [`bone_speed_sensitivity`] to the last bit.
 pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, options: PredictionOptions) -> Result<PredictionRun> {
-    if options.bone_speed_sensitivity {
-        bone_sound_speed(scenario)?;
-    }
+    let moved = if options.bone_speed_sensitivity {
+        let faster = Simulation::new(&with_amplitude(faster_bone(scenario)?))?;
+        let moved = faster.element_responses(target.unwrap_or(faster.focus))?;
+        drop(faster);
+        crate::memory::release_freed();
+        Some(moved)
+    } else {
+        None
+    };
     let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
     let target = target.unwrap_or(unbuilt.focus());
     let reference_medium = without_bone(unbuilt.medium())?;
@@ -132,14 +142,6 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         reciprocal_field(&plan, target, unbuilt.reflections())?
     };
     crate::memory::release_freed();
-    let moved = match options.bone_speed_sensitivity {
-        true => {
-            let moved = Simulation::new(&with_amplitude(faster_bone(scenario)?))?.element_responses(target)?;
-            crate::memory::release_freed();
-            Some(moved)
-        }
-        false => None,
-    };
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
     let mut responses = sim.source.transposed_many(&[through_skull, through_reference])?;
@@ -147,7 +149,14 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     let reference_steering = steering_phases(&sim.transducer, &reference_medium, sim.frequency, target)?;
     let prediction = from_responses(target, skull, reference, reference_steering, sim.steering_toward(target)?);
     let bone_speed_sensitivity = moved.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
-    Ok(PredictionRun { prediction, bone_speed_sensitivity, simulation: options.keep_simulation.then_some(sim) })
+    let simulation = if options.keep_simulation {
+        Some(sim)
+    } else {
+        drop(sim);
+        crate::memory::release_freed();
+        None
+    };
+    Ok(PredictionRun { prediction, bone_speed_sensitivity, simulation })
 }
 
 /// `scenario` with the ARFI amplitude given (1 unless it sets one), so that its simulation is

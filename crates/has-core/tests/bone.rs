@@ -442,15 +442,16 @@ fn the_build_records_its_reference_as_propagate_does() {
     // source. It is the very march with the count: a march that also records the power (so it
     // is not the kept one) records the same window bit for bit; another source is marched.
     let section = Window { planes: 0..g.nz, rows: 32..33, cols: 0..g.nx };
+    let mut last = None;
     for w in [section, window.clone()] {
         let spec = RecordSpec { window: Some(w), ..RecordSpec::default() };
         let (plan, built) = HasPlan::build(&g, &resolved.medium, F, &reference, &HasOptions::default(), &spec).unwrap();
         let marched = plan.propagate(&reference, &RecordSpec { power: true, ..spec.clone() }).unwrap();
         assert_eq!(built.window, marched.window);
         assert_eq!(plan.propagate(&reference, &spec).unwrap(), built);
+        last = Some((plan, built, spec));
     }
-    let spec = RecordSpec { window: Some(window.clone()), ..RecordSpec::default() };
-    let (plan, built) = HasPlan::build(&g, &resolved.medium, F, &reference, &HasOptions::default(), &spec).unwrap();
+    let (plan, built, spec) = last.unwrap();
     let other: Vec<C64> = reference.iter().map(|v| v * C64::new(0.0, 2.0)).collect();
     let batch = plan.propagate_batch(&[other.clone(), reference.clone()], &spec).unwrap();
     assert_eq!(batch[1], built);

@@ -6,7 +6,7 @@
 //! Run with `cargo test --release -p has-core --test prediction -- --nocapture` to see the numbers.
 
 use has_core::nifti;
-use has_core::prediction::{predict, predict_scenario};
+use has_core::prediction::{predict, predict_scenario, predict_scenario_with, PredictionOptions};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use std::path::PathBuf;
@@ -115,7 +115,7 @@ fn predicted_phases_restore_the_focus_through_a_shifted_uneven_shell() {
     // From the scenario (what `arfi predict` calls), its simulation built without the ARFI
     // amplitude's march: the same prediction to the last bit (the amplitude scales images only).
     let q = predict_scenario(&bowl_scenario(&dir, ""), None).unwrap();
-    assert_eq!((&q.phases, &q.transmission, q.corrected_pressure), (&p.phases, &p.transmission, p.corrected_pressure));
+    assert_eq!(q, p);
     std::fs::remove_dir_all(dir).ok();
 }
 
@@ -126,6 +126,9 @@ fn a_prediction_needs_a_ct() {
     let sim = Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap();
     let err = predict(sim, None).unwrap_err().to_string();
     assert!(err.contains("ct") && err.contains("CT of the head"), "{err}");
+    let keep = PredictionOptions { keep_simulation: true, ..PredictionOptions::default() };
+    let err = predict_scenario_with(&Scenario::from_toml(text, None).unwrap(), None, keep).err().map(|e| e.to_string());
+    assert!(err.as_deref().is_some_and(|e| e.starts_with("ct") && e.contains("CT of the head")), "{err:?}");
 }
 
 /// Pressure transmission of a plane wave at normal incidence through a layer of `(rho, c, alpha)`
@@ -344,7 +347,7 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     // correlation 0.946. Tolerance: correlation at least 0.93 (the shape over the aperture,
     // which is what an estimate fits the mode's coefficient on) and a slope of 0.9–1.4.
     use has_core::physics::ct::{BoneModel, HuConversion};
-    use has_core::prediction::{bone_speed_sensitivity, predict_scenario_with, PredictionOptions, BONE_SPEED_STEP};
+    use has_core::prediction::{bone_speed_sensitivity, BONE_SPEED_STEP};
     let dir = scratch("bone-speed");
     let (outer_c, inner_c) = ([4e-3, 0.0, 46e-3], [0.0, 0.0, 46e-3]);
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, outer_c, 20e-3, inner_c, 15e-3, f64::INFINITY, 0.5e-3)).unwrap();
@@ -417,6 +420,7 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     let options = PredictionOptions { bone_speed_sensitivity: true, keep_simulation: true };
     let run = predict_scenario_with(&scenario, None, options).unwrap();
     assert_eq!(run.prediction, p);
+    assert_eq!(predict(sim.clone(), None).unwrap(), p);
     assert_eq!(run.bone_speed_sensitivity.as_deref(), Some(&g[..]));
     let kept = run.simulation.unwrap();
     let added: Vec<f64> = (0..kept.n_elements()).map(|e| p.reference_steering[e] - p.phases[e] - kept.steering[e]).collect();
@@ -430,5 +434,8 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     assert_eq!(a.pressure, b.pressure);
     let soft_run = predict_scenario_with(&soft, None, options).err().map(|e| e.to_string());
     assert!(soft_run.is_some_and(|e| e.starts_with("ct.conversion")));
+    let keep = PredictionOptions { keep_simulation: true, ..PredictionOptions::default() };
+    let outside = predict_scenario_with(&scenario, Some([0.0, 0.0, 1.0]), keep).err().map(|e| e.to_string());
+    assert!(outside.as_deref().is_some_and(|e| e.starts_with("target") && e.contains("outside the grid")), "{outside:?}");
     std::fs::remove_dir_all(dir).ok();
 }

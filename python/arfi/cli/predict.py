@@ -34,7 +34,7 @@ def register(sub: Any) -> None:
                         "(about as long as the prediction); needs conversion = \"aubry2003\"")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
-                  "phase and transmission; simulates the skull again: about as long as the prediction)")
+                  "phase and transmission; two more marches of the prediction's own simulation of the skull, kept for the report)")
     p.set_defaults(run=run)
 
 
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     # The report draws the beam through the skull: the prediction keeps the skull's simulation for it.
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=args.bone_speed_sensitivity,
-                keep_simulation=args.report is not None)
+                keep_simulation=bool(args.report))
     seconds = time.perf_counter() - t
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm

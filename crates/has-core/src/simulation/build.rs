@@ -85,11 +85,12 @@ impl Unbuilt {
     }
 
     /// [`Unbuilt::build`] whose march of the steered beam records the x–z section nearest y =
-    /// `y` (m) when the scenario gives the ARFI amplitude (else the ideal image, to calibrate it):
-    /// through reverberating layers the plan keeps that recording, so that
+    /// `y` (m) when the scenario gives the ARFI amplitude (else the ideal image, to calibrate it)
+    /// and adds no reflections (a reflecting section would cost the build a march it does not
+    /// keep): through reverberating layers the plan keeps that recording, so that
     /// [`Simulation::section`] of the steered beam there needs no march of its own.
     pub(crate) fn build_with_section(self, y: f64) -> Result<Simulation> {
-        if self.r.amplitude.is_none() {
+        if self.r.amplitude.is_none() || self.reflections() {
             return self.build();
         }
         let (_, spec) = section_spec(&self.grid, y, self.reflections())?;
@@ -146,5 +147,35 @@ impl Unbuilt {
             noise: r.noise,
             reflections: r.grid.reflections.unwrap_or(false),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bowl through a bone plate (which reverberates), the amplitude given: the build with a
+    /// section keeps the steered beam's section through y = 1 mm, so that `Simulation::section`
+    /// of the steering is not marched again; with reflections (which a build's counting march
+    /// does not record) or an amplitude to calibrate, it builds as `build` does and keeps none.
+    #[test]
+    fn a_build_with_a_section_keeps_the_steered_beams_section() {
+        let text = |grid: &str, arfi: &str| {
+            format!(
+                "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 40.0\naperture_diameter_mm = 30.0\n\
+                 [focus]\nposition_mm = [0.0, 0.0, 40.0]\n[grid]\nspacing_mm = 0.5\nz_max_mm = 50.0\n{grid}[arfi]\n{arfi}\
+                 [medium]\nbackground = \"water\"\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\n\
+                 [[material]]\nname = \"bone\"\nsound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0\nattenuation_db_cm_mhz = 4.0\n\
+                 [[region]]\nmaterial = \"bone\"\nshape = \"slab\"\nz_min_mm = 20.0\nz_max_mm = 26.0\n"
+            )
+        };
+        let given = "amplitude_rad_m3_per_n = 1.0\n";
+        for (grid, arfi, keeps) in [("", given, true), ("reflections = true\n", given, false), ("", "", false)] {
+            let scenario = Scenario::from_toml(&text(grid, arfi), None).unwrap();
+            let sim = Unbuilt::new(&scenario).unwrap().build_with_section(1e-3).unwrap();
+            assert!(sim.plan.reverberation().is_some_and(|z| z.2 > 0), "the plate does not reverberate");
+            let (_, spec) = section_spec(&sim.grid, 1e-3, sim.reflections).unwrap();
+            assert_eq!(sim.plan.kept_recording(&sim.steered_source, &spec).is_some(), keeps, "{grid}{arfi}");
+        }
     }
 }

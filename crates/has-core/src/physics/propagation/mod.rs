@@ -335,7 +335,7 @@ impl HasPlan {
     }
 
     /// The kept recording (see [`HasPlan::propagate`]) if it is of `source` for `spec`.
-    fn kept_recording(&self, source: &[C64], spec: &RecordSpec) -> Option<Recording> {
+    pub(crate) fn kept_recording(&self, source: &[C64], spec: &RecordSpec) -> Option<Recording> {
         self.kept.as_ref().filter(|k| k.spec == *spec && k.source == source).map(|k| k.recording.clone())
     }
 
