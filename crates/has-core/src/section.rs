@@ -3,9 +3,7 @@
 //! used there (a skull slice with the beam through it).
 
 use crate::error::{HasError, Result};
-use crate::physics::grid::Grid;
-use crate::physics::propagation::{RecordSpec, Window};
-use crate::simulation::Simulation;
+use crate::simulation::{section_spec, Simulation};
 use ndarray::{Array2, Array3};
 use num_complex::Complex64 as C64;
 
@@ -52,16 +50,6 @@ impl Simulation {
         let sound_speed = Array2::from_shape_fn((g.nz, g.nx), |(n, i)| self.plan.slab_properties(n).sound_speed[row * g.nx + i]);
         Ok(Section { y: g.y(row), x: (0..g.nx).map(|i| g.x(i)).collect(), z: (0..g.nz).map(|n| g.z(n)).collect(), sound_speed, pressure })
     }
-}
-
-/// The grid row nearest y = `y` (m) and the spec that records the x–z section there: every
-/// plane, that row, all columns (`reflections` as the simulation marches).
-pub(crate) fn section_spec(g: &Grid, y: f64, reflections: bool) -> Result<(usize, RecordSpec)> {
-    let Some([_, row, _]) = g.nearest([0.0, y, g.z0]) else {
-        return Err(HasError::invalid("y_mm", format!("must lie within the grid, ±{:.1} mm", 0.5 * g.ny as f64 * g.dy * 1e3)));
-    };
-    let window = Window { planes: 0..g.nz, rows: row..row + 1, cols: 0..g.nx };
-    Ok((row, RecordSpec { window: Some(window), reflections, ..RecordSpec::default() }))
 }
 
 #[cfg(test)]

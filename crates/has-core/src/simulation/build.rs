@@ -4,7 +4,7 @@
 //! another plan from the same pieces first (the prediction's head without bone) and never hold
 //! two plans at once.
 
-use super::{choose_grid, Simulation};
+use super::{choose_grid, section_spec, Simulation};
 use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
@@ -13,7 +13,6 @@ use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
 use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::scenario::{Resolved, Scenario};
-use crate::section::section_spec;
 use num_complex::Complex64 as C64;
 use std::sync::Arc;
 

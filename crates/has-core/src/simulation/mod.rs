@@ -9,7 +9,7 @@ use crate::inverse::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Material, Medium};
 use crate::physics::mr::{add_noise, focal_peak, MrGeometry, MrSampler};
-use crate::physics::propagation::{HasPlan, RecordSpec, Recording};
+use crate::physics::propagation::{HasPlan, RecordSpec, Recording, Window};
 use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::physics::transducer::Transducer;
@@ -477,4 +477,14 @@ pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bo
         ));
     };
     plan.transposed(plane, &weights, reflections)
+}
+
+/// The grid row nearest y = `y` (m) and the spec that records the x–z section there: every
+/// plane, that row, all columns (`reflections` as the simulation marches).
+pub(crate) fn section_spec(g: &Grid, y: f64, reflections: bool) -> Result<(usize, RecordSpec)> {
+    let Some([_, row, _]) = g.nearest([0.0, y, g.z0]) else {
+        return Err(HasError::invalid("y_mm", format!("must lie within the grid, ±{:.1} mm", 0.5 * g.ny as f64 * g.dy * 1e3)));
+    };
+    let window = Window { planes: 0..g.nz, rows: row..row + 1, cols: 0..g.nx };
+    Ok((row, RecordSpec { window: Some(window), reflections, ..RecordSpec::default() }))
 }
