@@ -18,9 +18,12 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::phase::wrap;
+use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
-use crate::physics::propagation::{HasPlan, RecordSpec};
+use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
+use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
+use crate::physics::transducer::Transducer;
 use crate::scenario::Scenario;
 use crate::simulation::{reciprocal_field, Simulation, Unbuilt};
 use num_complex::Complex64 as C64;
@@ -130,24 +133,20 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
     let target = target.unwrap_or(unbuilt.focus());
     let reference_medium = without_bone(unbuilt.medium())?;
-    let through_reference = {
-        let (plan, _) = HasPlan::build(
-            &unbuilt.grid,
-            &reference_medium,
-            unbuilt.frequency(),
-            &unbuilt.steered_source,
-            &unbuilt.options,
-            &RecordSpec::default(),
-        )?;
-        reciprocal_field(&plan, target, unbuilt.reflections())?
-    };
-    crate::memory::release_freed();
+    let through_reference = reference_field(
+        &unbuilt.grid,
+        &reference_medium,
+        unbuilt.frequency(),
+        &unbuilt.steered_source,
+        &unbuilt.options,
+        target,
+        unbuilt.reflections(),
+    )?;
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
-    let mut responses = sim.source.transposed_many(&[through_skull, through_reference])?;
-    let (reference, skull) = (responses.remove(1), responses.remove(0));
-    let reference_steering = steering_phases(&sim.transducer, &reference_medium, sim.frequency, target)?;
-    let prediction = from_responses(target, skull, reference, reference_steering, sim.steering_toward(target)?);
+    let fields = [through_skull, through_reference];
+    let prediction =
+        from_fields(&sim.source, &sim.transducer, &reference_medium, sim.frequency, target, fields, sim.steering_toward(target)?)?;
     let bone_speed_sensitivity = moved.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
     let simulation = if options.keep_simulation {
         Some(sim)
@@ -189,29 +188,49 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let options = plan.options.clone();
     drop(plan);
     crate::memory::release_freed();
-    let through_reference = {
-        let (reference_plan, _) = HasPlan::build(&grid, &reference_medium, frequency, &steered_source, &options, &RecordSpec::default())?;
-        reciprocal_field(&reference_plan, target, reflections)?
-    };
-    let mut responses = source.transposed_many(&[through_skull, through_reference])?;
-    let (reference, skull) = (responses.remove(1), responses.remove(0));
-    let reference_steering = steering_phases(&transducer, &reference_medium, frequency, target)?;
-    Ok(from_responses(target, skull, reference, reference_steering, ray_steering))
+    let through_reference = reference_field(&grid, &reference_medium, frequency, &steered_source, &options, target, reflections)?;
+    from_fields(&source, &transducer, &reference_medium, frequency, target, [through_skull, through_reference], ray_steering)
 }
 
-/// The prediction from each element's response at `target` through the skull and through the
-/// reference head (Pa per unit drive), the reference steering and the scenario's own (rad).
-fn from_responses(
+/// The transposed march from `target` through the head without bone (`medium`), its plan built
+/// with the skull's grid, steered source and options, then dropped and its memory handed back.
+fn reference_field(
+    grid: &Grid,
+    medium: &Medium,
+    frequency: f64,
+    steered_source: &[C64],
+    options: &HasOptions,
     target: [f64; 3],
-    skull: Vec<C64>,
-    reference: Vec<C64>,
-    reference_steering: Vec<f64>,
+    reflections: bool,
+) -> Result<Vec<C64>> {
+    let field = {
+        let (plan, _) = HasPlan::build(grid, medium, frequency, steered_source, options, &RecordSpec::default())?;
+        reciprocal_field(&plan, target, reflections)?
+    };
+    crate::memory::release_freed();
+    Ok(field)
+}
+
+/// The prediction at `target` from the transposed marches `[through the skull, through the
+/// reference head]`: each element's response through either by one transposed projection of
+/// `source`, the reference steering through `reference_medium`, and the scenario's own steering
+/// `ray_steering` (rad).
+fn from_fields(
+    source: &SourceModel,
+    transducer: &Transducer,
+    reference_medium: &Medium,
+    frequency: f64,
+    target: [f64; 3],
+    [through_skull, through_reference]: [Vec<C64>; 2],
     ray_steering: Vec<f64>,
-) -> Prediction {
+) -> Result<Prediction> {
+    let mut responses = source.transposed_many(&[through_skull, through_reference])?;
+    let (reference, skull) = (responses.remove(1), responses.remove(0));
+    let reference_steering = steering_phases(transducer, reference_medium, frequency, target)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();
     let transmission = skull.iter().zip(&reference).map(|(s, r)| if r.norm() > 0.0 { s.norm() / r.norm() } else { 0.0 }).collect();
-    Prediction {
+    Ok(Prediction {
         target,
         reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
         reference_optimal_pressure: reference.iter().map(|h| h.norm()).sum(),
@@ -223,7 +242,7 @@ fn from_responses(
         transmission,
         reference_steering,
         skull_responses: skull,
-    }
+    })
 }
 
 /// The relative step of the bone sound speed over which [`bone_speed_sensitivity`] takes its
