@@ -39,21 +39,31 @@ fn element_basis_images_gradient_and_estimate() {
     let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
     let basis = &model.cost.basis;
 
-    // The basis reproduces the direct HAS image: the fields are marched and stored in single
-    // precision (a few 1e-6 of the peak in the field, about twice that in |p|²: see
+    // The basis is marched on a grid 1.5 x coarser (3λ/8: the phantom and water reverberate
+    // nowhere), and reproduces that grid's direct HAS image: the fields are marched and stored in
+    // single precision (a few 1e-6 of the peak in the field, about twice that in |p|²: see
     // `single_precision_march_matches_the_double_precision_one`); 2e-5 leaves room.
-    let direct = sim.arfi_image(&truth).unwrap();
+    let coarse = common::basis_model(&sim);
+    assert!((coarse.grid.dx / sim.grid.dx - 1.5).abs() < 0.01, "basis spacing {} m", coarse.grid.dx);
     let p = &basis.sampler.pixels;
+    let box_of = |img: &Array2<f64>| img.slice(ndarray::s![p[0].clone(), p[1].clone()]).to_owned();
+    let max_diff = |a: &Array2<f64>, b: &Array2<f64>| (a - b).iter().fold(0.0_f64, |m, x| m.max(x.abs()));
     let from_basis = basis.image(&truth).unwrap();
-    let err = (&from_basis - &direct.slice(ndarray::s![p[0].clone(), p[1].clone()])).iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-    assert!(err < 2e-5 * peak(&direct), "basis image error {err:e}");
+    let err = max_diff(&from_basis, &box_of(&coarse.arfi_image(&truth).unwrap()));
+    assert!(err < 2e-5 * peak(&from_basis), "basis image error {err:e}");
+    // Against the simulation's own λ/4 grid: the discretisation (measured 1.5 % of the peak; at
+    // 1.25 x coarser 0.8 %, so the λ/4 grid's own error is of that order). 2 % of the peak,
+    // under the 3 % that 0.02 rad of noise is on this 0.6 rad focus.
+    let direct = sim.arfi_image(&truth).unwrap();
+    let err = max_diff(&from_basis, &box_of(&direct));
+    assert!(err < 0.02 * peak(&direct), "coarser basis against the simulation's grid: {err:e}");
 
     assert_gradient(&model.cost);
 
     // Element amplitudes (a prediction's transmission) weight the basis as they weight the march.
     let amplitudes: Vec<f64> = (0..n).map(|e| 0.2 + 0.8 * ((e * 37) % 11) as f64 / 10.0).collect();
     let weighted = sim.with_element_amplitudes(&amplitudes).unwrap();
-    let direct_weighted = weighted.arfi_image(&truth).unwrap();
+    let direct_weighted = common::basis_model(&weighted).arfi_image(&truth).unwrap();
     let basis_weighted = build_element_model(&weighted, &ms, sim.mask_fraction, 0, None, None).unwrap().cost.basis;
     let q = &basis_weighted.sampler.pixels;
     let err = (&basis_weighted.image(&truth).unwrap() - &direct_weighted.slice(ndarray::s![q[0].clone(), q[1].clone()]))
@@ -112,7 +122,8 @@ fn a_basis_cache_reuses_the_basis_for_the_same_pixel_box_only() {
 #[test]
 fn element_gradient_with_nuisance_projected_out() {
     let sim = common::small_array();
-    let (truth, mut ms) = study(&sim, 2);
+    // Images of the basis's own model (its grid): the linear fit is then exact.
+    let (truth, mut ms) = study(&common::basis_model(&sim), 2);
     let coords = |k: usize, i: usize| sim.mr.pixel_center(k, i) * 1e3;
     let added = [[0.03, 2e-4, -1e-4], [-0.02, 0.0, 3e-4]];
     for (m, b) in ms.iter_mut().zip(&added) {

@@ -31,7 +31,8 @@ def register(sub: Any) -> None:
     add_calibration(p)
     p.add_argument("--groups", type=int, default=16,
                    help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
-                   "phase per element on the element field basis (lbfgs only; about 15 s of marching for 1024 elements)")
+                   "phase per element on the element field basis (lbfgs only): one march per element, through soft tissue and "
+                   "water on a grid of 3/8 of the shortest wavelength (images within 1.5 %% of the peak of the scenario's grid's)")
     add_method(p, "lbfgs",
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)

@@ -113,6 +113,12 @@ impl SourceModel {
         Ok(model)
     }
 
+    /// The same array's footprints on another grid (its plane 0 at the same z): the same face
+    /// pressure and coupling medium.
+    pub fn on_grid(&self, transducer: &Transducer, grid: &Grid) -> Result<Self> {
+        SourceModel::new(transducer, grid, self.face_pressure, self.wavenumber, self.attenuation)
+    }
+
     /// Number of elements.
     pub fn len(&self) -> usize {
         self.footprints.len()

@@ -55,10 +55,7 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
             return Err(HasError::invalid("grid.step_mm", format!("must not exceed the wavelength ({:.3} mm)", wavelength * 1e3)))
         }
         Some(s) => s * 1e-3,
-        // At most the lateral spacing, and a whole number of steps to the focal depth, so that a
-        // plane lies exactly on the focus.
-        None if r.focus[2] > z0 + dx => (r.focus[2] - z0) / ((r.focus[2] - z0) / dx).ceil(),
-        None => dx,
+        None => step_to_focus(z0, r.focus[2], dx),
     };
     let extent = r.transducer.lateral_extent().max(r.focus[0].abs().max(r.focus[1].abs()) + 10e-3);
     let size = r.grid.lateral_size_mm.map_or(2.0 * (extent + 20e-3), |s| s * 1e-3);
@@ -78,6 +75,30 @@ pub fn choose_grid(r: &Resolved) -> Result<Grid> {
     }
     memory::check(|| format!("a {n} x {n} grid"), bytes, "use a coarser grid.spacing_mm or a smaller grid.lateral_size_mm")?;
     Grid::new(n, n, dx, dx, nz, dz, z0)
+}
+
+/// The default step: at most the lateral spacing `dx`, and a whole number of steps from the
+/// source plane `z0` to the focal depth `focus_z` (m), so that a plane lies exactly on the focus.
+fn step_to_focus(z0: f64, focus_z: f64, dx: f64) -> f64 {
+    if focus_z > z0 + dx {
+        (focus_z - z0) / ((focus_z - z0) / dx).ceil()
+    } else {
+        dx
+    }
+}
+
+/// `grid` at the coarser lateral spacing `spacing` (m): at least the same lateral extent
+/// (FFT-friendly sizes), the same source plane, steps chosen as [`choose_grid`] chooses them for
+/// that spacing (a plane on the focal depth `focus_z`), and planes up to at least its last one.
+pub fn coarser_grid(grid: &Grid, focus_z: f64, spacing: f64) -> Result<Grid> {
+    if !(spacing > grid.dx.max(grid.dy)) {
+        return Err(HasError::invalid("spacing", format!("{spacing} m is not coarser than the grid's {} m", grid.dx.max(grid.dy))));
+    }
+    let lateral = |n: usize, d: f64| fft_friendly((n as f64 * d / spacing - 1e-9).ceil() as usize);
+    let dz = step_to_focus(grid.z0, focus_z, spacing.max(grid.dz));
+    let depth = grid.z(grid.nz - 1) - grid.z0;
+    let nz = (depth / dz - 1e-9).ceil() as usize + 1;
+    Grid::new(lateral(grid.nx, grid.dx), lateral(grid.ny, grid.dy), spacing, spacing, nz, dz, grid.z0)
 }
 
 #[cfg(test)]

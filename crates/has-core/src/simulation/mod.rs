@@ -20,8 +20,9 @@ use std::sync::Arc;
 
 mod build;
 mod grid;
+mod regrid;
 pub(crate) use build::Unbuilt;
-pub use grid::{choose_grid, with_chosen_grid};
+pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).

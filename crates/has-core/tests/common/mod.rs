@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests (each test file is its own crate: `mod common;`).
 #![allow(dead_code)]
 
+use has_core::inverse::basis::basis_grid;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 
@@ -8,6 +9,15 @@ use has_core::simulation::Simulation;
 /// per-element tests short.
 pub fn small_array() -> Simulation {
     Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 8\n", None).unwrap()).unwrap()
+}
+
+/// The simulation an element basis of `sim` is marched on (`basis_grid`: a coarser grid through
+/// soft tissue and water), whose images the basis reproduces to single precision.
+pub fn basis_model(sim: &Simulation) -> Simulation {
+    match basis_grid(sim).unwrap() {
+        Some(g) => sim.on_grid(g).unwrap(),
+        None => sim.clone(),
+    }
 }
 
 /// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
