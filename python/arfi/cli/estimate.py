@@ -32,7 +32,8 @@ def register(sub: Any) -> None:
     p.add_argument("--groups", type=int, default=16,
                    help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
                    "phase per element on the element field basis (lbfgs only): one march per element, through soft tissue and "
-                   "water on a grid of 3/8 of the shortest wavelength (images within 1.5 %% of the peak of the scenario's grid's)")
+                   "water on a grid of 3/8 of the shortest wavelength, at most 3/4 of an MR pixel (images within 1.5 %% of the "
+                   "peak of the scenario's grid's at 550-650 kHz)")
     add_method(p, "lbfgs",
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)

@@ -122,4 +122,21 @@ mod tests {
             }
         }
     }
+
+    /// A coarser grid covers at least the grid's lateral extent and depth, from the same source
+    /// plane, with a plane on the focus and steps of at most its spacing; a spacing that is not
+    /// coarser is refused.
+    #[test]
+    fn a_coarser_grid_covers_the_grid_with_a_plane_on_the_focus() {
+        let r = Scenario::default().resolve().unwrap();
+        let g = choose_grid(&r).unwrap();
+        let spacing = 1.5 * g.dx;
+        let c = coarser_grid(&g, r.focus[2], spacing).unwrap();
+        assert_eq!((c.dx, c.dy, c.z0), (spacing, spacing, g.z0));
+        assert!(c.nx as f64 * c.dx >= g.nx as f64 * g.dx && c.ny as f64 * c.dy >= g.ny as f64 * g.dy);
+        assert!(c.z(c.nz - 1) >= g.z(g.nz - 1) - 1e-12 && c.dz <= spacing);
+        let steps = (r.focus[2] - c.z0) / c.dz;
+        assert!((steps - steps.round()).abs() < 1e-9, "{steps} steps to the focus");
+        assert!(coarser_grid(&g, r.focus[2], g.dx).is_err());
+    }
 }
