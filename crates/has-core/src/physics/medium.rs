@@ -383,9 +383,17 @@ impl Medium {
     /// Properties on the lateral grid at height `z`: row-major `(ny, nx)`. Where a CT reaches,
     /// each pixel holds its cell's average (see [`crate::physics::ct`]).
     pub fn slice(&self, grid: &Grid, z: f64, frequency: f64) -> SliceProperties {
+        self.slice_with(grid, z, frequency, &mut Vec::new())
+    }
+
+    /// [`Medium::slice`] built in `scratch` (reused from slice to slice, its memory touched once:
+    /// a plan's layout reads hundreds of slices).
+    pub fn slice_with(&self, grid: &Grid, z: f64, frequency: f64, scratch: &mut Vec<Properties>) -> SliceProperties {
         let per_material: Vec<Properties> = self.materials.iter().map(|m| m.properties(frequency)).collect();
         let voxels_here = self.voxels.as_ref().is_some_and(|v| v.covers_z(z));
-        let mut props = Vec::with_capacity(grid.lateral_len());
+        let props = scratch;
+        props.clear();
+        props.reserve(grid.lateral_len());
         for j in 0..grid.ny {
             for i in 0..grid.nx {
                 let (x, y) = (grid.x(i), grid.y(j));
@@ -393,7 +401,7 @@ impl Medium {
             }
         }
         if let Some(ct) = self.ct.as_ref().filter(|ct| ct.covers_z(z)) {
-            ct.fill_slice(grid, z, frequency, &mut props);
+            ct.fill_slice(grid, z, frequency, props);
         }
         SliceProperties {
             sound_speed: props.iter().map(|p| p.sound_speed).collect(),

@@ -394,7 +394,8 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
     let mut slabs: Vec<Arc<SliceProperties>> = Vec::new();
     let mut slab_of_step = Vec::with_capacity(grid.nz - 1);
     let mut interfaces = Vec::with_capacity(grid.nz - 1);
-    let mut prev = Arc::new(medium.slice(grid, grid.z0 - 0.5 * grid.dz, frequency));
+    let mut scratch = Vec::new();
+    let mut prev = Arc::new(medium.slice_with(grid, grid.z0 - 0.5 * grid.dz, frequency, &mut scratch));
     let mut interface_cache: HashMap<(usize, usize), Option<Arc<Interface>>> = HashMap::new();
     let mut shared = Coefficients::default();
     let mut prev_slab = usize::MAX;
@@ -405,7 +406,7 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
         let slab = match slabs.last() {
             Some(_) if key.is_some() && key == prev_key => slabs.len() - 1,
             last => {
-                let props = medium.slice(grid, z, frequency);
+                let props = medium.slice_with(grid, z, frequency, &mut scratch);
                 if last.is_some_and(|l| **l == props) {
                     slabs.len() - 1
                 } else {
