@@ -165,7 +165,7 @@ impl Simulation {
         }
         let mut s = self.clone();
         s.element_amplitudes = Arc::new(amplitudes.to_vec());
-        s.steered_source = Arc::new(s.source.field(&(0..s.n_elements()).map(|e| s.drive(e, 0.0)).collect::<Vec<_>>())?);
+        s.steered_source = Arc::new(s.source.field(&s.steered_drives())?);
         Ok(s)
     }
 
@@ -179,6 +179,18 @@ impl Simulation {
     /// `a_e·exp(i·(steering_e + added))`.
     pub fn drive(&self, e: usize, added: f64) -> C64 {
         C64::from_polar(self.element_amplitudes[e], self.steering[e] + added)
+    }
+
+    /// Each element's drive with no added phase: `a_e·exp(i·steering_e)` ([`Simulation::drive`]).
+    fn steered_drives(&self) -> Vec<C64> {
+        (0..self.n_elements()).map(|e| self.drive(e, 0.0)).collect()
+    }
+
+    /// This simulation's MR sampler (geometry, broadening, shift) made anew on `grid` through
+    /// `medium`.
+    fn sampler_on(&self, grid: &Grid, medium: &Medium) -> Result<MrSampler> {
+        let old = self.sampler()?;
+        MrSampler::new(grid, medium, self.frequency, &old.geometry, old.broadening)?.with_view([old.broadening.width; 2], old.shift)
     }
 
     /// The MR sampler (the map from `|p|²` on the MR window to the image without its amplitude),
@@ -206,9 +218,7 @@ impl Simulation {
         medium.materials[material] = changed;
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
         let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &self.steered_source, &self.plan.options, &spec)?;
-        let old = self.sampler()?;
-        let sampler = MrSampler::new(&self.grid, &medium, self.frequency, &old.geometry, old.broadening)?
-            .with_view([old.broadening.width; 2], old.shift)?;
+        let sampler = self.sampler_on(&self.grid, &medium)?;
         Ok(Simulation { medium, plan, sampler: Ok(sampler), ..self.clone() })
     }
 

@@ -5,7 +5,6 @@
 use super::Simulation;
 use crate::error::Result;
 use crate::physics::grid::Grid;
-use crate::physics::mr::MrSampler;
 use crate::physics::propagation::{HasPlan, RecordSpec};
 use std::sync::Arc;
 
@@ -18,14 +17,10 @@ impl Simulation {
     pub fn on_grid(&self, grid: Grid) -> Result<Self> {
         self.medium.check_on_grid(&grid)?;
         let source = self.source.on_grid(&self.transducer, &grid)?;
-        let drive: Vec<_> = (0..self.n_elements()).map(|e| self.drive(e, 0.0)).collect();
-        let steered_source = source.field(&drive)?;
+        let steered_source = source.field(&self.steered_drives())?;
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
         let (plan, _) = HasPlan::build(&grid, &self.medium, self.frequency, &steered_source, &self.plan.options, &spec)?;
-        let sampler = self.sampler.as_ref().map_err(Clone::clone).and_then(|old| {
-            MrSampler::new(&grid, &self.medium, self.frequency, &old.geometry, old.broadening)?
-                .with_view([old.broadening.width; 2], old.shift)
-        });
+        let sampler = self.sampler_on(&grid, &self.medium);
         Ok(Simulation {
             name: self.name.clone(),
             frequency: self.frequency,
