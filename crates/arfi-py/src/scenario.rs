@@ -37,11 +37,12 @@ pub(crate) fn scenario_toml_with_grid(text: &str, base_dir: Option<&str>) -> PyR
     has_core::simulation::with_chosen_grid(&s).and_then(|s| s.to_toml()).map_err(to_py)
 }
 
-/// Parses and validates a scenario, returning it as complete JSON (for `Scenario.to_dict`).
+/// Parses a scenario, returning it as complete JSON (for `Scenario.to_dict`, whose text was
+/// validated as a whole when it was normalised: resolving it again would read its CT again).
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None))]
 pub(crate) fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
-    validated_scenario(text, format, base_dir)?.to_json().map_err(to_py)
+    parse_scenario(text, format, base_dir)?.to_json().map_err(to_py)
 }
 
 /// A parsed scenario whose values have also been checked together (`Scenario::resolve`).

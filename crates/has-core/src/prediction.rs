@@ -130,18 +130,20 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     } else {
         None
     };
-    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    let mut unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
     let target = target.unwrap_or(unbuilt.focus());
     let reference_medium = without_bone(unbuilt.medium())?;
+    let steered_source = unbuilt.steered_source()?.to_vec();
     let through_reference = reference_field(
         &unbuilt.grid,
         &reference_medium,
         unbuilt.frequency(),
-        &unbuilt.steered_source,
+        &steered_source,
         &unbuilt.options,
         target,
         unbuilt.reflections(),
     )?;
+    drop(steered_source);
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
     let fields = [through_skull, through_reference];

@@ -2,7 +2,9 @@
 
 use crate::error::{require_positive, HasError, Result};
 use crate::physics::ct::CtMedium;
+use crate::physics::fft::map_collect;
 use crate::physics::grid::Grid;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 use crate::physics::material::{attenuation_np_m, require_sound_speed};
@@ -392,22 +394,18 @@ impl Medium {
         let per_material: Vec<Properties> = self.materials.iter().map(|m| m.properties(frequency)).collect();
         let voxels_here = self.voxels.as_ref().is_some_and(|v| v.covers_z(z));
         let props = scratch;
-        props.clear();
-        props.reserve(grid.lateral_len());
-        for j in 0..grid.ny {
-            for i in 0..grid.nx {
+        props.resize(grid.lateral_len(), per_material[self.background]);
+        props.par_chunks_mut(grid.nx).enumerate().for_each(|(j, row)| {
+            for (i, p) in row.iter_mut().enumerate() {
                 let (x, y) = (grid.x(i), grid.y(j));
-                props.push(if voxels_here { self.described_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] });
+                *p = if voxels_here { self.described_at(x, y, z, frequency) } else { per_material[self.material_at(x, y, z)] };
             }
-        }
+        });
         if let Some(ct) = self.ct.as_ref().filter(|ct| ct.covers_z(z)) {
             ct.fill_slice(grid, z, frequency, props);
         }
-        SliceProperties {
-            sound_speed: props.iter().map(|p| p.sound_speed).collect(),
-            density: props.iter().map(|p| p.density).collect(),
-            attenuation: props.iter().map(|p| p.attenuation).collect(),
-        }
+        let field = |f: fn(&Properties) -> f64| map_collect(true, props, f);
+        SliceProperties { sound_speed: field(|p| p.sound_speed), density: field(|p| p.density), attenuation: field(|p| p.attenuation) }
     }
 
     /// Which regions' z-ranges contain `z`; two heights with equal keys have identical slices.

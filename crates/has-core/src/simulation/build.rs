@@ -24,8 +24,8 @@ pub(crate) struct Unbuilt {
     pub(crate) source: SourceModel,
     pub(crate) options: HasOptions,
     sampler: Result<MrSampler>,
-    /// The source plane of the steered array: the plan's reference beam.
-    pub(crate) steered_source: Vec<C64>,
+    /// The source plane of the steered array (the plan's reference beam), once made.
+    steered_source: Option<Vec<C64>>,
 }
 
 impl Unbuilt {
@@ -50,9 +50,17 @@ impl Unbuilt {
             ..HasOptions::default()
         };
         let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
-        let drive: Vec<C64> = steering.iter().map(|&p| C64::from_polar(1.0, p)).collect();
-        let steered_source = source.field(&drive)?;
-        Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source })
+        Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source: None })
+    }
+
+    /// The steered array's field on plane 0 (made by the first call, unless the build makes it
+    /// while it samples the medium).
+    pub(crate) fn steered_source(&mut self) -> Result<&[C64]> {
+        let field = match self.steered_source.take() {
+            Some(field) => field,
+            None => steered_field(&self.source, &self.steering)?,
+        };
+        Ok(self.steered_source.insert(field))
     }
 
     /// The scenario's medium.
@@ -100,7 +108,10 @@ impl Unbuilt {
     /// amplitude is to be calibrated).
     fn build_recording(self, spec: RecordSpec) -> Result<Simulation> {
         let Unbuilt { r, grid, steering, source, options, sampler, steered_source } = self;
-        let (plan, ideal) = HasPlan::build(&grid, &r.medium, r.frequency, &steered_source, &options, &spec)?;
+        let (plan, ideal, steered_source) = match steered_source {
+            Some(s) => HasPlan::build(&grid, &r.medium, r.frequency, &s, &options, &spec).map(|(p, i)| (p, i, s))?,
+            None => HasPlan::build_with_reference(&grid, &r.medium, r.frequency, || steered_field(&source, &steering), &options, &spec)?,
+        };
         let amplitude = match (r.amplitude, &sampler) {
             (Some(a), _) => Ok(a),
             (None, Err(e)) => Err(e.clone()),
@@ -147,6 +158,11 @@ impl Unbuilt {
             reflections: r.grid.reflections.unwrap_or(false),
         })
     }
+}
+
+/// The field on plane 0 of the array steered by `steering` (rad per element).
+fn steered_field(source: &SourceModel, steering: &[f64]) -> Result<Vec<C64>> {
+    source.field(&steering.iter().map(|&p| C64::from_polar(1.0, p)).collect::<Vec<_>>())
 }
 
 #[cfg(test)]

@@ -17,9 +17,10 @@ impl Simulation {
     pub fn on_grid(&self, grid: Grid) -> Result<Self> {
         self.medium.check_on_grid(&grid)?;
         let source = self.source.on_grid(&self.transducer, &grid)?;
-        let steered_source = source.field(&self.steered_drives())?;
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
-        let (plan, _) = HasPlan::build(&grid, &self.medium, self.frequency, &steered_source, &self.plan.options, &spec)?;
+        let drives = self.steered_drives();
+        let (plan, _, steered_source) =
+            HasPlan::build_with_reference(&grid, &self.medium, self.frequency, || source.field(&drives), &self.plan.options, &spec)?;
         let sampler = self.sampler_on(&grid, &self.medium);
         Ok(Simulation {
             name: self.name.clone(),

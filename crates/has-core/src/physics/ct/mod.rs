@@ -38,6 +38,8 @@ pub struct CtMedium {
     pub path: String,
     /// Shape `(nk, nj, ni)`.
     shape: [usize; 3],
+    /// The lowest and highest HU where every voxel holds a whole number, else `None`.
+    whole_hu: Option<(i32, i32)>,
     /// HU per voxel, row-major `(k, j, i)` (shared by [`CtMedium::without_bone`]).
     hu: Arc<Vec<f32>>,
     /// Transducer frame (m) to continuous voxel index (i, j, k).
@@ -159,8 +161,11 @@ impl CtMedium {
                 bounds[1][a] = bounds[1][a].max(p[a]);
             }
         }
+        let whole = volume.values.iter().all(|v| v.fract() == 0.0);
+        let whole_hu = whole.then(|| volume.values.iter().fold((i32::MAX, i32::MIN), |(lo, hi), &v| (lo.min(v as i32), hi.max(v as i32))));
         Ok(CtMedium {
             path: path.to_string(),
+            whole_hu: whole_hu.filter(|(lo, hi)| lo <= hi),
             shape: volume.shape,
             hu: Arc::new(volume.values),
             frame_to_voxel,
@@ -220,6 +225,17 @@ impl CtMedium {
     /// docs); points outside the CT or in coupling voxels take `outside`. `None` if no point of
     /// the cell is CT tissue.
     pub fn cell_properties(&self, center: [f64; 3], size: [f64; 3], frequency: f64, outside: Properties) -> Option<Properties> {
+        self.cell_average(center, size, outside, &|hu| self.conversion.properties(hu, frequency))
+    }
+
+    /// [`CtMedium::cell_properties`] with `convert` giving the properties of a HU value.
+    fn cell_average(
+        &self,
+        center: [f64; 3],
+        size: [f64; 3],
+        outside: Properties,
+        convert: &impl Fn(f64) -> Option<Properties>,
+    ) -> Option<Properties> {
         let n = self.samples(size);
         let (mut slowness, mut density, mut attenuation, mut tissue) = (0.0, 0.0, 0.0, false);
         for k in 0..n[2] {
@@ -227,7 +243,7 @@ impl CtMedium {
                 for i in 0..n[0] {
                     let off = |s: usize, n: usize, d: f64| ((s as f64 + 0.5) / n as f64 - 0.5) * d;
                     let p = [center[0] + off(i, n[0], size[0]), center[1] + off(j, n[1], size[1]), center[2] + off(k, n[2], size[2])];
-                    let q = self.properties_at(p, frequency);
+                    let q = self.hu_at(p).and_then(convert);
                     tissue |= q.is_some();
                     let q = q.unwrap_or(outside);
                     slowness += 1.0 / q.sound_speed;
@@ -250,13 +266,22 @@ impl CtMedium {
     /// properties on entry, which the cell's points outside the CT tissue take. Rows run in
     /// parallel on the current rayon pool; each cell is computed alone, so the result does not
     /// depend on the number of threads.
+    ///
+    /// Where every voxel holds a whole number of HU (as scanners store them), each value's
+    /// properties are converted once and looked up: the same values.
     pub fn fill_slice(&self, grid: &Grid, z: f64, frequency: f64, props: &mut [Properties]) {
         let size = [grid.dx, grid.dy, grid.dz];
+        let table: Option<(i32, Vec<Option<Properties>>)> =
+            self.whole_hu.map(|(lo, hi)| (lo, (lo..=hi).map(|hu| self.conversion.properties(hu as f64, frequency)).collect()));
+        let convert = |hu: f64| match &table {
+            Some((lo, t)) => t[(hu as i32 - lo) as usize],
+            None => self.conversion.properties(hu, frequency),
+        };
         props.par_chunks_mut(grid.nx).enumerate().for_each(|(j, row)| {
             for (i, p) in row.iter_mut().enumerate() {
                 let c = [grid.x(i), grid.y(j), z];
                 if self.may_touch(c, size) {
-                    if let Some(q) = self.cell_properties(c, size, frequency, *p) {
+                    if let Some(q) = self.cell_average(c, size, *p, &convert) {
                         *p = q;
                     }
                 }
@@ -371,5 +396,37 @@ mod tests {
         assert!((p.density - 0.5 * (2200.0 + 1040.0)).abs() < 1e-9);
         // Wholly outside: the scenario's medium applies.
         assert_eq!(ct.cell_properties([0.02, 0.0, 0.0], [1e-3; 3], 1e6, water), None);
+    }
+
+    /// A slice of a CT of whole HU (converted once per value and looked up) holds, pixel by
+    /// pixel and to the bit, each cell's own conversion; so does one whose HU are not whole
+    /// (converted at every sample), whose values differ.
+    #[test]
+    fn a_slice_holds_each_cells_properties_with_or_without_the_table() {
+        let g = Grid::new(10, 8, 0.7e-3, 0.6e-3, 3, 0.8e-3, 0.0).unwrap();
+        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0 };
+        let mut conv = HuConversion::named("aubry2003").unwrap();
+        conv.coupling_below_hu = -1000.0;
+        for offset in [0.0, 0.25] {
+            // The ramp (0 to 333 HU) scaled into bone: 1000-1999 HU, shifted by `offset`.
+            let mut v = ramp();
+            v.values.iter_mut().for_each(|h| *h = 1000.0 + 3.0 * *h + offset);
+            let mut t = IDENTITY;
+            t[2][3] = 0.5;
+            let ct = CtMedium::new(v, t, conv.clone(), "ramp.nii").unwrap();
+            assert_eq!(ct.whole_hu.is_some(), offset == 0.0);
+            let z = 1.6e-3;
+            let mut props = vec![water; g.lateral_len()];
+            ct.fill_slice(&g, z, 650e3, &mut props);
+            let size = [g.dx, g.dy, g.dz];
+            let mut bone = 0;
+            for (p, got) in props.iter().enumerate() {
+                let c = [g.x(p % g.nx), g.y(p / g.nx), z];
+                let want = ct.cell_properties(c, size, 650e3, water).unwrap_or(water);
+                assert_eq!(*got, want, "pixel {p}, offset {offset}");
+                bone += usize::from(got.sound_speed > 2000.0);
+            }
+            assert!(bone >= 4, "{bone} bone pixels: the slice misses the CT");
+        }
     }
 }

@@ -18,7 +18,7 @@
 //! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
 //! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
 
-use crate::physics::fft::{Fft2, FftWorkspace, CHUNK};
+use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
 use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
@@ -80,8 +80,9 @@ pub(crate) struct Interface<T: FftNum = f64> {
 }
 
 enum Kind<T: FftNum> {
-    /// `R(x, y)` applied pixel by pixel.
-    Pointwise(Vec<T>),
+    /// `R(x, y)` applied pixel by pixel, kept on the pixels where it is not zero (in increasing
+    /// order; through a head, the few percent of the plane where the slices differ).
+    Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T> },
     /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
     Spectral(Vec<Pair<T>>),
 }
@@ -108,7 +109,7 @@ impl Interface {
     /// single-precision copy (shared as the originals are).
     pub(crate) fn single(&self, copy: &mut impl FnMut(&Arc<Vec<C64>>) -> Arc<Vec<C32>>) -> Interface<f32> {
         let kind = match &self.kind {
-            Kind::Pointwise(r) => Kind::Pointwise(r.iter().map(|&r| r as f32).collect()),
+            Kind::Pointwise { pixels, r } => Kind::Pointwise { pixels: pixels.clone(), r: r.iter().map(|&r| r as f32).collect() },
             Kind::Spectral(pairs) => {
                 Kind::Spectral(pairs.iter().map(|p| Pair { pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect())
             }
@@ -130,13 +131,18 @@ impl Interface {
         }
         let n = from.sound_speed.len();
         let normal: Vec<f64> = (0..n)
+            .into_par_iter()
             .map(|i| {
                 let (za, zb) = (from.density[i] * from.sound_speed[i], to.density[i] * to.sound_speed[i]);
                 (zb - za) / (za + zb)
             })
             .collect();
-        let strength = normal.iter().fold(0.0, |m: f64, r| m.max(r.abs()));
-        let pointwise = || Some(Interface { strength, kind: Kind::Pointwise(normal.clone()) });
+        let strength = normal.par_iter().map(|r| r.abs()).reduce(|| 0.0, f64::max);
+        let pointwise = || {
+            let pixels: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| normal[i as usize] != 0.0).collect();
+            let r = pixels.iter().map(|&i| normal[i as usize]).collect();
+            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r } })
+        };
         if model == InterfaceModel::NormalIncidence {
             return pointwise();
         }
@@ -175,12 +181,12 @@ impl Interface {
 
 impl<T: FftNum> Interface<T> {
     /// What it holds, as ids of whole planes (arrays as long as the grid's plane): a pointwise
-    /// coefficient map; or each material pair's spectral coefficient (shared between interfaces:
+    /// coefficient map (at most a plane: its pixels and their coefficients); or each material pair's spectral coefficient (shared between interfaces:
     /// the same id) and, where pairs split the plane, their pixel lists (one plane's worth).
     pub(crate) fn planes(&self) -> Vec<usize> {
         let own = self as *const Self as usize;
         match &self.kind {
-            Kind::Pointwise(_) => vec![own],
+            Kind::Pointwise { .. } => vec![own],
             Kind::Spectral(pairs) => pairs
                 .iter()
                 .map(|p| Arc::as_ptr(&p.coefficient) as usize)
@@ -189,18 +195,23 @@ impl<T: FftNum> Interface<T> {
         }
     }
 
+    /// The pixels where a pointwise interface's `R` is not zero and its values there, or `None`
+    /// for a spectral interface.
+    pub(crate) fn pointwise(&self) -> Option<(&Arc<Vec<u32>>, &[T])> {
+        match &self.kind {
+            Kind::Pointwise { pixels, r } => Some((pixels, r)),
+            Kind::Spectral(_) => None,
+        }
+    }
+
     /// `out ← R ⊛ p`: the wave reflected by this interface from the incident wave `p` (for a
     /// wave crossing in the other direction, the reflection is `-R ⊛ p`). `out` and `work` are
     /// as long as `p`; `work` is overwritten.
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
-            Kind::Pointwise(r) => {
-                let scale = |o: &mut [Complex<T>], p: &[Complex<T>], r: &[T]| o.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r);
-                if ws.is_parallel() {
-                    out.par_chunks_mut(CHUNK).zip(p.par_chunks(CHUNK)).zip(r.par_chunks(CHUNK)).for_each(|((o, p), r)| scale(o, p, r));
-                } else {
-                    scale(out, p, r);
-                }
+            Kind::Pointwise { pixels, r } => {
+                out.fill(Complex::new(T::zero(), T::zero()));
+                pixels.iter().zip(r).for_each(|(&i, &r)| out[i as usize] = p[i as usize] * r);
             }
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
@@ -226,7 +237,10 @@ impl Interface {
     /// only, so the filter is its own transpose). `work` is overwritten.
     pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
         match &self.kind {
-            Kind::Pointwise(r) => out.iter_mut().zip(p).zip(r).for_each(|((o, p), r)| *o = p * r),
+            Kind::Pointwise { pixels, r } => {
+                out.fill(C64::new(0.0, 0.0));
+                pixels.iter().zip(r).for_each(|(&i, &r)| out[i as usize] = p[i as usize] * r);
+            }
             Kind::Spectral(pairs) => {
                 let mut sum = vec![C64::new(0.0, 0.0); p.len()];
                 for pair in pairs {

@@ -17,6 +17,7 @@ use num_complex::{Complex, Complex64 as C64};
 use rustfft::num_traits::NumAssign;
 use rustfft::FftNum;
 use std::ops::Range;
+use std::sync::Arc;
 
 /// A real type a march runs in: `f64`, or `f32` for a single-precision march.
 pub(crate) trait Real: FftNum + NumAssign + Into<f64> {}
@@ -260,8 +261,72 @@ impl<'a> Recorder<'a> {
     }
 }
 
+/// A wave kept on one plane: every pixel, or only the pixels of a pointwise interface (zero
+/// elsewhere), which is what such an interface reflects.
+pub(super) enum Wave<T: Real> {
+    Dense(Vec<Complex<T>>),
+    Sparse { pixels: Arc<Vec<u32>>, values: Vec<Complex<T>> },
+}
+
+impl<T: Real> Wave<T> {
+    /// `field ← field + wave`.
+    fn add_to(&self, field: &mut [Complex<T>], parallel: bool) {
+        match self {
+            Wave::Dense(w) => each_pair(parallel, field, w, |f, &w| *f += w),
+            Wave::Sparse { pixels, values } => pixels.iter().zip(values).for_each(|(&i, &w)| field[i as usize] += w),
+        }
+    }
+
+    /// The samples that may not be zero.
+    fn samples(&self) -> &[Complex<T>] {
+        match self {
+            Wave::Dense(w) => w,
+            Wave::Sparse { values, .. } => values,
+        }
+    }
+}
+
+/// Crosses `interface` in the direction `sign` (+1 forward, -1 backward): `field ← field +
+/// sign·R ⊛ field`; returns the reflected wave `sign·R ⊛ field` when `keep`. A pointwise
+/// interface touches, and keeps, only its own pixels; a spectral one uses `reflected` and `work`
+/// (made as long as `field` if they are not) and keeps every pixel.
+pub(super) fn cross<T: Real>(
+    interface: &Interface<T>,
+    fft: &Fft2<T>,
+    field: &mut [Complex<T>],
+    sign: f64,
+    keep: bool,
+    (reflected, work): (&mut Vec<Complex<T>>, &mut Vec<Complex<T>>),
+    ws: &mut FftWorkspace<T>,
+) -> Option<Wave<T>> {
+    if let Some((pixels, r)) = interface.pointwise() {
+        let mut values = Vec::with_capacity(if keep { pixels.len() } else { 0 });
+        for (&i, &r) in pixels.iter().zip(r) {
+            let f = &mut field[i as usize];
+            let w = if sign < 0.0 { -(*f * r) } else { *f * r };
+            *f += w;
+            if keep {
+                values.push(w);
+            }
+        }
+        return keep.then(|| Wave::Sparse { pixels: pixels.clone(), values });
+    }
+    for buffer in [&mut *reflected, &mut *work] {
+        buffer.resize(field.len(), zero());
+    }
+    interface.reflect(fft, field, reflected, work, ws);
+    let parallel = ws.is_parallel();
+    if sign < 0.0 {
+        each_pair(parallel, field, reflected, |f, &r| *f -= r);
+        keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| -r)))
+    } else {
+        each_pair(parallel, field, reflected, |f, &r| *f += r);
+        keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| r)))
+    }
+}
+
 /// Waves starting at given planes, in increasing plane order.
-type Sources<T> = Vec<(usize, Vec<Complex<T>>)>;
+type Sources<T> = Vec<(usize, Wave<T>)>;
 
 /// Buffers of one march.
 struct Sweeper<'a, T: Real, O: Operators<T>> {
@@ -273,27 +338,15 @@ struct Sweeper<'a, T: Real, O: Operators<T>> {
 
 impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
     fn new(ops: &'a O, parallel: bool) -> Self {
-        let n = ops.grid().lateral_len();
-        Sweeper { ops, ws: ops.fft().workspace(parallel), work: Vec::new(), reflected: vec![zero(); n] }
+        Sweeper { ops, ws: ops.fft().workspace(parallel), work: Vec::new(), reflected: Vec::new() }
     }
 
     /// Crosses the interface at plane `n` (if any) in the direction `sign` (+1 forward, -1
     /// backward): `field ← field + sign·R ⊛ field`; returns the reflected wave `sign·R ⊛ field`
     /// when `keep`.
-    fn cross(&mut self, n: usize, field: &mut [Complex<T>], sign: f64, keep: bool) -> Option<Vec<Complex<T>>> {
+    fn cross(&mut self, n: usize, field: &mut [Complex<T>], sign: f64, keep: bool) -> Option<Wave<T>> {
         let interface = self.ops.interface(n)?;
-        if self.work.len() != field.len() {
-            self.work = vec![zero(); field.len()];
-        }
-        interface.reflect(self.ops.fft(), field, &mut self.reflected, &mut self.work, &mut self.ws);
-        let (parallel, reflected) = (self.ws.is_parallel(), &self.reflected);
-        if sign < 0.0 {
-            each_pair(parallel, field, reflected, |f, &r| *f -= r);
-            keep.then(|| map_collect(parallel, reflected, |&r| -r))
-        } else {
-            each_pair(parallel, field, reflected, |f, &r| *f += r);
-            keep.then(|| map_collect(parallel, reflected, |&r| r))
-        }
+        cross(interface, self.ops.fft(), field, sign, keep, (&mut self.reflected, &mut self.work), &mut self.ws)
     }
 
     /// Propagates `field` through slab `s` (from plane `s` to `s + 1`, or back).
@@ -335,8 +388,9 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
                 }
             }
             while sources.last().is_some_and(|s| s.0 == n) {
-                let (_, s) = sources.pop().unwrap_or_default();
-                each_pair(self.ws.is_parallel(), field, &s, |f, &s| *f += s);
+                if let Some((_, s)) = sources.pop() {
+                    s.add_to(field, self.ws.is_parallel());
+                }
             }
         }
         back
@@ -368,8 +422,9 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
                 }
             }
             while sources.last().is_some_and(|s| s.0 == m) {
-                let (_, s) = sources.pop().unwrap_or_default();
-                each_pair(self.ws.is_parallel(), &mut b, &s, |b, &s| *b += s);
+                if let Some((_, s)) = sources.pop() {
+                    s.add_to(&mut b, self.ws.is_parallel());
+                }
                 started = true;
             }
             if started {
@@ -395,7 +450,7 @@ fn rss<T: Real>(v: &[Complex<T>]) -> f64 {
 
 /// Root-sum-square of the waves' samples.
 fn norm<T: Real>(waves: &Sources<T>) -> f64 {
-    waves.iter().flat_map(|(_, w)| w.iter()).map(|&v| double(v).norm_sqr()).sum::<f64>().sqrt()
+    waves.iter().flat_map(|(_, w)| w.samples()).map(|&v| double(v).norm_sqr()).sum::<f64>().sqrt()
 }
 
 /// Marches `field` (the source on plane 0) with the operators `ops` and returns what `spec` asks
@@ -498,4 +553,46 @@ impl HasPlan {
 /// instead of waking the calling thread at each of them (20–30 % faster from Python's thread).
 pub(super) fn in_pool(f: impl FnOnce() + Send) {
     rayon::scope(|s| s.spawn(|_| f()));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::propagation::interface::{Coefficients, InterfaceModel};
+
+    /// Crossing a pointwise interface touches its own pixels alone and keeps its reflection
+    /// there: the same samples, to the bit, as the whole plane's reflection `R ⊛ p` added to the
+    /// field (the operator's plain form), in either direction; zero on every other pixel.
+    #[test]
+    fn a_pointwise_crossing_equals_the_whole_planes_reflection() {
+        let g = Grid::new(12, 10, 0.5e-3, 0.5e-3, 4, 0.5e-3, 0.0).unwrap();
+        let n = g.lateral_len();
+        let water = SliceProperties { sound_speed: vec![1500.0; n], density: vec![1000.0; n], attenuation: vec![0.0; n] };
+        // Ten distinct bone-like pixels (more pairs than the spectral model takes), water elsewhere.
+        let mut bone = water.clone();
+        for (m, i) in (7..n).step_by(11).enumerate() {
+            bone.sound_speed[i] = 2000.0 + 100.0 * m as f64;
+            bone.density[i] = 1500.0 + 30.0 * m as f64;
+        }
+        let omega = 2.0 * std::f64::consts::PI * 5e5;
+        let interface = Interface::new(&g, &water, &bone, omega, InterfaceModel::Angular, &mut Coefficients::default()).unwrap();
+        let (pixels, _) = interface.pointwise().expect("per-pixel interface");
+        assert_eq!(pixels.len(), (7..n).step_by(11).count());
+        let fft = Fft2::new(g.nx, g.ny);
+        let mut ws = fft.workspace(false);
+        let p: Vec<C64> = (0..n).map(|i| C64::new((i as f64 * 0.37).sin(), (i as f64 * 0.11).cos())).collect();
+        for sign in [1.0, -1.0] {
+            let (mut reflected, mut work) = (vec![C64::new(0.0, 0.0); n], vec![C64::new(0.0, 0.0); n]);
+            interface.reflect(&fft, &p, &mut reflected, &mut work, &mut ws);
+            let whole: Vec<C64> = reflected.iter().map(|&r| if sign < 0.0 { -r } else { r }).collect();
+            let crossed: Vec<C64> = p.iter().zip(&whole).map(|(&p, &r)| p + r).collect();
+            let mut field = p.clone();
+            let kept = cross(&interface, &fft, &mut field, sign, true, (&mut Vec::new(), &mut Vec::new()), &mut ws).unwrap();
+            assert_eq!(field, crossed, "sign {sign}");
+            let mut kept_plane = vec![C64::new(0.0, 0.0); n];
+            kept.add_to(&mut kept_plane, false);
+            assert_eq!(kept_plane, whole, "sign {sign}");
+            assert!(matches!(kept, Wave::Sparse { .. }));
+        }
+    }
 }

@@ -44,7 +44,7 @@ pub(crate) use single::single;
 pub use single::SinglePlan;
 
 use crate::error::{HasError, Result};
-use crate::physics::fft::{each_pair, Fft2};
+use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Medium, SliceProperties};
 use interface::{Coefficients, Interface};
@@ -185,14 +185,39 @@ impl HasPlan {
         spec: &RecordSpec,
     ) -> Result<(Self, Recording)> {
         let mut out = Err(HasError::invalid("plan", "not built"));
-        march::in_pool(|| out = Self::build_here(grid, medium, frequency, reference, options, spec));
+        march::in_pool(|| {
+            out = Self::build_here(layout(grid, medium, frequency, options.interfaces), grid, medium, reference, options, spec)
+        });
         out
     }
 
-    fn build_here(
+    /// [`HasPlan::build`] with the reference made by `reference` (e.g. the steered source's
+    /// Rayleigh projection) while the medium is sampled onto the planes: the two share the pool,
+    /// and the sampling's serial parts leave it room. Returns the reference too.
+    pub fn build_with_reference(
         grid: &Grid,
         medium: &Medium,
         frequency: f64,
+        reference: impl FnOnce() -> Result<Vec<C64>> + Send,
+        options: &HasOptions,
+        spec: &RecordSpec,
+    ) -> Result<(Self, Recording, Vec<C64>)> {
+        let mut out = Err(HasError::invalid("plan", "not built"));
+        march::in_pool(|| {
+            let (layout, reference) = rayon::join(|| layout(grid, medium, frequency, options.interfaces), reference);
+            out = reference.and_then(|r| {
+                let (plan, rec) = Self::build_here(layout, grid, medium, &r, options, spec)?;
+                Ok((plan, rec, r))
+            });
+        });
+        out
+    }
+
+    /// The build on the pool, from the medium laid out on the planes.
+    fn build_here(
+        layout: Layout,
+        grid: &Grid,
+        medium: &Medium,
         reference: &[C64],
         options: &HasOptions,
         spec: &RecordSpec,
@@ -201,8 +226,8 @@ impl HasPlan {
         if reference.len() != n {
             return Err(HasError::invalid("reference", format!("has {} samples, grid has {n}", reference.len())));
         }
+        let Layout { frequency, slabs, slab_of_step, interfaces } = layout;
         let omega = 2.0 * PI * frequency;
-        let Layout { slabs, slab_of_step, interfaces } = layout(grid, medium, frequency, options.interfaces);
         let fft = Fft2::new(grid.nx, grid.ny);
         let sponge = sponge_map(grid, options);
         let mut propagator_cache: HashMap<[u64; 2], Arc<Vec<C64>>> = HashMap::new();
@@ -226,15 +251,13 @@ impl HasPlan {
         let mut recorder = march::Recorder::new(grid, spec, spec.last_plane(grid.nz));
         let mut field = reference.to_vec();
         let mut ws = plan.fft.workspace(true);
-        let mut work = vec![C64::new(0.0, 0.0); n];
-        let mut reflected = vec![C64::new(0.0, 0.0); n];
+        let (mut work, mut reflected) = (Vec::new(), Vec::new());
         for (step, (slab, interface)) in slab_of_step.into_iter().zip(interfaces).enumerate() {
             let arriving = plan.steps.last().map_or(slab, |s| s.slab);
             recorder.add(step, &field);
             recorder.power(step, &plan.slabs[arriving], &field);
             if let Some(i) = &interface {
-                i.reflect(&plan.fft, &field, &mut reflected, &mut work, &mut ws);
-                each_pair(ws.is_parallel(), &mut field, &reflected, |f, r| *f += r);
+                march::cross(i, &plan.fft, &mut field, 1.0, false, (&mut reflected, &mut work), &mut ws);
             }
             let props = &plan.slabs[slab];
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
@@ -384,6 +407,8 @@ impl HasPlan {
 /// at each step's first plane (the medium half a step before plane 0 is the one the source
 /// radiates from).
 struct Layout {
+    /// The frequency the properties are taken at (Hz).
+    frequency: f64,
     slabs: Vec<Arc<SliceProperties>>,
     slab_of_step: Vec<usize>,
     interfaces: Vec<Option<Arc<Interface>>>,
@@ -432,7 +457,7 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
         prev = current.clone();
         prev_slab = slab;
     }
-    Layout { slabs, slab_of_step, interfaces }
+    Layout { frequency, slabs, slab_of_step, interfaces }
 }
 
 /// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (sequential sums: identical with any
