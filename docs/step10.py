@@ -16,9 +16,9 @@ into the tutorial
 
 usage: python docs/step10.py [--small] [--check] [--workdir DIR]
 
---small    the same commands at a small size (a 2 mm CT, 220 kHz instead of 650 kHz): a few
-           minutes instead of about 15 (and 9 GB); prints the step as it would write it and
-           writes nothing
+--small    the same commands at a small size (a 2 mm CT, 220 kHz instead of 650 kHz), faster
+           and in less memory than the full step (about 5 minutes, 7.3 GB at most); prints the
+           step as it would write it and writes nothing
 --check    writes nothing; exit 1 if the tutorial differs from what the commands print (times
            aside), or with --small if a printed line differs in form (numbers aside)
 --workdir  run in DIR (created; kept afterwards) instead of a temporary folder
