@@ -161,8 +161,10 @@ impl CtMedium {
                 bounds[1][a] = bounds[1][a].max(p[a]);
             }
         }
-        let whole = volume.values.iter().all(|v| v.fract() == 0.0);
-        let whole_hu = whole.then(|| volume.values.iter().fold((i32::MAX, i32::MIN), |(lo, hi), &v| (lo.min(v as i32), hi.max(v as i32))));
+        let whole_hu = volume
+            .values
+            .iter()
+            .try_fold((i32::MAX, i32::MIN), |(lo, hi), &v| (v.fract() == 0.0).then(|| (lo.min(v as i32), hi.max(v as i32))));
         Ok(CtMedium {
             path: path.to_string(),
             whole_hu: whole_hu.filter(|(lo, hi)| lo <= hi),

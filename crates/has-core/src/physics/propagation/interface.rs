@@ -209,10 +209,7 @@ impl<T: FftNum> Interface<T> {
     /// as long as `p`; `work` is overwritten.
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
-            Kind::Pointwise { pixels, r } => {
-                out.fill(Complex::new(T::zero(), T::zero()));
-                pixels.iter().zip(r).for_each(|(&i, &r)| out[i as usize] = p[i as usize] * r);
-            }
+            Kind::Pointwise { pixels, r } => scale_pixels(pixels, r, p, out),
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
                 fft.forward(work, ws);
@@ -237,10 +234,8 @@ impl Interface {
     /// only, so the filter is its own transpose). `work` is overwritten.
     pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
         match &self.kind {
-            Kind::Pointwise { pixels, r } => {
-                out.fill(C64::new(0.0, 0.0));
-                pixels.iter().zip(r).for_each(|(&i, &r)| out[i as usize] = p[i as usize] * r);
-            }
+            // A pointwise R is diagonal: its own transpose.
+            Kind::Pointwise { pixels, r } => scale_pixels(pixels, r, p, out),
             Kind::Spectral(pairs) => {
                 let mut sum = vec![C64::new(0.0, 0.0); p.len()];
                 for pair in pairs {
@@ -259,6 +254,12 @@ impl Interface {
             }
         }
     }
+}
+
+/// `out ← R·p` for `R` non-zero only on `pixels` (with values `r`): zero elsewhere.
+fn scale_pixels<T: FftNum>(pixels: &[u32], r: &[T], p: &[Complex<T>], out: &mut [Complex<T>]) {
+    out.fill(Complex::new(T::zero(), T::zero()));
+    pixels.iter().zip(r).for_each(|(&i, &r)| out[i as usize] = p[i as usize] * r);
 }
 
 /// (density, complex wavenumber at `omega`) of pixel `i`.
