@@ -73,6 +73,17 @@ class Scenario:
         """The scenario as a dict with every default written out."""
         return json.loads(_core.scenario_json(self._toml, "toml", self._base_dir))
 
+    def with_ct_bone(self) -> "Scenario":
+        """The head of this ``[ct]`` scenario with the CT's bone (``without_bone = false``) driven
+        with the reference steering (``steer_without_bone = true``): the skull ``arfi predict``
+        marches, steered as the estimation's model (``without_bone = true``) is. A scenario
+        without ``[ct]`` raises ``ValueError``."""
+        d = self.to_dict()
+        if not d.get("ct"):
+            raise ValueError(f"scenario {self.name!r}: has no [ct]: a model with the CT's bone needs a CT of the head")
+        d["ct"] = {**d["ct"], "without_bone": False, "steer_without_bone": True}
+        return Scenario.from_dict(d, self._base_dir)
+
     def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the TOML (atomically: a failed write leaves no partial file)."""
         atomic_write_text(Path(path), self._toml)

@@ -437,6 +437,20 @@ class Simulation:
         imgs, knowns = self._image_list(images, known)
         return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 
+    def fit_mode(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None,
+                 mode: ArrayLike) -> _core.ModeFit:
+        """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
+        priori) that best explains the images, each taken with its ``known`` phases added: image
+        ``k`` is this model's with ``c * mode + known_k`` added, one image scale fitted, ``c``
+        searched at steps of one (one march per image each) and refined on a parabola. Meant for
+        a CT prediction's bone-speed mode on the head with the CT's bone driven with the
+        reference steering (:meth:`arfi.scenario.Scenario.with_ct_bone`): the phases stay the
+        prediction's, so a model without the skull cannot pull the coefficient by reshaping its
+        focus. Returns ``coefficient``, ``std`` (posterior), ``scale``, ``misfit`` (chi-squared per
+        pixel), ``n_pixels``, ``noise_rad`` and ``tried`` ((c, cost) pairs)."""
+        imgs, knowns = self._image_list(images, known)
+        return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
+
     def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
                  time_limit_s: float | None = None) -> Diagnosis:

@@ -282,9 +282,9 @@ def test_estimate_weighs_the_elements_by_a_predicted_transmission(tmp_path, caps
 
 
 def test_estimate_refuses_a_bone_speed_prior_it_cannot_fit(tmp_path, capsys, sim):
-    # --prior-bone-speed-std-percent needs the prediction's sensitivity (its JSON from predict
-    # --bone-speed-sensitivity), a prior correlated over the aperture and a positive std: one
-    # line each, exit 2, nothing written.
+    # --prior-bone-speed-std-percent needs the prediction (--prior) and its sensitivity (the JSON
+    # of arfi predict), one phase per element, a [ct] scenario (the mode is fitted on the head
+    # with the CT's bone) and a std >= 0: one line each, exit 2, nothing written.
     image = tmp_path / "m.nii.gz"
     arfi.write_arfi_image(image, sim.arfi_image(None), sim.mr_affine_mm, sim.mr_volume_shape)
     n = sim.n_elements
@@ -293,25 +293,25 @@ def test_estimate_refuses_a_bone_speed_prior_it_cannot_fit(tmp_path, capsys, sim
     (tmp_path / "plain.json").write_text(json.dumps(plain))
     (tmp_path / "short.json").write_text(json.dumps({**plain, "bone_speed_sensitivity_rad_per_percent": [0.01] * 3}))
     (tmp_path / "full.json").write_text(json.dumps({**plain, "bone_speed_sensitivity_rad_per_percent": [0.01] * n}))
-    prior = ["--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3", "--groups", str(n)]
+    prior = ["--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3"]
     cases = [
-        (["--prior-correlation-mm", "30"], "--prior-transmission"),
-        (["--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "plain.json")], "bone_speed_sensitivity"),
-        (["--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "short.json")], f"{n} finite numbers"),
-        (["--prior-transmission", str(tmp_path / "full.json")], "--prior-correlation-mm"),
+        (["--groups", str(n)], "--prior-transmission"),
+        (["--groups", str(n), "--prior-transmission", str(tmp_path / "plain.json")], "bone_speed_sensitivity"),
+        (["--groups", str(n), "--prior-transmission", str(tmp_path / "short.json")], f"{n} finite numbers"),
+        (["--prior-transmission", str(tmp_path / "full.json")], "per-element estimates only"),
+        (["--groups", str(n), "--prior-transmission", str(tmp_path / "full.json")], "[ct]"),
     ]
     for extra, says in cases:
         assert main(["estimate", "--image", str(image), *prior, *extra, "--prior-bone-speed-std-percent", "20",
                      "--out-phases", str(tmp_path / "x.npy")]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "--prior-bone-speed-std-percent" in err and says in err, err
-    assert main(["estimate", "--image", str(image), *prior, "--prior-correlation-mm", "30", "--prior-transmission",
-                 str(tmp_path / "full.json"), "--prior-bone-speed-std-percent", "-5", "--out-phases", str(tmp_path / "x.npy")]) == 2
-    assert "must be a finite number > 0" in capsys.readouterr().err
-    assert main(["estimate", "--image", str(image), "--prior", str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3",
-                 "--prior-correlation-mm", "30", "--prior-transmission", str(tmp_path / "full.json"),
+    assert main(["estimate", "--image", str(image), "--groups", str(n), "--prior-transmission", str(tmp_path / "full.json"),
                  "--prior-bone-speed-std-percent", "20", "--out-phases", str(tmp_path / "x.npy")]) == 2
-    assert "per-element estimates only" in capsys.readouterr().err
+    assert "needs --prior" in capsys.readouterr().err
+    assert main(["estimate", "--image", str(image), *prior, "--groups", str(n), "--prior-transmission",
+                 str(tmp_path / "full.json"), "--prior-bone-speed-std-percent", "-5", "--out-phases", str(tmp_path / "x.npy")]) == 2
+    assert "must be a finite number >= 0" in capsys.readouterr().err
     assert not (tmp_path / "x.npy").exists()
     # The Python API names the parameter.
     with pytest.raises(ValueError, match="prior_modes"):

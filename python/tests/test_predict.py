@@ -146,14 +146,14 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
 
 
 def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head, tmp_path, capsys):
-    # predict --bone-speed-sensitivity: per element, rad per percent of the conversion's bone sound
+    # predict's bone speed sensitivity: per element, rad per percent of the conversion's bone sound
     # speed (a +10 % difference through the wave model). Five times it must give the change to a
     # prediction made with bone 5 % faster: the phase through bone is close to linear in the
     # speed over 5 %; tolerance 25 % of that change's weighted RMS (measured at 220 kHz: a change of
     # 0.013 rad RMS, predicted to 8 % of it; the 650 kHz head moves about three times as much).
+    # On by default with the porosity conversion (the default one).
     js = tmp_path / "prediction.json"
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js),
-                 "--bone-speed-sensitivity"]) == 0
+    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js)]) == 0
     assert "bone speed sensitivity" in capsys.readouterr().out
     d = json.loads(js.read_text())
     g = np.asarray(d["bone_speed_sensitivity_rad_per_percent"])
@@ -169,4 +169,7 @@ def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head,
     print(f"bone +5 %: change {rms(change):.3f} rad RMS, 5 x sensitivity {rms(5 * g):.3f}, difference {err:.3f}")
     assert g.shape == (256,) and rms(change) > 0.005 and err < 0.25 * rms(change), (err, rms(change))
     assert "bone_speed_sensitivity_rad_per_percent" not in predict(scenario).to_dict()
+    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js),
+                 "--no-bone-speed-sensitivity"]) == 0
+    assert "bone_speed_sensitivity_rad_per_percent" not in json.loads(js.read_text())
 

@@ -5,6 +5,7 @@ mod cost;
 mod diagnose;
 mod error;
 mod interrupt;
+mod mode_fit;
 mod prediction;
 mod scenario;
 mod simulation;
@@ -16,6 +17,7 @@ use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenari
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::CoreSimulation>()?;
     m.add_class::<cost::CoreCostModel>()?;
+    m.add_class::<mode_fit::CoreModeFit>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;

@@ -5,6 +5,7 @@ use crate::cost::CoreCostModel;
 use crate::diagnose::{diagnosis_dict, effects_from_dict};
 use crate::error::{invalid, to_py};
 use crate::interrupt::run_interruptible;
+use crate::mode_fit::CoreModeFit;
 use crate::scenario::parse_scenario;
 use has_core::inverse::basis::BasisCache;
 use has_core::inverse::calibrate::calibrate;
@@ -13,6 +14,7 @@ use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimation::{estimate_aberration_with, EstimateRequest, Method};
 use has_core::inverse::information::ShiftSuggestion;
+use has_core::inverse::mode_fit::fit_mode;
 use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
@@ -351,6 +353,21 @@ impl CoreSimulation {
         let e = effects_from_dict(&self.inner, &effects)?;
         let imgs = py.detach(|| effect_images(&self.inner, &knowns, &e)).map_err(to_py)?;
         Ok(imgs.into_iter().map(|m| m.into_pyarray(py)).collect())
+    }
+
+    /// The coefficient of a prior `mode` (rad per element for a coefficient of 1) fitted to
+    /// images, each taken with its known added phases, the phases otherwise this model's own.
+    fn fit_mode(
+        &self,
+        py: Python<'_>,
+        images: Vec<PyReadonlyArray2<'_, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+        mode: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<CoreModeFit> {
+        let measurements = measurements(images, known)?;
+        let mode = mode.as_array().to_vec();
+        let fit = py.detach(|| fit_mode(&self.inner, &mode, &measurements)).map_err(to_py)?;
+        Ok(CoreModeFit(fit))
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.

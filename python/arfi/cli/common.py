@@ -85,20 +85,28 @@ def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
     return values, target
 
 
-def read_bone_speed_sensitivity(path: str | None, n_elements: int) -> np.ndarray:
-    """The per-element bone speed sensitivity (rad per percent) in the JSON of ``arfi predict
-    --bone-speed-sensitivity`` given as ``--prior-transmission``, for
-    ``--prior-bone-speed-std-percent``."""
+def read_bone_speed_sensitivity(path: str | None, n_elements: int, required: bool) -> np.ndarray | None:
+    """The per-element bone speed sensitivity (rad per percent) in the JSON of ``arfi predict``
+    given as ``--prior-transmission``, for ``--prior-bone-speed-std-percent``; None when that file
+    holds none (or not ``n_elements`` finite values) and ``required`` is false."""
     name = "--prior-bone-speed-std-percent"
+    make = "arfi predict --bone-speed-sensitivity --json"
     if path is None or not path.endswith(".json"):
-        raise UsageError(f"{name}: needs --prior-transmission with the JSON of arfi predict --bone-speed-sensitivity")
+        if not required:
+            return None
+        raise UsageError(f"{name}: needs --prior-transmission with the JSON of {make}")
+    d = json.loads(Path(path).read_text(encoding="utf-8"))  # read_transmission has read it already
+    if "bone_speed_sensitivity_rad_per_percent" not in d:
+        if not required:
+            return None
+        raise UsageError(f"{name}: {path} holds no 'bone_speed_sensitivity_rad_per_percent': make it with {make}")
     try:
-        d = json.loads(Path(path).read_text(encoding="utf-8"))
         values = np.asarray(d["bone_speed_sensitivity_rad_per_percent"], dtype=np.float64)
-    except (ValueError, KeyError, TypeError):
-        raise UsageError(f"{name}: {path} holds no 'bone_speed_sensitivity_rad_per_percent': make it with "
-                         f"arfi predict --bone-speed-sensitivity --json") from None
+    except (ValueError, TypeError):
+        values = np.empty(0)
     if values.shape != (n_elements,) or not np.all(np.isfinite(values)):
+        if not required:
+            return None
         raise UsageError(f"{name}: {path}: 'bone_speed_sensitivity_rad_per_percent' must hold {n_elements} finite numbers "
                          f"(one per element)")
     return values
@@ -145,9 +153,10 @@ def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | Non
     return image, known
 
 
-def calibrated_simulation(args: argparse.Namespace) -> Simulation:
-    """The scenario's simulation, with the calibration file applied when given."""
-    sim = Simulation(load_scenario(args), groups=getattr(args, "groups", None))
+def calibrated_simulation(args: argparse.Namespace, scenario: Scenario | None = None) -> Simulation:
+    """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
+    applied when given."""
+    sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None))
     if getattr(args, "calibration", None):
         path = Path(args.calibration)
         if not path.is_file():

@@ -9,13 +9,21 @@ from typing import Any
 
 import numpy as np
 
-from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, npy_path, read_image,
-                             read_bone_speed_sensitivity, read_optional_phases, read_transmission, save_npy)
+from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, load_scenario,
+                             npy_path, read_image, read_bone_speed_sensitivity, read_optional_phases, read_transmission, save_npy)
+from arfi.estimation import wrap
+from arfi.scenario import Scenario
 
 TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
 fraction of the focal spot's width (2.3 mm at 650 kHz), over which each element's wave crosses
 the same bone."""
+
+BONE_SPEED_STD_PERCENT = 20.0
+"""How far the CT conversion's bone sound speed is taken to be off a priori (percent, one
+standard deviation) where the prediction gives its bone-speed mode: the porosity model's dense-
+bone speed is a population constant, and individual skulls' speeds scatter by about a tenth
+to a fifth around such constants."""
 
 
 def register(sub: Any) -> None:
@@ -64,16 +72,17 @@ def register(sub: Any) -> None:
                    "as the skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude). The JSON's "
                    "'target_mm' must lie within 0.5 mm of the scenario's focus")
     p.add_argument("--prior-bone-speed-std-percent", type=float, dest="prior_bone_speed_std_percent", metavar="P",
-                   help="the CT conversion's bone sound speed may be off by about P percent: fit that error's mode over "
-                   "the aperture (the prediction's bone_speed_sensitivity_rad_per_percent times a coefficient, P percent "
-                   "a priori) with the smooth corrections. Needs --prior-correlation-mm and --prior-transmission with the "
-                   "JSON of arfi predict --bone-speed-sensitivity; per-element estimates only. The images pin the mode's "
-                   "coefficient only loosely (the fitted image scale takes most of what a better focus changes): it lifted "
-                   "a poor prediction by 0.09 of the focus and cost a good one 0.015, so use it where the conversion is in "
-                   "doubt")
+                   help="the CT conversion's bone sound speed may be off by about P percent (default 20 where the "
+                   "--prior-transmission JSON of arfi predict holds bone_speed_sensitivity_rad_per_percent; 0: off). "
+                   "Before the per-element fit, the images fit that error's mode (the sensitivity times a coefficient, "
+                   "P percent a priori) on the head with the CT's bone, driven with the reference steering, the phases "
+                   "otherwise the prediction's (one march per image and coefficient tried, about five coefficients); "
+                   "the prior then moves along the mode by the fitted coefficient. Needs --prior, a [ct] scenario "
+                   "and one phase per element")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
-                   "MISMATCH (the images are not explained), the prediction itself (JSON 'recommended' says which)")
+                   "MISMATCH (the images are not explained), the prediction itself, moved along its bone-speed mode when that "
+                   "was fitted (JSON 'recommended' says which)")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
                    "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
@@ -88,7 +97,11 @@ def run(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     prior = read_optional_phases(args.prior, "--prior")
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
-    sim = calibrated_simulation(args)
+    scenario = load_scenario(args)
+    bone_speed = fit_bone_speed(args, scenario, prior)
+    if bone_speed is not None:
+        prior = bone_speed.pop("prior")
+    sim = calibrated_simulation(args, scenario)
     if transmission is not None:
         if len(transmission) != sim.n_elements:
             raise ValueError(f"--prior-transmission: {args.prior_transmission}: has {len(transmission)} values for "
@@ -102,30 +115,19 @@ def run(args: argparse.Namespace) -> int:
                              f"{z:.1f}) mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at "
                              f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
-    modes = None
-    if args.prior_bone_speed_std_percent is not None:
-        std = args.prior_bone_speed_std_percent
-        if not (np.isfinite(std) and std > 0):
-            raise UsageError(f"--prior-bone-speed-std-percent: must be a finite number > 0, got {std:g}")
-        if sim.n_groups != sim.n_elements:
-            raise UsageError(f"--prior-bone-speed-std-percent: fitted by per-element estimates only (--groups {sim.n_elements})")
-        if prior is None or args.prior_correlation_mm is None:
-            raise UsageError("--prior-bone-speed-std-percent: needs --prior with --prior-correlation-mm (the mode is fitted "
-                             "with the prior's smooth corrections)")
-        modes = std * read_bone_speed_sensitivity(args.prior_transmission, sim.n_elements)[None, :]
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
                      progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
                      prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance,
-                     suggest=bool(args.suggest), prior_modes=modes)
+                     suggest=bool(args.suggest))
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
-             + (f", bone speed +-{args.prior_bone_speed_std_percent:g} %" if modes is not None else "")
+             + (f", moved along the bone-speed mode by {bone_speed['percent']:+.1f} %" if bone_speed else "")
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.nuisance is not None:
         n = e.nuisance
@@ -149,8 +151,9 @@ def run(args: argparse.Namespace) -> int:
     # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
     use_prediction = e.model_mismatch and e.prior_used and prior is not None
     if use_prediction:
+        which = "the prediction (--prior" + (", moved along its bone-speed mode" if bone_speed else "") + ")"
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
-              f"the model does not explain the images, so this estimate is NOT to be applied: the prediction (--prior) is "
+              f"the model does not explain the images, so this estimate is NOT to be applied: {which} is "
               f"the safer correction"
               + (f" and is what {args.out_phases} holds" if args.out_phases else "")
               + ". Check the scenario against the images (arfi diagnose), then estimate again.")
@@ -176,10 +179,59 @@ def run(args: argparse.Namespace) -> int:
         model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
                    "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
-    prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm,
-                      "prior_bone_speed_std_percent": args.prior_bone_speed_std_percent} if e.prior_used else {}
+    prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
+    if bone_speed is not None:
+        prior_settings["prior_bone_speed_std_percent"] = bone_speed["std_percent_prior"]
+        prior_settings["bone_speed_fit"] = bone_speed
     if transmission is not None:
         prior_settings["prior_transmission"] = args.prior_transmission
     finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total,
                   "recommended": "prediction" if use_prediction else "estimate", "recommended_phases_rad": recommended})
     return 0
+
+
+def fit_bone_speed(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None) -> dict[str, Any] | None:
+    """The prediction's bone-speed mode fitted to the images on the head with the CT's bone
+    (``--prior-bone-speed-std-percent``; by default wherever the prediction's JSON holds its
+    sensitivity): the fit's numbers and the prior moved along the mode (key ``prior``), or None
+    when there is nothing to fit. The model with bone is built and dropped here, before the
+    estimation's own model, so that the two plans are never held at once."""
+    std = args.prior_bone_speed_std_percent
+    explicit = std is not None
+    if explicit and not (np.isfinite(std) and std >= 0):
+        raise UsageError(f"--prior-bone-speed-std-percent: must be a finite number >= 0, got {std:g}")
+    if std == 0:
+        return None
+    if prior is None:
+        if explicit:
+            raise UsageError("--prior-bone-speed-std-percent: needs --prior (the prediction the mode belongs to)")
+        return None
+    sensitivity = read_bone_speed_sensitivity(args.prior_transmission, len(prior), required=explicit)
+    if sensitivity is None:
+        return None
+    if args.groups != len(prior):
+        if explicit:
+            raise UsageError(f"--prior-bone-speed-std-percent: fitted for per-element estimates only (--groups {len(prior)})")
+        return None
+    if scenario.to_dict().get("ct") is None:
+        if explicit:
+            raise UsageError("--prior-bone-speed-std-percent: needs a [ct] scenario (the mode is fitted on the head with "
+                             "the CT's bone)")
+        return None
+    t = time.perf_counter()
+    skull = calibrated_simulation(args, scenario.with_ct_bone())
+    if skull.n_elements != len(prior):
+        raise ValueError(f"--prior: {args.prior}: has {len(prior)} values for {skull.n_elements} elements")
+    std = std if explicit else BONE_SPEED_STD_PERCENT
+    pairs = [read_image(skull, p) for p in args.image]
+    fit = skull.fit_mode([p[0] for p in pairs], [p[1] for p in pairs], std * sensitivity)
+    del skull
+    percent, spread = fit.coefficient * std, fit.std * std
+    print(f"estimate: bone speed from the images on the head with the CT's bone: {percent:+.1f} +- {spread:.1f} % of the "
+          f"conversion's (prior +-{std:g} %; image scale {fit.scale:.3f}, misfit {fit.misfit:.2f} over {fit.n_pixels} pixels, "
+          f"{len(fit.tried)} coefficients tried in {time.perf_counter() - t:.1f} s): the prior moves along the prediction's "
+          f"bone-speed mode by that much")
+    return {"percent": percent, "std_percent": spread, "std_percent_prior": std, "scale": fit.scale, "misfit": fit.misfit,
+            "n_pixels": fit.n_pixels, "tried_percent": [c * std for c, _ in fit.tried], "seconds": time.perf_counter() - t,
+            "prior": wrap(prior + fit.coefficient * std * sensitivity)}
+

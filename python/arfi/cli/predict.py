@@ -27,11 +27,13 @@ def register(sub: Any) -> None:
     p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
     p.add_argument("--target-mm", type=float, nargs=3, dest="target_mm", metavar=("X", "Y", "Z"),
                    help="point to predict for, transducer frame (default: the focus)")
-    p.add_argument("--bone-speed-sensitivity", action="store_true", dest="bone_speed_sensitivity",
+    p.add_argument("--bone-speed-sensitivity", action=argparse.BooleanOptionalAction, default=None,
+                   dest="bone_speed_sensitivity",
                    help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
-                        "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the error mode "
-                        "arfi estimate fits with --prior-bone-speed-std-percent. One more simulation of the skull "
-                        "(about as long as the prediction); needs conversion = \"aubry2003\"")
+                        "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the mode arfi "
+                        "estimate fits to the images on the head with the CT's bone before its per-element fit. One more "
+                        "simulation of the skull (about half the prediction's time). Default: on with the porosity "
+                        "conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity skips it")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
                   "phase and transmission; two more marches of the prediction's own simulation of the skull, kept for the report)")
@@ -44,9 +46,12 @@ def run(args: argparse.Namespace) -> int:
     if scenario.to_dict().get("ct") is None:
         raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
                          "arfi phantom writes a synthetic one")
+    sensitivity = args.bone_speed_sensitivity
+    if sensitivity is None:  # by default wherever the conversion has a bone sound speed
+        sensitivity = scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
     t = time.perf_counter()
     # The report draws the beam through the skull: the prediction keeps the skull's simulation for it.
-    p = predict(scenario, args.target_mm, bone_speed_sensitivity=args.bone_speed_sensitivity,
+    p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
                 keep_simulation=bool(args.report))
     seconds = time.perf_counter() - t
     save_npy(args.out, p.phases_rad)

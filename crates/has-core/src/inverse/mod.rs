@@ -10,6 +10,7 @@ pub mod estimate;
 pub mod estimation;
 pub mod information;
 pub mod linear;
+pub mod mode_fit;
 pub mod nuisance;
 pub mod phase;
 pub mod prior;

@@ -1,0 +1,225 @@
+//! The coefficient of a prediction's error mode from MR-ARFI images, fitted on a model that
+//! holds what the mode linearises: the bone-speed mode of a CT prediction
+//! ([`crate::prediction::bone_speed_sensitivity`]) on the head with the CT's bone.
+//!
+//! The estimation's model of a head reads its bone as soft tissue: its focal spot is not shaped
+//! by a skull, and a per-element fit that may move along the mode reshapes the spot with it
+//! (on a good prediction it moved twice the true bone-speed error). Here the phases stay the
+//! prediction's and only the mode's coefficient `c` and one image scale `a` are fitted, on the
+//! model through the CT's bone driven with the reference steering (the prediction is what that
+//! model already holds): image `k` is simulated with the added phases `c·m + known_k` and
+//!
+//! `J(c) = min_a Σ_k Σ_pixels (a·model_k(c) − measured_k)² / σ² + c²`
+//!
+//! over the imaged pixels of the estimation's pixel box (σ the images' background noise; `c`
+//! standard normal a priori, so `J` is minus twice the log posterior). `J` is evaluated at
+//! coefficients one apart (one march per image each, all in one batch) until a minimum lies
+//! inside, then at the vertex of the parabola through it and its neighbours.
+
+use crate::error::{HasError, Result};
+use crate::inverse::basis::{known_per_element, BACKGROUND_MARGIN};
+use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
+use crate::physics::mr::MrSampler;
+use crate::physics::propagation::RecordSpec;
+use crate::simulation::Simulation;
+use ndarray::Array2;
+use std::ops::Range;
+
+/// The coefficients a fit starts from (the mode's units: one standard deviation each).
+const START: [f64; 3] = [-1.0, 0.0, 1.0];
+/// How far out the search for an inner minimum goes (standard deviations of the prior).
+const REACH: f64 = 3.0;
+/// The smallest noise level (rad) the cost divides by: noise-free images leave the prior
+/// negligible rather than the cost undefined.
+const MIN_NOISE: f64 = 1e-6;
+
+/// A mode's coefficient fitted to images ([`fit_mode`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModeFit {
+    /// The fitted coefficient `c` (the mode's units; standard normal a priori).
+    pub coefficient: f64,
+    /// Its posterior standard deviation, from the parabola's curvature (`J` is minus twice the
+    /// log posterior: `J ≈ J(ĉ) + (c − ĉ)²/std²`).
+    pub std: f64,
+    /// The fitted image scale at `c`.
+    pub scale: f64,
+    /// `χ²` per pixel at `c`: about 1 when the model explains the images to their noise.
+    pub misfit: f64,
+    /// Pixels fitted (over all images).
+    pub n_pixels: usize,
+    /// The noise level σ (rad) the cost is normalised by.
+    pub noise: f64,
+    /// Each coefficient tried with its `J`, in increasing coefficient.
+    pub tried: Vec<[f64; 2]>,
+}
+
+/// One evaluation of `J`.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    c: f64,
+    j: f64,
+    scale: f64,
+    chi2: f64,
+    pixels: usize,
+}
+
+/// Fits the coefficient of `mode` (rad per element for a coefficient of 1) to `measurements`
+/// on `sim`, the model through the CT's bone driven with the reference steering (see the module
+/// docs). The pixel box is the estimation's ([`masks_and_box`] at the scenario's mask fraction,
+/// [`BACKGROUND_MARGIN`] pixels around the masks); every pixel imaged in both the measured and
+/// the model image counts.
+pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement]) -> Result<ModeFit> {
+    let n = sim.n_elements();
+    if mode.len() != n {
+        return Err(HasError::invalid("mode", format!("has {} values for {n} elements", mode.len())));
+    }
+    crate::error::require_finite("mode", mode)?;
+    let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
+    let [u, v] = boxed.pixels.clone();
+    let known = measurements
+        .iter()
+        .enumerate()
+        .map(|(k, m)| {
+            known_per_element(sim, &m.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let fit = Fit {
+        sim,
+        mode,
+        measurements,
+        known,
+        sampler: sim.sampler()?.restrict(u.clone(), v.clone())?,
+        box_pixels: [u, v],
+        noise: boxed.noise.max(MIN_NOISE),
+    };
+    fit.run()
+}
+
+/// What one fit holds while it searches.
+struct Fit<'a> {
+    sim: &'a Simulation,
+    mode: &'a [f64],
+    measurements: &'a [Measurement],
+    known: Vec<Vec<f64>>,
+    sampler: MrSampler,
+    box_pixels: [Range<usize>; 2],
+    noise: f64,
+}
+
+impl Fit<'_> {
+    fn run(&self) -> Result<ModeFit> {
+        let mut tried = self.evaluate(&START)?;
+        loop {
+            let best = argmin(&tried);
+            let next = if best == 0 && tried[0].c > -REACH {
+                tried[0].c - 1.0
+            } else if best == tried.len() - 1 && tried[best].c < REACH {
+                tried[best].c + 1.0
+            } else {
+                break;
+            };
+            tried.extend(self.evaluate(&[next])?);
+            tried.sort_by(|a, b| a.c.total_cmp(&b.c));
+        }
+        let best = argmin(&tried);
+        let (vertex, curvature) = parabola(&tried, best);
+        if let Some(c) = vertex.filter(|c| (c - tried[best].c).abs() > 1e-3) {
+            tried.extend(self.evaluate(&[c])?);
+            tried.sort_by(|a, b| a.c.total_cmp(&b.c));
+        }
+        let chosen = tried[argmin(&tried)];
+        Ok(ModeFit {
+            coefficient: chosen.c,
+            std: curvature.map_or(1.0, |a| 1.0 / a.sqrt()),
+            scale: chosen.scale,
+            misfit: chosen.chi2 / chosen.pixels.max(1) as f64,
+            n_pixels: chosen.pixels,
+            noise: self.noise,
+            tried: tried.iter().map(|p| [p.c, p.j]).collect(),
+        })
+    }
+
+    /// `J` at each coefficient in `cs`: every image of every coefficient marched in one batch.
+    fn evaluate(&self, cs: &[f64]) -> Result<Vec<Point>> {
+        let added: Vec<Vec<f64>> =
+            cs.iter().flat_map(|&c| self.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
+        let sources = self.sim.source_fields(&added)?;
+        let spec = RecordSpec { window: Some(self.sampler.window.clone()), reflections: self.sim.reflections, ..RecordSpec::default() };
+        let recordings = self.sim.plan.propagate_batch(&sources, &spec)?;
+        let amplitude = self.sim.amplitude()?;
+        let images = recordings
+            .iter()
+            .map(|r| {
+                let mut image = self.sampler.force_image(&r.window)? * amplitude;
+                self.sampler.blank_unimaged(&mut image);
+                Ok(image)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(cs.iter().zip(images.chunks(self.measurements.len())).map(|(&c, models)| self.point(c, models)).collect())
+    }
+
+    /// `J` at `c` from its model images (one per measurement, on the box).
+    fn point(&self, c: f64, models: &[Array2<f64>]) -> Point {
+        let [u, v] = &self.box_pixels;
+        let pairs: Vec<(f64, f64)> = self
+            .measurements
+            .iter()
+            .zip(models)
+            .flat_map(|(meas, model)| {
+                imaged_pixels(&meas.image, u.clone(), v.clone())
+                    .into_iter()
+                    .map(move |(i, j)| (model[[i - u.start, j - v.start]], meas.image[[i, j]]))
+                    .filter(|(m, _)| m.is_finite())
+            })
+            .collect();
+        let (md, mm) = pairs.iter().fold((0.0, 0.0), |(md, mm), (m, d)| (md + m * d, mm + m * m));
+        let scale = if mm > 0.0 { (md / mm).max(0.0) } else { 0.0 };
+        let chi2 = pairs.iter().map(|(m, d)| (scale * m - d).powi(2)).sum::<f64>() / self.noise.powi(2);
+        Point { c, j: chi2 + c * c, scale, chi2, pixels: pairs.len() }
+    }
+}
+
+/// The index of the smallest `J`.
+fn argmin(points: &[Point]) -> usize {
+    (0..points.len()).min_by(|&a, &b| points[a].j.total_cmp(&points[b].j)).unwrap_or(0)
+}
+
+/// The vertex of the parabola through point `i` and its neighbours (sorted by `c`), kept within
+/// them, and the parabola's curvature `a` (`J ≈ a·(c − vertex)² + …`), when it opens upwards.
+fn parabola(points: &[Point], i: usize) -> (Option<f64>, Option<f64>) {
+    if i == 0 || i + 1 >= points.len() {
+        return (None, None);
+    }
+    let [p0, p1, p2] = [points[i - 1], points[i], points[i + 1]];
+    // Divided differences: J = p1.j + b·(c − p1.c) + a·(c − p0.c)·(c − p1.c) … in Newton form.
+    let d01 = (p1.j - p0.j) / (p1.c - p0.c);
+    let d12 = (p2.j - p1.j) / (p2.c - p1.c);
+    let a = (d12 - d01) / (p2.c - p0.c);
+    if a.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return (None, None);
+    }
+    let vertex = 0.5 * (p0.c + p1.c) - d01 / (2.0 * a);
+    (Some(vertex.clamp(p0.c, p2.c)), Some(a))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(c: f64, j: f64) -> Point {
+        Point { c, j, scale: 1.0, chi2: j, pixels: 1 }
+    }
+
+    #[test]
+    fn the_parabolas_vertex_and_curvature_are_exact_for_a_parabola() {
+        // J = 4·(c − 0.3)² + 7 sampled at −1, 0, 1.5: vertex 0.3, curvature 4 (std 0.5).
+        let j = |c: f64| 4.0 * (c - 0.3f64).powi(2) + 7.0;
+        let pts = [point(-1.0, j(-1.0)), point(0.0, j(0.0)), point(1.5, j(1.5))];
+        let (vertex, a) = parabola(&pts, 1);
+        assert!((vertex.unwrap() - 0.3).abs() < 1e-12);
+        assert!((a.unwrap() - 4.0).abs() < 1e-12);
+        // Opening downwards or at the edge: no vertex.
+        assert_eq!(parabola(&[point(-1.0, 0.0), point(0.0, 1.0), point(1.0, 0.0)], 1), (None, None));
+        assert_eq!(parabola(&pts, 0), (None, None));
+    }
+}
