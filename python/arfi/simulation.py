@@ -438,7 +438,7 @@ class Simulation:
         return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 
     def fit_mode(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None,
-                 mode: ArrayLike) -> _core.ModeFit:
+                 mode: ArrayLike) -> "_core.ModeFit":
         """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
         priori) that best explains the images, each taken with its ``known`` phases added: image
         ``k`` is this model's with ``c * mode + known_k`` added, one image scale fitted, ``c``

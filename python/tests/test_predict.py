@@ -173,3 +173,24 @@ def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head,
                  "--no-bone-speed-sensitivity"]) == 0
     assert "bone_speed_sensitivity_rad_per_percent" not in json.loads(js.read_text())
 
+
+
+def test_a_mode_is_fitted_on_the_head_with_its_bone(head):
+    # Scenario.with_ct_bone: the CT read with its bone, steered as without it (the reference
+    # steering). Simulation.fit_mode on images that model makes itself with a mode at a known
+    # coefficient (three images, 0.02 rad noise) must find it within three of its own posterior
+    # standard deviations, allowing for the prior's pull towards zero (a factor 1 / (1 + std^2));
+    # a mode of the wrong length and a scenario without [ct] are named.
+    skull = Simulation(Scenario.load(head / "head.toml").with_ct_bone(), groups=256)
+    assert skull.scenario.to_dict()["ct"]["steer_without_bone"] is True
+    rng = np.random.default_rng(5)
+    mode = np.convolve(rng.normal(size=256 + 15), np.ones(16) / 4.0, mode="valid")  # smooth, about 1 rad RMS
+    known = [None] + [skull.focus_shift_phases((0.0, 0.0, dz)) for dz in (5.0, -5.0)]
+    images = [skull.arfi_image(0.7 * mode + (0 if k is None else k), 0.02, i + 1) for i, k in enumerate(known)]
+    fit = skull.fit_mode(images, known, mode)
+    assert abs(fit.coefficient - 0.7 / (1 + fit.std**2)) < 3 * fit.std and fit.std < 0.3, fit
+    assert 0.8 < fit.misfit < 1.2 and len(fit.tried) >= 4, fit
+    with pytest.raises(ValueError, match="mode"):
+        skull.fit_mode(images, known, mode[:5])
+    with pytest.raises(ValueError, match=r"\[ct\]"):
+        Scenario.default().with_ct_bone()

@@ -14,7 +14,8 @@
 //! over the imaged pixels of the estimation's pixel box (σ the images' background noise; `c`
 //! standard normal a priori, so `J` is minus twice the log posterior). `J` is evaluated at
 //! coefficients one apart (one march per image each, all in one batch) until a minimum lies
-//! inside, then at the vertex of the parabola through it and its neighbours.
+//! inside, then at the vertices of successive parabolas through the best and its neighbours,
+//! until a step is short against the posterior's spread.
 
 use crate::error::{HasError, Result};
 use crate::inverse::basis::{known_per_element, BACKGROUND_MARGIN};
@@ -29,6 +30,11 @@ use std::ops::Range;
 const START: [f64; 3] = [-1.0, 0.0, 1.0];
 /// How far out the search for an inner minimum goes (standard deviations of the prior).
 const REACH: f64 = 3.0;
+/// Parabolic steps at most once an inner minimum is bracketed.
+const REFINEMENTS: usize = 4;
+/// A parabolic step shorter than this fraction of the posterior's standard deviation ends the
+/// search: the coefficient is then known to well within its own uncertainty.
+const STEP_OF_SPREAD: f64 = 0.25;
 /// The smallest noise level (rad) the cost divides by: noise-free images leave the prior
 /// negligible rather than the cost undefined.
 const MIN_NOISE: f64 = 1e-6;
@@ -121,16 +127,22 @@ impl Fit<'_> {
             tried.extend(self.evaluate(&[next])?);
             tried.sort_by(|a, b| a.c.total_cmp(&b.c));
         }
-        let best = argmin(&tried);
-        let (vertex, curvature) = parabola(&tried, best);
-        if let Some(c) = vertex.filter(|c| (c - tried[best].c).abs() > 1e-3) {
-            tried.extend(self.evaluate(&[c])?);
+        // Successive parabolic steps within the bracket, until a step is small against the
+        // posterior's spread.
+        for _ in 0..REFINEMENTS {
+            let best = argmin(&tried);
+            let (Some(vertex), Some(a)) = parabola(&tried, best) else { break };
+            if (vertex - tried[best].c).abs() < (STEP_OF_SPREAD / a.sqrt()).max(1e-3) {
+                break;
+            }
+            tried.extend(self.evaluate(&[vertex])?);
             tried.sort_by(|a, b| a.c.total_cmp(&b.c));
         }
-        let chosen = tried[argmin(&tried)];
+        let best = argmin(&tried);
+        let chosen = tried[best];
         Ok(ModeFit {
             coefficient: chosen.c,
-            std: curvature.map_or(1.0, |a| 1.0 / a.sqrt()),
+            std: parabola(&tried, best).1.map_or(1.0, |a| 1.0 / a.sqrt()),
             scale: chosen.scale,
             misfit: chosen.chi2 / chosen.pixels.max(1) as f64,
             n_pixels: chosen.pixels,
