@@ -442,12 +442,14 @@ class Simulation:
         """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
         priori) that best explains the images, each taken with its ``known`` phases added: image
         ``k`` is this model's with ``c * mode + known_k`` added, one image scale fitted, ``c``
-        searched at steps of one (one march per image each) and refined on a parabola. Meant for
+        searched at steps of one (one march per image each) out to +-3, then by successive
+        parabolic steps (``bracketed`` is false when the best lies at +-3). Meant for
         a CT prediction's bone-speed mode on the head with the CT's bone driven with the
         reference steering (:meth:`arfi.scenario.Scenario.with_ct_bone`): the phases stay the
         prediction's, so a model without the skull cannot pull the coefficient by reshaping its
         focus. Returns ``coefficient``, ``std`` (posterior), ``scale``, ``misfit`` (chi-squared per
-        pixel), ``n_pixels``, ``noise_rad`` and ``tried`` ((c, cost) pairs)."""
+        pixel), ``n_pixels``, ``noise_rad``, ``tried`` ((c, cost) pairs) and ``bracketed``. Ctrl-C
+        stops it before the next coefficient."""
         imgs, knowns = self._image_list(images, known)
         return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
 

@@ -13,6 +13,13 @@ mod simulation;
 use pyo3::prelude::*;
 use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenario_toml_with_grid};
 
+/// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`): call
+/// after dropping a simulation whose HAS plan is large, before building the next.
+#[pyfunction]
+fn release_freed() {
+    has_core::memory::release_freed();
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::CoreSimulation>()?;
@@ -24,5 +31,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
+    m.add_function(wrap_pyfunction!(release_freed, m)?)?;
     Ok(())
 }

@@ -53,6 +53,13 @@ impl CoreModeFit {
         self.0.tried.iter().map(|t| (t[0], t[1])).collect()
     }
 
+    /// Whether the best coefficient lies between two tried (false: at the search's end, three
+    /// prior standard deviations out, with the prior's spread as `std`).
+    #[getter]
+    fn bracketed(&self) -> bool {
+        self.0.bracketed
+    }
+
     fn __repr__(&self) -> String {
         let f = &self.0;
         format!(

@@ -366,7 +366,8 @@ impl CoreSimulation {
     ) -> PyResult<CoreModeFit> {
         let measurements = measurements(images, known)?;
         let mode = mode.as_array().to_vec();
-        let fit = py.detach(|| fit_mode(&self.inner, &mode, &measurements)).map_err(to_py)?;
+        let cancel = AtomicBool::new(false);
+        let fit = run_interruptible(py, &cancel, || fit_mode(&self.inner, &mode, &measurements, Some(&cancel)))?.map_err(to_py)?;
         Ok(CoreModeFit(fit))
     }
 

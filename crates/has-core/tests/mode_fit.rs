@@ -40,7 +40,7 @@ fn images(c: f64, seed: u64) -> Vec<Measurement> {
 }
 
 fn fit(c: f64, seed: u64) -> ModeFit {
-    fit_mode(sim(), &mode(), &images(c, seed)).unwrap()
+    fit_mode(sim(), &mode(), &images(c, seed), None).unwrap()
 }
 
 #[test]
@@ -54,6 +54,7 @@ fn the_fit_finds_the_coefficient_the_images_were_made_with() {
         assert!(f.std < 0.2, "the images pin the coefficient: {f:?}");
         assert!((f.misfit - 1.0).abs() < 0.2, "a perfect model fits to the noise: {f:?}");
         assert!((f.scale - 1.0).abs() < 0.05, "the model's own scale: {f:?}");
+        assert!(f.bracketed, "{f:?}");
     }
 }
 
@@ -62,10 +63,25 @@ fn a_coefficient_beyond_the_start_is_reached() {
     let f = fit(2.2, 4);
     assert!((f.coefficient - 2.2 / (1.0 + f.std * f.std)).abs() < 3.0 * f.std, "{f:?}");
     assert!(f.tried.iter().any(|t| t[0] >= 3.0 - 1e-9), "searched out to 3: {:?}", f.tried);
+    assert!(f.bracketed);
+}
+
+#[test]
+fn a_coefficient_beyond_the_search_is_not_bracketed() {
+    // At 4.5 the smallest J tried is at the search's end, 3: said so, with the prior's spread.
+    let f = fit(4.5, 6);
+    assert!(!f.bracketed && f.coefficient == 3.0 && f.std == 1.0, "{f:?}");
+}
+
+#[test]
+fn a_fit_is_stopped_by_its_cancel_flag() {
+    let cancel = std::sync::atomic::AtomicBool::new(true);
+    let e = fit_mode(sim(), &mode(), &images(0.0, 7), Some(&cancel)).unwrap_err();
+    assert!(matches!(e, has_core::HasError::Interrupted), "{e}");
 }
 
 #[test]
 fn a_mode_of_the_wrong_length_is_named() {
-    let e = fit_mode(sim(), &[0.0; 3], &images(0.0, 5)).unwrap_err();
+    let e = fit_mode(sim(), &[0.0; 3], &images(0.0, 5), None).unwrap_err();
     assert!(e.to_string().contains("mode"), "{e}");
 }

@@ -12,7 +12,9 @@ import numpy as np
 from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, load_scenario,
                              npy_path, read_image, read_bone_speed_sensitivity, read_optional_phases, read_transmission, save_npy)
 from arfi.estimation import wrap
+from arfi import _core
 from arfi.scenario import Scenario
+from arfi.simulation import Simulation
 
 TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
@@ -98,22 +100,12 @@ def run(args: argparse.Namespace) -> int:
     prior = read_optional_phases(args.prior, "--prior")
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     scenario = load_scenario(args)
-    bone_speed = fit_bone_speed(args, scenario, prior)
+    bone_speed = fit_bone_speed(args, scenario, prior, transmission, predicted_at)
     if bone_speed is not None:
         prior = bone_speed.pop("prior")
     sim = calibrated_simulation(args, scenario)
     if transmission is not None:
-        if len(transmission) != sim.n_elements:
-            raise ValueError(f"--prior-transmission: {args.prior_transmission}: has {len(transmission)} values for "
-                             f"{sim.n_elements} elements")
-        # Each element's transmission is its wave's at the point predicted for; a focus elsewhere
-        # (beyond a fraction of the focal spot) crosses the skull elsewhere.
-        if predicted_at is not None and np.linalg.norm(predicted_at - sim.focus_mm) > TARGET_TOLERANCE_MM:
-            x, y, z = predicted_at
-            fx, fy, fz = sim.focus_mm
-            raise ValueError(f"--prior-transmission: {args.prior_transmission}: predicted for the target ({x:.1f}, {y:.1f}, "
-                             f"{z:.1f}) mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at "
-                             f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
+        check_transmission(args, transmission, predicted_at, sim)
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
     pairs = [read_image(sim, p) for p in args.image]
     e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], method=args.method, max_evaluations=args.max_evaluations,
@@ -127,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
-             + (f", moved along the bone-speed mode by {bone_speed['percent']:+.1f} %" if bone_speed else "")
+             + (f", moved along the bone-speed mode by {bone_speed['percent']:+.1f} %" if bone_speed and bone_speed["prior_moved"] else "")
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.nuisance is not None:
         n = e.nuisance
@@ -151,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
     use_prediction = e.model_mismatch and e.prior_used and prior is not None
     if use_prediction:
-        which = "the prediction (--prior" + (", moved along its bone-speed mode" if bone_speed else "") + ")"
+        which = "the prediction (--prior" + (", moved along its bone-speed mode" if bone_speed and bone_speed["prior_moved"] else "") + ")"
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
               f"the model does not explain the images, so this estimate is NOT to be applied: {which} is "
               f"the safer correction"
@@ -190,12 +182,30 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def fit_bone_speed(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None) -> dict[str, Any] | None:
+def check_transmission(args: argparse.Namespace, transmission: np.ndarray, predicted_at: np.ndarray | None,
+                       sim: Simulation) -> None:
+    """``--prior-transmission`` holds one value per element of ``sim``, predicted at its focus."""
+    if len(transmission) != sim.n_elements:
+        raise ValueError(f"--prior-transmission: {args.prior_transmission}: has {len(transmission)} values for "
+                         f"{sim.n_elements} elements")
+    # Each element's transmission is its wave's at the point predicted for; a focus elsewhere
+    # (beyond a fraction of the focal spot) crosses the skull elsewhere.
+    if predicted_at is not None and np.linalg.norm(predicted_at - sim.focus_mm) > TARGET_TOLERANCE_MM:
+        x, y, z = predicted_at
+        fx, fy, fz = sim.focus_mm
+        raise ValueError(f"--prior-transmission: {args.prior_transmission}: predicted for the target ({x:.1f}, {y:.1f}, "
+                         f"{z:.1f}) mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at "
+                         f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
+
+
+def fit_bone_speed(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None,
+                   transmission: np.ndarray | None, predicted_at: np.ndarray | None) -> dict[str, Any] | None:
     """The prediction's bone-speed mode fitted to the images on the head with the CT's bone
     (``--prior-bone-speed-std-percent``; by default wherever the prediction's JSON holds its
-    sensitivity): the fit's numbers and the prior moved along the mode (key ``prior``), or None
-    when there is nothing to fit. The model with bone is built and dropped here, before the
-    estimation's own model, so that the two plans are never held at once."""
+    sensitivity and the estimate is per element): the fit's numbers and the prior moved along
+    the mode (key ``prior``), or None when there is nothing to fit. The model with bone is built
+    and dropped here, its memory handed back, before the estimation's own model is built, so that
+    the two plans are never held at once."""
     std = args.prior_bone_speed_std_percent
     explicit = std is not None
     if explicit and not (np.isfinite(std) and std >= 0):
@@ -206,32 +216,42 @@ def fit_bone_speed(args: argparse.Namespace, scenario: Scenario, prior: np.ndarr
         if explicit:
             raise UsageError("--prior-bone-speed-std-percent: needs --prior (the prediction the mode belongs to)")
         return None
-    sensitivity = read_bone_speed_sensitivity(args.prior_transmission, len(prior), required=explicit)
-    if sensitivity is None:
-        return None
     if args.groups != len(prior):
         if explicit:
             raise UsageError(f"--prior-bone-speed-std-percent: fitted for per-element estimates only (--groups {len(prior)})")
+        return None
+    sensitivity = read_bone_speed_sensitivity(args.prior_transmission, len(prior), required=explicit)
+    if sensitivity is None:
         return None
     if scenario.to_dict().get("ct") is None:
         if explicit:
             raise UsageError("--prior-bone-speed-std-percent: needs a [ct] scenario (the mode is fitted on the head with "
                              "the CT's bone)")
         return None
+    if args.prior_std_rad is None:  # checked here too: the fit takes minutes before the estimate would say so
+        raise UsageError("--prior-std-rad: required with --prior (the expected error of each predicted phase, rad)")
     t = time.perf_counter()
     skull = calibrated_simulation(args, scenario.with_ct_bone())
     if skull.n_elements != len(prior):
         raise ValueError(f"--prior: {args.prior}: has {len(prior)} values for {skull.n_elements} elements")
+    if transmission is not None:
+        check_transmission(args, transmission, predicted_at, skull)
     std = std if explicit else BONE_SPEED_STD_PERCENT
     pairs = [read_image(skull, p) for p in args.image]
     fit = skull.fit_mode([p[0] for p in pairs], [p[1] for p in pairs], std * sensitivity)
-    del skull
+    del skull, pairs
+    _core.release_freed()
     percent, spread = fit.coefficient * std, fit.std * std
-    print(f"estimate: bone speed from the images on the head with the CT's bone: {percent:+.1f} +- {spread:.1f} % of the "
-          f"conversion's (prior +-{std:g} %; image scale {fit.scale:.3f}, misfit {fit.misfit:.2f} over {fit.n_pixels} pixels, "
-          f"{len(fit.tried)} coefficients tried in {time.perf_counter() - t:.1f} s): the prior moves along the prediction's "
-          f"bone-speed mode by that much")
+    seconds = time.perf_counter() - t
+    found = (f"estimate: bone speed from the images on the head with the CT's bone: {percent:+.1f} +- {spread:.1f} % of "
+             f"the conversion's (prior +-{std:g} %; image scale {fit.scale:.3f}, misfit {fit.misfit:.2f} over {fit.n_pixels} "
+             f"pixels, {len(fit.tried)} coefficients tried, the model with bone built and marched in {seconds:.1f} s)")
+    if fit.bracketed:
+        print(f"{found}: the prior moves along the prediction's bone-speed mode by that much")
+    else:
+        print(f"{found}: at the search's end (three times the prior's spread): the prior is NOT moved; check the CT's "
+              f"conversion and registration against the images (arfi diagnose)")
+    moved = wrap(prior + fit.coefficient * std * sensitivity) if fit.bracketed else prior
     return {"percent": percent, "std_percent": spread, "std_percent_prior": std, "scale": fit.scale, "misfit": fit.misfit,
-            "n_pixels": fit.n_pixels, "tried_percent": [c * std for c, _ in fit.tried], "seconds": time.perf_counter() - t,
-            "prior": wrap(prior + fit.coefficient * std * sensitivity)}
-
+            "n_pixels": fit.n_pixels, "tried_percent": [c * std for c, _ in fit.tried], "bracketed": fit.bracketed,
+            "prior_moved": fit.bracketed, "seconds": seconds, "prior": moved}

@@ -32,8 +32,9 @@ def register(sub: Any) -> None:
                    help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
                         "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the mode arfi "
                         "estimate fits to the images on the head with the CT's bone before its per-element fit. One more "
-                        "simulation of the skull (about half the prediction's time). Default: on with the porosity "
-                        "conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity skips it")
+                        "simulation of the skull (about half the prediction's time). Default: on with --json and the "
+                        "porosity conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity "
+                        "skips it")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
                   "phase and transmission; two more marches of the prediction's own simulation of the skull, kept for the report)")
@@ -47,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
                          "arfi phantom writes a synthetic one")
     sensitivity = args.bone_speed_sensitivity
-    if sensitivity is None:  # by default wherever the conversion has a bone sound speed
-        sensitivity = scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
+    if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
+        sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
     t = time.perf_counter()
     # The report draws the beam through the skull: the prediction keeps the skull's simulation for it.
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,

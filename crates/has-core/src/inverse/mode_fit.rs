@@ -25,6 +25,7 @@ use crate::physics::propagation::RecordSpec;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The coefficients a fit starts from (the mode's units: one standard deviation each).
 const START: [f64; 3] = [-1.0, 0.0, 1.0];
@@ -57,6 +58,10 @@ pub struct ModeFit {
     pub noise: f64,
     /// Each coefficient tried with its `J`, in increasing coefficient.
     pub tried: Vec<[f64; 2]>,
+    /// Whether the smallest `J` lies between two coefficients tried: false when it is at the
+    /// search's end (the images put the coefficient beyond ±3, three prior standard deviations),
+    /// where `coefficient` is that end and `std` the prior's.
+    pub bracketed: bool,
 }
 
 /// One evaluation of `J`.
@@ -73,8 +78,10 @@ struct Point {
 /// on `sim`, the model through the CT's bone driven with the reference steering (see the module
 /// docs). The pixel box is the estimation's ([`masks_and_box`] at the scenario's mask fraction,
 /// [`BACKGROUND_MARGIN`] pixels around the masks); every pixel imaged in both the measured and
-/// the model image counts.
-pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement]) -> Result<ModeFit> {
+/// the model image counts. `cancel`, when set by another thread, ends the fit before the next
+/// coefficient ([`HasError::Interrupted`]). An error when no pixel is imaged in both, or the model
+/// gives no force there.
+pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement], cancel: Option<&AtomicBool>) -> Result<ModeFit> {
     let n = sim.n_elements();
     if mode.len() != n {
         return Err(HasError::invalid("mode", format!("has {} values for {n} elements", mode.len())));
@@ -97,6 +104,7 @@ pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement]) ->
         sampler: sim.sampler()?.restrict(u.clone(), v.clone())?,
         box_pixels: [u, v],
         noise: boxed.noise.max(MIN_NOISE),
+        cancel,
     };
     fit.run()
 }
@@ -110,6 +118,7 @@ struct Fit<'a> {
     sampler: MrSampler,
     box_pixels: [Range<usize>; 2],
     noise: f64,
+    cancel: Option<&'a AtomicBool>,
 }
 
 impl Fit<'_> {
@@ -140,9 +149,11 @@ impl Fit<'_> {
         }
         let best = argmin(&tried);
         let chosen = tried[best];
+        let bracketed = best > 0 && best + 1 < tried.len();
         Ok(ModeFit {
             coefficient: chosen.c,
             std: parabola(&tried, best).1.map_or(1.0, |a| 1.0 / a.sqrt()),
+            bracketed,
             scale: chosen.scale,
             misfit: chosen.chi2 / chosen.pixels.max(1) as f64,
             n_pixels: chosen.pixels,
@@ -153,6 +164,9 @@ impl Fit<'_> {
 
     /// `J` at each coefficient in `cs`: every image of every coefficient marched in one batch.
     fn evaluate(&self, cs: &[f64]) -> Result<Vec<Point>> {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            return Err(HasError::Interrupted);
+        }
         let added: Vec<Vec<f64>> =
             cs.iter().flat_map(|&c| self.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
         let sources = self.sim.source_fields(&added)?;
@@ -167,11 +181,11 @@ impl Fit<'_> {
                 Ok(image)
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(cs.iter().zip(images.chunks(self.measurements.len())).map(|(&c, models)| self.point(c, models)).collect())
+        cs.iter().zip(images.chunks(self.measurements.len())).map(|(&c, models)| self.point(c, models)).collect()
     }
 
     /// `J` at `c` from its model images (one per measurement, on the box).
-    fn point(&self, c: f64, models: &[Array2<f64>]) -> Point {
+    fn point(&self, c: f64, models: &[Array2<f64>]) -> Result<Point> {
         let [u, v] = &self.box_pixels;
         let pairs: Vec<(f64, f64)> = self
             .measurements
@@ -185,9 +199,15 @@ impl Fit<'_> {
             })
             .collect();
         let (md, mm) = pairs.iter().fold((0.0, 0.0), |(md, mm), (m, d)| (md + m * d, mm + m * m));
-        let scale = if mm > 0.0 { (md / mm).max(0.0) } else { 0.0 };
+        if !(mm > 0.0) {
+            return Err(HasError::invalid(
+                "images",
+                format!("have no pixel imaged in both them and the model (with the mode at {c}) where the model gives force"),
+            ));
+        }
+        let scale = (md / mm).max(0.0);
         let chi2 = pairs.iter().map(|(m, d)| (scale * m - d).powi(2)).sum::<f64>() / self.noise.powi(2);
-        Point { c, j: chi2 + c * c, scale, chi2, pixels: pairs.len() }
+        Ok(Point { c, j: chi2 + c * c, scale, chi2, pixels: pairs.len() })
     }
 }
 
@@ -203,7 +223,8 @@ fn parabola(points: &[Point], i: usize) -> (Option<f64>, Option<f64>) {
         return (None, None);
     }
     let [p0, p1, p2] = [points[i - 1], points[i], points[i + 1]];
-    // Divided differences: J = p1.j + b·(c − p1.c) + a·(c − p0.c)·(c − p1.c) … in Newton form.
+    // Newton form through p0, p1, p2: J = p0.j + d01·(c − p0.c) + a·(c − p0.c)·(c − p1.c), with
+    // d01 and d12 the first divided differences and `a` the second.
     let d01 = (p1.j - p0.j) / (p1.c - p0.c);
     let d12 = (p2.j - p1.j) / (p2.c - p1.c);
     let a = (d12 - d01) / (p2.c - p0.c);
