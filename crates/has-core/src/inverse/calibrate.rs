@@ -9,7 +9,6 @@
 use crate::error::{require_positive, HasError, Result};
 use crate::inverse::cost::{check_image, imaged_pixels, mask_pixels};
 use crate::physics::mr::noise_floor;
-use crate::physics::propagation::RecordSpec;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 
@@ -36,8 +35,7 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
     require_positive("max_width_mm", max_width * 1e3)?;
-    let spec = RecordSpec { window: Some(sim.sampler()?.window.clone()), reflections: sim.reflections, ..RecordSpec::default() };
-    let rec = sim.plan.propagate(&sim.source_field(known)?, &spec)?;
+    let rec = sim.record_window(&[sim.source_field(known)?])?.remove(0);
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal
     // still constrain the width through the tails.

@@ -18,10 +18,9 @@
 //! until a step is short against the posterior's spread.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::{known_per_element, BACKGROUND_MARGIN};
+use crate::inverse::basis::{image_known_per_element, BACKGROUND_MARGIN};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
 use crate::physics::mr::MrSampler;
-use crate::physics::propagation::RecordSpec;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use std::ops::Range;
@@ -89,13 +88,7 @@ pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement], ca
     crate::error::require_finite("mode", mode)?;
     let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
     let [u, v] = boxed.pixels.clone();
-    let known = measurements
-        .iter()
-        .enumerate()
-        .map(|(k, m)| {
-            known_per_element(sim, &m.known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let known = measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
     let fit = Fit {
         sim,
         mode,
@@ -169,18 +162,9 @@ impl Fit<'_> {
         }
         let added: Vec<Vec<f64>> =
             cs.iter().flat_map(|&c| self.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
-        let sources = self.sim.source_fields(&added)?;
-        let spec = RecordSpec { window: Some(self.sampler.window.clone()), reflections: self.sim.reflections, ..RecordSpec::default() };
-        let recordings = self.sim.plan.propagate_batch(&sources, &spec)?;
+        let recordings = self.sim.record_in(&self.sampler.window, &self.sim.source_fields(&added)?)?;
         let amplitude = self.sim.amplitude()?;
-        let images = recordings
-            .iter()
-            .map(|r| {
-                let mut image = self.sampler.force_image(&r.window)? * amplitude;
-                self.sampler.blank_unimaged(&mut image);
-                Ok(image)
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let images = recordings.iter().map(|r| self.sampler.arfi_image(&r.window, amplitude)).collect::<Result<Vec<_>>>()?;
         cs.iter().zip(images.chunks(self.measurements.len())).map(|(&c, models)| self.point(c, models)).collect()
     }
 

@@ -337,6 +337,14 @@ impl MrSampler {
         });
     }
 
+    /// The MR-ARFI phase image (rad) from the recorded window of the complex pressure: the force
+    /// image times `amplitude` (rad·m³/N), its pixels without signal NaN.
+    pub fn arfi_image(&self, window_field: &[num_complex::Complex64], amplitude: f64) -> Result<Array2<f64>> {
+        let mut image = self.force_image(window_field)? * amplitude;
+        self.blank_unimaged(&mut image);
+        Ok(image)
+    }
+
     /// The image `(n_u, n_v)` of force density (N/m³), broadened and pixel-averaged, from the
     /// recorded window of the complex pressure.
     pub fn force_image(&self, window_field: &[num_complex::Complex64]) -> Result<Array2<f64>> {

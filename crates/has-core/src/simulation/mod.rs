@@ -422,10 +422,7 @@ impl Simulation {
     /// ```
     pub fn arfi_image(&self, added: &[f64]) -> Result<Array2<f64>> {
         let rec = self.record_window(&[self.source_field(added)?])?.remove(0);
-        let sampler = self.sampler()?;
-        let mut image = sampler.force_image(&rec.window)? * self.amplitude()?;
-        sampler.blank_unimaged(&mut image);
-        Ok(image)
+        self.sampler()?.arfi_image(&rec.window, self.amplitude()?)
     }
 
     /// An MR-ARFI image with seeded Gaussian noise of `noise` rad added (NaN stays NaN).
@@ -462,7 +459,13 @@ impl Simulation {
 
     /// Marches several sources in one batch, keeping the MR window.
     pub fn record_window(&self, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
-        let spec = RecordSpec { window: Some(self.sampler()?.window.clone()), reflections: self.reflections, ..RecordSpec::default() };
+        self.record_in(&self.sampler()?.window, sources)
+    }
+
+    /// Marches several sources in one batch, keeping `window` (e.g. a restricted sampler's),
+    /// with reflections as the simulation marches.
+    pub fn record_in(&self, window: &Window, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {
+        let spec = RecordSpec { window: Some(window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         self.plan.propagate_batch(sources, &spec)
     }
 }

@@ -340,8 +340,7 @@ impl BasisCache {
         let crate::inverse::cost::MaskedBox { masks, pixels: [u, v], noise } = masks_and_box(sim, measurements, mask_fraction, margin)?;
         let mut terms = Vec::with_capacity(measurements.len());
         for (k, (meas, mask)) in measurements.iter().zip(&masks).enumerate() {
-            let offset = known_per_element(sim, &meas.known)
-                .map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))?;
+            let offset = image_known_per_element(sim, k, &meas.known)?;
             let local = |&(i, j): &(usize, usize)| (i - u.start) * v.len() + (j - v.start);
             let box_pixels;
             let pixels = if whole_box {
@@ -377,6 +376,12 @@ impl BasisCache {
 /// Pixels without signal (NaN) are left out either way.
 pub fn fits_whole_box(nuisance: &Nuisance) -> bool {
     nuisance.amplitude || nuisance.background_phase
+}
+
+/// [`known_per_element`] of image `k`'s known phases, an error naming that image's
+/// `applied_phases_rad`.
+pub fn image_known_per_element(sim: &Simulation, k: usize, known: &[f64]) -> Result<Vec<f64>> {
+    known_per_element(sim, known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))
 }
 
 /// Known phases per element from values per element, per group of `sim`, or per default group
