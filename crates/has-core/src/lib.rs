@@ -27,6 +27,7 @@ pub mod memory;
 pub mod nifti;
 pub mod physics;
 pub mod prediction;
+pub mod reference;
 pub mod scenario;
 pub mod section;
 pub mod simulation;
