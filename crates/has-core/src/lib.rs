@@ -31,6 +31,7 @@ pub mod reference;
 pub mod scenario;
 pub mod section;
 pub mod simulation;
+pub mod validation;
 
 pub use error::{HasError, Result};
 pub use inverse::diagnose::{diagnose, Diagnosis};

@@ -243,9 +243,11 @@ impl Medium {
                     name,
                     format!(
                         "is {:.3} mm thick, less than one grid step ({:.3} mm): the march would miss it or make it a whole step; \
-                         set grid.step_mm below its thickness",
+                         set grid.step_mm to {:.4} mm (one step across it), or leave it out: the default step puts planes on \
+                         the faces of layers",
                         (z_max - z_min) * 1e3,
-                        grid.dz * 1e3
+                        grid.dz * 1e3,
+                        (z_max - z_min) * 1e3
                     ),
                 ));
             }

@@ -1,0 +1,280 @@
+//! The cases of the suite: scenarios a user would write, each with its exact solution.
+
+use crate::error::{HasError, Result};
+use crate::nifti;
+use crate::physics::material::{attenuation_np_m, Properties};
+use crate::reference::layered::{Layer, LayeredBowl};
+use crate::reference::shell::{Passes, Shell, ShellBowl};
+use crate::reference::{Bowl, Fluid};
+use crate::scenario::Scenario;
+use num_complex::Complex64 as C64;
+use std::path::Path;
+
+/// The ITRUSST benchmark's source SC1: 500 kHz, radius of curvature 64 mm, aperture 64 mm.
+const FREQUENCY: f64 = 500e3;
+const ROC_MM: f64 = 64.0;
+const APERTURE_MM: f64 = 64.0;
+
+/// A fluid of the benchmark: name, sound speed (m/s), density (kg/m³), attenuation at 500 kHz
+/// (dB/cm; Aubry et al. 2022, table 2).
+#[derive(Debug, Clone, Copy)]
+struct Tissue(&'static str, f64, f64, f64);
+
+const WATER: Tissue = Tissue("water", 1500.0, 1000.0, 0.0);
+const SKIN: Tissue = Tissue("skin", 1610.0, 1090.0, 0.2);
+const CORTICAL: Tissue = Tissue("cortical", 2800.0, 1850.0, 4.0);
+const TRABECULAR: Tissue = Tissue("trabecular", 2300.0, 1700.0, 8.0);
+const BRAIN: Tissue = Tissue("brain", 1560.0, 1040.0, 0.3);
+
+impl Tissue {
+    /// dB/cm/MHz of a law linear in frequency with this value at 500 kHz.
+    fn db_cm_mhz(&self) -> f64 {
+        self.3 / (FREQUENCY / 1e6)
+    }
+
+    fn fluid(&self) -> Fluid {
+        let p = Properties { sound_speed: self.1, density: self.2, attenuation: attenuation_np_m(self.db_cm_mhz(), 1.0, FREQUENCY) };
+        Fluid::new(p, FREQUENCY).expect("the benchmark's fluids are valid")
+    }
+
+    fn toml(&self) -> String {
+        format!(
+            "[[material]]\nname = \"{}\"\nsound_speed_m_s = {:.1}\ndensity_kg_m3 = {:.1}\nattenuation_db_cm_mhz = {}\n",
+            self.0,
+            self.1,
+            self.2,
+            self.db_cm_mhz()
+        )
+    }
+}
+
+/// The exact solution of a case.
+#[derive(Debug, Clone)]
+pub enum Exact {
+    /// Water, or planar layers normal to the axis.
+    Layered(LayeredBowl),
+    /// Inside a spherical shell.
+    Shell(ShellBowl, f64),
+}
+
+impl Exact {
+    /// `p/p0` at radius `rho` from the axis and depth `z` (m).
+    pub fn pressure(&self, rho: f64, z: f64) -> Result<C64> {
+        match self {
+            Exact::Layered(s) => s.pressure(rho, z),
+            Exact::Shell(s, _) => s.pressure(rho, z),
+        }
+    }
+
+    /// Whether the solution is given at depth `z` on the axis.
+    pub fn covers(&self, z: f64) -> bool {
+        match self {
+            Exact::Layered(s) => z >= s.exit_face,
+            Exact::Shell(s, centre) => (z - centre).abs() <= s.reach,
+        }
+    }
+}
+
+/// What a case's exact solution is built from.
+#[derive(Debug, Clone)]
+enum Geometry {
+    /// Layers from `z1` (m): fluids and thicknesses (m), then the exit fluid.
+    Layered { z1: f64, layers: Vec<(Tissue, f64)>, exit: Tissue },
+    /// A cap of cortical bone on a sphere about `(0, 0, centre)` (m), water inside and out.
+    Shell { centre: f64, inner: f64, outer: f64 },
+}
+
+/// One case of the suite.
+#[derive(Debug, Clone)]
+pub struct Case {
+    /// Short name (`water`, `bm3`, ...).
+    pub name: String,
+    /// What it is.
+    pub description: String,
+    /// The scenario, as a user would write it (no `[grid]`: the default grid).
+    pub scenario: Scenario,
+    geometry: Geometry,
+}
+
+impl Case {
+    /// The exact solution (built on demand: a fraction of a second).
+    pub fn exact(&self) -> Result<Exact> {
+        let water = WATER.fluid();
+        let bowl = Bowl::new(ROC_MM * 1e-3, 0.5 * APERTURE_MM * 1e-3, water.k.re)?;
+        match &self.geometry {
+            Geometry::Layered { z1, layers, exit } => {
+                let layers: Vec<Layer> = layers.iter().map(|&(t, d)| Layer { thickness: d, fluid: t.fluid() }).collect();
+                Ok(Exact::Layered(LayeredBowl::new(&bowl, water, *z1, &layers, exit.fluid())?))
+            }
+            &Geometry::Shell { centre, inner, outer } => {
+                let shell = Shell { centre, inner_radius: inner, outer_radius: outer, wall: CORTICAL.fluid(), interior: water };
+                Ok(Exact::Shell(ShellBowl::new(&bowl, water, shell, Passes::One, inner - 1e-3)?, centre))
+            }
+        }
+    }
+}
+
+/// The bowl's scenario with `media` (materials after water) and `regions` (TOML).
+fn scenario(media: &[Tissue], regions: &str, dir: Option<&Path>) -> Result<Scenario> {
+    let materials: String = std::iter::once(WATER).chain(media.iter().copied()).map(|t| t.toml()).collect();
+    let text = format!(
+        "name = \"ITRUSST SC1\"\nfrequency_hz = {FREQUENCY}\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = {ROC_MM}\n\
+         aperture_diameter_mm = {APERTURE_MM}\n[focus]\nposition_mm = [0.0, 0.0, {ROC_MM}]\n{materials}[medium]\nbackground = \"water\"\n{regions}"
+    );
+    Scenario::from_toml(&text, dir)
+}
+
+/// Planar layers from `z1_mm` on (thicknesses in mm), then `exit` to the end of the grid.
+fn layered(name: &str, description: &str, z1_mm: f64, layers: &[(Tissue, f64)], exit: Tissue) -> Result<Case> {
+    let mut regions = String::new();
+    let mut z = z1_mm;
+    for (t, d) in layers {
+        regions += &format!("[[region]]\nmaterial = \"{}\"\nshape = \"slab\"\nz_min_mm = {z}\nz_max_mm = {}\n", t.0, z + d);
+        z += d;
+    }
+    if exit.0 != WATER.0 {
+        regions += &format!("[[region]]\nmaterial = \"{}\"\nshape = \"slab\"\nz_min_mm = {z}\nz_max_mm = 1000.0\n", exit.0);
+    }
+    let mut media: Vec<Tissue> = Vec::new();
+    for t in layers.iter().map(|l| l.0).chain([exit]) {
+        if t.0 != WATER.0 && !media.iter().any(|m| m.0 == t.0) {
+            media.push(t);
+        }
+    }
+    Ok(Case {
+        name: name.into(),
+        description: description.into(),
+        scenario: scenario(&media, &regions, None)?,
+        geometry: Geometry::Layered { z1: z1_mm * 1e-3, layers: layers.iter().map(|&(t, d)| (t, d * 1e-3)).collect(), exit },
+    })
+}
+
+/// CT voxel size of the shells, m.
+const CT_VOXEL: f64 = 0.25e-3;
+/// HU of the shells' bone: the porosity conversion's dense bone (`hu_max`), set to the
+/// benchmark's cortical bone.
+const BONE_HU: f64 = 2000.0;
+
+/// A cap of cortical bone (radii in mm about the axis point `centre_mm`), the cone of half-angle
+/// `cap_deg` about the direction towards the bowl, written as a CT of 0.25 mm voxels (HU 2000 in
+/// the bone, -1000 elsewhere: coupling, the scenario's water) to `dir/{name}.nii`.
+fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f64, outer_mm: f64, cap_deg: f64) -> Result<Case> {
+    let (c, a, b) = (centre_mm * 1e-3, inner_mm * 1e-3, outer_mm * 1e-3);
+    let cos_cap = cap_deg.to_radians().cos();
+    // The box around the cap, with two voxels of coupling on every side, reaching past the
+    // focal region (a CT must cover the focus).
+    let half = b * cap_deg.to_radians().sin() + 2.0 * CT_VOXEL;
+    let (z_lo, z_hi) = (c - b - 2.0 * CT_VOXEL, (c - a * cos_cap).max(ROC_MM * 1e-3 + super::WINDOW) + 2.0 * CT_VOXEL);
+    let n = (2.0 * half / CT_VOXEL).ceil() as usize + 1;
+    let nk = ((z_hi - z_lo) / CT_VOXEL).ceil() as usize + 1;
+    let centre_of = |i: usize, n: usize| (i as f64 - 0.5 * (n - 1) as f64) * CT_VOXEL;
+    let mut hu = Vec::with_capacity(n * n * nk);
+    for k in 0..nk {
+        let z = z_lo + k as f64 * CT_VOXEL - c;
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (centre_of(i, n), centre_of(j, n));
+                let r = (x * x + y * y + z * z).sqrt();
+                hu.push(if r >= a && r <= b && -z >= cos_cap * r { BONE_HU as f32 } else { -1000.0 });
+            }
+        }
+    }
+    // RAS x = -LPS x: a box symmetric about the axis maps onto itself.
+    let h = 0.5 * (n - 1) as f64 * CT_VOXEL * 1e3;
+    let s = CT_VOXEL * 1e3;
+    let affine = [[-s, 0.0, 0.0, h], [0.0, -s, 0.0, h], [0.0, 0.0, s, z_lo * 1e3]];
+    let file = format!("{name}.nii");
+    std::fs::write(dir.join(&file), nifti::encode([nk, n, n], &hu, affine))
+        .map_err(|e| HasError::invalid("validation directory", format!("cannot write {}: {e}", dir.join(&file).display())))?;
+    let ct = format!(
+        "[ct]\nfile = \"{file}\"\nconversion = \"aubry2003\"\nhu_max = {BONE_HU}\nbone_sound_speed_m_s = {:.1}\n\
+         bone_density_kg_m3 = {:.1}\nbone_attenuation_min_db_cm_mhz = {}\nwater_sound_speed_m_s = {:.1}\nwater_density_kg_m3 = {:.1}\n",
+        CORTICAL.1,
+        CORTICAL.2,
+        CORTICAL.db_cm_mhz(),
+        WATER.1,
+        WATER.2
+    );
+    Ok(Case {
+        name: name.into(),
+        description: description.into(),
+        scenario: scenario(&[], &ct, Some(dir))?,
+        geometry: Geometry::Shell { centre: c, inner: a, outer: b },
+    })
+}
+
+/// The suite's cases; the shells' CTs are written to `dir`.
+pub fn suite(dir: &Path) -> Result<Vec<Case>> {
+    Ok(vec![
+        layered("water", "ITRUSST SC1 bowl (500 kHz, R 64 mm, aperture 64 mm) in water", 10.0, &[], WATER)?,
+        layered("bm3", "cortical plate 6.5 mm thick, 30-36.5 mm from the apex (ITRUSST BM3)", 30.0, &[(CORTICAL, 6.5)], WATER)?,
+        layered(
+            "bm4",
+            "flat layered skull: skin 4, cortical 1.5, trabecular 4, cortical 1 mm from 26 mm, then brain (ITRUSST BM4)",
+            26.0,
+            &[(SKIN, 4.0), (CORTICAL, 1.5), (TRABECULAR, 4.0), (CORTICAL, 1.0)],
+            BRAIN,
+        )?,
+        shell(dir, "shell", "cortical shell cap from a CT, radii 30-36.5 mm about the focus (normal incidence)", ROC_MM, 30.0, 36.5, 80.0)?,
+        shell(
+            dir,
+            "bm5",
+            "cortical shell cap from a CT, outer radius 75 mm, 6.5 mm thick, apex 30 mm from the bowl (oblique incidence; ITRUSST BM5-like)",
+            105.0,
+            68.5,
+            75.0,
+            50.0,
+        )?,
+    ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+    use super::*;
+
+    /// Prints the suite's comparison (run with `--ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn print_suite() {
+        let dir = std::env::temp_dir().join(format!("arfi-validation-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for mut case in suite(&dir).unwrap() {
+            if let Ok(step) = std::env::var("ARFI_STEP_MM") {
+                case.scenario.grid.step_mm = Some(step.parse().unwrap());
+            }
+            if let Ok(v) = std::env::var("ARFI_SPACING_MM") {
+                case.scenario.grid.spacing_mm = Some(v.parse().unwrap());
+            }
+            if let Ok(v) = std::env::var("ARFI_INTERFACES") {
+                case.scenario.grid.interfaces = Some(v);
+            }
+            if let Ok(v) = std::env::var("ARFI_SCREEN") {
+                case.scenario.grid.screen = Some(v);
+            }
+            if std::env::var("ARFI_ONLY").is_ok_and(|o| o != case.name) {
+                continue;
+            }
+            let c = compare(&case).unwrap();
+            eprintln!(
+                "{:6} p {:.4} vs {:.4} ({:+.2} %), z {:.2} vs {:.2} mm ({:+.2}), axial {:.2} %, corr {:.4}, dz {:.3} mm, {:.1} s",
+                c.name,
+                c.focal_pressure[0],
+                c.focal_pressure[1],
+                100.0 * c.focal_pressure_error(),
+                c.focal_z[0] * 1e3,
+                c.focal_z[1] * 1e3,
+                c.focal_position_error() * 1e3,
+                100.0 * c.axial_error,
+                c.correlation,
+                c.step * 1e3,
+                c.seconds
+            );
+            if std::env::var("ARFI_AXIS").is_ok() {
+                for r in c.axis.iter().step_by(2) {
+                    eprintln!("  {:.2} {:.3} {:.3} {:+.1}%", r[0] * 1e3, r[1], r[2], 100.0 * (r[1] / r[2] - 1.0));
+                }
+            }
+        }
+    }
+}
