@@ -9,6 +9,7 @@ mod mode_fit;
 mod prediction;
 mod scenario;
 mod simulation;
+mod validation;
 
 use pyo3::prelude::*;
 use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenario_toml_with_grid};
@@ -25,6 +26,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::CoreSimulation>()?;
     m.add_class::<cost::CoreCostModel>()?;
     m.add_class::<mode_fit::CoreModeFit>()?;
+    m.add_class::<validation::CoreValidationCase>()?;
+    m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
@@ -32,5 +35,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;
+    m.add_function(wrap_pyfunction!(validation::validation_cases, m)?)?;
+    m.add_function(wrap_pyfunction!(validation::validation_tolerances, m)?)?;
     Ok(())
 }

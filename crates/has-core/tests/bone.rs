@@ -524,12 +524,23 @@ fn small_with_slab(material: &str, z_mm: [f64; 2]) -> Scenario {
 }
 
 #[test]
-fn plates_thinner_than_a_step_or_outside_the_grid_are_refused_by_name() {
+fn thin_plates_get_planes_on_their_faces_and_plates_outside_the_grid_are_refused_by_name() {
     use has_core::simulation::Simulation;
     let bone = "sound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0";
-    // Default step here: λ/4 in water = 0.75 mm, adjusted to land on the focus.
-    let e = Simulation::new(&small_with_slab(bone, [20.0, 20.3])).err().unwrap().to_string();
-    assert!(e.contains("region[0] (plate)") && e.contains("less than one grid step"), "{e}");
+    // The default step (at most λ/4 in water = 0.75 mm) is chosen to put planes on both faces of
+    // a 0.3 mm plate.
+    let sim = Simulation::new(&small_with_slab(bone, [20.0, 20.3])).unwrap();
+    let g = &sim.grid;
+    assert!(g.dz <= 0.3e-3 * (1.0 + 1e-9), "step {} mm", g.dz * 1e3);
+    for face in [20e-3, 20.3e-3] {
+        let n = (face - g.z0) / g.dz;
+        assert!((n - n.round()).abs() < 0.02, "face {face} at plane {n}");
+    }
+    // A step set coarser than the plate: refused, naming the plate and a step that resolves it.
+    let mut coarse = small_with_slab(bone, [20.0, 20.3]);
+    coarse.grid.step_mm = Some(0.75);
+    let e = Simulation::new(&coarse).err().unwrap().to_string();
+    assert!(e.contains("region[0] (plate)") && e.contains("less than one grid step") && e.contains("0.3000 mm"), "{e}");
     let e = Simulation::new(&small_with_slab(bone, [500.0, 506.5])).err().unwrap().to_string();
     assert!(e.contains("region[0] (plate)") && e.contains("outside the simulation grid"), "{e}");
     assert!(Simulation::new(&small_with_slab(bone, [20.0, 26.5])).is_ok());

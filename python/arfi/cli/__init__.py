@@ -12,11 +12,12 @@ import argparse
 import sys
 from typing import Callable, Sequence
 
-from arfi.cli import calibrate, diagnose, dicom, estimate, field, phantom, predict, reproduce, scenario, simulate, sweep
+from arfi.cli import (calibrate, diagnose, dicom, estimate, field, phantom, predict, reproduce, scenario, simulate, sweep,
+                      validate)
 from arfi.cli.common import Parser, UsageError
 
 #: The verbs, in the order ``arfi --help`` lists them.
-VERBS = (scenario, phantom, field, predict, simulate, dicom, calibrate, estimate, diagnose, sweep, reproduce)
+VERBS = (scenario, phantom, field, predict, simulate, dicom, calibrate, estimate, diagnose, sweep, reproduce, validate)
 
 __all__ = ["UsageError", "build_parser", "main"]
 

@@ -219,7 +219,9 @@ mod plate_limit {
     use crate::physics::material::{attenuation_np_m, Properties};
 
     /// A shell of 3 m radius whose near wall lies where a plate lies gives the plate's field:
-    /// the spherical and the planar solutions agree on the axis about the focus.
+    /// the spherical and the planar solutions, written independently, agree on the axis about
+    /// the focus within 2 % (what remains is the wall's curvature: a sagitta of 0.05 mm over the
+    /// beam's 17 mm radius, a weak lens that moves the focus by a fraction of a millimetre).
     #[test]
     fn a_huge_shell_gives_the_plates_field() {
         let f = 500e3;
@@ -228,12 +230,11 @@ mod plate_limit {
         let bowl = Bowl::new(64e-3, 32e-3, water.k.re).unwrap();
         let outer = 3.0;
         let shell = Shell { centre: 30e-3 + outer, inner_radius: outer - 6.5e-3, outer_radius: outer, wall: bone, interior: water };
-        let t = std::time::Instant::now();
         let s = ShellBowl::new(&bowl, water, shell, Passes::One, outer - 20e-3).unwrap();
         let plate = LayeredBowl::new(&bowl, water, 30e-3, &[Layer { thickness: 6.5e-3, fluid: bone }], water).unwrap();
-        for z in [50e-3, 55e-3, 60e-3, 64e-3, 70e-3] {
+        for z in [55e-3, 60e-3, 64e-3] {
             let (a, b) = (s.pressure(0.0, z).unwrap().norm(), plate.pressure(0.0, z).unwrap().norm());
-            eprintln!("z {:.0} mm: shell {a:.4}, plate {b:.4} ({:+.2} %), {:.1} s", z * 1e3, 100.0 * (a / b - 1.0), t.elapsed().as_secs_f64());
+            assert!((a / b - 1.0).abs() < 0.02, "z {:.0} mm: shell {a:.4}, plate {b:.4}", z * 1e3);
         }
     }
 }

@@ -212,6 +212,36 @@ mod tests {
         }
     }
 
+    /// The flat layered skull's faces (26, 30, 31.5, 35.5, 36.5 mm) and the focus (64 mm) share
+    /// a lattice of 0.5 mm: the default step is the largest that puts planes on all of them,
+    /// the source plane moved forward onto it.
+    #[test]
+    fn the_default_step_puts_planes_on_layer_faces() {
+        let faces = [26e-3, 30e-3, 31.5e-3, 35.5e-3, 36.5e-3];
+        let (z0, dz) = steps_on_faces(10.07e-3, 0.75e-3, &faces, 64e-3);
+        assert!((dz - 0.5e-3).abs() < 1e-12, "{dz}");
+        assert!(z0 >= 10.07e-3 && z0 < 10.07e-3 + dz);
+        for z in faces.iter().chain([&64e-3]) {
+            let n = (z - z0) / dz;
+            assert!((n - n.round()).abs() < 1e-9, "{z}: plane {n}");
+        }
+        // One face: the step to the focus, and a plane on the face.
+        let (z0, dz) = steps_on_faces(10.07e-3, 0.75e-3, &[30.2e-3], 64e-3);
+        let n = (30.2e-3 - z0) / dz;
+        assert!(dz <= 0.75e-3 && (n - n.round()).abs() < 0.02, "{dz} {n}");
+    }
+
+    /// The paper's phantom (1533 m/s) is too close to water to need a plane on its face: the
+    /// default scenario's grid is the step to the focus from the unmoved source plane.
+    #[test]
+    fn faint_faces_leave_the_grid_alone() {
+        let r = Scenario::default().resolve().unwrap();
+        let g = choose_grid(&r).unwrap();
+        let wavelength = r.medium.min_sound_speed() / r.frequency;
+        assert!(marked_faces(&r, g.z0, 1.0).is_empty());
+        assert_eq!(g.dz, step_to_focus(g.z0, r.focus[2], 0.25 * wavelength));
+    }
+
     /// A coarser grid covers at least the grid's lateral extent and depth, from the same source
     /// plane, with a plane on the focus and steps of at most its spacing; a spacing that is not
     /// coarser is refused.

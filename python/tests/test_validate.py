@@ -1,0 +1,73 @@
+"""``arfi validate``: the suite's table, report and exit status, as a user runs it."""
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+import pytest
+
+from arfi import validation
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "arfi", "validate", *args], capture_output=True, text=True, timeout=600)
+
+
+def test_validate_writes_its_table_and_report_and_passes_the_layered_cases(tmp_path):
+    out = tmp_path / "report"
+    r = run("--case", "water", "--case", "bm4", "--out", str(out), "--json", str(tmp_path / "v.json"))
+    assert r.returncode == 0, r.stderr
+    assert "| water |" in r.stdout and "| bm4 |" in r.stdout and "2 of 2 cases pass" in r.stdout
+    for name in ("report.html", "validation.md", "validation.json", "water.png", "bm4.png"):
+        assert (out / name).stat().st_size > 0, name
+    result = json.loads((tmp_path / "v.json").read_text())
+    assert result["passed"] is True
+    bm4 = next(c for c in result["cases"] if c["case"] == "bm4")
+    # The flat layered skull on its default grid: within the suite's 5 % and 0.5 mm.
+    assert abs(bm4["focal_pressure_error"]) < 0.05 and abs(bm4["focal_position_error_mm"]) < 0.5
+    assert bm4["step_mm"] == pytest.approx(0.5)
+
+
+def test_the_exit_status_says_whether_every_case_passed(tmp_path):
+    r = run("--case", "shell", "--json", str(tmp_path / "v.json"))
+    result = json.loads((tmp_path / "v.json").read_text())
+    assert r.returncode == (0 if result["passed"] else 1), r.stdout
+    assert ("FAIL" in r.stdout) == (not result["passed"])
+
+
+def test_an_unknown_case_is_one_line_and_exit_2():
+    r = run("--case", "bm9")
+    assert r.returncode == 2
+    assert r.stderr.strip() == "arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, shell, bm5"
+    with pytest.raises(ValueError, match="cases: unknown bm9"):
+        validation.run(["bm9"])
+
+
+def _rows(md: str) -> dict[str, list[Any]]:
+    """The numbers of each case's row of a validation table, each with the unit of its last
+    printed digit, then whether it passed."""
+    import re
+
+    rows = {}
+    for line in md.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 9 and cells[0] in validation.CASES:
+            found = re.findall(r"[-+]?\d+\.\d+", " ".join(cells[1:8]))
+            numbers = [(float(v), 10.0 ** -len(v.split(".")[1])) for v in found]
+            rows[cells[0]] = numbers + [cells[8] == "pass"]
+    return rows
+
+
+def test_the_documented_table_is_what_the_suite_prints_now():
+    # docs/validation.md shows the suite's table; it must be today's, to the last digit printed
+    # (give or take one in that digit: floating-point sums may differ between machines).
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[2] / "docs" / "validation.md").read_text(encoding="utf-8")
+    documented, now = _rows(doc), _rows(validation.table(validation.run()))
+    assert set(documented) == set(validation.CASES) == set(now)
+    for case in validation.CASES:
+        for (d, unit), (n, _) in zip(documented[case][:-1], now[case][:-1]):
+            assert abs(d - n) <= 1.01 * unit, f"{case}: documented {documented[case]}, now {now[case]}"
+        assert documented[case][-1] == now[case][-1], case
