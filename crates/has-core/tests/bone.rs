@@ -536,6 +536,9 @@ fn thin_plates_get_planes_on_their_faces_and_plates_outside_the_grid_are_refused
         let n = (face - g.z0) / g.dz;
         assert!((n - n.round()).abs() < 0.02, "face {face} at plane {n}");
     }
+    // A plate thinner than the finest default step (1/32 of the spacing): refused at once.
+    let e = Simulation::new(&small_with_slab(bone, [20.0, 20.00001])).err().unwrap().to_string();
+    assert!(e.contains("region[0] (plate)") && e.contains("less than one grid step"), "{e}");
     // A step set coarser than the plate: refused, naming the plate and a step that resolves it.
     let mut coarse = small_with_slab(bone, [20.0, 20.3]);
     coarse.grid.step_mm = Some(0.75);

@@ -162,11 +162,13 @@ fn a_plate_thinner_than_its_cells_keeps_its_delay_wherever_it_lies_on_the_grid()
         coarse_worst = coarse_worst.max((coarse / exact).arg().abs());
         amplitude_worst = amplitude_worst.max((ct.norm() / exact.norm() - 1.0).abs());
     }
-    // Measured (2026-11-25): CT phase within 0.13 rad of the exact layering at every shift, the
-    // coarse region's rounding up to 0.48 rad off. The averaged cells at the faces grade the
-    // impedance, so they reflect less than a sharp face: the CT's focal pressure is 10-18 % high.
-    // Bounds: phase 0.15 rad and below a third of the rounding's error; amplitude 20 %.
+    // Measured: CT phase within 0.12 rad of the exact layering at every shift, the coarse
+    // region's rounding (a step set in [grid], so its faces are not all on planes) up to 0.89 rad
+    // off. The cells at the faces take the impedance at their centre: sharp faces at the nearest
+    // planes, so the plate reflects as one of 2 or 3 whole steps would, 0-8 % below the exact
+    // focal pressure (averaged impedances graded the faces: 10-18 % above it). Bounds: phase
+    // 0.15 rad and below a third of the rounding's error; amplitude 12 %.
     assert!(ct_worst < 0.15 && ct_worst < coarse_worst / 3.0, "{ct_worst} {coarse_worst}");
-    assert!(amplitude_worst < 0.2, "{amplitude_worst}");
+    assert!(amplitude_worst < 0.12, "{amplitude_worst}");
     std::fs::remove_dir_all(dir).ok();
 }

@@ -72,7 +72,9 @@ impl LayeredBowl {
             .map(|(psi, w)| (k * psi.sin(), C64::new(w * k * psi.sin(), 0.0)))
             .collect();
         measure.extend(
-            composite_gauss(EVANESCENT_PANELS, 16, 0.0, kappa_max).into_iter().map(|(kappa, w)| ((k * k + kappa * kappa).sqrt(), C64::new(0.0, -w))),
+            composite_gauss(EVANESCENT_PANELS, 16, 0.0, kappa_max)
+                .into_iter()
+                .map(|(kappa, w)| ((k * k + kappa * kappa).sqrt(), C64::new(0.0, -w))),
         );
         let nodes = measure
             .into_par_iter()
@@ -91,7 +93,10 @@ impl LayeredBowl {
     /// `p/p0` at radius `rho` from the axis and depth `z` (m, at or beyond the exit face).
     pub fn pressure(&self, rho: f64, z: f64) -> Result<C64> {
         if z < self.exit_face - 1e-12 {
-            return Err(HasError::invalid("z", format!("{:.3} mm lies before the stack's exit face at {:.3} mm", z * 1e3, self.exit_face * 1e3)));
+            return Err(HasError::invalid(
+                "z",
+                format!("{:.3} mm lies before the stack's exit face at {:.3} mm", z * 1e3, self.exit_face * 1e3),
+            ));
         }
         let d = z - self.exit_face;
         Ok(self.nodes.iter().map(|&(kt, a)| a * bessel_j0(kt * rho) * (C64::i() * self.exit.kz(C64::new(kt, 0.0)) * d).exp()).sum())
@@ -132,14 +137,8 @@ pub fn transmission(entry: Fluid, layers: &[Layer], exit: Fluid, kt: C64) -> C64
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_fluid as fluid;
     use super::*;
-    use crate::physics::material::Properties;
-
-    const F: f64 = 500e3;
-
-    fn fluid(c: f64, rho: f64, alpha: f64) -> Fluid {
-        Fluid::new(Properties { sound_speed: c, density: rho, attenuation: alpha }, F).unwrap()
-    }
 
     /// In water alone the spectrum gives back the direct Rayleigh sum, on and off the axis:
     /// 1e-4 of the focal pressure (the quadratures' accuracy, checked by the direct sum's own).
@@ -163,7 +162,7 @@ mod tests {
     fn transmission_of_one_layer_matches_its_closed_form() {
         let water = fluid(1500.0, 1000.0, 0.0);
         let bone = fluid(2800.0, 1850.0, 0.0);
-                let d = 6.5e-3;
+        let d = 6.5e-3;
         let t = transmission(water, &[Layer { thickness: d, fluid: bone }], water, C64::new(0.0, 0.0));
         let ratio = 2800.0 * 1850.0 / 1.5e6;
         let qd = bone.k.re * d;

@@ -125,6 +125,14 @@ impl Bowl {
     }
 }
 
+/// The fluid of sound speed `c` (m/s), density `rho` (kg/m³) and attenuation `a0` (dB/cm/MHz,
+/// linear in frequency) at the tests' 500 kHz.
+#[cfg(test)]
+pub(crate) fn test_fluid(c: f64, rho: f64, a0: f64) -> Fluid {
+    use crate::physics::material::attenuation_np_m;
+    Fluid::new(Properties { sound_speed: c, density: rho, attenuation: attenuation_np_m(a0, 1.0, 500e3) }, 500e3).unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -97,7 +97,10 @@ impl ShellBowl {
     pub fn pressure(&self, rho: f64, z: f64) -> Result<C64> {
         let r = rho.hypot(z - self.shell.centre);
         if r > self.reach * (1.0 + 1e-12) {
-            return Err(HasError::invalid("point", format!("lies {:.2} mm from the centre, beyond the {:.2} mm reach", r * 1e3, self.reach * 1e3)));
+            return Err(HasError::invalid(
+                "point",
+                format!("lies {:.2} mm from the centre, beyond the {:.2} mm reach", r * 1e3, self.reach * 1e3),
+            ));
         }
         let n_max = self.coefficients.len() - 1;
         if r == 0.0 {
@@ -162,15 +165,9 @@ fn transmissions(water: Fluid, shell: &Shell, passes: Passes, n_max: usize) -> V
 
 #[cfg(test)]
 mod tests {
-    use super::super::layered::{transmission, Layer};
+    use super::super::layered::{transmission, Layer, LayeredBowl};
+    use super::super::test_fluid as fluid;
     use super::*;
-    use crate::physics::material::Properties;
-
-    const F: f64 = 500e3;
-
-    fn fluid(c: f64, rho: f64, alpha: f64) -> Fluid {
-        Fluid::new(Properties { sound_speed: c, density: rho, attenuation: alpha }, F).unwrap()
-    }
 
     /// A shell of water changes nothing, and the expansion gives back the direct Rayleigh sum
     /// about a centre on the focus and one 41 mm beyond it: 1e-4 of the focal pressure.
@@ -210,13 +207,6 @@ mod tests {
             assert!((tn.norm() - plate.norm()).abs() < 0.01 * plate.norm(), "|T| {} vs plate {}", tn.norm(), plate.norm());
         }
     }
-}
-
-#[cfg(test)]
-mod plate_limit {
-    use super::super::layered::{Layer, LayeredBowl};
-    use super::*;
-    use crate::physics::material::{attenuation_np_m, Properties};
 
     /// A shell of 3 m radius whose near wall lies where a plate lies gives the plate's field:
     /// the spherical and the planar solutions, written independently, agree on the axis about
@@ -224,9 +214,7 @@ mod plate_limit {
     /// beam's 17 mm radius, a weak lens that moves the focus by a fraction of a millimetre).
     #[test]
     fn a_huge_shell_gives_the_plates_field() {
-        let f = 500e3;
-        let fl = |c: f64, rho: f64, a: f64| Fluid::new(Properties { sound_speed: c, density: rho, attenuation: attenuation_np_m(a, 1.0, f) }, f).unwrap();
-        let (water, bone) = (fl(1500.0, 1000.0, 0.0), fl(2800.0, 1850.0, 8.0));
+        let (water, bone) = (fluid(1500.0, 1000.0, 0.0), fluid(2800.0, 1850.0, 8.0));
         let bowl = Bowl::new(64e-3, 32e-3, water.k.re).unwrap();
         let outer = 3.0;
         let shell = Shell { centre: 30e-3 + outer, inner_radius: outer - 6.5e-3, outer_radius: outer, wall: bone, interior: water };

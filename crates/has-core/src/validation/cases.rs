@@ -227,4 +227,3 @@ pub fn suite(dir: &Path) -> Result<Vec<Case>> {
         )?,
     ])
 }
-

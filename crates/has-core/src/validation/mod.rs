@@ -167,8 +167,8 @@ fn parabolic_peak(samples: &[(f64, f64)]) -> (f64, f64) {
     (x1 + dx, y1 + slope * dx + c * dx * dx)
 }
 
-/// Pearson correlation coefficient.
-fn pearson(a: &[f64], b: &[f64]) -> f64 {
+/// Pearson correlation coefficient of two equally long samples.
+pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;
     let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);

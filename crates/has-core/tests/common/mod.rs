@@ -33,15 +33,4 @@ pub fn parabolic_peak(y: &[f64]) -> (f64, f64) {
     (n as f64 + off, b - 0.25 * (a - c) * off)
 }
 
-/// Pearson correlation coefficient.
-pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt()
-}
+pub use has_core::validation::pearson;
