@@ -35,6 +35,11 @@ def test_calibration_recovers_the_scenario_width(sim):
     c = sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=3))
     assert c.broadening_width_mm == pytest.approx(2.7, abs=0.1)
     assert c.amplitude == pytest.approx(sim.amplitude, rel=0.02)
+    # Widths beyond the MR field of view are not searched (they blur the image flat): a huge
+    # max_width_mm gives the same width, in the time of the field of view's search (it took
+    # minutes with 2**64 mm).
+    assert sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=3), None, 2**64).broadening_width_mm == \
+        pytest.approx(c.broadening_width_mm, abs=0.01)
 
 
 def test_estimate_rejects_bad_arguments(sim, ideal):

@@ -27,7 +27,7 @@ pub struct Calibration {
     pub noise: f64,
 }
 
-/// Fits W (searched in `[0, max_width]`, m) and A to a measured image of the beam steered with
+/// Fits W (searched in `[0, max_width]`, m, at most the MR field of view) and A to a measured image of the beam steered with
 /// `known` phases added (per element or per group; empty = none).
 pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_fraction: f64, max_width: f64) -> Result<Calibration> {
     check_image(sim, image, "image")?;
@@ -35,6 +35,9 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         return Err(HasError::invalid("mask_fraction", "must lie in (0, 1)"));
     }
     require_positive("max_width_mm", max_width * 1e3)?;
+    // A Gaussian wider than the field of view blurs the image flat: no wider width can fit better,
+    // and the search's cost grows with the width.
+    let max_width = max_width.min(sim.mr.fov[0].max(sim.mr.fov[1]));
     let rec = sim.record_window(&[sim.source_field(known)?])?.remove(0);
     let power: Vec<f64> = rec.window.iter().map(|p| p.norm_sqr()).collect();
     // The focal zone, dilated by the blur reach of the largest width: pixels with little signal
