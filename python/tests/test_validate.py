@@ -36,10 +36,13 @@ def test_the_exit_status_says_whether_every_case_passed(tmp_path):
     assert ("FAIL" in r.stdout) == (not result["passed"])
 
 
-def test_an_unknown_case_is_one_line_and_exit_2():
+def test_an_unknown_case_or_an_out_that_is_a_file_is_one_line_and_exit_2(tmp_path):
     r = run("--case", "bm9")
     assert r.returncode == 2
     assert r.stderr.strip() == "arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, shell, bm5"
+    (tmp_path / "file").write_text("x")
+    r = run("--case", "water", "--out", str(tmp_path / "file"))
+    assert r.returncode == 2 and r.stderr.strip() == f"arfi: error: --out: {tmp_path / 'file'} exists and is not a folder"
     with pytest.raises(ValueError, match="cases: unknown bm9"):
         validation.run(["bm9"])
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from arfi.cli.common import finish
@@ -36,6 +37,8 @@ def run(args: argparse.Namespace) -> int:
         unknown = [c for c in args.cases if c not in CASES]
         if unknown:
             raise ValueError(f"--case: unknown {', '.join(unknown)}; the suite has {', '.join(CASES)}")
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        raise ValueError(f"--out: {args.out} exists and is not a folder")
     t = time.perf_counter()
     results = run_suite(args.cases, progress=lambda name: print(f"validate: {name} ...", file=sys.stderr, flush=True))
     print(table(results))
