@@ -37,13 +37,19 @@ TOLERANCES: dict[str, float] = dict(zip(("focal_pressure", "focal_position_mm", 
 CASES = ("water", "bm3", "bm4", "shell", "bm5")
 
 
-def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[Any]:
-    """Runs the named cases (all by default), each on its scenario's default grid, and returns
-    their :class:`arfi._core.ValidationResult`. Raises ValueError naming an unknown case."""
+def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
+    """The cases asked for (all when None); ValueError naming ``name`` and an unknown case."""
     wanted = list(CASES if cases is None else cases)
     unknown = [c for c in wanted if c not in CASES]
     if unknown:
-        raise ValueError(f"cases: unknown {', '.join(unknown)}; the suite has {', '.join(CASES)}")
+        raise ValueError(f"{name}: unknown {', '.join(unknown)}; the suite has {', '.join(CASES)}")
+    return wanted
+
+
+def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[Any]:
+    """Runs the named cases (all by default), each on its scenario's default grid, and returns
+    their :class:`arfi._core.ValidationResult`. Raises ValueError naming an unknown case."""
+    wanted = check_cases(cases)
     results = []
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as tmp:
         for case in _core.validation_cases(tmp):

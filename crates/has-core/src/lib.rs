@@ -25,6 +25,7 @@ pub mod error;
 pub mod inverse;
 pub mod memory;
 pub mod nifti;
+pub mod numeric;
 pub mod physics;
 pub mod prediction;
 pub mod reference;

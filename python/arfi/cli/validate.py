@@ -31,16 +31,13 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.validation import CASES, run as run_suite, summary, table, write_report
+    from arfi.validation import check_cases, run as run_suite, summary, table, write_report
 
-    if args.cases is not None:
-        unknown = [c for c in args.cases if c not in CASES]
-        if unknown:
-            raise ValueError(f"--case: unknown {', '.join(unknown)}; the suite has {', '.join(CASES)}")
+    cases = check_cases(args.cases, "--case")
     if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
         raise ValueError(f"--out: {args.out} exists and is not a folder")
     t = time.perf_counter()
-    results = run_suite(args.cases, progress=lambda name: print(f"validate: {name} ...", file=sys.stderr, flush=True))
+    results = run_suite(cases, progress=lambda name: print(f"validate: {name} ...", file=sys.stderr, flush=True))
     print(table(results))
     failed = [r.name for r in results if not r.passed]
     if args.out is not None:

@@ -20,6 +20,7 @@
 use crate::error::{HasError, Result};
 use crate::inverse::basis::{image_known_per_element, BACKGROUND_MARGIN};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
+use crate::numeric;
 use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;
 use ndarray::Array2;
@@ -207,16 +208,10 @@ fn parabola(points: &[Point], i: usize) -> (Option<f64>, Option<f64>) {
         return (None, None);
     }
     let [p0, p1, p2] = [points[i - 1], points[i], points[i + 1]];
-    // Newton form through p0, p1, p2: J = p0.j + d01·(c − p0.c) + a·(c − p0.c)·(c − p1.c), with
-    // d01 and d12 the first divided differences and `a` the second.
-    let d01 = (p1.j - p0.j) / (p1.c - p0.c);
-    let d12 = (p2.j - p1.j) / (p2.c - p1.c);
-    let a = (d12 - d01) / (p2.c - p0.c);
-    if a.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return (None, None);
+    match numeric::parabola([(p0.c, p0.j), (p1.c, p1.j), (p2.c, p2.j)]) {
+        Some(p) if p.curvature > 0.0 => (Some(p.vertex.clamp(p0.c, p2.c)), Some(p.curvature)),
+        _ => (None, None),
     }
-    let vertex = 0.5 * (p0.c + p1.c) - d01 / (2.0 * a);
-    (Some(vertex.clamp(p0.c, p2.c)), Some(a))
 }
 
 #[cfg(test)]

@@ -46,17 +46,30 @@ impl Shape {
         }
     }
 
+    /// Its extent along z, `(z_min, z_max)` (m).
+    pub fn z_range(&self) -> (f64, f64) {
+        match *self {
+            Shape::Cylinder { z_min, z_max, .. } | Shape::Slab { z_min, z_max } => (z_min, z_max),
+        }
+    }
+
+    /// A point `(x, y)` (m) the shape covers at every z of its range: the cylinder's axis, or the
+    /// beam axis for a slab.
+    pub fn axis_point(&self) -> [f64; 2] {
+        match *self {
+            Shape::Cylinder { center, .. } => center,
+            Shape::Slab { .. } => [0.0, 0.0],
+        }
+    }
+
     fn validate(&self, name: &str) -> Result<()> {
-        let (z_min, z_max) = match *self {
-            Shape::Cylinder { radius, z_min, z_max, center } => {
-                require_positive(&format!("{name}.radius_mm"), radius)?;
-                if !center.iter().all(|c| c.is_finite()) {
-                    return Err(HasError::invalid(format!("{name}.center_mm"), "must be finite"));
-                }
-                (z_min, z_max)
+        if let Shape::Cylinder { radius, center, .. } = *self {
+            require_positive(&format!("{name}.radius_mm"), radius)?;
+            if !center.iter().all(|c| c.is_finite()) {
+                return Err(HasError::invalid(format!("{name}.center_mm"), "must be finite"));
             }
-            Shape::Slab { z_min, z_max } => (z_min, z_max),
-        };
+        }
+        let (z_min, z_max) = self.z_range();
         if !(z_min.is_finite() && z_max.is_finite() && z_max > z_min) {
             return Err(HasError::invalid(
                 format!("{name}.z_min_mm/z_max_mm"),
@@ -201,18 +214,17 @@ impl Medium {
 
     /// Checks that `grid` resolves every region: each must reach into the grid (a region wholly
     /// beyond it would have no effect) and be at least one step thick along z (the march samples
-    /// each slab at its midpoint, so a thinner layer would vanish or count as a whole step;
-    /// thicker layers are rounded to whole steps).
+    /// each slab at its midpoint, so a thinner layer would vanish or count as a whole step; the
+    /// default step puts planes on the faces of layers, a step set in `[grid]` may round them).
     pub fn check_on_grid(&self, grid: &Grid) -> Result<()> {
         let (z_lo, z_hi) = (grid.z0, grid.z(grid.nz - 1));
         let (x_half, y_half) = (grid.x(grid.nx - 1).max(-grid.x(0)), grid.y(grid.ny - 1).max(-grid.y(0)));
         for (i, r) in self.regions.iter().enumerate() {
             let name = format!("region[{i}] ({})", self.materials[r.material].name);
-            let (z_min, z_max, lateral_miss) = match r.shape {
-                Shape::Slab { z_min, z_max } => (z_min, z_max, false),
-                Shape::Cylinder { radius, z_min, z_max, center } => {
-                    (z_min, z_max, center[0].abs() - radius > x_half || center[1].abs() - radius > y_half)
-                }
+            let (z_min, z_max) = r.shape.z_range();
+            let lateral_miss = match r.shape {
+                Shape::Slab { .. } => false,
+                Shape::Cylinder { radius, center, .. } => center[0].abs() - radius > x_half || center[1].abs() - radius > y_half,
             };
             if z_max < z_lo {
                 return Err(HasError::invalid(
@@ -419,8 +431,9 @@ impl Medium {
         Some(
             self.regions
                 .iter()
-                .map(|r| match r.shape {
-                    Shape::Cylinder { z_min, z_max, .. } | Shape::Slab { z_min, z_max } => z >= z_min && z <= z_max,
+                .map(|r| {
+                    let (z_min, z_max) = r.shape.z_range();
+                    z >= z_min && z <= z_max
                 })
                 .collect(),
         )

@@ -115,10 +115,8 @@ fn marked_faces(r: &Resolved, z0: f64, z_end: f64) -> Vec<f64> {
     let omega = 2.0 * std::f64::consts::PI * r.frequency;
     let mut faces: Vec<f64> = Vec::new();
     for region in &m.regions {
-        let (z_min, z_max, [cx, cy]) = match region.shape {
-            crate::physics::medium::Shape::Cylinder { z_min, z_max, center, .. } => (z_min, z_max, center),
-            crate::physics::medium::Shape::Slab { z_min, z_max } => (z_min, z_max, [0.0, 0.0]),
-        };
+        let (z_min, z_max) = region.shape.z_range();
+        let [cx, cy] = region.shape.axis_point();
         for z in [z_min, z_max] {
             if z <= z0 || z >= z_end || faces.iter().any(|f| (f - z).abs() < 1e-9) {
                 continue;
@@ -142,8 +140,9 @@ fn marked_faces(r: &Resolved, z0: f64, z_end: f64) -> Vec<f64> {
 /// plane moves forward from `z0` by less than a step to the first plane of that lattice. Where no
 /// step down to `dz_max/4` (or the thinnest layer) fits every face, the one that comes closest.
 fn steps_on_faces(z0: f64, dz_max: f64, faces: &[f64], focus_z: f64) -> (f64, f64) {
-    let misfit =
-        |dz: f64, targets: &[f64]| targets.iter().map(|&z| ((z - faces[0]) / dz - ((z - faces[0]) / dz).round()).abs()).fold(0.0, f64::max);
+    let misfit = |dz: f64, targets: &[f64]| {
+        targets.iter().map(|&z| (z - faces[0]) / dz).map(|steps| (steps - steps.round()).abs()).fold(0.0, f64::max)
+    };
     let span = |targets: &[f64]| targets.iter().fold(0.0_f64, |m, &z| m.max((z - faces[0]).abs()));
     let mut with_focus = faces.to_vec();
     with_focus.push(focus_z);
@@ -163,9 +162,7 @@ fn steps_on_faces(z0: f64, dz_max: f64, faces: &[f64], focus_z: f64) -> (f64, f6
         .find(|&dz| misfit(dz, &with_focus) <= ON_PLANE)
         .or_else(|| candidates(faces, floor).find(|&dz| misfit(dz, faces) <= ON_PLANE))
         .unwrap_or_else(|| {
-            candidates(faces, floor)
-                .fold((dz_max, f64::INFINITY), |b, dz| if misfit(dz, faces) < b.1 { (dz, misfit(dz, faces)) } else { b })
-                .0
+            candidates(faces, floor).map(|dz| (dz, misfit(dz, faces))).fold((dz_max, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b }).0
         });
     (align_source_plane(z0, dz, faces), dz)
 }

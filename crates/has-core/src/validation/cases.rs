@@ -8,7 +8,7 @@ use crate::reference::shell::{Passes, Shell, ShellBowl};
 use crate::reference::{Bowl, Fluid};
 use crate::scenario::Scenario;
 use num_complex::Complex64 as C64;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The ITRUSST benchmark's source SC1: 500 kHz, radius of curvature 64 mm, aperture 64 mm.
 const FREQUENCY: f64 = 500e3;
@@ -80,8 +80,9 @@ impl Exact {
 enum Geometry {
     /// Layers from `z1` (m): fluids and thicknesses (m), then the exit fluid.
     Layered { z1: f64, layers: Vec<(Tissue, f64)>, exit: Tissue },
-    /// A cap of cortical bone on a sphere about `(0, 0, centre)` (m), water inside and out.
-    Shell { centre: f64, inner: f64, outer: f64 },
+    /// A cap of cortical bone on a sphere about `(0, 0, centre)` (m) within `cap_deg` of the
+    /// direction towards the bowl, water inside and out, read from the CT at `ct`.
+    Shell { centre: f64, inner: f64, outer: f64, cap_deg: f64, ct: PathBuf },
 }
 
 /// One case of the suite.
@@ -97,6 +98,14 @@ pub struct Case {
 }
 
 impl Case {
+    /// Writes what the case's scenario reads (a shell's CT; layered cases read nothing).
+    pub fn write_inputs(&self) -> Result<()> {
+        match &self.geometry {
+            Geometry::Layered { .. } => Ok(()),
+            &Geometry::Shell { centre, inner, outer, cap_deg, ref ct } => write_shell_ct(ct, centre, inner, outer, cap_deg),
+        }
+    }
+
     /// The exact solution (built on demand: a fraction of a second).
     pub fn exact(&self) -> Result<Exact> {
         let water = WATER.fluid();
@@ -106,7 +115,7 @@ impl Case {
                 let layers: Vec<Layer> = layers.iter().map(|&(t, d)| Layer { thickness: d, fluid: t.fluid() }).collect();
                 Ok(Exact::Layered(LayeredBowl::new(&bowl, water, *z1, &layers, exit.fluid())?))
             }
-            &Geometry::Shell { centre, inner, outer } => {
+            &Geometry::Shell { centre, inner, outer, .. } => {
                 let shell = Shell { centre, inner_radius: inner, outer_radius: outer, wall: CORTICAL.fluid(), interior: water };
                 Ok(Exact::Shell(ShellBowl::new(&bowl, water, shell, Passes::One, inner - 1e-3)?, centre))
             }
@@ -155,11 +164,10 @@ const CT_VOXEL: f64 = 0.25e-3;
 /// benchmark's cortical bone.
 const BONE_HU: f64 = 2000.0;
 
-/// A cap of cortical bone (radii in mm about the axis point `centre_mm`), the cone of half-angle
-/// `cap_deg` about the direction towards the bowl, written as a CT of 0.25 mm voxels (HU 2000 in
-/// the bone, -1000 elsewhere: coupling, the scenario's water) to `dir/{name}.nii`.
-fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f64, outer_mm: f64, cap_deg: f64) -> Result<Case> {
-    let (c, a, b) = (centre_mm * 1e-3, inner_mm * 1e-3, outer_mm * 1e-3);
+/// A cap of cortical bone (radii in m about the axis point `c`), the cone of half-angle `cap_deg`
+/// about the direction towards the bowl, written to `path` as a CT of 0.25 mm voxels (HU 2000 in
+/// the bone, -1000 elsewhere: coupling, the scenario's water).
+fn write_shell_ct(path: &Path, c: f64, a: f64, b: f64, cap_deg: f64) -> Result<()> {
     let cos_cap = cap_deg.to_radians().cos();
     // The box around the cap, with two voxels of coupling on every side, reaching past the
     // focal region (a CT must cover the focus).
@@ -183,9 +191,14 @@ fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f6
     let h = 0.5 * (n - 1) as f64 * CT_VOXEL * 1e3;
     let s = CT_VOXEL * 1e3;
     let affine = [[-s, 0.0, 0.0, h], [0.0, -s, 0.0, h], [0.0, 0.0, s, z_lo * 1e3]];
+    std::fs::write(path, nifti::encode([nk, n, n], &hu, affine))
+        .map_err(|e| HasError::invalid("validation directory", format!("cannot write {}: {e}", path.display())))
+}
+
+/// The shell case `name` (radii in mm about the axis point `centre_mm`, a cap of `cap_deg`), its
+/// CT to be written to `dir/{name}.nii` by [`Case::write_inputs`].
+fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f64, outer_mm: f64, cap_deg: f64) -> Result<Case> {
     let file = format!("{name}.nii");
-    std::fs::write(dir.join(&file), nifti::encode([nk, n, n], &hu, affine))
-        .map_err(|e| HasError::invalid("validation directory", format!("cannot write {}: {e}", dir.join(&file).display())))?;
     let ct = format!(
         "[ct]\nfile = \"{file}\"\nconversion = \"aubry2003\"\nhu_max = {BONE_HU}\nbone_sound_speed_m_s = {:.1}\n\
          bone_density_kg_m3 = {:.1}\nbone_attenuation_min_db_cm_mhz = {}\nwater_sound_speed_m_s = {:.1}\nwater_density_kg_m3 = {:.1}\n",
@@ -199,11 +212,11 @@ fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f6
         name: name.into(),
         description: description.into(),
         scenario: scenario(&[], &ct, Some(dir))?,
-        geometry: Geometry::Shell { centre: c, inner: a, outer: b },
+        geometry: Geometry::Shell { centre: centre_mm * 1e-3, inner: inner_mm * 1e-3, outer: outer_mm * 1e-3, cap_deg, ct: dir.join(file) },
     })
 }
 
-/// The suite's cases; the shells' CTs are written to `dir`.
+/// The suite's cases; a shell's CT is written to `dir` when the case runs ([`Case::write_inputs`]).
 pub fn suite(dir: &Path) -> Result<Vec<Case>> {
     Ok(vec![
         layered("water", "ITRUSST SC1 bowl (500 kHz, R 64 mm, aperture 64 mm) in water", 10.0, &[], WATER)?,

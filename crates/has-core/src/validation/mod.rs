@@ -13,6 +13,7 @@ mod cases;
 pub use cases::{suite, Case, Exact};
 
 use crate::error::Result;
+use crate::numeric::{parabolic_peak, pearson};
 use crate::simulation::Simulation;
 
 /// How close the simulation must come (the targets of a planning tool: half the spread of the
@@ -86,22 +87,23 @@ impl Comparison {
     }
 }
 
-/// Runs `case` on its scenario's default grid and compares it with its exact solution.
+/// Runs `case` on its scenario's default grid (writing its inputs first) and compares it with its
+/// exact solution.
 pub fn compare(case: &Case) -> Result<Comparison> {
     let t = std::time::Instant::now();
+    case.write_inputs()?;
     let sim = Simulation::new(&case.scenario)?;
     let exact = case.exact()?;
     let p0 = sim.source.face_pressure;
-    let axis_field = sim.field(&[], None)?;
-    let axis: Vec<(f64, f64)> = axis_field.axis_z.iter().zip(&axis_field.axis_pressure).map(|(&z, p)| (z, p.norm() / p0)).collect();
     // The exact peak by a 10 µm scan over ±15 mm of the nominal focus.
-    let nominal = case.scenario.resolve()?.focus[2];
-    let (z_exact, p_exact) = (0..=3000)
-        .map(|i| nominal - 15e-3 + i as f64 * 1e-5)
-        .map(|z| Ok((z, exact.pressure(0.0, z)?.norm())))
-        .collect::<Result<Vec<_>>>()?
-        .into_iter()
-        .fold((0.0, 0.0), |b, (z, p)| if p > b.1 { (z, p) } else { b });
+    let nominal = sim.focus[2];
+    let (z_exact, p_exact) = (0..=3000).map(|i| nominal - 15e-3 + i as f64 * 1e-5).try_fold((0.0, 0.0), |b, z| {
+        let p = exact.pressure(0.0, z)?.norm();
+        Ok::<_, crate::HasError>(if p > b.1 { (z, p) } else { b })
+    })?;
+    // One march: the axis, and the grid's plane nearest the exact focus.
+    let plane = sim.field(&[], Some(z_exact))?;
+    let axis: Vec<(f64, f64)> = plane.axis_z.iter().zip(&plane.axis_pressure).map(|(&z, p)| (z, p.norm() / p0)).collect();
     // The simulated peak in the same range (inside bone the standing wave can be higher).
     let near: Vec<(f64, f64)> = axis.iter().copied().filter(|&(z, _)| exact.covers(z) && (z - nominal).abs() <= 15e-3).collect();
     let (z_sim, p_sim) = parabolic_peak(&near);
@@ -116,8 +118,7 @@ pub fn compare(case: &Case) -> Result<Comparison> {
             rows.push([z, p, e]);
         }
     }
-    // The focal plane: the grid's plane nearest the exact focus, exact values at its own z.
-    let plane = sim.field(&[], Some(z_exact))?;
+    // The focal plane, exact values at its own z.
     let (mut a, mut b, mut line) = (Vec::new(), Vec::new(), Vec::new());
     for (j, &y) in plane.y.iter().enumerate() {
         for (i, &x) in plane.x.iter().enumerate() {
@@ -144,52 +145,4 @@ pub fn compare(case: &Case) -> Result<Comparison> {
         spacing: sim.grid.dx,
         seconds: t.elapsed().as_secs_f64(),
     })
-}
-
-/// The peak of samples `(z, value)` by a parabola through the largest and its two neighbours
-/// (for unequal spacing too): `(z, value)`.
-fn parabolic_peak(samples: &[(f64, f64)]) -> (f64, f64) {
-    let n = (0..samples.len()).fold(0, |b, i| if samples[i].1 > samples[b].1 { i } else { b });
-    if n == 0 || n + 1 == samples.len() {
-        return samples[n];
-    }
-    let [(x0, y0), (x1, y1), (x2, y2)] = [samples[n - 1], samples[n], samples[n + 1]];
-    // Newton's divided differences: y = y1 + d1·(x - x1) + d2·(x - x1)·(x - x0) ...
-    let d01 = (y1 - y0) / (x1 - x0);
-    let d12 = (y2 - y1) / (x2 - x1);
-    let c = (d12 - d01) / (x2 - x0);
-    if !(c < 0.0) {
-        return samples[n];
-    }
-    // y = y1 + slope·(x - x1) + c·(x - x1)², slope at x1 = d01 + c·(x1 - x0).
-    let slope = d01 + c * (x1 - x0);
-    let dx = -slope / (2.0 * c);
-    (x1 + dx, y1 + slope * dx + c * dx * dx)
-}
-
-/// Pearson correlation coefficient of two equally long samples.
-pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A parabola's own samples, unequally spaced, give back its vertex.
-    #[test]
-    fn parabolic_peak_finds_the_vertex_between_unequal_samples() {
-        let f = |x: f64| 3.0 - 2.0 * (x - 0.37).powi(2);
-        let s: Vec<(f64, f64)> = [0.0, 0.25, 0.5, 1.2].iter().map(|&x| (x, f(x))).collect();
-        let (x, y) = parabolic_peak(&s);
-        assert!((x - 0.37).abs() < 1e-12 && (y - 3.0).abs() < 1e-12, "{x} {y}");
-    }
 }

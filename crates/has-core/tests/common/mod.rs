@@ -23,15 +23,9 @@ pub fn basis_model(sim: &Simulation) -> Simulation {
 /// Sub-sample peak of equally spaced samples by a parabola through the largest sample and its two
 /// neighbours: (fractional index, value).
 pub fn parabolic_peak(y: &[f64]) -> (f64, f64) {
-    let n = (0..y.len()).fold(0, |b, i| if y[i] > y[b] { i } else { b });
-    if n == 0 || n + 1 == y.len() {
-        return (n as f64, y[n]);
-    }
-    let (a, b, c) = (y[n - 1], y[n], y[n + 1]);
-    let d = a - 2.0 * b + c;
-    let off = if d < 0.0 { 0.5 * (a - c) / d } else { 0.0 };
-    (n as f64 + off, b - 0.25 * (a - c) * off)
+    let samples: Vec<(f64, f64)> = y.iter().enumerate().map(|(i, &v)| (i as f64, v)).collect();
+    has_core::numeric::parabolic_peak(&samples)
 }
 
 #[allow(unused_imports)] // (not every test file correlates)
-pub use has_core::validation::pearson;
+pub use has_core::numeric::pearson;
