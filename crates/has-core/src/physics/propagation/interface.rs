@@ -16,7 +16,26 @@
 //! the wave-propagation method (Brenner & Singer, Appl Opt 32(26), 1993): the reflected wave is
 //! `Σ_pairs M_ab(x, y) · IFFT(R_ab · FFT(p))`, with `M_ab` the pixels where slab `n - 1` holds
 //! `a` and slab `n` holds `b`. Slices with more distinct pairs than [`MAX_SPECTRAL_PAIRS`] (voxel
-//! maps of continuously varying properties) use the normal-incidence coefficient pixel by pixel.
+//! maps and CTs of continuously varying properties) use the normal-incidence coefficient pixel
+//! by pixel.
+//!
+//! The march carries the *flux-normalised* field `ψ = p·sqrt(Z_s/Z)` (`Z = rho·c` of the pixel's
+//! medium, `Z_s` of the source's): the angular spectrum keeps `Σ|ψ|²`, so a wave moving across
+//! the plane from one impedance into another (the risers of a staircase face, which no z
+//! interface sees) keeps its power instead of its pressure. Crossing a face, `ψ` is transmitted
+//! by `(1 + R)·sqrt(Z_a/Z_b)`, which is `sqrt(1 - R²)` at normal incidence in either direction;
+//! reflected waves stay in the medium they came from and keep `R`. Recorded values are pressures
+//! (`p = ψ·sqrt(Z/Z_s)`).
+//!
+//! A CT face inside a cell is applied at the nearest plane (the cell takes the impedance at its
+//! centre) while the cell's averaged slowness keeps the delay through it; what the plane cannot
+//! keep is where the face reflects. A per-pixel face is therefore given the phase of its true
+//! position ([`face_phase`]): reflected forward-going waves carry `R·exp(i·φ)`, backward-going
+//! ones `-R·exp(-i·φ)`, with `φ = 2·(omega·s_m + i·alpha_m)·δ` for the misplaced material
+//! (slowness `s_m`, attenuation `alpha_m`, thickness `δ`, signed: + when the face lies beyond the
+//! plane) found from the averaged slowness of the cells on either side. Without it the round trips inside a curved bone wall, whose faces
+//! snap by up to half a step, add up with phases spread over ±k·dz and the wall's reverberation
+//! is lost.
 
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
@@ -81,18 +100,24 @@ pub(crate) struct Interface<T: FftNum = f64> {
 
 enum Kind<T: FftNum> {
     /// `R(x, y)` applied pixel by pixel, kept on the pixels where it is not zero (in increasing
-    /// order; through a head, the few percent of the plane where the slices differ).
-    Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T> },
+    /// order; through a head, the few percent of the plane where the slices differ), with the
+    /// factor `exp(i·φ)` of each face's true position (`None`: every face on the plane).
+    Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T>, phase: Option<Vec<Complex<T>>> },
     /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
     Spectral(Vec<Pair<T>>),
 }
 
 struct Pair<T: FftNum> {
+    /// `sqrt(Z_a/Z_b)`: the flux normalisation of the wave crossing from `a` into `b`.
+    scale: f64,
     /// The pixels of this pair; `None`: every pixel.
     pixels: Option<Vec<u32>>,
     /// `R_ab(kx, ky) / (nx·ny)` in the transposed spectrum layout `(nx, ny)`.
     coefficient: Arc<Vec<Complex<T>>>,
 }
+
+/// A pointwise interface's pixels, their coefficients `R` and their faces' factors `exp(i·φ)`.
+pub(crate) type PointwiseFaces<'a, T> = (&'a Arc<Vec<u32>>, &'a [T], Option<&'a [Complex<T>]>);
 
 /// Properties of one pixel as exact bits (equal bits: the same material).
 type Key = [u64; 3];
@@ -109,21 +134,29 @@ impl Interface {
     /// single-precision copy (shared as the originals are).
     pub(crate) fn single(&self, copy: &mut impl FnMut(&Arc<Vec<C64>>) -> Arc<Vec<C32>>) -> Interface<f32> {
         let kind = match &self.kind {
-            Kind::Pointwise { pixels, r } => Kind::Pointwise { pixels: pixels.clone(), r: r.iter().map(|&r| r as f32).collect() },
-            Kind::Spectral(pairs) => {
-                Kind::Spectral(pairs.iter().map(|p| Pair { pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect())
-            }
+            Kind::Pointwise { pixels, r, phase } => Kind::Pointwise {
+                pixels: pixels.clone(),
+                r: r.iter().map(|&r| r as f32).collect(),
+                phase: phase.as_ref().map(|p| p.iter().map(|&p| C32::new(p.re as f32, p.im as f32)).collect()),
+            },
+            Kind::Spectral(pairs) => Kind::Spectral(
+                pairs.iter().map(|p| Pair { scale: p.scale, pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect(),
+            ),
         };
         Interface { strength: self.strength, kind }
     }
 
-    /// The interface from slab `from` into slab `to`, or `None` where they are equal.
+    /// The interface from slab `from` into slab `to`, or `None` where they are equal. With
+    /// `around` (the slabs before `from` and after `to`), a pointwise interface gives its faces
+    /// the phases of their positions inside the cells ([`face_phase`]); without, its faces lie on
+    /// the plane (the faces of regions, which the default grid puts on planes).
     pub fn new(
         grid: &Grid,
         from: &SliceProperties,
         to: &SliceProperties,
         omega: f64,
         model: InterfaceModel,
+        around: Option<(&SliceProperties, &SliceProperties)>,
         shared: &mut Coefficients,
     ) -> Option<Self> {
         if from == to {
@@ -141,7 +174,13 @@ impl Interface {
         let pointwise = || {
             let pixels: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| normal[i as usize] != 0.0).collect();
             let r = pixels.iter().map(|&i| normal[i as usize]).collect();
-            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r } })
+            let phase = around.and_then(|(before, after)| {
+                let slabs = [before, from, to, after];
+                let phase: Vec<C64> =
+                    pixels.par_iter().map(|&i| (C64::i() * face_phase(slabs, i as usize, omega, grid.dz)).exp()).collect();
+                phase.iter().any(|&p| p != C64::new(1.0, 0.0)).then_some(phase)
+            });
+            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r, phase } })
         };
         if model == InterfaceModel::NormalIncidence {
             return pointwise();
@@ -167,6 +206,7 @@ impl Interface {
         let pairs = pairs
             .into_iter()
             .map(|(k, (first, pixels))| Pair {
+                scale: (impedance(from, first) / impedance(to, first)).sqrt(),
                 coefficient: shared
                     .0
                     .entry(k)
@@ -181,12 +221,20 @@ impl Interface {
 
 impl<T: FftNum> Interface<T> {
     /// What it holds, as ids of whole planes (arrays as long as the grid's plane): a pointwise
-    /// coefficient map (at most a plane: its pixels and their coefficients); or each material pair's spectral coefficient (shared between interfaces:
+    /// coefficient map (at most a plane: its pixels and their coefficients; a second with its
+    /// faces' factors); or each material pair's spectral coefficient (shared between interfaces:
     /// the same id) and, where pairs split the plane, their pixel lists (one plane's worth).
     pub(crate) fn planes(&self) -> Vec<usize> {
         let own = self as *const Self as usize;
         match &self.kind {
-            Kind::Pointwise { .. } => vec![own],
+            // The pixels and coefficients, and the faces' factors (8 or 16 bytes a pixel).
+            Kind::Pointwise { phase, .. } => {
+                if phase.is_some() {
+                    vec![own, own + 1]
+                } else {
+                    vec![own]
+                }
+            }
             Kind::Spectral(pairs) => pairs
                 .iter()
                 .map(|p| Arc::as_ptr(&p.coefficient) as usize)
@@ -195,11 +243,11 @@ impl<T: FftNum> Interface<T> {
         }
     }
 
-    /// The pixels where a pointwise interface's `R` is not zero and its values there, or `None`
-    /// for a spectral interface.
-    pub(crate) fn pointwise(&self) -> Option<(&Arc<Vec<u32>>, &[T])> {
+    /// The pixels where a pointwise interface's `R` is not zero, its values there and the faces'
+    /// factors (`None` where every face lies on the plane), or `None` for a spectral interface.
+    pub(crate) fn pointwise(&self) -> Option<PointwiseFaces<'_, T>> {
         match &self.kind {
-            Kind::Pointwise { pixels, r } => Some((pixels, r)),
+            Kind::Pointwise { pixels, r, phase } => Some((pixels, r, phase.as_deref())),
             Kind::Spectral(_) => None,
         }
     }
@@ -209,7 +257,7 @@ impl<T: FftNum> Interface<T> {
     /// as long as `p`; `work` is overwritten.
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
-            Kind::Pointwise { pixels, r } => scale_pixels(pixels, r, p, out),
+            Kind::Pointwise { pixels, r, .. } => scale_pixels(pixels, r, p, out),
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
                 fft.forward(work, ws);
@@ -228,14 +276,48 @@ impl<T: FftNum> Interface<T> {
     }
 }
 
+impl<T: FftNum + Into<f64>> Interface<T> {
+    /// `ψ ← sqrt(Z_from/Z_to)·ψ` on the pixels the interface changes, for a wave that has crossed
+    /// it in the direction `sign` (+1: from slab `n - 1` into slab `n`; -1 back) as a pressure
+    /// (`ψ + sign·R ⊛ ψ`): what makes the crossing transmit the flux-normalised field (see the
+    /// module doc). Diagonal, so its own transpose.
+    pub fn normalise_transmitted(&self, field: &mut [Complex<T>], sign: f64) {
+        let power = |s: f64| T::from_f64(if sign < 0.0 { 1.0 / s } else { s }).expect("a finite scale");
+        match &self.kind {
+            Kind::Pointwise { pixels, r, .. } => pixels.iter().zip(r).for_each(|(&i, &r)| {
+                // Z_a/Z_b = (1 - R)/(1 + R) for R = (Z_b - Z_a)/(Z_a + Z_b).
+                let r: f64 = r.into();
+                let f = &mut field[i as usize];
+                *f = *f * power(((1.0 - r) / (1.0 + r)).sqrt());
+            }),
+            Kind::Spectral(pairs) => {
+                for pair in pairs {
+                    let s = power(pair.scale);
+                    match &pair.pixels {
+                        None => field.iter_mut().for_each(|f| *f = *f * s),
+                        Some(px) => px.iter().for_each(|&i| field[i as usize] = field[i as usize] * s),
+                    }
+                }
+            }
+        }
+    }
+}
+
 impl Interface {
     /// `out ← Rᵀ p`, the transpose of [`Interface::reflect`]: `Σ_pairs IFFT(R_ab · FFT(M_ab · p))`
     /// (each pair's pixels taken before its filter, not after; `R_ab` depends on `kx² + ky²`
-    /// only, so the filter is its own transpose). `work` is overwritten.
-    pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace) {
+    /// only, so the filter is its own transpose). With `faces` (the direction of the incident
+    /// wave, ±1), a pointwise `R` carries its faces' factors (`exp(±i·φ)`): the transpose of the
+    /// reflected wave's operator rather than of the crossing's. `work` is overwritten.
+    pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace, faces: Option<f64>) {
         match &self.kind {
             // A pointwise R is diagonal: its own transpose.
-            Kind::Pointwise { pixels, r } => scale_pixels(pixels, r, p, out),
+            Kind::Pointwise { pixels, r, phase } => {
+                scale_pixels(pixels, r, p, out);
+                if let (Some(sign), Some(phase)) = (faces, phase) {
+                    pixels.iter().zip(phase).for_each(|(&i, &f)| out[i as usize] *= if sign < 0.0 { 1.0 / f } else { f });
+                }
+            }
             Kind::Spectral(pairs) => {
                 let mut sum = vec![C64::new(0.0, 0.0); p.len()];
                 for pair in pairs {
@@ -254,6 +336,41 @@ impl Interface {
             }
         }
     }
+}
+
+/// The complex phase `φ = 2·(κ_P·f - κ_C·g)·dz`, `κ = omega·s + i·alpha`, of the face between
+/// slabs `P` and `C` at pixel `i` (`slabs` = the slab before `P`, `P`, `C`, the slab after `C`;
+/// `s` slowness, `alpha` attenuation; the true path of the wave reflected at the face less the
+/// marched one, there and back): a face
+/// inside `C` (whose centre lies beyond it) leaves the fraction `f = (s_C - s_N)/(s_P - s_N)` of
+/// `C` in `P`'s material, a face inside `P` the fraction `g = (s_P - s_A)/(s_C - s_A)` of `P` in
+/// `C`'s. Each is taken only where the cell beyond it is of the material its centre holds
+/// (impedance within [`FACE_NEIGHBOUR`] of the jump: a face between two layers at least a step
+/// thick) and whose slowness differs from the other side's (by more than 1e-6: a change of
+/// density alone leaves the fraction undefined), and held below one half (the centre decides the
+/// side).
+fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C64 {
+    let [a, p, c, n] = slabs.map(|s| (1.0 / s.sound_speed[i], impedance(s, i)));
+    let kappa = |s: &SliceProperties, slowness: f64| C64::new(omega * slowness, s.attenuation[i]);
+    let jump = (c.1 - p.1).abs();
+    let mut phase = C64::new(0.0, 0.0);
+    let differ = |x: f64, y: f64| (x - y).abs() > 1e-6 * x.abs().max(y.abs());
+    if (n.1 - c.1).abs() <= FACE_NEIGHBOUR * jump && differ(p.0, n.0) {
+        phase += 2.0 * kappa(slabs[1], p.0) * ((c.0 - n.0) / (p.0 - n.0)).clamp(0.0, 0.5) * dz;
+    }
+    if (a.1 - p.1).abs() <= FACE_NEIGHBOUR * jump && differ(c.0, a.0) {
+        phase -= 2.0 * kappa(slabs[2], c.0) * ((p.0 - a.0) / (c.0 - a.0)).clamp(0.0, 0.5) * dz;
+    }
+    phase
+}
+
+/// A cell next to a face counts as the material of the face's side when its impedance is within
+/// this fraction of the face's jump of it.
+const FACE_NEIGHBOUR: f64 = 0.1;
+
+/// `rho·c` of pixel `i`.
+fn impedance(s: &SliceProperties, i: usize) -> f64 {
+    s.density[i] * s.sound_speed[i]
 }
 
 /// `out ← R·p` for `R` non-zero only on `pixels` (with values `r`): zero elsewhere.
@@ -311,6 +428,43 @@ mod tests {
 
     const WATER: (f64, f64, f64) = (1000.0, 1500.0, 0.0);
     const BONE: (f64, f64, f64) = (1850.0, 2800.0, 0.0);
+
+    /// Cells of `dz` about a face at `face` (m; water before it, bone after), each holding the
+    /// slowness and attenuation averaged over it and the impedance at its centre, as a CT's cells do.
+    fn cells_about(face: f64, dz: f64, centres: [f64; 4]) -> [SliceProperties; 4] {
+        let (water, bone) = ((1500.0, 1000.0, 0.0), (2800.0, 1850.0, 46.0));
+        centres.map(|z| {
+            let bone_part = ((z + 0.5 * dz - face) / dz).clamp(0.0, 1.0);
+            let slowness = bone_part / bone.0 + (1.0 - bone_part) / water.0;
+            let centre = if z >= face { bone } else { water };
+            let c = 1.0 / slowness;
+            SliceProperties {
+                sound_speed: vec![c],
+                density: vec![centre.0 * centre.1 / c],
+                attenuation: vec![bone_part * bone.2 + (1.0 - bone_part) * water.2],
+            }
+        })
+    }
+
+    /// The face's phase is the path the reflected wave lacks, there and back: a face 0.2 mm
+    /// beyond the plane where the jump is applied gives `2·k_water·0.2 mm` (water lies between),
+    /// one 0.2 mm before it `-2·(k_bone + i·alpha_bone)·0.2 mm` (bone lies between); on the plane,
+    /// nothing. To rounding (1e-12 rad).
+    #[test]
+    fn a_face_inside_a_cell_gets_the_phase_of_its_position() {
+        let (omega, dz) = (2.0 * PI * 5e5, 0.75e-3);
+        let plane = 30e-3;
+        let centres = [plane - 1.5 * dz, plane - 0.5 * dz, plane + 0.5 * dz, plane + 1.5 * dz];
+        for (offset, want) in [
+            (0.2e-3, C64::new(2.0 * omega / 1500.0 * 0.2e-3, 0.0)),
+            (-0.2e-3, -2.0 * C64::new(omega / 2800.0, 46.0) * 0.2e-3),
+            (0.0, C64::new(0.0, 0.0)),
+        ] {
+            let cells = cells_about(plane + offset, dz, centres);
+            let phase = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
+            assert!((phase - want).norm() < 1e-12, "offset {offset}: {phase} vs {want}");
+        }
+    }
 
     #[test]
     fn normal_incidence_gives_the_impedance_formula() {

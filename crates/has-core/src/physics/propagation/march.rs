@@ -1,6 +1,7 @@
 //! Marching a source through a plan: the one-way sweep, the round trips of the reverberation
 //! zone, the backward pass of reflections, and what is recorded on the way.
 //!
+//! The march carries the flux-normalised field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]).
 //! Recorded values are the total pressure on the plane: at an interface plane, the side before
 //! the interface (incident forward wave plus the backward wave leaving it), which equals the side
 //! after it by pressure continuity.
@@ -38,6 +39,16 @@ pub(super) trait Operators<T: Real>: Sync {
     fn step(&self, s: usize) -> (&[Complex<T>], &[Complex<T>]);
     /// The properties of the slab the beam crossed to reach plane `n`.
     fn slab(&self, n: usize) -> &SliceProperties;
+    /// The medium the source radiates from (half a step before plane 0).
+    fn source_medium(&self) -> &SliceProperties;
+    /// The medium on the side of plane `n` its recording is taken on (the source's on plane 0).
+    fn before(&self, n: usize) -> &SliceProperties {
+        if n == 0 {
+            self.source_medium()
+        } else {
+            self.slab(n)
+        }
+    }
 }
 
 impl Operators<f64> for HasPlan {
@@ -59,6 +70,9 @@ impl Operators<f64> for HasPlan {
     }
     fn slab(&self, n: usize) -> &SliceProperties {
         self.slab_properties(n)
+    }
+    fn source_medium(&self) -> &SliceProperties {
+        &self.source_medium
     }
 }
 
@@ -161,9 +175,9 @@ impl RecordSpec {
     }
 }
 
-/// The field on one plane (`(ny, nx)`) at lateral position (x, y) (m), bilinearly interpolated
-/// between the four pixels around it (exactly a pixel's value on it); zero outside the grid.
-pub(crate) fn bilinear<T: Real>(g: &Grid, field: &[Complex<T>], x: f64, y: f64) -> C64 {
+/// The field on one plane (`(ny, nx)`, sample `i` given by `field(i)`) at lateral position
+/// (x, y) (m), bilinearly interpolated between the four pixels around it (exactly a pixel's value on it); zero outside the grid.
+pub(crate) fn bilinear(g: &Grid, field: impl Fn(usize) -> C64, x: f64, y: f64) -> C64 {
     let (u, v) = (x / g.dx + (g.nx / 2) as f64, y / g.dy + (g.ny / 2) as f64);
     let (i0, j0) = (u.floor(), v.floor());
     let (fu, fv) = (u - i0, v - j0);
@@ -171,7 +185,7 @@ pub(crate) fn bilinear<T: Real>(g: &Grid, field: &[Complex<T>], x: f64, y: f64) 
         if i < 0.0 || j < 0.0 || i >= g.nx as f64 || j >= g.ny as f64 {
             C64::new(0.0, 0.0)
         } else {
-            double(field[j as usize * g.nx + i as usize])
+            field(j as usize * g.nx + i as usize)
         }
     };
     let row = |j: f64| at(i0, j) * (1.0 - fu) + if fu > 0.0 { at(i0 + 1.0, j) * fu } else { C64::new(0.0, 0.0) };
@@ -216,18 +230,28 @@ impl<'a> Recorder<'a> {
         self.rec
     }
 
-    /// Adds `field` (the pressure of one wave on plane `n`).
-    pub(super) fn add<T: Real>(&mut self, n: usize, field: &[Complex<T>]) {
+    /// Adds `field` (the flux-normalised field `ψ` of one wave on plane `n`, in the medium
+    /// `before`) as pressure `p = ψ·sqrt(Z/Z_s)` (`Z_s` of the `source` medium).
+    pub(super) fn add<T: Real>(&mut self, n: usize, field: &[Complex<T>], before: &SliceProperties, source: &SliceProperties) {
         let g = self.grid;
         if n > self.last {
             return;
         }
-        if let Ok(i) = self.planes.binary_search(&n) {
-            self.rec.planes[i].iter_mut().zip(field).for_each(|(a, &b)| *a += double(b));
+        let same = std::ptr::eq(before, source);
+        let pressure = |i: usize| {
+            let v = double(field[i]);
+            if same {
+                v
+            } else {
+                v * pressure_scale(before, source, i)
+            }
+        };
+        if let Ok(k) = self.planes.binary_search(&n) {
+            self.rec.planes[k].iter_mut().enumerate().for_each(|(i, a)| *a += pressure(i));
         }
         if self.spec.axis {
             let z = g.z(n);
-            self.rec.axis[n] += bilinear(g, field, self.spec.axis_slope[0] * z, self.spec.axis_slope[1] * z);
+            self.rec.axis[n] += bilinear(g, pressure, self.spec.axis_slope[0] * z, self.spec.axis_slope[1] * z);
         }
         if let Some(w) = self.spec.window.as_ref().filter(|w| w.planes.contains(&n)) {
             let (nr, nc) = (w.rows.len(), w.cols.len());
@@ -235,8 +259,8 @@ impl<'a> Recorder<'a> {
                 let base = ((n - w.planes.start) * nr + k) * nc;
                 self.rec.window[base..base + nc]
                     .iter_mut()
-                    .zip(&field[r * g.nx + w.cols.start..r * g.nx + w.cols.end])
-                    .for_each(|(a, &b)| *a += double(b));
+                    .zip(r * g.nx + w.cols.start..r * g.nx + w.cols.end)
+                    .for_each(|(a, i)| *a += pressure(i));
             }
         }
     }
@@ -250,15 +274,26 @@ impl<'a> Recorder<'a> {
         rec.power.iter_mut().zip(&more.power).for_each(|(a, b)| *a += b);
     }
 
-    /// Sets the power of the forward wave `field` through plane `n` (impedance of `slab`).
-    pub(super) fn power<T: Real>(&mut self, n: usize, slab: &SliceProperties, field: &[Complex<T>]) {
+    /// Sets the power `Σ |ψ|²/(2·Z_s)·dA` of the forward wave `field` through plane `n` (`Z_s` of
+    /// the `source` medium: `|ψ|²/Z_s = |p|²/Z`).
+    pub(super) fn power<T: Real>(&mut self, n: usize, source: &SliceProperties, field: &[Complex<T>]) {
         if self.spec.power && n <= self.last {
             let g = self.grid;
-            let p: f64 =
-                field.iter().zip(&slab.sound_speed).zip(&slab.density).map(|((&v, c), rho)| double(v).norm_sqr() / (2.0 * rho * c)).sum();
+            let p: f64 = field
+                .iter()
+                .zip(&source.sound_speed)
+                .zip(&source.density)
+                .map(|((&v, c), rho)| double(v).norm_sqr() / (2.0 * rho * c))
+                .sum();
             self.rec.power[n] = p * g.dx * g.dy;
         }
     }
+}
+
+/// `sqrt(Z/Z_s)` at pixel `i`: the pressure of a unit flux-normalised field in the medium
+/// `before`, for the source medium `source`.
+pub(super) fn pressure_scale(before: &SliceProperties, source: &SliceProperties, i: usize) -> f64 {
+    ((before.density[i] * before.sound_speed[i]) / (source.density[i] * source.sound_speed[i])).sqrt()
 }
 
 /// A wave kept on one plane: every pixel, or only the pixels of a pointwise interface (zero
@@ -286,8 +321,10 @@ impl<T: Real> Wave<T> {
     }
 }
 
-/// Crosses `interface` in the direction `sign` (+1 forward, -1 backward): `field ← field +
-/// sign·R ⊛ field`; returns the reflected wave `sign·R ⊛ field` when `keep`. A pointwise
+/// Crosses `interface` in the direction `sign` (+1 forward, -1 backward): `field ← S·(field +
+/// sign·R ⊛ field)` with the flux normalisation `S` ([`Interface::normalise_transmitted`]);
+/// returns the reflected wave `sign·R ⊛ field` when `keep` (a pointwise face's with its factor
+/// `exp(±i·φ)`, see `face_phase`). A pointwise
 /// interface touches, and keeps, only its own pixels; a spectral one uses `reflected` and `work`
 /// (made as long as `field` if they are not) and keeps every pixel.
 pub(super) fn cross<T: Real>(
@@ -299,16 +336,24 @@ pub(super) fn cross<T: Real>(
     (reflected, work): (&mut Vec<Complex<T>>, &mut Vec<Complex<T>>),
     ws: &mut FftWorkspace<T>,
 ) -> Option<Wave<T>> {
-    if let Some((pixels, r)) = interface.pointwise() {
+    if let Some((pixels, r, phase)) = interface.pointwise() {
         let mut values = Vec::with_capacity(if keep { pixels.len() } else { 0 });
-        for (&i, &r) in pixels.iter().zip(r) {
+        for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
             let f = &mut field[i as usize];
             let w = if sign < 0.0 { -(*f * r) } else { *f * r };
             *f += w;
             if keep {
-                values.push(w);
+                // The reflected wave leaves the face's true position (see `face_phase`).
+                values.push(match phase {
+                    Some(phase) => {
+                        let f = phase[m];
+                        w * if sign < 0.0 { Complex::new(T::one(), T::zero()) / f } else { f }
+                    }
+                    None => w,
+                });
             }
         }
+        interface.normalise_transmitted(field, sign);
         return keep.then(|| Wave::Sparse { pixels: pixels.clone(), values });
     }
     for buffer in [&mut *reflected, &mut *work] {
@@ -318,11 +363,11 @@ pub(super) fn cross<T: Real>(
     let parallel = ws.is_parallel();
     if sign < 0.0 {
         each_pair(parallel, field, reflected, |f, &r| *f -= r);
-        keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| -r)))
     } else {
         each_pair(parallel, field, reflected, |f, &r| *f += r);
-        keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| r)))
     }
+    interface.normalise_transmitted(field, sign);
+    keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| if sign < 0.0 { -r } else { r })))
 }
 
 /// Waves starting at given planes, in increasing plane order.
@@ -342,8 +387,7 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
     }
 
     /// Crosses the interface at plane `n` (if any) in the direction `sign` (+1 forward, -1
-    /// backward): `field ← field + sign·R ⊛ field`; returns the reflected wave `sign·R ⊛ field`
-    /// when `keep`.
+    /// backward), see [`cross`].
     fn cross(&mut self, n: usize, field: &mut [Complex<T>], sign: f64, keep: bool) -> Option<Wave<T>> {
         let interface = self.ops.interface(n)?;
         cross(interface, self.ops.fft(), field, sign, keep, (&mut self.reflected, &mut self.work), &mut self.ws)
@@ -379,9 +423,9 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
                 self.step(n - 1, field);
             }
             if n > from || entering {
-                rec.add(n, field);
+                rec.add(n, field, self.ops.before(n), self.ops.source_medium());
                 if power {
-                    rec.power(n, self.ops.slab(n), field);
+                    rec.power(n, self.ops.source_medium(), field);
                 }
                 if let Some(r) = self.cross(n, field, 1.0, keep(n)) {
                     back.push((n, r));
@@ -428,7 +472,7 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
                 started = true;
             }
             if started {
-                rec.add(m, &b);
+                rec.add(m, &b, self.ops.before(m), self.ops.source_medium());
             }
             if let Some((_, w)) = inject.filter(|i| i.0 == m) {
                 each_pair(self.ws.is_parallel(), &mut b, w, |b, &w| *b += w);
@@ -562,7 +606,8 @@ mod tests {
 
     /// Crossing a pointwise interface touches its own pixels alone and keeps its reflection
     /// there: the same samples, to the bit, as the whole plane's reflection `R ⊛ p` added to the
-    /// field (the operator's plain form), in either direction; zero on every other pixel.
+    /// field (the operator's plain form) and normalised, in either direction; zero on every other
+    /// pixel. The normalised transmission is `sqrt(1 - R²)` both ways (1e-15: rounding).
     #[test]
     fn a_pointwise_crossing_equals_the_whole_planes_reflection() {
         let g = Grid::new(12, 10, 0.5e-3, 0.5e-3, 4, 0.5e-3, 0.0).unwrap();
@@ -575,8 +620,8 @@ mod tests {
             bone.density[i] = 1500.0 + 30.0 * m as f64;
         }
         let omega = 2.0 * std::f64::consts::PI * 5e5;
-        let interface = Interface::new(&g, &water, &bone, omega, InterfaceModel::Angular, &mut Coefficients::default()).unwrap();
-        let (pixels, _) = interface.pointwise().expect("per-pixel interface");
+        let interface = Interface::new(&g, &water, &bone, omega, InterfaceModel::Angular, None, &mut Coefficients::default()).unwrap();
+        let (pixels, _, _) = interface.pointwise().expect("per-pixel interface");
         assert_eq!(pixels.len(), (7..n).step_by(11).count());
         let fft = Fft2::new(g.nx, g.ny);
         let mut ws = fft.workspace(false);
@@ -585,10 +630,17 @@ mod tests {
             let (mut reflected, mut work) = (vec![C64::new(0.0, 0.0); n], vec![C64::new(0.0, 0.0); n]);
             interface.reflect(&fft, &p, &mut reflected, &mut work, &mut ws);
             let whole: Vec<C64> = reflected.iter().map(|&r| if sign < 0.0 { -r } else { r }).collect();
-            let crossed: Vec<C64> = p.iter().zip(&whole).map(|(&p, &r)| p + r).collect();
+            let mut crossed: Vec<C64> = p.iter().zip(&whole).map(|(&p, &r)| p + r).collect();
+            interface.normalise_transmitted(&mut crossed, sign);
             let mut field = p.clone();
             let kept = cross(&interface, &fft, &mut field, sign, true, (&mut Vec::new(), &mut Vec::new()), &mut ws).unwrap();
             assert_eq!(field, crossed, "sign {sign}");
+            for i in 0..n {
+                let (za, zb) = (1.5e6, bone.density[i] * bone.sound_speed[i]);
+                let r = (zb - za) / (za + zb);
+                let want = p[i] * (1.0 - r * r).sqrt();
+                assert!((field[i] - want).norm() < 1e-15, "sign {sign}, pixel {i}: {} vs {want}", field[i]);
+            }
             let mut kept_plane = vec![C64::new(0.0, 0.0); n];
             kept.add_to(&mut kept_plane, false);
             assert_eq!(kept_plane, whole, "sign {sign}");

@@ -14,8 +14,8 @@
 //!    where `sigma` is an absorbing layer at the lateral edges (it does not count as absorption
 //!    for the radiation force).
 //!
-//! `k̄` and `ᾱ` of each slab are means of `k(x, y)` and `alpha(x, y)` weighted by the pressure
-//! magnitude of a *reference beam* (the steered, unaberrated source), fixed when the plan is
+//! `k̄` and `ᾱ` of each slab are means of `k(x, y)` and `alpha(x, y)` weighted by the magnitude
+//! of the marched (flux-normalised) field of a *reference beam* (the steered, unaberrated source), fixed when the plan is
 //! built. Fixing them makes every later propagation linear in the source, so group fields add up
 //! to the field of the whole array exactly. Screens, interfaces and propagators are built once
 //! per distinct slab and shared by every source of a batch. Time convention `exp(-i·omega·t)`: a
@@ -157,6 +157,8 @@ pub struct HasPlan {
     /// The options it was built with.
     pub options: HasOptions,
     fft: Fft2,
+    /// The medium half a step before plane 0, which the source radiates from.
+    source_medium: Arc<SliceProperties>,
     slabs: Vec<Arc<SliceProperties>>,
     steps: Vec<Step>,
     zone: Option<Zone>,
@@ -226,7 +228,7 @@ impl HasPlan {
         if reference.len() != n {
             return Err(HasError::invalid("reference", format!("has {} samples, grid has {n}", reference.len())));
         }
-        let Layout { frequency, slabs, slab_of_step, interfaces } = layout;
+        let Layout { frequency, source_medium, slabs, slab_of_step, interfaces } = layout;
         let omega = 2.0 * PI * frequency;
         let fft = Fft2::new(grid.nx, grid.ny);
         let sponge = sponge_map(grid, options);
@@ -241,6 +243,7 @@ impl HasPlan {
             frequency,
             options: options.clone(),
             fft,
+            source_medium,
             slabs,
             steps: Vec::with_capacity(grid.nz - 1),
             zone: None,
@@ -253,9 +256,9 @@ impl HasPlan {
         let mut ws = plan.fft.workspace(true);
         let (mut work, mut reflected) = (Vec::new(), Vec::new());
         for (step, (slab, interface)) in slab_of_step.into_iter().zip(interfaces).enumerate() {
-            let arriving = plan.steps.last().map_or(slab, |s| s.slab);
-            recorder.add(step, &field);
-            recorder.power(step, &plan.slabs[arriving], &field);
+            let before = plan.steps.last().map_or(&plan.source_medium, |s| &plan.slabs[s.slab]);
+            recorder.add(step, &field, before, &plan.source_medium);
+            recorder.power(step, &plan.source_medium, &field);
             if let Some(i) = &interface {
                 march::cross(i, &plan.fft, &mut field, 1.0, false, (&mut reflected, &mut work), &mut ws);
             }
@@ -276,8 +279,8 @@ impl HasPlan {
             plan.steps.push(s);
         }
         let last = grid.nz - 1;
-        recorder.add(last, &field);
-        recorder.power(last, plan.slab_properties(last), &field);
+        recorder.add(last, &field, plan.slab_properties(last), &plan.source_medium);
+        recorder.power(last, &plan.source_medium, &field);
         plan.zone = plan.reverberation_zone();
         // The march that counts the round trips records what `spec` asks when it reaches the
         // zone (not with reflections: the waves left in the zone when counting stops differ from
@@ -409,6 +412,7 @@ impl HasPlan {
 struct Layout {
     /// The frequency the properties are taken at (Hz).
     frequency: f64,
+    source_medium: Arc<SliceProperties>,
     slabs: Vec<Arc<SliceProperties>>,
     slab_of_step: Vec<usize>,
     interfaces: Vec<Option<Arc<Interface>>>,
@@ -418,12 +422,10 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
     let omega = 2.0 * PI * frequency;
     let mut slabs: Vec<Arc<SliceProperties>> = Vec::new();
     let mut slab_of_step = Vec::with_capacity(grid.nz - 1);
-    let mut interfaces = Vec::with_capacity(grid.nz - 1);
+    // Whether each slab (the source's medium first) is made of regions: planar faces.
+    let mut planar = vec![medium.slice_key(grid.z0 - 0.5 * grid.dz).is_some()];
     let mut scratch = Vec::new();
-    let mut prev = Arc::new(medium.slice_with(grid, grid.z0 - 0.5 * grid.dz, frequency, &mut scratch));
-    let mut interface_cache: HashMap<(usize, usize), Option<Arc<Interface>>> = HashMap::new();
-    let mut shared = Coefficients::default();
-    let mut prev_slab = usize::MAX;
+    let source_medium = Arc::new(medium.slice_with(grid, grid.z0 - 0.5 * grid.dz, frequency, &mut scratch));
     let mut prev_key = None;
     for step in 0..grid.nz - 1 {
         let z = grid.z(step) + 0.5 * grid.dz;
@@ -440,24 +442,30 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
                 }
             }
         };
+        planar.push(key.is_some());
         prev_key = key;
-        let current = &slabs[slab];
-        let interface = if step == 0 {
-            Interface::new(grid, &prev, current, omega, model, &mut shared).map(Arc::new)
-        } else if slab == prev_slab {
-            None
-        } else {
-            interface_cache
-                .entry((prev_slab, slab))
-                .or_insert_with(|| Interface::new(grid, &prev, current, omega, model, &mut shared).map(Arc::new))
-                .clone()
-        };
-        interfaces.push(interface);
         slab_of_step.push(slab);
-        prev = current.clone();
-        prev_slab = slab;
     }
-    Layout { frequency, slabs, slab_of_step, interfaces }
+    // The slab before plane n (n = 0: the source's medium).
+    let before = |n: usize| if n == 0 { &source_medium } else { &slabs[slab_of_step[(n - 1).min(slab_of_step.len() - 1)]] };
+    let mut interface_cache: HashMap<(usize, usize), Option<Arc<Interface>>> = HashMap::new();
+    let mut shared = Coefficients::default();
+    let interfaces = (0..grid.nz - 1)
+        .map(|step| {
+            let (from, to) = (before(step), before(step + 1));
+            if step > 0 && slab_of_step[step - 1] == slab_of_step[step] {
+                return None;
+            }
+            if planar[step] && planar[step + 1] {
+                let key = (if step == 0 { usize::MAX } else { slab_of_step[step - 1] }, slab_of_step[step]);
+                let mut new = || Interface::new(grid, from, to, omega, model, None, &mut shared).map(Arc::new);
+                return if step == 0 { new() } else { interface_cache.entry(key).or_insert_with(new).clone() };
+            }
+            let around = (before(step.saturating_sub(1)), before(step + 2));
+            Interface::new(grid, from, to, omega, model, Some((&**around.0, &**around.1)), &mut shared).map(Arc::new)
+        })
+        .collect();
+    Layout { frequency, source_medium, slabs, slab_of_step, interfaces }
 }
 
 /// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (sequential sums: identical with any

@@ -8,8 +8,12 @@
 //! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the step's own propagator `H` and
 //! screen `S` (the oblique screen with the step's directions) evaluated for `δz` (evanescent
 //! components left out). The next plane's field is recorded before its interface, so no interface
-//! lies between. On a grid point the weights are that point's alone.
+//! lies between. On a grid point the weights are that point's alone. Both act on the marched
+//! field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]), the band-limited one, so the weights on
+//! the recorded pressure carry `c/C_ij`: `C = sqrt(Z/Z_s)` of the slab before the plane, `c` at
+//! the point's nearest pixel (1 where the slab's impedance is the source's).
 
+use super::march::{pressure_scale, Operators};
 use super::{propagator, sponge_map, step_screen, HasPlan};
 use num_complex::Complex64 as C64;
 use std::f64::consts::PI;
@@ -35,7 +39,9 @@ impl HasPlan {
         let mut w: Vec<C64> = wy.iter().flat_map(|y| wx.iter().map(move |x| C64::new(x * y, 0.0))).collect();
         let on_plane = (t - t.round()).abs() < ON_GRID;
         if on_plane {
-            return Some((t.round() as usize, w));
+            let n = t.round() as usize;
+            self.to_pressure_weights(n, point, &mut w);
+            return Some((n, w));
         }
         let next = t.ceil() as usize;
         let dz = point[2] - g.z(next);
@@ -47,7 +53,20 @@ impl HasPlan {
             step_screen(g, &self.slabs[step.slab], &sponge_map(g, &self.options), omega, mean, self.options.screen, next - 1, dz);
         let mut ws = self.fft.workspace(true);
         self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
+        self.to_pressure_weights(next, point, &mut w);
         Some((next, w))
+    }
+
+    /// Weights `w` on the marched field of plane `n` made weights on its recorded pressure:
+    /// `w_ij·c/C_ij` (see the module doc).
+    fn to_pressure_weights(&self, n: usize, point: [f64; 3], w: &mut [C64]) {
+        let (before, source) = (self.before(n), self.source_medium());
+        if std::ptr::eq(before, source) {
+            return;
+        }
+        let Some([i, j, _]) = self.grid.nearest(point) else { return };
+        let at_point = pressure_scale(before, source, j * self.grid.nx + i);
+        w.iter_mut().enumerate().for_each(|(p, w)| *w *= at_point / pressure_scale(before, source, p));
     }
 }
 

@@ -101,6 +101,9 @@ impl Operators<f32> for SinglePlan {
     fn slab(&self, n: usize) -> &SliceProperties {
         self.plan.slab_properties(n)
     }
+    fn source_medium(&self) -> &SliceProperties {
+        &self.plan.source_medium
+    }
 }
 
 impl SinglePlan {

@@ -2,7 +2,9 @@
 //! vector whose dot product with any source is the weighted sum of that source's recorded field.
 //!
 //! A march is a linear map `s ↦ M·s` from the source plane to the recorded planes, a product of
-//! steps `P = screen · IFFT · propagator · FFT`, crossings `I ± R` and additions. Its transpose
+//! steps `P = screen · IFFT · propagator · FFT`, crossings `S·(I ± R)` (`S` the diagonal flux
+//! normalisation of [`Interface::normalise_transmitted`]), recordings `C` (the diagonal
+//! `sqrt(Z/Z_s)` that turns the marched field into pressure) and additions. Its transpose
 //! `Mᵀ` is the product of the transposed factors in reverse order: `Pᵀ = IFFT · propagator · FFT
 //! · screen` (the propagator depends on `kx² + ky²` only, which makes `IFFT · propagator · FFT`
 //! symmetric), `Rᵀ` masks each material pair's pixels before its filter
@@ -14,7 +16,7 @@
 //! pressure at that pixel is one dot product (see [`crate::Simulation::element_responses`]).
 
 use super::interface::Interface;
-use super::march::RecordSpec;
+use super::march::{pressure_scale, Operators, RecordSpec};
 use super::HasPlan;
 use crate::error::{HasError, Result};
 use crate::physics::fft::FftWorkspace;
@@ -46,10 +48,15 @@ impl<'a> Transposer<'a> {
         plan.steps.get(n).and_then(|s| s.interface.as_deref())
     }
 
-    /// The transpose of recording plane `n`: the weights join the adjoint there.
+    /// The transpose of recording plane `n` (`p = C·ψ`): the weights, scaled by `C`, join the
+    /// adjoint there.
     fn record(&self, n: usize, adjoint: &mut [C64]) {
         if n == self.plane {
-            adjoint.iter_mut().zip(self.weights).for_each(|(a, w)| *a += w);
+            let (before, source) = (self.plan.before(n), self.plan.source_medium());
+            let same = std::ptr::eq(before, source);
+            adjoint.iter_mut().zip(self.weights).enumerate().for_each(|(i, (a, w))| {
+                *a += if same { *w } else { w * pressure_scale(before, source, i) };
+            });
         }
     }
 
@@ -59,18 +66,27 @@ impl<'a> Transposer<'a> {
         self.plan.fft.filter(adjoint, &mut self.ws, Some(&st.screen), &st.propagator, None);
     }
 
-    /// The transpose of crossing plane `n` in direction `sign` (`f ← f + sign·R·f`, the reflected
-    /// wave `sign·R·f` kept with adjoint `kept`): `a ← a + sign·Rᵀ·(a + kept)`.
+    /// The transpose of crossing plane `n` in direction `sign` (`f ← S·(f + sign·R·f)`, the
+    /// reflected wave `sign·R_φ·f` kept with adjoint `kept`, `R_φ` with the faces' phases):
+    /// `a ← S·a`, then `a ← a + sign·(Rᵀ·a + R_φᵀ·kept)`.
     fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Vec<C64>>) {
         let Some(interface) = self.interface(n) else { return };
+        interface.normalise_transmitted(adjoint, sign);
         if self.work.len() != adjoint.len() {
             self.work = self.zero();
         }
         self.incident.copy_from_slice(adjoint);
+        let faces = interface.pointwise().is_some_and(|p| p.2.is_some());
         if let Some(k) = kept {
-            self.incident.iter_mut().zip(k).for_each(|(a, k)| *a += k);
+            if faces {
+                // The kept wave carries the faces' phases, the transmitted one does not.
+                interface.reflect_transposed(&self.plan.fft, k, &mut self.reflected, &mut self.work, &mut self.ws, Some(sign));
+                adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
+            } else {
+                self.incident.iter_mut().zip(k).for_each(|(a, k)| *a += k);
+            }
         }
-        interface.reflect_transposed(&self.plan.fft, &self.incident, &mut self.reflected, &mut self.work, &mut self.ws);
+        interface.reflect_transposed(&self.plan.fft, &self.incident, &mut self.reflected, &mut self.work, &mut self.ws, None);
         adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
     }
 
