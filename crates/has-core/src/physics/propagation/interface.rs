@@ -33,9 +33,9 @@
 //! position ([`face_phase`]): reflected forward-going waves carry `R·exp(i·φ)`, backward-going
 //! ones `-R·exp(-i·φ)`, with `φ = 2·(omega·s_m + i·alpha_m)·δ` for the misplaced material
 //! (slowness `s_m`, attenuation `alpha_m`, thickness `δ`, signed: + when the face lies beyond the
-//! plane) found from the averaged slowness of the cells on either side. Without it the round trips inside a curved bone wall, whose faces
-//! snap by up to half a step, add up with phases spread over ±k·dz and the wall's reverberation
-//! is lost.
+//! plane) found from the averaged slowness of the cells on either side. Without it the round
+//! trips inside a curved bone wall, whose faces snap by up to half a step, add up with phases
+//! spread over ±k·dz and the wall's reverberation is lost.
 
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
@@ -341,8 +341,7 @@ impl Interface {
 /// The complex phase `φ = 2·(κ_P·f - κ_C·g)·dz`, `κ = omega·s + i·alpha`, of the face between
 /// slabs `P` and `C` at pixel `i` (`slabs` = the slab before `P`, `P`, `C`, the slab after `C`;
 /// `s` slowness, `alpha` attenuation; the true path of the wave reflected at the face less the
-/// marched one, there and back): a face
-/// inside `C` (whose centre lies beyond it) leaves the fraction `f = (s_C - s_N)/(s_P - s_N)` of
+/// marched one, there and back): a face inside `C` (whose centre lies beyond it) leaves the fraction `f = (s_C - s_N)/(s_P - s_N)` of
 /// `C` in `P`'s material, a face inside `P` the fraction `g = (s_P - s_A)/(s_C - s_A)` of `P` in
 /// `C`'s. Each is taken only where the cell beyond it is of the material its centre holds
 /// (impedance within [`FACE_NEIGHBOUR`] of the jump: a face between two layers at least a step

@@ -176,7 +176,8 @@ impl RecordSpec {
 }
 
 /// The field on one plane (`(ny, nx)`, sample `i` given by `field(i)`) at lateral position
-/// (x, y) (m), bilinearly interpolated between the four pixels around it (exactly a pixel's value on it); zero outside the grid.
+/// (x, y) (m), bilinearly interpolated between the four pixels around it (exactly a pixel's
+/// value on it); zero outside the grid.
 pub(crate) fn bilinear(g: &Grid, field: impl Fn(usize) -> C64, x: f64, y: f64) -> C64 {
     let (u, v) = (x / g.dx + (g.nx / 2) as f64, y / g.dy + (g.ny / 2) as f64);
     let (i0, j0) = (u.floor(), v.floor());

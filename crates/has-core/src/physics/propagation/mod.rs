@@ -448,21 +448,18 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
     }
     // The slab before plane n (n = 0: the source's medium).
     let before = |n: usize| if n == 0 { &source_medium } else { &slabs[slab_of_step[(n - 1).min(slab_of_step.len() - 1)]] };
-    let mut interface_cache: HashMap<(usize, usize), Option<Arc<Interface>>> = HashMap::new();
+    // Slabs are only reused for the step just before, so each change of slab happens once: an
+    // interface is built where the slab changes (the material pairs' spectral coefficients are
+    // shared through `shared`). Faces of regions lie on planes; others get their positions' phases.
     let mut shared = Coefficients::default();
     let interfaces = (0..grid.nz - 1)
         .map(|step| {
-            let (from, to) = (before(step), before(step + 1));
             if step > 0 && slab_of_step[step - 1] == slab_of_step[step] {
                 return None;
             }
-            if planar[step] && planar[step + 1] {
-                let key = (if step == 0 { usize::MAX } else { slab_of_step[step - 1] }, slab_of_step[step]);
-                let mut new = || Interface::new(grid, from, to, omega, model, None, &mut shared).map(Arc::new);
-                return if step == 0 { new() } else { interface_cache.entry(key).or_insert_with(new).clone() };
-            }
-            let around = (before(step.saturating_sub(1)), before(step + 2));
-            Interface::new(grid, from, to, omega, model, Some((&**around.0, &**around.1)), &mut shared).map(Arc::new)
+            let (from, to) = (before(step), before(step + 1));
+            let around = (!(planar[step] && planar[step + 1])).then(|| (&**before(step.saturating_sub(1)), &**before(step + 2)));
+            Interface::new(grid, from, to, omega, model, around, &mut shared).map(Arc::new)
         })
         .collect();
     Layout { frequency, source_medium, slabs, slab_of_step, interfaces }
