@@ -299,6 +299,7 @@ pub(super) fn pressure_scale(before: &SliceProperties, source: &SliceProperties,
 
 /// A wave kept on one plane: every pixel, or only the pixels of a pointwise interface (zero
 /// elsewhere), which is what such an interface reflects.
+#[derive(Clone)]
 pub(super) enum Wave<T: Real> {
     Dense(Vec<Complex<T>>),
     Sparse { pixels: Arc<Vec<u32>>, values: Vec<Complex<T>> },
@@ -306,10 +307,21 @@ pub(super) enum Wave<T: Real> {
 
 impl<T: Real> Wave<T> {
     /// `field ← field + wave`.
-    fn add_to(&self, field: &mut [Complex<T>], parallel: bool) {
+    pub(super) fn add_to(&self, field: &mut [Complex<T>], parallel: bool) {
         match self {
             Wave::Dense(w) => each_pair(parallel, field, w, |f, &w| *f += w),
             Wave::Sparse { pixels, values } => pixels.iter().zip(values).for_each(|(&i, &w)| field[i as usize] += w),
+        }
+    }
+
+    /// `plane ← wave` (zero off a sparse wave's pixels).
+    pub(super) fn write_to(&self, plane: &mut [Complex<T>]) {
+        match self {
+            Wave::Dense(w) => plane.copy_from_slice(w),
+            Wave::Sparse { pixels, values } => {
+                plane.fill(zero());
+                pixels.iter().zip(values).for_each(|(&i, &w)| plane[i as usize] = w);
+            }
         }
     }
 

@@ -16,7 +16,7 @@
 //! pressure at that pixel is one dot product (see [`crate::Simulation::element_responses`]).
 
 use super::interface::Interface;
-use super::march::{pressure_scale, Operators, RecordSpec};
+use super::march::{pressure_scale, Operators, RecordSpec, Wave};
 use super::HasPlan;
 use crate::error::{HasError, Result};
 use crate::physics::fft::FftWorkspace;
@@ -24,8 +24,9 @@ use num_complex::Complex64 as C64;
 use std::collections::BTreeMap;
 use std::ops::Range;
 
-/// Adjoint waves by plane.
-type Adjoints = BTreeMap<usize, Vec<C64>>;
+/// Adjoint waves by plane: each kept for the reflection at its plane, which reads a pointwise
+/// interface's pixels only (so only those are kept; through a head a few percent of the plane).
+type Adjoints = BTreeMap<usize, Wave<f64>>;
 
 /// Buffers and the weighted plane of one transposed march.
 struct Transposer<'a> {
@@ -34,6 +35,8 @@ struct Transposer<'a> {
     work: Vec<C64>,
     reflected: Vec<C64>,
     incident: Vec<C64>,
+    /// A kept adjoint written out on the whole plane.
+    unpacked: Vec<C64>,
     plane: usize,
     weights: &'a [C64],
 }
@@ -46,6 +49,15 @@ impl<'a> Transposer<'a> {
     fn interface(&self, n: usize) -> Option<&'a Interface> {
         let plan: &'a HasPlan = self.plan;
         plan.steps.get(n).and_then(|s| s.interface.as_deref())
+    }
+
+    /// The adjoint on plane `n` as the reflection there reads it: on a pointwise interface's
+    /// pixels, or the whole plane.
+    fn keep(&self, n: usize, adjoint: &[C64]) -> Wave<f64> {
+        match self.interface(n).and_then(Interface::pointwise) {
+            Some((pixels, ..)) => Wave::Sparse { pixels: pixels.clone(), values: pixels.iter().map(|&i| adjoint[i as usize]).collect() },
+            None => Wave::Dense(adjoint.to_vec()),
+        }
     }
 
     /// The transpose of recording plane `n` (`p = C·ψ`): the weights, scaled by `C`, join the
@@ -69,7 +81,7 @@ impl<'a> Transposer<'a> {
     /// The transpose of crossing plane `n` in direction `sign` (`f ← S·(f + sign·R·f)`, the
     /// reflected wave `sign·R_φ·f` kept with adjoint `kept`, `R_φ` with the faces' phases):
     /// `a ← S·a`, then `a ← a + sign·(Rᵀ·a + R_φᵀ·kept)`.
-    fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Vec<C64>>) {
+    fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Wave<f64>>) {
         let Some(interface) = self.interface(n) else { return };
         interface.normalise_transmitted(adjoint, sign);
         if self.work.len() != adjoint.len() {
@@ -80,10 +92,12 @@ impl<'a> Transposer<'a> {
         if let Some(k) = kept {
             if faces {
                 // The kept wave carries the faces' phases, the transmitted one does not.
-                interface.reflect_transposed(&self.plan.fft, k, &mut self.reflected, &mut self.work, &mut self.ws, Some(sign));
+                self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
+                k.write_to(&mut self.unpacked);
+                interface.reflect_transposed(&self.plan.fft, &self.unpacked, &mut self.reflected, &mut self.work, &mut self.ws, Some(sign));
                 adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
             } else {
-                self.incident.iter_mut().zip(k).for_each(|(a, k)| *a += k);
+                k.add_to(&mut self.incident, false);
             }
         }
         interface.reflect_transposed(&self.plan.fft, &self.incident, &mut self.reflected, &mut self.work, &mut self.ws, None);
@@ -101,12 +115,12 @@ impl<'a> Transposer<'a> {
         to: usize,
         entering: bool,
         sources: &[usize],
-        kept: &dyn Fn(usize) -> Option<&'k Vec<C64>>,
+        kept: &dyn Fn(usize) -> Option<&'k Wave<f64>>,
     ) -> Adjoints {
         let mut out = Adjoints::new();
         for n in (from..=to).rev() {
             if sources.contains(&n) {
-                out.insert(n, adjoint.to_vec());
+                out.insert(n, self.keep(n, adjoint));
             }
             if n > from || entering {
                 self.cross(n, adjoint, 1.0, kept(n));
@@ -129,7 +143,7 @@ impl<'a> Transposer<'a> {
         sources: &[usize],
         bottom: usize,
         inject: Option<usize>,
-        emitted: &dyn Fn(usize) -> Option<&'k Vec<C64>>,
+        emitted: &dyn Fn(usize) -> Option<&'k Wave<f64>>,
     ) -> (Adjoints, Option<Vec<C64>>) {
         let mut out = Adjoints::new();
         let mut injected = None;
@@ -148,7 +162,7 @@ impl<'a> Transposer<'a> {
                 self.record(m, &mut adjoint);
             }
             if source_here {
-                out.insert(m, adjoint.clone());
+                out.insert(m, self.keep(m, &adjoint));
             }
             if m < top {
                 self.cross(m, &mut adjoint, -1.0, emitted(m));
@@ -210,6 +224,7 @@ impl HasPlan {
             work: Vec::new(),
             reflected: vec![C64::new(0.0, 0.0); self.grid.lateral_len()],
             incident: vec![C64::new(0.0, 0.0); self.grid.lateral_len()],
+            unpacked: Vec::new(),
             plane,
             weights,
         };
