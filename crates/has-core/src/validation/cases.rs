@@ -240,3 +240,18 @@ pub fn suite(dir: &Path) -> Result<Vec<Case>> {
         )?,
     ])
 }
+
+/// Thinner cortical caps about the focus (3, 3.5 and 4 mm; radii out to 36.5 mm, as `shell`):
+/// near the wall's half-wave thickness (2.8 mm at 500 kHz), where the reverberation inside the
+/// wall decides what crosses it. Not in [`suite`]: the march does not yet meet every tolerance on
+/// them (see `docs/validation.md`).
+pub fn thin_shells(dir: &Path) -> Result<Vec<Case>> {
+    [3.0, 3.5, 4.0]
+        .iter()
+        .map(|t| {
+            let name = format!("shell{t}");
+            let description = format!("cortical shell cap from a CT, {t} mm thick, outer radius 36.5 mm about the focus");
+            shell(dir, &name, &description, ROC_MM, 36.5 - t, 36.5, 80.0)
+        })
+        .collect()
+}

@@ -10,7 +10,7 @@
 
 mod cases;
 
-pub use cases::{suite, Case, Exact};
+pub use cases::{suite, thin_shells, Case, Exact};
 
 use crate::error::Result;
 use crate::numeric::{parabolic_peak, pearson};
