@@ -91,10 +91,20 @@ def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: 
             for n, k, m, s in itertools.product(noise_levels, image_counts, methods, range(seeds))]
 
 
+def _distributed() -> Any:
+    """The ``dask.distributed`` module, or a ``ValueError`` naming the extra that installs it."""
+    try:
+        import dask.distributed
+    except ImportError:
+        raise ValueError("sweep: needs dask.distributed, which arfi installs as an extra: pip install \"arfi[cluster]\"") from None
+    return dask.distributed
+
+
 def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
     """A client on the cluster at ``scheduler``, or on a new local cluster of ``workers``
     single-threaded worker processes (each runs arfi on one thread: trials are the parallelism)."""
-    from dask.distributed import Client, LocalCluster
+    distributed = _distributed()
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if scheduler:
         try:
@@ -112,8 +122,7 @@ def run_sweep(points: Sequence[Trial], scenario: Scenario | None = None, schedul
               progress: bool | None = None) -> list[dict[str, Any]]:
     """Runs the trials on dask.distributed (an existing cluster at ``scheduler``, or a local one)
     and returns their rows in the order of ``points``."""
-    from dask.distributed import as_completed
-
+    as_completed = _distributed().as_completed
     toml = None if scenario is None else scenario.to_toml()
     client, cluster = _client(scheduler, workers or os.cpu_count() or 1)
     bar = Progress("sweep", len(points), "trials", enabled=progress)

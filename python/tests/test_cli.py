@@ -366,3 +366,13 @@ def test_images_with_pixels_without_signal_are_read_and_fitted(tmp_path, sim, id
     arfi.write_arfi_image(path, image, sim.mr_affine_mm, sim.mr_volume_shape)
     with pytest.raises(ValueError, match="infinite"):
         arfi.read_arfi_image(path)
+
+
+def test_sweep_without_dask_names_the_extra_to_install(tmp_path, capsys, monkeypatch):
+    # Python refuses to import a module whose sys.modules entry is None: as if dask were absent.
+    monkeypatch.setitem(sys.modules, "dask", None)
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    assert main(["sweep", "--seeds", "1", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and 'pip install "arfi[cluster]"' in err, err
+    assert not (tmp_path / "o").exists()
