@@ -22,7 +22,8 @@
 //! The march carries the *flux-normalised* field `ψ = p·sqrt(Z_s/Z)` (`Z = rho·c` of the pixel's
 //! medium, `Z_s` of the source's): the angular spectrum keeps `Σ|ψ|²`, so a wave moving across
 //! the plane from one impedance into another (the risers of a staircase face, which no z
-//! interface sees) keeps its power instead of its pressure. Crossing a face, `ψ` is transmitted
+//! interface sees) keeps its power instead of its pressure, and a wall's treads take the loss its
+//! risers do not (`risers.rs`). Crossing a face, `ψ` is transmitted
 //! by `(1 + R)·sqrt(Z_a/Z_b)`, which is `sqrt(1 - R²)` at normal incidence in either direction;
 //! reflected waves stay in the medium they came from and keep `R`. Recorded values are pressures
 //! (`p = ψ·sqrt(Z/Z_s)`).
@@ -148,8 +149,9 @@ impl Interface {
 
     /// The interface from slab `from` into slab `to`, or `None` where they are equal. With
     /// `around` (the slabs before `from` and after `to`), a pointwise interface gives its faces
-    /// the phases of their positions inside the cells ([`face_phase`]); without, its faces lie on
-    /// the plane (the faces of regions, which the default grid puts on planes).
+    /// the phases of their positions inside the cells ([`face_phase`]) and, with the angular
+    /// model, a wall's faces the coefficient of the staircase's treads (`risers.rs`); without,
+    /// its faces lie on the plane (the faces of regions, which the default grid puts on planes).
     pub fn new(
         grid: &Grid,
         from: &SliceProperties,
@@ -173,7 +175,20 @@ impl Interface {
         let strength = normal.par_iter().map(|r| r.abs()).reduce(|| 0.0, f64::max);
         let pointwise = || {
             let pixels: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| normal[i as usize] != 0.0).collect();
-            let r = pixels.iter().map(|&i| normal[i as usize]).collect();
+            // A CT's or voxel map's walls cross the planes as staircases whose risers the angular
+            // spectrum passes unreflected: their treads take that share of the wall's loss.
+            let r = pixels
+                .par_iter()
+                .map(|&i| {
+                    let (i, r) = (i as usize, normal[i as usize]);
+                    match around {
+                        Some((before, after)) if model == InterfaceModel::Angular && is_wall([before, from, to, after], i) => {
+                            super::risers::tread_coefficient(r, grid, (from, to), i)
+                        }
+                        _ => r,
+                    }
+                })
+                .collect();
             let phase = around.and_then(|(before, after)| {
                 let slabs = [before, from, to, after];
                 let phase: Vec<C64> =
@@ -363,6 +378,16 @@ fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C6
     phase
 }
 
+/// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
+/// between two layers: the cell before it of `P`'s material and the cell after it of `C`'s
+/// (impedance within [`FACE_NEIGHBOUR`] of the jump). Inside graded or textured bone the
+/// neighbours differ, and the slowness gradient there is texture, not a wall's normal.
+fn is_wall(slabs: [&SliceProperties; 4], i: usize) -> bool {
+    let [a, p, c, n] = slabs.map(|s| impedance(s, i));
+    let jump = (c - p).abs();
+    (a - p).abs() <= FACE_NEIGHBOUR * jump && (n - c).abs() <= FACE_NEIGHBOUR * jump
+}
+
 /// A cell next to a face counts as the material of the face's side when its impedance is within
 /// this fraction of the face's jump of it.
 const FACE_NEIGHBOUR: f64 = 0.1;
@@ -463,6 +488,27 @@ mod tests {
             let phase = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
             assert!((phase - want).norm() < 1e-12, "offset {offset}: {phase} vs {want}");
         }
+    }
+
+    /// A face between a layer of water and one of bone is a wall wherever inside its cells it
+    /// lies; a face inside a ramp of impedance (graded or textured bone: the cells beyond it
+    /// differ from the cells at it by more than a tenth of its jump) is not.
+    #[test]
+    fn a_wall_lies_between_two_layers() {
+        let dz = 0.75e-3;
+        let centres = [-1.5 * dz, -0.5 * dz, 0.5 * dz, 1.5 * dz];
+        for offset in [-0.3e-3, 0.0, 0.3e-3] {
+            let cells = cells_about(offset, dz, centres);
+            assert!(is_wall([&cells[0], &cells[1], &cells[2], &cells[3]], 0), "face at {offset}");
+        }
+        let ramp: Vec<SliceProperties> = (0..4)
+            .map(|k| SliceProperties {
+                sound_speed: vec![1500.0 + 300.0 * k as f64],
+                density: vec![1000.0 + 200.0 * k as f64],
+                attenuation: vec![0.0],
+            })
+            .collect();
+        assert!(!is_wall([&ramp[0], &ramp[1], &ramp[2], &ramp[3]], 0));
     }
 
     #[test]

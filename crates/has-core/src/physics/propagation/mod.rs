@@ -35,6 +35,7 @@ mod interface;
 mod march;
 mod operators;
 mod point;
+mod risers;
 mod single;
 mod transpose;
 
