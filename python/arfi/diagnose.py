@@ -110,10 +110,10 @@ class Diagnosis:
             fig.suptitle(f"step {k}: {title}")
             figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
         fig, ax = plt.subplots(figsize=(6, 3.8))
-        rms = [self.residual_rms_initial] + [e["residual_rms_after"] for e in self.effects]
-        ax.plot(range(len(rms)), rms, "o-", label="residual RMS")
+        gap = [self.residual_rms_initial] + [e["residual_rms_after"] for e in self.effects]
+        ax.plot(range(len(gap)), gap, "o-", label="residual RMS")
         ax.axhline(self.noise_floor, color="k", ls="--", label="noise floor")
-        ax.set_xticks(range(len(rms)), ["model"] + [f"+{e['name']}" for e in self.effects], rotation=20)
+        ax.set_xticks(range(len(gap)), ["model"] + [f"+{e['name']}" for e in self.effects], rotation=20)
         ax.set(ylabel="rad", title="the gap shrinking")
         ax.legend()
         figures.append(("gap", save_figure(fig, out / "diagnose_gap.png")))

@@ -55,8 +55,7 @@ def focal_and_hottest(values: NDArray[np.float64], start: tuple[int, ...]) -> tu
     region when that is hotter than the peak (else None)."""
     peak = climb(values, start)
     outside = np.where(region_6db(values, peak), -np.inf, values)
-    hot = np.unravel_index(int(np.argmax(outside)), values.shape)
-    hot = tuple(int(i) for i in hot)
+    hot = tuple(int(i) for i in np.unravel_index(int(np.argmax(outside)), values.shape))
     return peak, (hot if outside[hot] > values[peak] else None)
 
 

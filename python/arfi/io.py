@@ -122,6 +122,8 @@ def read_arfi_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], 
         raise FileNotFoundError(f"image: {p}: no such file")
     try:
         img = nib.load(str(p))
+        if not isinstance(img, nib.spatialimages.SpatialImage):
+            raise ValueError(f"a {type(img).__name__}, not an image")
         data = np.asarray(img.get_fdata(dtype=np.float64))
     except Exception as e:  # nibabel raises many types for corrupt files
         raise ValueError(f"image: {p}: not a readable NIfTI file ({e})") from None

@@ -117,7 +117,7 @@ def defocused_images(sim: Simulation, applied: NDArray[np.float64], aberrated: N
                      seed: int) -> tuple[list[NDArray[np.float64]], list[Any]]:
     """The aberrated image and one noisy image per :data:`DEFOCUS_MM` step (noise seeds
     ``70_000 + 100·seed + k``), with their known per-element phases (None for the first)."""
-    images, known = [aberrated], [None]
+    images, known = [aberrated], [None]  # type: list[NDArray[np.float64]], list[NDArray[np.float64] | None]
     for k, dz in enumerate(DEFOCUS_MM):
         d = sim.focus_shift_phases((0.0, 0.0, dz))
         images.append(sim.arfi_image(applied + d, noise_rad=noise, seed=70_000 + 100 * seed + k))

@@ -4,6 +4,7 @@ focus is highest, so a correction that the scanner shows to be worse is never ke
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -70,8 +71,8 @@ def robust_focal(image: NDArray[np.float64], region: NDArray[np.bool_] | None = 
 
 
 def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float64]], ArrayLike], iterations: int = 2,
-          known: ArrayLike | None = None, extra_images: list[ArrayLike] | None = None,
-          extra_known: list[ArrayLike | None] | None = None, margin_sigma: float = 2.0,
+          known: ArrayLike | None = None, extra_images: Sequence[ArrayLike] | None = None,
+          extra_known: Sequence[ArrayLike | None] | None = None, margin_sigma: float = 2.0,
           **estimate_options: Any) -> LoopResult:
     """Runs loop 2 from a first (aberrated) ``image`` taken with ``known`` phases added.
 

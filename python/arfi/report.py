@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from arfi.io import atomic_path, atomic_write_text
 
@@ -64,7 +64,7 @@ def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: s
     fig.colorbar(im, ax=ax, label="ARFI phase (rad)")
 
 
-def element_map(fig: Any, ax: Any, sim: Any, phases: Sequence[float], title: str) -> None:
+def element_map(fig: Any, ax: Any, sim: Any, phases: ArrayLike, title: str) -> None:
     """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π]);
     ``phases`` per element or per group."""
     per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
@@ -159,7 +159,7 @@ def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[t
 
 
 def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
-               values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
+               values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
     """Report of a fit (``calibrate``, ``estimate``, ``simulate``): the measured image, the model,
     their residual and, with ``phases`` (rad, the estimated aberration), the element maps of the
     aberration and of its correction (paper Fig. 4c/4d). ``values`` go in a table."""
@@ -180,7 +180,7 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
 
 
 def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],
-                 phases: Sequence[float] | None = None) -> Path:
+                 phases: ArrayLike | None = None) -> Path:
     """Report of a simulated image, with the element map of the phases added to the steering."""
     plt = pyplot()
     out = _report_dir(out)
@@ -191,7 +191,7 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
     return _verb_page(out, verb, values, [("simulated image", save_figure(fig, out / f"{verb}.png"))])
 
 
-def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: Sequence[float] | None = None) -> Path:
+def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
     """Report of a simulated field: |p| (MPa) on the plane, axes in mm, its colour scale set by
     the focal peak near the target (hotter places saturate); |p| along the beam's axis (the line
     from the array's centre through the target) with the target's depth marked; with ``phases``,

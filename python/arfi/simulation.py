@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -16,6 +16,32 @@ from arfi.estimation import Calibration, Estimate
 from arfi.focal import axis_focus, plane_focus
 from arfi.scenario import Scenario
 from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
+
+
+#: One MR-ARFI image (2-D, or a list of rows) or several (a sequence of 2-D arrays, or a 3-D stack).
+Images = ArrayLike | Sequence[ArrayLike]
+#: Known added phases: one vector for one image, or one entry (a vector or None) per image; None: none.
+Known = ArrayLike | Sequence[ArrayLike | None] | None
+
+
+def images_and_known(images: Images, known: Known) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64] | None]]:
+    """The images as 2-D float64 arrays and their known phases (one entry, or None, per image;
+    a single image also takes its vector in a one-entry list). The core checks that the counts
+    agree."""
+    single = (isinstance(images, np.ndarray) and images.ndim != 3) or (
+        isinstance(images, (list, tuple)) and len(images) > 0 and not hasattr(images[0], "shape") and np.ndim(images[0]) == 1)
+    several = cast(Sequence[ArrayLike], images)
+    imgs = [as_image(cast(ArrayLike, images), "images[0]")] if single else [as_image(m, f"images[{i}]") for i, m in enumerate(several)]
+    if not imgs:
+        raise ValueError("images: need at least one image")
+    if known is None:
+        return imgs, [None] * len(imgs)
+    entries = cast(Sequence[ArrayLike | None], known)
+    if single and isinstance(known, (list, tuple)) and len(known) == 1 and (known[0] is None or np.ndim(known[0]) == 1):
+        return imgs, [as_phases(known[0], "known[0]")]
+    if single:
+        return imgs, [as_phases(cast(ArrayLike, known), "known")]
+    return imgs, [as_phases(k, f"known[{i}]") for i, k in enumerate(entries)]
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
@@ -220,7 +246,8 @@ class Simulation:
 
     @property
     def mr_volume_shape(self) -> tuple[int, int, int]:
-        return tuple(self._core.mr_volume_shape)
+        a, b, c = self._core.mr_volume_shape
+        return int(a), int(b), int(c)
 
     def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
@@ -244,7 +271,7 @@ class Simulation:
         elif isinstance(phases, (Sequence, np.ndarray)) and len(phases) > 0 and all(p is None or np.ndim(p) == 1 for p in phases):
             drives = [none if p is None else as_phases(p, f"phases[{k}]") for k, p in enumerate(phases)]
         else:
-            drives = [as_phases(phases)]
+            drives = [as_phases(cast(ArrayLike, phases))]
         y = None if y_mm is None else as_number(y_mm, "y_mm")
         return Section(**self._core.section(drives, y))
 
@@ -317,8 +344,8 @@ class Simulation:
 
     def estimate(
         self,
-        images: ArrayLike | list[ArrayLike],
-        known: list[ArrayLike | None] | None = None,
+        images: Images,
+        known: Known = None,
         method: str = "lbfgs",
         max_evaluations: int | None = None,
         time_limit_s: float | None = None,
@@ -401,16 +428,7 @@ class Simulation:
         a prior, phases as spread as uniform ones, correlated over 12 mm). It ignores distant
         rivals such as twins, so it ranks acquisitions rather than predicts the focus. About 10 s
         for 1024 elements; see ``next_acquisition``."""
-        # A list (or a 3-D stack) of images, or one image.
-        stack = isinstance(images, (list, tuple)) or (isinstance(images, np.ndarray) and images.ndim == 3)
-        imgs = list(images) if stack else [images]  # type: ignore[arg-type]
-        if not imgs:
-            raise ValueError("images: need at least one image")
-        arrays = [as_image(im, f"images[{k}]") for k, im in enumerate(imgs)]
-        kn = [None] * len(arrays) if known is None else list(known)
-        if len(kn) != len(arrays):
-            raise ValueError(f"known: has {len(kn)} entries for {len(arrays)} images")
-        kn_arrays = [as_phases(k, f"known[{i}]") for i, k in enumerate(kn)]
+        arrays, kn_arrays = images_and_known(images, known)
         if not isinstance(method, str):
             raise ValueError(f"method: must be \"nelder-mead\", \"pso\" or \"lbfgs\", got {method!r}")
         evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations", 1)
@@ -427,17 +445,17 @@ class Simulation:
                                 prior_modes=modes)
         return Estimate(**d)
 
-    def cost_model(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
+    def cost_model(self, images: Images, known: Known = None,
                    fit_amplitude: bool = False) -> CostModel:
         """The hybrid cost (paper Eq. 4) that ``estimate`` minimises, for one MR-ARFI image or a
         list of them, each taken with its ``known`` added phases (rad, per element or group; None
         = none): the same masks (``mask_fraction`` of each image's maximum, connected to it) and
         per-pixel group kernels. ``fit_amplitude`` fits one amplitude scale for all images at each
         evaluation. At most 256 groups."""
-        imgs, knowns = self._image_list(images, known)
+        imgs, knowns = images_and_known(images, known)
         return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 
-    def fit_mode(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None,
+    def fit_mode(self, images: Images, known: Known,
                  mode: ArrayLike) -> "_core.ModeFit":
         """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
         priori) that best explains the images, each taken with its ``known`` phases added: image
@@ -450,10 +468,10 @@ class Simulation:
         focus. Returns ``coefficient``, ``std`` (posterior), ``scale``, ``misfit`` (chi-squared per
         pixel), ``n_pixels``, ``noise_rad``, ``tried`` ((c, cost) pairs) and ``bracketed``. Ctrl-C
         stops it before the next coefficient."""
-        imgs, knowns = self._image_list(images, known)
+        imgs, knowns = images_and_known(images, known)
         return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
 
-    def diagnose(self, images: ArrayLike | list[ArrayLike], known: ArrayLike | list[ArrayLike | None] | None = None,
+    def diagnose(self, images: Images, known: Known = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
                  time_limit_s: float | None = None) -> Diagnosis:
         """The model-discrepancy workflow (fit each candidate effect, add the best while the BIC
@@ -466,7 +484,7 @@ class Simulation:
         variance) an effect needs, 0 being the plain BIC. ``max_iterations`` bounds each candidate's
         Nelder–Mead fit; after ``time_limit_s`` the effects added so far are returned with
         ``stop == "time limit"``. Ctrl-C stops the run within a second."""
-        imgs, knowns = self._image_list(images, known)
+        imgs, knowns = images_and_known(images, known)
         if effects is not None and (isinstance(effects, str) or not all(isinstance(e, str) for e in effects)):
             raise ValueError(f"effects: must be a list of effect names, got {effects!r}")
         d = self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations", 1, 10**9),
@@ -474,7 +492,7 @@ class Simulation:
                                 None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True))
         return Diagnosis(**d)
 
-    def effect_images(self, effects: dict[str, Any], known: list[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
+    def effect_images(self, effects: dict[str, Any], known: Sequence[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
         """The model's MR-ARFI images (rad) with effects of the diagnosis library applied:
         ``effects`` maps parameter names, exactly as ``diagnose`` reports them, to values
         (``arfi.diagnose.PARAMETERS`` lists them with their meaning: ``scale``,
@@ -487,24 +505,6 @@ class Simulation:
             if key != "dead_groups":
                 real_array(value, f"effects[{key!r}]")
         return self._core.effect_images(knowns, effects)
-
-    def _image_list(self, images: ArrayLike | list[ArrayLike], known: Any) -> tuple[list[NDArray[np.float64]], list[Any]]:
-        """Images as a list of 2-D arrays and their known phases (one entry, or None, per image)."""
-        # One image: a 2-D array, or a list of rows; several: a list of 2-D arrays.
-        single = isinstance(images, np.ndarray) or (isinstance(images, (list, tuple)) and len(images) > 0
-                                                    and not hasattr(images[0], "shape") and np.ndim(images[0]) == 1)
-        imgs = [as_image(images, "image")] if single else [as_image(m, f"images[{i}]") for i, m in enumerate(images)]
-        if not imgs:
-            raise ValueError("images: need at least one image")
-        if known is None:
-            knowns = [None] * len(imgs)
-        elif single:
-            knowns = [as_phases(known, "known")]
-        else:
-            if len(known) != len(imgs):
-                raise ValueError(f"known: need one entry (or None) per image, got {len(known)} for {len(imgs)}")
-            knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known)]
-        return imgs, knowns
 
     def source_field(self, phases: ArrayLike | None = None) -> NDArray[np.complex128]:
         """Pressure (Pa) on the source plane, shape (ny, nx)."""

@@ -4,7 +4,7 @@ takes, or raises ``ValueError`` naming the parameter (complex values are refused
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,6 +32,10 @@ def as_point_mm(value: ArrayLike, name: str) -> tuple[float, float, float]:
     return float(a[0]), float(a[1]), float(a[2])
 
 
+@overload
+def as_phases(phases: None, name: str = "phases") -> None: ...
+@overload
+def as_phases(phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]: ...
 def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.float64] | None:
     """Phases (rad) as a 1-D float64 array, or None. Raises ValueError naming `name`."""
     if phases is None:

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 import arfi
+from arfi.simulation import images_and_known
 
 
 def test_ideal_image_has_the_scenario_focal_phase_and_shape(sim, ideal):
@@ -206,3 +207,20 @@ def test_element_amplitudes_weight_the_elements_linearly(sim):
     for bad in [np.ones(3), -a, np.zeros(sim.n_elements), np.full(sim.n_elements, np.nan)]:
         with pytest.raises(ValueError, match="amplitudes"):
             sim.with_element_amplitudes(bad)
+
+
+def test_images_and_known_take_one_image_or_several_in_every_form():
+    img, p = np.arange(12.0).reshape(3, 4), np.linspace(0.0, 1.0, 5)
+    for images, known in [(img, p), (img, [p]), (img.tolist(), p)]:
+        arrays, knowns = images_and_known(images, known)
+        assert len(arrays) == 1 and np.array_equal(arrays[0], img) and np.array_equal(knowns[0], p)
+    for images in ([img, img], (img, img), np.stack([img, img])):
+        arrays, knowns = images_and_known(images, [None, p])
+        assert len(arrays) == 2 and knowns[0] is None and np.array_equal(knowns[1], p)
+        assert images_and_known(images, None)[1] == [None, None]
+    with pytest.raises(ValueError, match="^images: need at least one image"):
+        images_and_known([], None)
+    with pytest.raises(ValueError, match=r"^images\[0\]: must be a 2-D image"):
+        images_and_known(np.zeros(5), None)
+    with pytest.raises(ValueError, match=r"^known\[1\]: must be one-dimensional"):
+        images_and_known([img, img], [p, np.zeros((2, 2))])

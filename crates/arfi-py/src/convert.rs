@@ -15,7 +15,7 @@ pub(crate) fn measurements(
     known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
 ) -> PyResult<Vec<Measurement>> {
     if images.len() != known.len() {
-        return Err(invalid("known", "need one entry (or None) per image"));
+        return Err(invalid("known", format!("need one entry (or None) per image, got {} for {} images", known.len(), images.len())));
     }
     Ok(images.iter().zip(known).map(|(i, k)| Measurement { image: i.as_array().to_owned(), known: phases_vec(k) }).collect())
 }

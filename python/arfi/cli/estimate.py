@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest or 'suggested_phases_rad in the JSON'}); "
               f"expected focus after the correction {n['expected_focus_now']:.2f} of the ideal now, {n['expected_focus']:.2f} "
               f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
-    recommended = prior if use_prediction else e.phases_rad
+    recommended = prior if use_prediction and prior is not None else e.phases_rad
     if args.out_phases:
         save_npy(args.out_phases, recommended)
     if args.suggest:
