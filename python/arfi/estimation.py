@@ -71,7 +71,9 @@ class Estimate:
     """Per-element estimation without a prior: the default-group estimate that warm-started it (with a prior the
     search starts from the prediction)."""
     underdetermined: bool = False
-    """Per-element estimation only: fewer masked pixels than phases (then also ``ambiguous``)."""
+    """Per-element estimation only: the images cannot determine a phase per element: one acquisition (one image, or
+    repeats with the same known phases), or, without a prior, fewer masked pixels than phases. Then also
+    ``ambiguous``, unless the prediction was kept (``kept_prediction``)."""
     kept_prediction: bool = False
     """Per-element estimation with a prior from one acquisition (one image, or repeats with the same known phases):
     ``phases_rad`` is the prediction itself, unsearched. One in-focus image cannot check a per-element correction of a

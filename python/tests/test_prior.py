@@ -107,9 +107,10 @@ def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
     images = [sim.arfi_image(truth, noise_rad=0.02, seed=2)]
     for s, prior in ((0.3, truth), (0.5, sim.condense(truth))):
         e = el.estimate(images, prior=prior, prior_std_rad=s, max_evaluations=50)
-        assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.underdetermined
-        # One acquisition cannot check a per-element correction: the prediction is kept as it is.
-        assert e.kept_prediction and e.evaluations == 0
+        assert e.prior_used and len(e.phases_rad) == sim.n_elements
+        # One acquisition cannot check a per-element correction: the prediction is kept as it is,
+        # and the estimate is flagged underdetermined.
+        assert e.kept_prediction and e.evaluations == 0 and e.underdetermined
         np.testing.assert_allclose(np.exp(1j * e.phases_rad), np.exp(1j * sim.element_phases(prior)), atol=1e-12)
     # A repeat with the same known phases (up to a common phase) is the same acquisition: kept too.
     repeat = sim.arfi_image(sim.element_phases(truth) + 0.7, noise_rad=0.02, seed=3)

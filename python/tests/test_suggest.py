@@ -70,7 +70,11 @@ def test_cli_one_acquisition_keeps_the_prediction_until_a_second(tmp_path, capsy
     assert "KEPT THE PREDICTION" in printed and "next acquisition" in printed, printed
     d = json.loads(out.read_text())
     assert d["kept_prediction"] is True and d["evaluations"] == 0 and d["stop"] == "prediction kept"
-    assert d["model_mismatch"] is False
+    # Not fitted, so no model mismatch is judged; the line gives the misfit the prediction leaves
+    # (here a prediction 3 rad off over 15 mm: well above 1), and one image is underdetermined.
+    assert d["model_mismatch"] is False and d["underdetermined"] is True and d["misfit"] > 1.2
+    assert f"misfit of {d['misfit']:.2f} x the noise expectation on this image (well above 1" in printed, printed
+    assert "AMBIGUOUS" not in printed
     np.testing.assert_allclose(np.exp(1j * np.array(d["phases_rad"])), np.exp(1j * np.load(tmp_path / "prior.npy")), atol=1e-12)
     shift = d["next_acquisition"]["focus_shift_mm"]
     assert main(["simulate", "--scenario", str(scenario), "--phases", str(tmp_path / "ab.npy"), "--focus-shift-mm",

@@ -130,8 +130,10 @@ def run(args: argparse.Namespace) -> int:
     if e.kept_prediction:
         print("estimate: KEPT THE PREDICTION: one acquisition cannot check a per-element correction of a prediction (one "
               "that fits the image better than the truth can leave less focus than the prediction); add an image with "
-              "other known phases, e.g. a defocus (--suggest), and estimate from both.")
-    if e.underdetermined:
+              f"other known phases, e.g. a defocus (--suggest), and estimate from both. The prediction leaves a misfit of "
+              f"{e.misfit:.2f} x the noise expectation on this image"
+              + (" (well above 1: the prediction, or the model, misses what the image shows)." if e.misfit > 1.2 else "."))
+    if e.underdetermined and not e.kept_prediction:
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
               f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
     elif e.ambiguous:

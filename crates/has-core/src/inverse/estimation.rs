@@ -139,8 +139,9 @@ pub struct EstimateReport {
     pub scale: f64,
     /// The default-group warm start of a per-element estimate.
     pub group_phases: Option<Vec<f64>>,
-    /// Fewer masked pixels than phases (one image, per element): the data cannot determine it,
-    /// and the assessment is marked ambiguous.
+    /// Per element, the images cannot determine a phase per element: one acquisition, or
+    /// (without a prior) fewer masked pixels than phases. The assessment is then marked
+    /// ambiguous, unless the prediction was kept.
     pub underdetermined: bool,
     /// Per element with a prior from one acquisition: the estimate is the prediction itself,
     /// unsearched (see [`one_acquisition`]); `misfit` then measures the prediction against the
@@ -517,9 +518,10 @@ fn estimate_per_element(
             (None, element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, cancel)?)
         }
     };
-    // One image's masked pixels cannot determine more phases than they number (without a prior).
-    let underdetermined = prior.is_none() && n_pixels < sim.n_elements();
-    assessment.ambiguous |= underdetermined;
+    // One acquisition cannot determine a phase per element (a kept prediction says so on its
+    // own), nor, without a prior, can fewer masked pixels than phases.
+    let underdetermined = one_acquisition(&cost.terms) || (prior.is_none() && n_pixels < sim.n_elements());
+    assessment.ambiguous |= underdetermined && !kept_prediction;
     // Misfit of the element fit itself (the group stage's cannot reach the noise on
     // element-level data).
     let image_cost = cost.cost(&elements.phases);
