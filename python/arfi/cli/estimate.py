@@ -134,8 +134,9 @@ def run(args: argparse.Namespace) -> int:
               f"{e.misfit:.2f} x the noise expectation on this image"
               + (" (well above 1: the prediction, or the model, misses what the image shows)." if e.misfit > 1.2 else "."))
     if e.underdetermined and not e.kept_prediction:
-        print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {e.n_pixels} masked pixels is underdetermined; add images "
-              f"taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
+        print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {len(args.image)} image(s), {e.n_pixels} masked pixels, are "
+              f"underdetermined (one acquisition cannot determine a phase per element, nor fewer pixels than phases); add "
+              f"images taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
     elif e.ambiguous:
         where = ("the next acquisition below; " if e.next_acquisition is not None else "") + \
             f"suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}"
