@@ -501,7 +501,8 @@ fn estimate_per_element(
     let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(time_limit);
     let default_budget = if nuisance.view() { VIEW_ELEMENT_EVALUATIONS } else { ELEMENT_EVALUATIONS };
     let budget = request.max_evaluations.unwrap_or(default_budget);
-    let kept_prediction = prior.is_some() && one_acquisition(&model.cost.terms);
+    let single_acquisition = one_acquisition(&model.cost.terms);
+    let kept_prediction = prior.is_some() && single_acquisition;
     let (elements, cost) = match &prior {
         Some(p) if kept_prediction => keep_prediction(model.cost, model.noise, p, &nuisance, &positions)?,
         _ => search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, cancel)?,
@@ -520,7 +521,7 @@ fn estimate_per_element(
     };
     // One acquisition cannot determine a phase per element (a kept prediction says so on its
     // own), nor, without a prior, can fewer masked pixels than phases.
-    let underdetermined = one_acquisition(&cost.terms) || (prior.is_none() && n_pixels < sim.n_elements());
+    let underdetermined = single_acquisition || (prior.is_none() && n_pixels < sim.n_elements());
     assessment.ambiguous |= underdetermined && !kept_prediction;
     // Misfit of the element fit itself (the group stage's cannot reach the noise on
     // element-level data).

@@ -364,28 +364,36 @@ impl Interface {
 /// density alone leaves the fraction undefined), and held below one half (the centre decides the
 /// side).
 fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C64 {
-    let [a, p, c, n] = slabs.map(|s| (1.0 / s.sound_speed[i], impedance(s, i)));
+    let [a, p, c, n] = slabs.map(|s| 1.0 / s.sound_speed[i]);
     let kappa = |s: &SliceProperties, slowness: f64| C64::new(omega * slowness, s.attenuation[i]);
-    let jump = (c.1 - p.1).abs();
+    let (before_is_p, after_is_c) = layered_sides(slabs, i);
     let mut phase = C64::new(0.0, 0.0);
     let differ = |x: f64, y: f64| (x - y).abs() > 1e-6 * x.abs().max(y.abs());
-    if (n.1 - c.1).abs() <= FACE_NEIGHBOUR * jump && differ(p.0, n.0) {
-        phase += 2.0 * kappa(slabs[1], p.0) * ((c.0 - n.0) / (p.0 - n.0)).clamp(0.0, 0.5) * dz;
+    if after_is_c && differ(p, n) {
+        phase += 2.0 * kappa(slabs[1], p) * ((c - n) / (p - n)).clamp(0.0, 0.5) * dz;
     }
-    if (a.1 - p.1).abs() <= FACE_NEIGHBOUR * jump && differ(c.0, a.0) {
-        phase -= 2.0 * kappa(slabs[2], c.0) * ((p.0 - a.0) / (c.0 - a.0)).clamp(0.0, 0.5) * dz;
+    if before_is_p && differ(c, a) {
+        phase -= 2.0 * kappa(slabs[2], c) * ((p - a) / (c - a)).clamp(0.0, 0.5) * dz;
     }
     phase
 }
 
 /// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
-/// between two layers: the cell before it of `P`'s material and the cell after it of `C`'s
-/// (impedance within [`FACE_NEIGHBOUR`] of the jump). Inside graded or textured bone the
-/// neighbours differ, and the slowness gradient there is texture, not a wall's normal.
+/// between two layers: the cells on both sides of it hold its two materials
+/// ([`layered_sides`]). Inside graded or textured bone the neighbours differ, and the slowness
+/// gradient there is texture, not a wall's normal.
 fn is_wall(slabs: [&SliceProperties; 4], i: usize) -> bool {
+    let (before_is_p, after_is_c) = layered_sides(slabs, i);
+    before_is_p && after_is_c
+}
+
+/// Whether, at pixel `i` of the face between `P` and `C` (`slabs` as in [`face_phase`]), the
+/// cell before `P` is of `P`'s material and the cell after `C` of `C`'s: impedance within
+/// [`FACE_NEIGHBOUR`] of the face's jump.
+fn layered_sides(slabs: [&SliceProperties; 4], i: usize) -> (bool, bool) {
     let [a, p, c, n] = slabs.map(|s| impedance(s, i));
     let jump = (c - p).abs();
-    (a - p).abs() <= FACE_NEIGHBOUR * jump && (n - c).abs() <= FACE_NEIGHBOUR * jump
+    ((a - p).abs() <= FACE_NEIGHBOUR * jump, (n - c).abs() <= FACE_NEIGHBOUR * jump)
 }
 
 /// A cell next to a face counts as the material of the face's side when its impedance is within
