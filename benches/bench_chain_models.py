@@ -127,7 +127,7 @@ def run(seed: int, case: str, frequency_hz: float, voxel_mm: float, std: float, 
                                    fit_nuisance="amplitude", prior_modes=modes)
                 key = f"{name}{'' if modes is None else ', mode'}"
                 r[key] = {"fraction": fraction(add + e.phases_rad), "posterior_cost": e.posterior_cost,
-                          "misfit": e.misfit, "scale": e.nuisance["scale"] if e.nuisance else None,
+                          "misfit": e.misfit, "scale": e.nuisance.scale if e.nuisance else None,
                           "model_mismatch": e.model_mismatch}
                 print(f"  {key}: {r[key]['fraction']:.3f} of the optimum, posterior cost {e.posterior_cost:.1f}, "
                       f"misfit {e.misfit:.2f} ({time.perf_counter() - t0:.0f} s)", flush=True)

@@ -33,7 +33,7 @@ class CostTerm:
 
 class CostModel:
     """``J(phi) = sum_k sum_{i in mask_k} (s·d_k,i(phi + offset_k) - m_k,i)²`` over the images, with
-    ``s = 1`` or, with ``fit_scale``, the least-squares amplitude scale for each ``phi``. This is
+    ``s = 1`` or, with ``fit_amplitude``, the least-squares amplitude scale for each ``phi``. This is
     what ``Simulation.estimate`` minimises; use it to drive your own optimiser (e.g.
     ``scipy.optimize.minimize(model.cost_and_gradient, x0, jac=True)``) or to check the model.
     Build it with ``Simulation.cost_model``."""
@@ -52,8 +52,8 @@ class CostModel:
         return int(self._core.n_pixels)
 
     @property
-    def fit_scale(self) -> bool:
-        return bool(self._core.fit_scale)
+    def fit_amplitude(self) -> bool:
+        return bool(self._core.fit_amplitude)
 
     @property
     def noise_rad(self) -> float:
@@ -70,7 +70,7 @@ class CostModel:
         return float(j), g
 
     def scale(self, phases: ArrayLike) -> float:
-        """The amplitude scale ``s`` at ``phases`` (1 unless ``fit_scale``)."""
+        """The amplitude scale ``s`` at ``phases`` (1 unless ``fit_amplitude``)."""
         return float(self._core.scale(self._phases(phases)))
 
     def terms(self) -> list[CostTerm]:
@@ -83,4 +83,4 @@ class CostModel:
         return p
 
     def __repr__(self) -> str:
-        return f"CostModel(n_groups={self.n_groups}, n_pixels={self.n_pixels}, fit_scale={self.fit_scale})"
+        return f"CostModel(n_groups={self.n_groups}, n_pixels={self.n_pixels}, fit_amplitude={self.fit_amplitude})"

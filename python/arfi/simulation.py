@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -339,8 +340,8 @@ class Simulation:
 
     def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
         """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
-        return Calibration(**self._core.calibrate(as_image(image, "image"), as_phases(known, "known"), None,
-                                                    as_number(max_width_mm, "max_width_mm", 0.0, low_open=True)))
+        return self._core.calibrate(as_image(image, "image"), as_phases(known, "known"), None,
+                                    as_number(max_width_mm, "max_width_mm", 0.0, low_open=True))
 
     def estimate(
         self,
@@ -439,11 +440,10 @@ class Simulation:
         length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm", 0.0, low_open=True)
         nuisance = nuisance_names(fit_nuisance)
         modes = None if prior_modes is None else as_modes(prior_modes, self.n_elements)
-        d = self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
+        return self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress), prior=prior_array, prior_std_rad=std,
                                 prior_correlation_mm=length, fit_nuisance=nuisance, suggest=bool(suggest),
                                 prior_modes=modes)
-        return Estimate(**d)
 
     def cost_model(self, images: Images, known: Known = None,
                    fit_amplitude: bool = False) -> CostModel:
@@ -501,6 +501,10 @@ class Simulation:
         ``known``. A diagnosis's ``params`` fed back here give its model images."""
         knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known or [None])]
         effects = dict(effects)
+        if "sound_speed_m_per_s" in effects:
+            warnings.warn("effects: 'sound_speed_m_per_s' is now 'sound_speed_m_s' (the scenario's name); the old name "
+                          "goes in the next release", DeprecationWarning, stacklevel=2)
+            effects["sound_speed_m_s"] = effects.pop("sound_speed_m_per_s")
         for key, value in effects.items():
             if key != "dead_groups":
                 real_array(value, f"effects[{key!r}]")

@@ -142,3 +142,13 @@ def test_effect_images_names_the_known_parameters_when_one_is_unknown(sim):
         sim.effect_images({"width_mm": 2.0})
     assert set(arfi.diagnose.PARAMETERS) >= {"broadening_width_u_mm", "broadening_width_v_mm", "dead_groups", "group_phases_rad"}
     assert {e for e, _ in arfi.diagnose.PARAMETERS.values()} == set(arfi.diagnose.EFFECTS)
+
+
+def test_effect_images_take_the_old_sound_speed_name_with_a_deprecation(sim) -> None:
+    # The parameter was named sound_speed_m_per_s; the scenario's sound_speed_m_s is the one name
+    # now, and the old one is accepted for one release with a DeprecationWarning.
+    new = sim.effect_images({"sound_speed_m_s": 1600.0})
+    with pytest.warns(DeprecationWarning, match="sound_speed_m_per_s' is now 'sound_speed_m_s'"):
+        old = sim.effect_images({"sound_speed_m_per_s": 1600.0})
+    np.testing.assert_array_equal(new[0], old[0])
+    assert "sound_speed_m_s" in arfi.diagnose.PARAMETERS

@@ -43,14 +43,14 @@ def test_amplitude_and_backgrounds_are_fitted_with_the_element_phases(small: arf
                          fit_nuisance="amplitude,background_phase")
     assert plain.nuisance is None and plain.model_mismatch
     n = fitted.nuisance
-    assert n is not None and n["fitted"] == ["amplitude", "background_phase"]
+    assert n is not None and n.fitted == ["amplitude", "background_phase"]
     # Hundreds of pixels per image determine the offset far below the 0.02 rad noise per pixel;
     # 0.005 rad leaves room for the phases' trade with the scale.
-    assert np.allclose(n["background_offset_rad"], offsets, atol=0.005), n
-    assert abs(n["background_slope_rad_per_mm"][0][0] - 2e-4) < 1e-4, n
-    assert abs(n["scale"] - 0.9) < 0.05, n
+    assert np.allclose(n.offset_rad, offsets, atol=0.005), n
+    assert abs(n.slope_x_rad_per_mm[0] - 2e-4) < 1e-4, n
+    assert abs(n.scale - 0.9) < 0.05, n
     # Not fitted: the model's values.
-    assert n["broadening_width_mm"] == pytest.approx(2.7) and n["shift_mm"] == [0.0, 0.0]
+    assert n.broadening_width_mm == pytest.approx(2.7) and (n.dx_mm, n.dy_mm) == (0.0, 0.0)
     # The residual is the noise: within 10 % of its expectation.
     assert fitted.misfit < 1.1 and not fitted.model_mismatch, fitted.misfit
     assert json.loads(json.dumps(fitted.to_dict()))["nuisance"]["fitted"] == ["amplitude", "background_phase"]

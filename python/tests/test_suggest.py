@@ -30,21 +30,21 @@ def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> 
                     suggest=True)
     n = e.next_acquisition
     assert n is not None
-    shifts = [c["focus_shift_mm"] for c in n["candidates"]]
-    values = [c["expected_focus"] for c in n["candidates"]]
+    shifts = [c.focus_shift_mm for c in n.candidates]
+    values = [c.expected_focus for c in n.candidates]
     # One image: the prediction is kept, so the in-focus image again (a repeat, which would be kept
     # again) is not offered, and the expected focus now is the prior's alone.
     assert e.kept_prediction and len(shifts) == 14 and [0.0, 0.0, 0.0] not in shifts
-    assert values == sorted(values, reverse=True) and n["focus_shift_mm"] == shifts[0]
+    assert values == sorted(values, reverse=True) and n.focus_shift_mm == shifts[0]
     # More data never lowers the expected focus; the suggested image's known phases move the focus.
-    assert 0.0 < n["expected_focus_now"] <= n["expected_focus"] <= 1.0, n
-    np.testing.assert_allclose(e.suggested_phases_rad, small.focus_shift_phases(n["focus_shift_mm"]), atol=1e-12)
-    assert json.loads(json.dumps(e.to_dict()))["next_acquisition"]["focus_shift_mm"] == n["focus_shift_mm"]
+    assert 0.0 < n.expected_focus_now <= n.expected_focus <= 1.0, n
+    np.testing.assert_allclose(e.suggested_phases_rad, small.focus_shift_phases(n.focus_shift_mm), atol=1e-12)
+    assert json.loads(json.dumps(e.to_dict()))["next_acquisition"]["focus_shift_mm"] == n.focus_shift_mm
     # Not asked: an ambiguous posterior (one image, a loose prior) still comes with the acquisition
     # that would settle it; an unambiguous one (a tight prior) and a group estimate come without.
     loose = el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, max_evaluations=20)
     assert loose.ambiguous and loose.next_acquisition is not None
-    np.testing.assert_allclose(loose.suggested_phases_rad, small.focus_shift_phases(loose.next_acquisition["focus_shift_mm"]),
+    np.testing.assert_allclose(loose.suggested_phases_rad, small.focus_shift_phases(loose.next_acquisition.focus_shift_mm),
                                atol=1e-12)
     tight = el.estimate([image], [None], prior=prediction, prior_std_rad=0.05, max_evaluations=20)
     assert not tight.ambiguous and tight.next_acquisition is None, tight.worst_recovery

@@ -41,7 +41,7 @@ impl CoreCostModel {
     }
 
     #[getter]
-    fn fit_scale(&self) -> bool {
+    fn fit_amplitude(&self) -> bool {
         self.cost.fit_scale
     }
 
@@ -63,7 +63,7 @@ impl CoreCostModel {
         Ok((j, g.into_pyarray(py)))
     }
 
-    /// The amplitude scale at `phases` (1 unless `fit_scale`).
+    /// The amplitude scale at `phases` (1 unless `fit_amplitude`).
     fn scale(&self, py: Python<'_>, phases: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
         let p = self.phases(phases)?;
         Ok(py.detach(|| self.cost.scale(&p)))

@@ -6,12 +6,16 @@ mod diagnose;
 mod error;
 mod interrupt;
 mod mode_fit;
+mod phase;
 mod prediction;
+mod results;
 mod scenario;
 mod simulation;
 mod validation;
 
+use has_core::inverse::estimation::Method;
 use pyo3::prelude::*;
+use pyo3::types::PyTuple;
 use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenario_toml_with_grid};
 
 /// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`): call
@@ -26,6 +30,11 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::CoreSimulation>()?;
     m.add_class::<cost::CoreCostModel>()?;
     m.add_class::<mode_fit::CoreModeFit>()?;
+    m.add_class::<results::CoreCalibration>()?;
+    m.add_class::<results::CoreEstimate>()?;
+    m.add_class::<results::NuisanceFit>()?;
+    m.add_class::<results::NextAcquisition>()?;
+    m.add_class::<results::ShiftCandidate>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
@@ -35,6 +44,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;
+    m.add_function(wrap_pyfunction!(phase::wrap_phases, m)?)?;
+    m.add_function(wrap_pyfunction!(phase::phase_error, m)?)?;
+    m.add("METHODS", PyTuple::new(m.py(), Method::ALL.map(|m| m.name()))?)?;
     m.add_function(wrap_pyfunction!(validation::validation_cases, m)?)?;
     m.add_function(wrap_pyfunction!(validation::validation_tolerances, m)?)?;
     Ok(())

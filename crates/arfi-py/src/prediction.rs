@@ -39,7 +39,7 @@ pub(crate) fn predict<'py>(
     d.set_item("target_mm", p.target.map(|v| v * 1e3).to_vec())?;
     d.set_item("reference_pa", p.reference_pressure)?;
     d.set_item("uncorrected_pa", p.uncorrected_pressure)?;
-    d.set_item("ray_steering_pa", p.ray_pressure)?;
+    d.set_item("ray_steering_pa", p.ray_steering_pressure)?;
     d.set_item("corrected_pa", p.corrected_pressure)?;
     d.set_item("optimal_pa", p.optimal_pressure)?;
     d.set_item("reference_optimal_pa", p.reference_optimal_pressure)?;

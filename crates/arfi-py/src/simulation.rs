@@ -6,6 +6,7 @@ use crate::diagnose::{diagnosis_dict, effects_from_dict};
 use crate::error::{invalid, to_py};
 use crate::interrupt::run_interruptible;
 use crate::mode_fit::CoreModeFit;
+use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
 use has_core::inverse::basis::BasisCache;
 use has_core::inverse::calibrate::calibrate;
@@ -13,7 +14,6 @@ use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimation::{estimate_aberration_with, EstimateRequest, Method};
-use has_core::inverse::information::ShiftSuggestion;
 use has_core::inverse::mode_fit::fit_mode;
 use has_core::inverse::nuisance::Nuisance;
 use has_core::inverse::prior::Prior;
@@ -22,7 +22,7 @@ use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -305,18 +305,12 @@ impl CoreSimulation {
         known: Option<PyReadonlyArray1<'py, f64>>,
         mask_fraction: Option<f64>,
         max_width_mm: f64,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<CoreCalibration> {
         let image = image.as_array().to_owned();
         let known = phases_vec(known);
         let frac = mask_fraction.unwrap_or(self.inner.mask_fraction);
         let c = py.detach(|| calibrate(&self.inner, &image, &known, frac, max_width_mm * 1e-3)).map_err(to_py)?;
-        let d = PyDict::new(py);
-        d.set_item("broadening_width_mm", c.broadening_width * 1e3)?;
-        d.set_item("amplitude", c.amplitude)?;
-        d.set_item("cost", c.cost)?;
-        d.set_item("n_pixels", c.n_pixels)?;
-        d.set_item("noise_rad", c.noise)?;
-        Ok(d)
+        Ok(CoreCalibration(c))
     }
 
     /// The model-discrepancy workflow (fit each candidate effect, add the best while the BIC
@@ -372,7 +366,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_scale=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_amplitude=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -384,7 +378,7 @@ impl CoreSimulation {
         time_limit_s: Option<f64>,
         seed: u64,
         starts: Option<usize>,
-        fit_scale: bool,
+        fit_amplitude: bool,
         threshold: f64,
         progress: bool,
         prior: Option<PyReadonlyArray1<'py, f64>>,
@@ -393,7 +387,7 @@ impl CoreSimulation {
         fit_nuisance: Option<Vec<String>>,
         suggest: bool,
         prior_modes: Option<PyReadonlyArray2<'py, f64>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<CoreEstimate> {
         let measurements = measurements(images, known)?;
         let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
         let prior = Prior::from_parts(prior.map(|p| p.as_array().to_vec()), prior_std_rad).map_err(to_py)?;
@@ -413,7 +407,7 @@ impl CoreSimulation {
             time_limit_s,
             seed,
             starts,
-            fit_scale,
+            fit_scale: fit_amplitude,
             nuisance,
             threshold,
             prior,
@@ -429,73 +423,25 @@ impl CoreSimulation {
             estimate_aberration_with(&self.inner, &measurements, &request, &self.basis, Some(&cancel), Some(&report))
         })?
         .map_err(to_py)?;
-        let (e, a) = (&r.estimate, &r.assessment);
-        let d = PyDict::new(py);
-        d.set_item("n_pixels", r.n_pixels)?;
-        d.set_item("scale", r.scale)?;
-        if let Some(g) = &r.group_phases {
-            d.set_item("group_phases_rad", g.clone().into_pyarray(py))?;
-        }
-        d.set_item("underdetermined", r.underdetermined)?;
-        d.set_item("kept_prediction", r.kept_prediction)?;
-        d.set_item("phases_rad", e.phases.clone().into_pyarray(py))?;
-        d.set_item("cost", r.image_cost)?;
-        d.set_item("prior_used", r.prior_used)?;
-        if r.prior_used {
-            d.set_item("posterior_cost", e.cost)?;
-        }
-        d.set_item("evaluations", e.evaluations)?;
-        d.set_item("seconds", e.seconds)?;
-        d.set_item("ambiguous", a.ambiguous)?;
-        d.set_item("stop", e.stop.name())?;
-        d.set_item("method", request.method.name())?;
-        d.set_item("noise_floor", r.noise)?;
-        d.set_item("cost_history", e.history.clone().into_pyarray(py))?;
-        d.set_item("margin", a.margin)?;
-        d.set_item("worst_recovery", a.worst_recovery)?;
-        let cands: Vec<Vec<f64>> = a.candidates.iter().map(|c| c.phases.clone()).collect();
-        d.set_item("candidate_phases_rad", cands)?;
-        d.set_item("candidate_costs", a.candidates.iter().map(|c| c.cost).collect::<Vec<_>>())?;
-        d.set_item("candidate_recoveries", a.candidates.iter().map(|c| c.predicted_recovery).collect::<Vec<_>>())?;
-        match &r.suggestion {
-            Some(next) => {
-                d.set_item("suggested_phases_rad", next.known.clone().into_pyarray(py))?;
-                d.set_item("next_acquisition", next_acquisition(py, next)?)?;
-            }
-            None => d.set_item("suggested_phases_rad", a.suggested_phases.clone().into_pyarray(py))?,
-        }
-        d.set_item("suggested_separation", a.suggested_separation)?;
-        d.set_item("misfit", a.misfit)?;
-        d.set_item("model_mismatch", a.mismatch)?;
-        if let Some(n) = &r.nuisance {
-            let f = PyDict::new(py);
-            f.set_item("fitted", n.fitted.names())?;
-            f.set_item("scale", n.scale)?;
-            f.set_item("broadening_width_mm", n.broadening_width_mm)?;
-            f.set_item("shift_mm", n.shift_mm.to_vec())?;
-            f.set_item("background_offset_rad", n.background.iter().map(|b| b[0]).collect::<Vec<_>>())?;
-            f.set_item("background_slope_rad_per_mm", n.background.iter().map(|b| vec![b[1], b[2]]).collect::<Vec<_>>())?;
-            d.set_item("nuisance", f)?;
-        }
-        Ok(d)
+        Ok(CoreEstimate { report: r, method: request.method })
     }
 
     /// The hybrid cost (paper Eq. 4) of images, each with its known added phases, on the per-pixel
     /// group kernels `estimate` minimises (at most 256 groups).
-    #[pyo3(signature = (images, known, fit_scale=false))]
+    #[pyo3(signature = (images, known, fit_amplitude=false))]
     fn cost_model(
         &self,
         py: Python<'_>,
         images: Vec<PyReadonlyArray2<'_, f64>>,
         known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
-        fit_scale: bool,
+        fit_amplitude: bool,
     ) -> PyResult<CoreCostModel> {
         let measurements = measurements(images, known)?;
         let sim = &self.inner;
         let cancel = AtomicBool::new(false);
         let model = run_interruptible(py, &cancel, || build_model(sim, &measurements, sim.mask_fraction, 3))?.map_err(to_py)?;
         let mut cost = model.cost;
-        cost.fit_scale = fit_scale;
+        cost.fit_scale = fit_amplitude;
         Ok(CoreCostModel { cost: Arc::new(cost), noise: model.noise })
     }
 
@@ -508,22 +454,4 @@ impl CoreSimulation {
         let a = ndarray::Array2::from_shape_vec((g.ny, g.nx), f).map_err(|e| invalid("field", e.to_string()))?;
         Ok(a.into_pyarray(py))
     }
-}
-
-/// The suggested next acquisition of a per-element estimate as a dict (shifts in mm).
-fn next_acquisition<'py>(py: Python<'py>, next: &ShiftSuggestion) -> PyResult<Bound<'py, PyDict>> {
-    let mm = |s: [f64; 3]| s.map(|v| v * 1e3).to_vec();
-    let d = PyDict::new(py);
-    d.set_item("focus_shift_mm", mm(next.shift))?;
-    d.set_item("expected_focus_now", next.expected_focus_now)?;
-    d.set_item("expected_focus", next.expected_focus)?;
-    let candidates = PyList::empty(py);
-    for c in &next.candidates {
-        let e = PyDict::new(py);
-        e.set_item("focus_shift_mm", mm(c.shift))?;
-        e.set_item("expected_focus", c.expected_focus)?;
-        candidates.append(e)?;
-    }
-    d.set_item("candidates", candidates)?;
-    Ok(d)
 }

@@ -54,7 +54,7 @@ pub struct Prediction {
     pub uncorrected_pressure: f64,
     /// The scenario's own steering toward the target through the skull (straight-ray times of
     /// flight through the CT's bone; at the focus, as `Simulation::field` drives it).
-    pub ray_pressure: f64,
+    pub ray_steering_pressure: f64,
     /// Reference steering minus the predicted phases, through the skull.
     pub corrected_pressure: f64,
     /// The most any phases can give through the skull at this drive amplitude, `Σ_e |h_e^skull|`
@@ -237,7 +237,7 @@ fn from_fields(
         reference_pressure: focal_pressure(&reference, |e| reference_steering[e]),
         reference_optimal_pressure: reference.iter().map(|h| h.norm()).sum(),
         uncorrected_pressure: focal_pressure(&skull, |e| reference_steering[e]),
-        ray_pressure: focal_pressure(&skull, |e| ray_steering[e]),
+        ray_steering_pressure: focal_pressure(&skull, |e| ray_steering[e]),
         corrected_pressure: focal_pressure(&skull, |e| reference_steering[e] - phases[e]),
         optimal_pressure: skull.iter().map(|h| h.norm()).sum(),
         phases,

@@ -247,7 +247,7 @@ fn an_image_through_the_beam_axis_names_attenuation_sound_speed_and_dropout() {
     // shares the focal move with it: within 25 m/s (measured 2026-11-23: 1435 m/s fitted for
     // 1417 m/s hidden, with a 0.69 mm axial shift beside it; the gap closes either way).
     assert_eq!(d.steps[0].effect, Effect::SoundSpeed, "{:?}", names(&d));
-    let c = param(&d, "sound_speed_m_per_s");
+    let c = param(&d, "sound_speed_m_s");
     assert!((c - e.field.sound_speed).abs() < 25.0 && gap(&d) < 1.2, "{c} m/s against {}", e.field.sound_speed);
     let mut e = none;
     e.field.dead_groups = vec![rng.random_range(0..16)];
@@ -384,7 +384,7 @@ fn every_effect_round_trips_from_diagnose_to_effect_images() {
         (Effect::SliceOffset, vec![("dz_mm", Number(6.0))]),
         (Effect::BroadeningAnisotropic, vec![("broadening_width_u_mm", Number(2.0)), ("broadening_width_v_mm", Number(3.6))]),
         (Effect::Attenuation, vec![("attenuation_db_cm_mhz", Number(0.75))]),
-        (Effect::SoundSpeed, vec![("sound_speed_m_per_s", Number(1600.0))]),
+        (Effect::SoundSpeed, vec![("sound_speed_m_s", Number(1600.0))]),
         (Effect::ElementDropout, vec![("dead_groups", Indices(vec![5]))]),
         (Effect::PhaseAberration, vec![("group_phases_rad", Numbers(phases))]),
     ];

@@ -88,7 +88,7 @@ fn predicted_phases_restore_the_focus_through_a_shifted_uneven_shell() {
          predicted/best {:.3}, uncorrected/best {:.3}; transmission {:.3} mean, phases {:.2} rad peak to peak",
         p.reference_pressure / 1e6,
         p.uncorrected_pressure / 1e6,
-        p.ray_pressure / 1e6,
+        p.ray_steering_pressure / 1e6,
         p.corrected_pressure / 1e6,
         best / 1e6,
         p.corrected_pressure / best,

@@ -123,9 +123,9 @@ def run(args: argparse.Namespace) -> int:
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.nuisance is not None:
         n = e.nuisance
-        offsets = ", ".join(f"{b:+.3f}" for b in n["background_offset_rad"])
-        print(f"estimate: fitted {', '.join(n['fitted'])}: amplitude scale {n['scale']:.3f}, W {n['broadening_width_mm']:.2f} mm, "
-              f"shift ({n['shift_mm'][0]:+.2f}, {n['shift_mm'][1]:+.2f}) mm, background offsets {offsets} rad; misfit "
+        offsets = ", ".join(f"{b:+.3f}" for b in n.offset_rad)
+        print(f"estimate: fitted {', '.join(n.fitted)}: amplitude scale {n.scale:.3f}, W {n.broadening_width_mm:.2f} mm, "
+              f"shift ({n.dx_mm:+.2f}, {n.dy_mm:+.2f}) mm, background offsets {offsets} rad; misfit "
               f"{e.misfit:.2f} x the noise expectation")
     if e.kept_prediction:
         print("estimate: KEPT THE PREDICTION: one acquisition cannot check a per-element correction of a prediction (one "
@@ -157,10 +157,10 @@ def run(args: argparse.Namespace) -> int:
               f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
               f"the focus: check it with an image taken with the correction applied (loop 2).")
     if e.next_acquisition is not None:
-        n = e.next_acquisition
-        x, y, z = n["focus_shift_mm"]
+        nxt = e.next_acquisition
+        x, y, z = nxt.focus_shift_mm
         print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest or 'suggested_phases_rad in the JSON'}); "
-              f"expected focus after the correction {n['expected_focus_now']:.2f} of the ideal now, {n['expected_focus']:.2f} "
+              f"expected focus after the correction {nxt.expected_focus_now:.2f} of the ideal now, {nxt.expected_focus:.2f} "
               f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
     recommended = prior if use_prediction and prior is not None else e.phases_rad
     if args.out_phases:

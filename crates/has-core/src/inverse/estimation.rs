@@ -34,14 +34,15 @@ pub enum Method {
 }
 
 impl Method {
-    /// Parses `"nelder-mead"`, `"pso"` or `"lbfgs"`.
+    /// Every optimiser, in the order the names are listed to users.
+    pub const ALL: [Method; 3] = [Method::NelderMead, Method::ParticleSwarm, Method::Lbfgs];
+
+    /// Parses a name of [`Method::name`] (`"nelder-mead"`, `"pso"` or `"lbfgs"`).
     pub fn parse(name: &str) -> Result<Self> {
-        match name {
-            "nelder-mead" => Ok(Method::NelderMead),
-            "pso" => Ok(Method::ParticleSwarm),
-            "lbfgs" => Ok(Method::Lbfgs),
-            m => Err(HasError::invalid("method", format!("must be 'nelder-mead', 'pso' or 'lbfgs', got '{m}'"))),
-        }
+        Method::ALL.into_iter().find(|m| m.name() == name).ok_or_else(|| {
+            let names: Vec<String> = Method::ALL.iter().map(|m| format!("'{}'", m.name())).collect();
+            HasError::invalid("method", format!("must be one of {}, got '{name}'", names.join(", ")))
+        })
     }
 
     /// The name [`Method::parse`] reads.

@@ -268,7 +268,7 @@ pub const PARAMETERS: [Parameter; 15] = [
         "width along the first axis minus width along the second (mm), broadening_width_mm their mean",
     ),
     param("attenuation_db_cm_mhz", Effect::Attenuation, ValueKind::Number, "attenuation of the material at the focus (dB/cm/MHz)"),
-    param("sound_speed_m_per_s", Effect::SoundSpeed, ValueKind::Number, "sound speed of the material at the focus (m/s)"),
+    param("sound_speed_m_s", Effect::SoundSpeed, ValueKind::Number, "sound speed of the material at the focus (m/s)"),
     param("dead_groups", Effect::ElementDropout, ValueKind::Indices, "groups whose elements emit nothing"),
     param("group_phases_rad", Effect::PhaseAberration, ValueKind::Numbers, "phase added to every element of each group (rad)"),
 ];
@@ -314,7 +314,7 @@ impl Effects {
             "slope_x_rad_per_mm" => v.background_slope_rad_per_mm[0] = number()?,
             "slope_y_rad_per_mm" => v.background_slope_rad_per_mm[1] = number()?,
             "dz_mm" => v.slice_offset_mm = number()?,
-            "sound_speed_m_per_s" => self.field.sound_speed = number()?,
+            "sound_speed_m_s" => self.field.sound_speed = number()?,
             "attenuation_db_cm_mhz" => self.field.attenuation_db_cm_mhz = number()?,
             "group_phases_rad" => match value {
                 Value::Numbers(x) if x.iter().all(|v| v.is_finite()) => self.field.group_phases = x.clone(),
@@ -356,7 +356,7 @@ pub(super) fn params_of(effect: Effect, after: &Effects, before: &Effects) -> Ve
             let new: Vec<usize> = f.dead_groups.iter().copied().filter(|g| !before.field.dead_groups.contains(g)).collect();
             vec![("dead_groups", Value::Indices(new))]
         }
-        Effect::SoundSpeed => vec![("sound_speed_m_per_s", Value::Number(f.sound_speed))],
+        Effect::SoundSpeed => vec![("sound_speed_m_s", Value::Number(f.sound_speed))],
         Effect::Attenuation => vec![("attenuation_db_cm_mhz", Value::Number(f.attenuation_db_cm_mhz))],
         Effect::BroadeningAnisotropic => {
             let w = after.view.widths_mm();
