@@ -109,7 +109,9 @@ class Medium:
 
     def __init__(self, scenario: dict, frequency: float):
         self.materials = {m["name"]: m for m in scenario["material"]}
-        self.background = scenario["medium"]["background"]
+        names = [m["name"] for m in scenario["material"]]
+        default = "water" if "water" in names else names[0]
+        self.background = scenario.get("medium", {}).get("background", default)
         self.regions = scenario.get("region", [])
         self.frequency = frequency
         grid = scenario.get("grid", {})
@@ -117,11 +119,13 @@ class Medium:
         self.screen = grid.get("screen", "oblique")
         self.sponge_width = grid.get("sponge_width_mm", 10.0) * 1e-3
         self.focus = np.array(scenario["focus"]["position_mm"]) * 1e-3
+        if grid.get("reflections", False):
+            raise ValueError("reflections towards the source are not supported here")
         for r in self.regions:
             if r["shape"] not in ("cylinder", "slab"):
                 raise ValueError(f"region shape {r['shape']!r} not supported here")
-        if any(k in scenario for k in ("ct", "voxels")) or any(k in scenario["medium"] for k in ("ct", "voxels")):
-            raise ValueError("voxel maps and CTs are not supported here")
+        if "ct" in scenario:
+            raise ValueError("CTs are not supported here")
 
     def _props(self, name: str) -> tuple[float, float, float]:
         m = self.materials[name]
@@ -173,7 +177,7 @@ def axial_wavenumber(k: complex | np.ndarray, kt2: np.ndarray) -> np.ndarray:
     return np.where(kz.imag < 0, -kz, kz)
 
 
-def reflection(omega: float, a: tuple[float, float, float], b: tuple[float, float, float], kt2: np.ndarray) -> np.ndarray:
+def reflection(omega: float, a: tuple[float, ...], b: tuple[float, ...], kt2: np.ndarray) -> np.ndarray:
     """Plane-wave pressure reflection coefficient from medium ``a`` into ``b``, each (c, rho, alpha)."""
     kza = axial_wavenumber(omega / a[0] + 1j * a[2], kt2)
     kzb = axial_wavenumber(omega / b[0] + 1j * b[2], kt2)
@@ -219,7 +223,8 @@ def interface(g: Grid, a: Slice, b: Slice, omega: float, model: str, shared: dic
     pa = np.stack([a.c, a.rho, a.alpha], axis=-1).reshape(-1, 3)
     pb = np.stack([b.c, b.rho, b.alpha], axis=-1).reshape(-1, 3)
     differ = np.any(pa != pb, axis=1)
-    pairs, first, inverse = np.unique(np.concatenate([pa, pb], axis=1)[differ], axis=0, return_index=True, return_inverse=True)
+    changed = np.concatenate([pa, pb], axis=1)[differ]  # (c, rho, alpha) before and after, per pixel
+    pairs, first, inverse = np.unique(changed, axis=0, return_index=True, return_inverse=True)
     new = sum(1 for p in pairs if tuple(p) not in shared)
     if len(pairs) > MAX_SPECTRAL_PAIRS or len(shared) + new > MAX_PLAN_PAIRS:
         return Pointwise(normal), strength
