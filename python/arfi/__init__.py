@@ -19,10 +19,11 @@ from arfi.simulation import Field, Section, Simulation
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
+from arfi.estimation import Calibration, Estimate, NextAcquisition, NuisanceFit
 from arfi._core import ModeFit
 
 __all__ = ["Scenario", "Simulation", "Field", "Section", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
-           "predict", "Prediction", "ModeFit"]
+           "predict", "Prediction", "ModeFit", "Calibration", "Estimate", "NuisanceFit", "NextAcquisition"]
 
 try:
     from importlib.metadata import version as _version

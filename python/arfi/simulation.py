@@ -282,7 +282,7 @@ class Simulation:
         ``noise_rad`` adds seeded Gaussian noise (same seed, same noise). Pixels without MR signal
         (bone; see ``imaged``) are NaN, as a scanner leaves them: use ``focal_arfi`` or
         ``np.nanmax`` rather than ``max``."""
-        noise = as_number(noise_rad, "noise_rad", 0.0)
+        noise = as_number(noise_rad, "noise_rad")
         return self._core.arfi_image(as_phases(phases), noise, as_count(seed, "seed"))
 
     def focal_arfi(self, image: ArrayLike) -> tuple[float, tuple[int, int]]:
@@ -311,25 +311,26 @@ class Simulation:
         the paper's 16-aberration case."""
         return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
 
-    def focus_shift_phases(self, shift_mm: ArrayLike) -> NDArray[np.float64]:
+    def focus_shift_phases(self, shift_mm: ArrayLike, name: str = "shift_mm") -> NDArray[np.float64]:
         """Known per-element phases (rad) that move the focus by ``shift_mm`` (x, y, z in the
         transducer frame, mm): the steering phases for the shifted target minus the current ones.
         Added to an acquisition (``arfi_image(aberration + p)``, ``arfi simulate --known-phases``)
         they give a displaced or, along z, a defocused diversity image: the classic phase-diversity
         choice (Gonsalves 1982); per element they inform more than images with random known
-        group phases (BENCHMARKS.md, "Ladder constants")."""
-        return self._core.focus_shift_phases(as_point_mm(shift_mm, "shift_mm"))
+        group phases (BENCHMARKS.md, "Ladder constants"). Errors name ``name``."""
+        return self._core.focus_shift_phases(as_point_mm(shift_mm, name), name)
 
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
         """Added phases, one per element or one per group, as one per element. Errors name ``name``."""
         a = as_phases(phases, name)
         if a is None:
             raise ValueError(f"{name}: required, got None")
-        try:
-            return self._core.element_phases(a)
-        except ValueError as e:
-            msg = str(e)
-            raise ValueError(name + msg[len("phases"):] if msg.startswith("phases:") else msg) from None
+        return self._core.element_phases(a, name)
+
+    def known_per_element(self, known: ArrayLike, name: str = "known") -> NDArray[np.float64]:
+        """An image's known added phases, given per element, per group or per default group (the
+        paper's 16), as one per element. Errors name ``name``."""
+        return self._core.known_per_element(as_phases(known, name), name)
 
     def condense(self, element_phases: ArrayLike) -> NDArray[np.float64]:
         """Per-group circular means (the angle of the mean phasor) of per-element phases."""
@@ -341,7 +342,7 @@ class Simulation:
     def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
         """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
         return self._core.calibrate(as_image(image, "image"), as_phases(known, "known"), None,
-                                    as_number(max_width_mm, "max_width_mm", 0.0, low_open=True))
+                                    as_number(max_width_mm, "max_width_mm"))
 
     def estimate(
         self,
@@ -400,16 +401,16 @@ class Simulation:
         sound speed may be off by 20 %. Each mode's coefficient (a standard normal a priori) is
         fitted with the smooth corrections, so one misjudged constant that moves every phase is
         one number for the images to find. With a fitted image scale the images pin it only
-        loosely: on a 650 kHz head phantom it lifted a poor prediction from 0.85 to 0.94 of the
-        best focus and cost a good one 0.015 (README, CT-based prediction). ``ambiguous`` is
-        judged on draws of the prior without the modes.
+        loosely (a uniform change of bone speed also changes the focal amplitude the scale
+        absorbs), so it helps a poor prediction more than a good one (docs/head.md).
+        ``ambiguous`` is judged on draws of the prior without the modes.
 
         Per element, a prior and one acquisition (one image, or repeats with the same known
         phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot
-        check a per-element correction of it. Over six skull screens its posterior optimum
-        averaged 0.79 of the ideal focus against the prediction's 0.76, but one lost 0.19 while
-        fitting the image better than the truth does; a second, defocused image lifted all six.
-        ``posterior_cost`` is then the negative log posterior at the prediction.
+        check a per-element correction of it: a correction that fits the image better than the
+        truth does can leave less focus than the prediction, while a second image with other
+        known phases (a defocus) constrains it (BENCHMARKS.md, "Smooth-error prior and defocused
+        images"). ``posterior_cost`` is then the negative log posterior at the prediction.
 
         ``fit_nuisance``: what else the images may differ in from this model, fitted jointly with
         per-element phases (names as ``diagnose`` reports them, a list or a comma-separated
@@ -431,13 +432,13 @@ class Simulation:
         for 1024 elements; see ``next_acquisition``."""
         arrays, kn_arrays = images_and_known(images, known)
         if not isinstance(method, str):
-            raise ValueError(f"method: must be \"nelder-mead\", \"pso\" or \"lbfgs\", got {method!r}")
-        evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations", 1)
-        limit = None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True)
-        n_starts = None if starts is None else as_count(starts, "starts", 1, 10_000)
+            raise ValueError(f"method: must be one of {', '.join(_core.METHODS)}, got {method!r}")
+        evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations")
+        limit = None if time_limit_s is None else as_number(time_limit_s, "time_limit_s")
+        n_starts = None if starts is None else as_count(starts, "starts")
         prior_array = as_phases(prior, "prior")
-        std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad", 0.0, low_open=True)
-        length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm", 0.0, low_open=True)
+        std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad")
+        length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm")
         nuisance = nuisance_names(fit_nuisance)
         modes = None if prior_modes is None else as_modes(prior_modes, self.n_elements)
         return self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
@@ -487,9 +488,9 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         if effects is not None and (isinstance(effects, str) or not all(isinstance(e, str) for e in effects)):
             raise ValueError(f"effects: must be a list of effect names, got {effects!r}")
-        d = self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations", 1, 10**9),
+        d = self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations"),
                                 None if effects is None else list(effects),
-                                None if time_limit_s is None else as_number(time_limit_s, "time_limit_s", 0.0, low_open=True))
+                                None if time_limit_s is None else as_number(time_limit_s, "time_limit_s"))
         return Diagnosis(**d)
 
     def effect_images(self, effects: dict[str, Any], known: Sequence[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:

@@ -16,3 +16,11 @@ def test_stub_lists_every_public_name_of_the_extension():
     missing += [n for n in dir(_core) if not n.startswith("_") and n not in classes and callable(getattr(_core, n))
                 and f"def {n}(" not in text]
     assert not missing, missing
+
+
+def test_result_classes_write_every_attribute_to_json_once():
+    # to_dict (the JSON) writes the attributes listed in _fields: each result's getters, no more,
+    # no fewer, so an attribute and its JSON key are one name.
+    for cls in (_core.Calibration, _core.Estimate, _core.NuisanceFit, _core.NextAcquisition, _core.ShiftCandidate):
+        getters = {n for n, v in vars(cls).items() if type(v).__name__ == "getset_descriptor" and not n.startswith("_")}
+        assert sorted(cls._fields) == sorted(getters), cls.__name__

@@ -15,19 +15,12 @@ fn mm(shift: [f64; 3]) -> [f64; 3] {
     shift.map(|v| v * 1e3)
 }
 
-/// Every public getter of a result object as a dict (the JSON of the result): arrays become
-/// lists, nested results dicts, `None` stays `None`.
+/// A result object as a dict of the attributes its class lists in `_fields` (the JSON of the
+/// result, in that order): arrays become lists, nested results dicts, `None` stays `None`.
 pub(crate) fn fields_dict<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-    let py = obj.py();
-    let d = PyDict::new(py);
-    let members = obj.get_type().getattr("__dict__")?;
-    for name in members.try_iter()? {
-        let name = name?;
-        let is_getter = members.get_item(&name)?.get_type().name()?.to_string() == "getset_descriptor";
-        let text: String = name.extract()?;
-        if is_getter && !text.starts_with('_') {
-            d.set_item(&name, plain(&obj.getattr(text.as_str())?)?)?;
-        }
+    let d = PyDict::new(obj.py());
+    for name in obj.getattr("_fields")?.extract::<Vec<String>>()? {
+        d.set_item(&name, plain(&obj.getattr(name.as_str())?)?)?;
     }
     Ok(d)
 }
@@ -52,6 +45,11 @@ pub(crate) struct CoreCalibration(pub(crate) Calibration);
 
 #[pymethods]
 impl CoreCalibration {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 5] = ["broadening_width_mm", "amplitude", "cost", "n_pixels", "noise_rad"];
+
     /// Gaussian width W (mm).
     #[getter]
     fn broadening_width_mm(&self) -> f64 {
@@ -110,6 +108,39 @@ pub(crate) struct CoreEstimate {
 
 #[pymethods]
 impl CoreEstimate {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 27] = [
+        "phases_rad",
+        "cost",
+        "evaluations",
+        "seconds",
+        "ambiguous",
+        "method",
+        "stop",
+        "noise_floor",
+        "n_pixels",
+        "scale",
+        "margin",
+        "worst_recovery",
+        "candidate_phases_rad",
+        "candidate_costs",
+        "candidate_recoveries",
+        "suggested_phases_rad",
+        "suggested_separation",
+        "cost_history",
+        "misfit",
+        "model_mismatch",
+        "group_phases_rad",
+        "underdetermined",
+        "kept_prediction",
+        "prior_used",
+        "posterior_cost",
+        "nuisance",
+        "next_acquisition",
+    ];
+
     /// The estimated phases (rad) in (-pi, pi], zero circular mean: subtract them to correct.
     #[getter]
     fn phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
@@ -304,12 +335,12 @@ impl CoreEstimate {
     fn __repr__(&self) -> String {
         let r = &self.report;
         format!(
-            "Estimate({} phases, method={:?}, cost={:.4}, misfit={:.3}, ambiguous={}, stop={:?})",
+            "Estimate({} phases, method='{}', cost={:.4}, misfit={:.3}, ambiguous={}, stop='{}')",
             r.estimate.phases.len(),
             self.method.name(),
             r.image_cost,
             r.assessment.misfit,
-            r.assessment.ambiguous,
+            if r.assessment.ambiguous { "True" } else { "False" },
             r.estimate.stop.name()
         )
     }
@@ -322,6 +353,12 @@ pub(crate) struct NuisanceFit(FittedNuisance);
 
 #[pymethods]
 impl NuisanceFit {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 8] =
+        ["fitted", "scale", "broadening_width_mm", "dx_mm", "dy_mm", "offset_rad", "slope_x_rad_per_mm", "slope_y_rad_per_mm"];
+
     /// The effects fitted (`"amplitude"`, `"broadening"`, `"registration_shift"`,
     /// `"background_phase"`).
     #[getter]
@@ -379,8 +416,8 @@ impl NuisanceFit {
     fn __repr__(&self) -> String {
         let n = &self.0;
         format!(
-            "NuisanceFit(fitted={:?}, scale={:.4}, broadening_width_mm={:.3}, dx_mm={:.3}, dy_mm={:.3})",
-            n.fitted.names(),
+            "NuisanceFit(fitted=[{}], scale={:.4}, broadening_width_mm={:.3}, dx_mm={:.3}, dy_mm={:.3})",
+            n.fitted.names().iter().map(|f| format!("'{f}'")).collect::<Vec<_>>().join(", "),
             n.scale,
             n.broadening_width_mm,
             n.shift_mm[0],
@@ -398,6 +435,11 @@ pub(crate) struct NextAcquisition(ShiftSuggestion);
 
 #[pymethods]
 impl NextAcquisition {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 4] = ["focus_shift_mm", "expected_focus_now", "expected_focus", "candidates"];
+
     /// The focus shift (mm; x, y, z) to image with next.
     #[getter]
     fn focus_shift_mm(&self) -> [f64; 3] {
@@ -442,6 +484,11 @@ pub(crate) struct ShiftCandidate(Candidate);
 
 #[pymethods]
 impl ShiftCandidate {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 2] = ["focus_shift_mm", "expected_focus"];
+
     /// The focus shift (mm; x, y, z).
     #[getter]
     fn focus_shift_mm(&self) -> [f64; 3] {

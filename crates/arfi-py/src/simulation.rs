@@ -8,7 +8,7 @@ use crate::interrupt::run_interruptible;
 use crate::mode_fit::CoreModeFit;
 use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
-use has_core::inverse::basis::BasisCache;
+use has_core::inverse::basis::{known_per_element, BasisCache};
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
@@ -264,9 +264,10 @@ impl CoreSimulation {
 
     /// Known per-element phases (rad) that move the focus by `shift_mm` (x, y, z in the
     /// transducer frame, mm): a displaced or defocused diversity acquisition.
-    fn focus_shift_phases<'py>(&self, py: Python<'py>, shift_mm: [f64; 3]) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    #[pyo3(signature = (shift_mm, name="shift_mm"))]
+    fn focus_shift_phases<'py>(&self, py: Python<'py>, shift_mm: [f64; 3], name: &str) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let shift = shift_mm.map(|v| v * 1e-3);
-        let phases = self.inner.focus_shift_phases(shift).map_err(|e| invalid("shift_mm", e.to_string()))?;
+        let phases = self.inner.focus_shift_phases(shift).map_err(|e| invalid(name, e.to_string()))?;
         Ok(phases.into_pyarray(py))
     }
 
@@ -287,8 +288,21 @@ impl CoreSimulation {
     }
 
     /// Added phases, one per element or one per group, expanded to one per element.
-    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(to_py)?.into_pyarray(py))
+    #[pyo3(signature = (phases, name="phases"))]
+    fn element_phases<'py>(&self, py: Python<'py>, phases: PyReadonlyArray1<'py, f64>, name: &str) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.element_phases(&phases.as_array().to_vec()).map_err(|e| to_py(e.naming(name)))?.into_pyarray(py))
+    }
+
+    /// Known phases per element from values per element, per group or per default group (the rule
+    /// every image's known phases follow); errors name `name`.
+    #[pyo3(signature = (known, name="known"))]
+    fn known_per_element<'py>(
+        &self,
+        py: Python<'py>,
+        known: PyReadonlyArray1<'py, f64>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(known_per_element(&self.inner, &known.as_array().to_vec()).map_err(|e| to_py(e.naming(name)))?.into_pyarray(py))
     }
 
     /// Per-group circular means of per-element phases.

@@ -55,6 +55,15 @@ impl HasError {
         HasError::InvalidParameter { name: name.into(), reason: reason.into() }
     }
 
+    /// The same error about parameter `name`, for a caller that knows the parameter by another
+    /// name (e.g. a command-line option); other kinds are returned unchanged.
+    pub fn naming(self, name: &str) -> Self {
+        match self {
+            HasError::InvalidParameter { reason, .. } => HasError::invalid(name, reason),
+            e => e,
+        }
+    }
+
     /// A failed read of the file `path`: [`HasError::FileNotFound`] if it does not exist, else
     /// [`HasError::BadFile`] with the system's message.
     pub fn reading(path: &str, e: &std::io::Error) -> Self {

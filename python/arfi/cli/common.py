@@ -146,10 +146,7 @@ def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | Non
             known = np.asarray(known, dtype=np.float64)
         except (TypeError, ValueError):
             raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers") from None
-        sizes = sorted({sim.n_elements, sim.n_groups} | ({sim.n_default_groups} if sim.n_groups == sim.n_elements else set()))
-        if known.ndim != 1 or known.size not in sizes or not np.all(np.isfinite(known)):
-            raise ValueError(f"sidecar of {path}: applied_phases_rad must hold {' or '.join(map(str, sizes))} "
-                             f"finite values, got shape {known.shape}")
+        sim.known_per_element(known, f"sidecar of {path}: applied_phases_rad")  # the core's rule for known phases
     return image, known
 
 

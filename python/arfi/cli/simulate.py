@@ -40,10 +40,7 @@ def run(args: argparse.Namespace) -> int:
     aberration = read_optional_phases(args.phases, "--phases")
     known = read_optional_phases(args.known_phases, "--known-phases")
     if args.focus_shift_mm is not None:
-        try:
-            shift = sim.focus_shift_phases(args.focus_shift_mm)
-        except ValueError as e:
-            raise ValueError("--focus-shift-mm" + str(e)[len("shift_mm"):]) from None
+        shift = sim.focus_shift_phases(args.focus_shift_mm, "--focus-shift-mm")
         known = shift if known is None else sim.element_phases(known, "--known-phases") + shift
     total = None
     for p in (aberration, known):

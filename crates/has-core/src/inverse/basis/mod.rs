@@ -398,13 +398,13 @@ pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
         return Ok(default.iter().map(|&g| known[g]).collect());
     }
     sim.element_phases(known).map_err(|_| {
-        HasError::invalid(
-            "phases",
-            format!(
-                "has {} values; expected {n} (one per element), {} (one per group) or {n_default} (one per default group)",
-                known.len(),
-                sim.n_groups
-            ),
-        )
+        let mut sizes = vec![format!("{n} (one per element)")];
+        if sim.n_groups != n {
+            sizes.push(format!("{} (one per group)", sim.n_groups));
+        }
+        if n_default != sim.n_groups && n_default != n {
+            sizes.push(format!("{n_default} (one per default group)"));
+        }
+        HasError::invalid("phases", format!("has {} values; expected {}", known.len(), sizes.join(" or ")))
     })
 }
