@@ -67,7 +67,7 @@ def main() -> None:
             times.append(time.perf_counter() - t)
         best = min(times)
         rows.append({"case": name, "images": len(images), "seconds": best, "named": d.names,
-                     "alternative": d.alternative["effects"] if d.alternative else None,
+                     "alternative": d.alternative.effects if d.alternative else None,
                      "gap": d.residual_rms_final / d.noise_floor,
                      "ratio_to_target": best / (TARGET_S * len(images))})
     print(f"arfi diagnose, {_dt.date.today()}, {platform.processor() or platform.machine()}, "

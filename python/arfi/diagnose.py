@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import html
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,8 +11,8 @@ from numpy.typing import NDArray
 
 from arfi import _core
 
-# Simulation is needed for an annotation only (Diagnosis.report). A run-time import would be a
-# cycle: simulation imports this module at run time, as Simulation.diagnose builds a Diagnosis.
+# Simulation is needed for an annotation only (write_report). A run-time import would be a
+# cycle: simulation imports this module at run time.
 if TYPE_CHECKING:
     from arfi.simulation import Simulation
 
@@ -27,126 +26,85 @@ EFFECTS: tuple[str, ...] = tuple(_effects)
 PARAMETERS: dict[str, tuple[str, str]] = {name: (effect, meaning) for name, effect, meaning in _parameters}
 
 
-@dataclass(frozen=True)
-class Diagnosis:
-    """The effects added to the model, in order, and the gap before and after.
+#: The outcome of ``Simulation.diagnose``: the effects added, in order, and the gap before and after
+#: (the extension's typed result; ``to_dict()`` is the JSON of ``arfi diagnose``).
+Diagnosis = _core.Diagnosis
 
-    Each entry of ``effects`` has ``name``, ``params`` (names carry their units), ``cost_before``,
-    ``cost_after``, ``evidence`` (the BIC gain in units of the noise variance),
-    ``residual_rms_after`` (rad), ``equivalent`` (other effects that explain the data as well:
-    the images cannot tell them apart), the ``candidates`` tried at that step and ``models``
-    (the model's image of each measurement after the step); ``rejected`` are the candidates of
-    the last round, none of which passed. A candidate that could not be fitted has ``cost`` and
-    ``evidence`` None and says why in ``failure``."""
 
-    effects: list[dict[str, Any]]
-    rejected: list[dict[str, Any]]
-    cost_initial: float
-    cost_final: float
-    noise_floor: float
-    """Noise standard deviation (rad) from the image backgrounds."""
-    n_pixels: int
-    residual_rms_initial: float
-    residual_rms_final: float
-    total_evidence: float
-    """The sum of the steps' evidence: ``(J_initial - J_final) / sigma² - K·ln n``."""
-    alternative: dict[str, Any] | None
-    """The other set of effects fitted in full when ``phase_aberration`` competed with simpler
-    effects (``effects``, ``total_evidence``, ``cost``); within about 10 of ``total_evidence``
-    the data do not decide between them."""
-    stop: str
-    """``"converged"`` (no candidate passes the threshold) or ``"time limit"`` (the effects added
-    before ``time_limit_s`` passed)."""
-    models_initial: list[NDArray[np.float64]] = field(repr=False)
-    models_final: list[NDArray[np.float64]] = field(repr=False)
+def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.float64]], out: str | Path) -> Path:
+    """Writes one PNG per step of ``diagnosis`` (measured image, model, residual, the candidates'
+    evidence) and the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
+    self-contained ``report.html``; returns the HTML path."""
+    from arfi.io import atomic_write_text
+    from arfi.report import axis_labels, figure_html, image_extent_mm, pyplot, save_figure
 
-    @property
-    def names(self) -> list[str]:
-        """Names of the effects added, in order."""
-        return [e["name"] for e in self.effects]
+    plt = pyplot()
 
-    def to_dict(self) -> dict[str, Any]:
-        """What ``arfi diagnose --json`` writes: ``effects`` (each ``name``, ``params``, ``cost_before``,
-        ``cost_after``, ``evidence``, ...), ``cost_initial``, ``cost_final``, ``noise_floor`` and the rest,
-        without the model images."""
-        d = {k: v for k, v in self.__dict__.items() if k not in ("models_initial", "models_final")}
-        d["effects"] = [{k: v for k, v in e.items() if k != "models"} for e in self.effects]
-        return d
-
-    def report(self, sim: Simulation, images: list[NDArray[np.float64]], out: str | Path) -> Path:
-        """Writes one PNG per step (measured image, model, residual, the candidates' evidence) and
-        the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
-        self-contained ``report.html``; returns the HTML path."""
-        from arfi.io import atomic_write_text
-        from arfi.report import axis_labels, figure_html, image_extent_mm, pyplot, save_figure
-
-        plt = pyplot()
-
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        figures: list[tuple[str, str]] = []
-        stages = [("model as given", self.models_initial, self.effects[0]["candidates"] if self.effects else self.rejected)]
-        for k, e in enumerate(self.effects):
-            nxt = self.effects[k + 1]["candidates"] if k + 1 < len(self.effects) else self.rejected
-            stages.append((f"after adding {e['name']}", e["models"], nxt))
-        ext = image_extent_mm(sim, images[0])
-        lim = max(float(np.max(np.abs(images[0]))), 1e-12)
-        for k, (title, models, candidates) in enumerate(stages):
-            residual = images[0] - models[0]
-            fig, ax = plt.subplots(1, 4, figsize=(17, 3.8))
-            for a, img, name, vmax in ((ax[0], images[0], "measured", lim), (ax[1], models[0], "model", lim),
-                                       (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12))):
-                im = a.imshow(img.T, origin="lower", extent=ext, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
-                a.set(title=name, **axis_labels(sim))
-                fig.colorbar(im, ax=a, label="ARFI phase (rad)")
-            rms = float(np.sqrt(np.mean(residual ** 2)))
-            ax[2].set_title(f"residual (RMS {rms:.4f} rad, noise {self.noise_floor:.4f} rad)")
-            names = [c["name"] for c in candidates]
-            ev = [np.nan if c["evidence"] is None else c["evidence"] for c in candidates]
-            ax[3].barh(names, np.nan_to_num(ev), color=["C2" if v > 0 else "0.6" for v in np.nan_to_num(ev)])
-            ax[3].axvline(0, color="k", lw=0.8)
-            ax[3].set(xlabel="evidence (BIC gain / sigma²)", title="next candidates" if k < len(stages) - 1 else "rejected")
-            ax[3].set_xscale("symlog")
-            fig.suptitle(f"step {k}: {title}")
-            figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
-        fig, ax = plt.subplots(figsize=(6, 3.8))
-        gap = [self.residual_rms_initial] + [e["residual_rms_after"] for e in self.effects]
-        ax.plot(range(len(gap)), gap, "o-", label="residual RMS")
-        ax.axhline(self.noise_floor, color="k", ls="--", label="noise floor")
-        ax.set_xticks(range(len(gap)), ["model"] + [f"+{e['name']}" for e in self.effects], rotation=20)
-        ax.set(ylabel="rad", title="the gap shrinking")
-        ax.legend()
-        figures.append(("gap", save_figure(fig, out / "diagnose_gap.png")))
-        rows = "".join(
-            f"<tr><td>{k}</td><td>{html.escape(e['name'])}</td><td>{html.escape(params_text(e['params']))}</td>"
-            f"<td>{e['cost_before']:.4g}</td><td>{e['cost_after']:.4g}</td><td>{e['evidence']:.1f}</td>"
-            f"<td>{e['residual_rms_after']:.4f}</td><td>{html.escape(', '.join(e['equivalent']) or '-')}</td></tr>"
-            for k, e in enumerate(self.effects, 1))
-        imgs = figure_html(out, figures)
-        verdict = ("no effect missing: the residual is consistent with the noise" if not self.effects
-                   else "effects added: " + ", ".join(self.names))
-        page = f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi diagnose</title>
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figures: list[tuple[str, str]] = []
+    stages = [("model as given", diagnosis.models_initial, diagnosis.effects[0].candidates if diagnosis.effects else diagnosis.rejected)]
+    for k, e in enumerate(diagnosis.effects):
+        nxt = diagnosis.effects[k + 1].candidates if k + 1 < len(diagnosis.effects) else diagnosis.rejected
+        stages.append((f"after adding {e.name}", e.models, nxt))
+    ext = image_extent_mm(sim, images[0])
+    lim = max(float(np.max(np.abs(images[0]))), 1e-12)
+    for k, (title, models, candidates) in enumerate(stages):
+        residual = images[0] - models[0]
+        fig, ax = plt.subplots(1, 4, figsize=(17, 3.8))
+        for a, img, name, vmax in ((ax[0], images[0], "measured", lim), (ax[1], models[0], "model", lim),
+                                   (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12))):
+            im = a.imshow(img.T, origin="lower", extent=ext, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
+            a.set(title=name, **axis_labels(sim))
+            fig.colorbar(im, ax=a, label="ARFI phase (rad)")
+        rms = float(np.sqrt(np.mean(residual ** 2)))
+        ax[2].set_title(f"residual (RMS {rms:.4f} rad, noise {diagnosis.noise_floor:.4f} rad)")
+        names = [c.name for c in candidates]
+        ev = [np.nan if c.evidence is None else c.evidence for c in candidates]
+        ax[3].barh(names, np.nan_to_num(ev), color=["C2" if v > 0 else "0.6" for v in np.nan_to_num(ev)])
+        ax[3].axvline(0, color="k", lw=0.8)
+        ax[3].set(xlabel="evidence (BIC gain / sigma²)", title="next candidates" if k < len(stages) - 1 else "rejected")
+        ax[3].set_xscale("symlog")
+        fig.suptitle(f"step {k}: {title}")
+        figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
+    fig, ax = plt.subplots(figsize=(6, 3.8))
+    gap = [diagnosis.residual_rms_initial] + [e.residual_rms_after for e in diagnosis.effects]
+    ax.plot(range(len(gap)), gap, "o-", label="residual RMS")
+    ax.axhline(diagnosis.noise_floor, color="k", ls="--", label="noise floor")
+    ax.set_xticks(range(len(gap)), ["model"] + [f"+{e.name}" for e in diagnosis.effects], rotation=20)
+    ax.set(ylabel="rad", title="the gap shrinking")
+    ax.legend()
+    figures.append(("gap", save_figure(fig, out / "diagnose_gap.png")))
+    rows = "".join(
+        f"<tr><td>{k}</td><td>{html.escape(e.name)}</td><td>{html.escape(params_text(e.params))}</td>"
+        f"<td>{e.cost_before:.4g}</td><td>{e.cost_after:.4g}</td><td>{e.evidence:.1f}</td>"
+        f"<td>{e.residual_rms_after:.4f}</td><td>{html.escape(', '.join(e.equivalent) or '-')}</td></tr>"
+        for k, e in enumerate(diagnosis.effects, 1))
+    imgs = figure_html(out, figures)
+    verdict = ("no effect missing: the residual is consistent with the noise" if not diagnosis.effects
+               else "effects added: " + ", ".join(diagnosis.names))
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi diagnose</title>
 <style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
 <body><h1>Model discrepancy: {html.escape(verdict)}</h1>
-<p>{len(images)} image(s), {self.n_pixels} pixels; noise floor {self.noise_floor:.4f} rad (image background).
-Residual RMS {self.residual_rms_initial:.4f} → {self.residual_rms_final:.4f} rad; cost {self.cost_initial:.4g} →
-{self.cost_final:.4g}. An effect is added when its evidence, (J<sub>before</sub> − J<sub>after</sub>)/σ² − k·ln n, is
+<p>{len(images)} image(s), {diagnosis.n_pixels} pixels; noise floor {diagnosis.noise_floor:.4f} rad (image background).
+Residual RMS {diagnosis.residual_rms_initial:.4f} → {diagnosis.residual_rms_final:.4f} rad; cost {diagnosis.cost_initial:.4g} →
+{diagnosis.cost_final:.4g}. An effect is added when its evidence, (J<sub>before</sub> − J<sub>after</sub>)/σ² − k·ln n, is
 positive; effects listed as equivalent explain the data as well (within 2).</p>
-{_alternative(self)}
+{_alternative(diagnosis)}
 <table><tr><th>step</th><th>effect</th><th>parameters</th><th>cost before</th><th>cost after</th><th>evidence</th>
 <th>residual RMS (rad)</th><th>equivalent</th></tr>{rows}</table>{imgs}</body></html>
 """
-        path = out / "report.html"
-        atomic_write_text(path, page)
-        return path
+    path = out / "report.html"
+    atomic_write_text(path, page)
+    return path
 
 
 def _alternative(d: Diagnosis) -> str:
     a = d.alternative
     if not a:
         return ""
-    margin = d.total_evidence - a["total_evidence"]
-    return (f"<p>Also fitted in full: {html.escape(', '.join(a['effects']))} (total evidence {a['total_evidence']:.1f}, "
+    margin = d.total_evidence - a.total_evidence
+    return (f"<p>Also fitted in full: {html.escape(', '.join(a.effects))} (total evidence {a.total_evidence:.1f}, "
             f"{margin:.1f} below the reported {d.total_evidence:.1f}"
             + ("; the data do not decide between them" if margin < 10 else "") + ").</p>")
 

@@ -488,10 +488,9 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         if effects is not None and (isinstance(effects, str) or not all(isinstance(e, str) for e in effects)):
             raise ValueError(f"effects: must be a list of effect names, got {effects!r}")
-        d = self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations"),
+        return self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations"),
                                 None if effects is None else list(effects),
                                 None if time_limit_s is None else as_number(time_limit_s, "time_limit_s"))
-        return Diagnosis(**d)
 
     def effect_images(self, effects: dict[str, Any], known: Sequence[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
         """The model's MR-ARFI images (rad) with effects of the diagnosis library applied:

@@ -12,7 +12,7 @@ broad = sim.effect_images({"broadening_width_mm": 3.5, "dx_mm": 0.8})[0]
 arfi_noise = np.random.default_rng(2).normal(0.0, 0.02, broad.shape)
 d = sim.diagnose(broad + arfi_noise, effects=["broadening", "amplitude", "registration_shift", "sound_speed"])
 h = hashlib.sha256(img.tobytes() + sim.field().pressure.tobytes() + e.phases_rad.tobytes() + repr(d.to_dict()).encode())
-print(h.hexdigest(), e.ambiguous, [x["name"] for x in d.effects])
+print(h.hexdigest(), e.ambiguous, [x.name for x in d.effects])
 """
 
 

@@ -60,7 +60,7 @@ def test_several_images_at_once_and_effect_images(sim):
               for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))]
     d = sim.diagnose(images, [None, known])
     assert d.names == ["registration_shift"]
-    assert d.effects[0]["params"]["dx_mm"] == pytest.approx(0.9, abs=0.3)
+    assert d.effects[0].params["dx_mm"] == pytest.approx(0.9, abs=0.3)
     assert len(d.models_final) == 2 and d.n_pixels == 2 * images[0].size
     assert d.residual_rms_final < 1.2 * d.noise_floor
     with pytest.raises(ValueError, match="known"):
@@ -90,7 +90,7 @@ def test_an_effect_that_cannot_be_fitted_is_reported_not_fatal():
     # be fitted: the run goes on with the other effects and reports why they were left out.
     sim = arfi.Simulation(groups=1024)
     d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=4))
-    failed = {c["name"]: c["failure"] for c in d.rejected if c["failure"]}
+    failed = {c.name: c.failure for c in d.rejected if c.failure}
     assert set(failed) == {"element_dropout", "phase_aberration"}
     assert all("128 groups" in f for f in failed.values())
     assert d.names == []
@@ -131,9 +131,9 @@ def test_reported_params_fed_to_effect_images_give_the_fitted_images(sim, effect
     d = sim.diagnose(images, known, effects=[effect])
     assert d.names == [effect]
     step = d.effects[0]
-    again = sim.effect_images(step["params"], known)
+    again = sim.effect_images(step.params, known)
     # The same forward model both ways: only the reported form of the values separates them.
-    for a, b in zip(again, step["models"]):
+    for a, b in zip(again, step.models):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
 
 

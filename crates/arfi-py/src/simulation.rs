@@ -2,7 +2,7 @@
 
 use crate::convert::{measurements, phases_vec};
 use crate::cost::CoreCostModel;
-use crate::diagnose::{diagnosis_dict, effects_from_dict};
+use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
 use crate::interrupt::run_interruptible;
 use crate::mode_fit::CoreModeFit;
@@ -341,12 +341,12 @@ impl CoreSimulation {
         max_iterations: usize,
         effects: Option<Vec<String>>,
         time_limit_s: Option<f64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<CoreDiagnosis> {
         let measurements = measurements(images, known)?;
         let options = DiagnoseOptions::new(threshold, max_iterations, effects.as_deref(), time_limit_s).map_err(to_py)?;
         let cancel = AtomicBool::new(false);
         let r = run_interruptible(py, &cancel, || diagnose(&self.inner, &measurements, &options, Some(&cancel)))?.map_err(to_py)?;
-        diagnosis_dict(py, &r)
+        Ok(CoreDiagnosis(r))
     }
 
     /// The model images of images taken with `known` phases under the effects of `effects`

@@ -36,7 +36,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.diagnose import EFFECTS, params_text
+    from arfi.diagnose import EFFECTS, params_text, write_report
 
     t = time.perf_counter()
     effects = None
@@ -54,21 +54,21 @@ def run(args: argparse.Namespace) -> int:
         known = [added if k is None else added + sim.element_phases(k) for k in known]
     d = sim.diagnose(images, known, threshold=args.threshold, effects=effects, time_limit_s=args.time_limit_s)
     for k, e in enumerate(d.effects, 1):
-        same = f"; explained as well by {', '.join(e['equivalent'])}" if e["equivalent"] else ""
-        print(f"diagnose: {k}. {e['name']} ({params_text(e['params'])}): cost {e['cost_before']:.4g} -> {e['cost_after']:.4g}, "
-              f"evidence {e['evidence']:.1f}{same}")
+        same = f"; explained as well by {', '.join(e.equivalent)}" if e.equivalent else ""
+        print(f"diagnose: {k}. {e.name} ({params_text(e.params)}): cost {e.cost_before:.4g} -> {e.cost_after:.4g}, "
+              f"evidence {e.evidence:.1f}{same}")
     if not d.effects:
         print("diagnose: no effect missing: the residual is consistent with the noise")
-    failed = [c for c in d.rejected + [c for e in d.effects for c in e["candidates"]] if c["failure"]]
-    for c in {c["name"]: c for c in failed}.values():
-        print(f"diagnose: {c['name']} could not be fitted: {c['failure']}")
-    if d.alternative and d.total_evidence - d.alternative["total_evidence"] < 10:
-        print(f"diagnose: the data explain about as well by {', '.join(d.alternative['effects'])} (total evidence "
-              f"{d.alternative['total_evidence']:.1f} against {d.total_evidence:.1f}); images with known diversity phases tell them apart")
+    failed = [c for c in [*d.rejected, *(c for e in d.effects for c in e.candidates)] if c.failure]
+    for c in {c.name: c for c in failed}.values():
+        print(f"diagnose: {c.name} could not be fitted: {c.failure}")
+    if d.alternative and d.total_evidence - d.alternative.total_evidence < 10:
+        print(f"diagnose: the data explain about as well by {', '.join(d.alternative.effects)} (total evidence "
+              f"{d.alternative.total_evidence:.1f} against {d.total_evidence:.1f}); images with known diversity phases tell them apart")
     if d.stop == "time limit":
         print(f"diagnose: stopped at the time limit ({args.time_limit_s:g} s) after {len(d.effects)} effect(s); more may be missing")
     print(f"diagnose: residual RMS {d.residual_rms_initial:.4f} -> {d.residual_rms_final:.4f} rad, noise floor {d.noise_floor:.4f} rad")
     if args.report:
-        print(f"diagnose: report -> {d.report(sim, images, args.report)}")
+        print(f"diagnose: report -> {write_report(d, sim, images, args.report)}")
     finish(args, {**d.to_dict(), "images": args.image, "seconds": time.perf_counter() - t})
     return 0
