@@ -10,6 +10,7 @@ with ``exec`` in the folder, in a fresh namespace or one given.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import os
@@ -26,6 +27,30 @@ FENCE = re.compile(r"^```(\S*)\s*$")
 
 class CommandError(Exception):
     """A document that cannot be read as commands, or a command that failed: one line."""
+
+
+class UsageError(Exception):
+    """Bad command-line input of a docs script: reported as one line, exit 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """Reports a usage error as one line starting with the script's name (argparse prints the usage too)."""
+
+    def error(self, message: str) -> None:
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def exit_status(name: str, work) -> int:
+    """Runs ``work()``, a script's work returning its exit status: a :class:`UsageError` is one line
+    on stderr and exit 2, a :class:`CommandError` one line starting with ``name`` and exit 1."""
+    try:
+        return work()
+    except UsageError as e:
+        print(e, file=sys.stderr)
+        return 2
+    except CommandError as e:
+        print(f"{name}: {e}", file=sys.stderr)
+        return 1
 
 
 @dataclass

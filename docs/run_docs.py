@@ -50,7 +50,8 @@ ROOT = DOCS.parent
 if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
     sys.path.insert(0, str(DOCS))
 
-from docblocks import Command, CommandError, Run, block_commands, fenced_blocks, run_command  # noqa: E402
+from docblocks import (Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402
+                       fenced_blocks, run_command)
 
 DOCUMENTS = (
     # The documents with command blocks, relative to the repository (docs/physics.md has none).
@@ -96,17 +97,6 @@ SMALL = (
 ANNOTATION = re.compile(r"^<!-- docs-run: (skip|file) (.*\S) -->$")
 CONTINUES = re.compile(r"^# continues\b")
 PLACEHOLDERS = ("…", "...")
-
-
-class UsageError(Exception):
-    """Bad command-line input: reported as one line, exit 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """Reports a usage error as one line (argparse prints the usage too)."""
-
-    def error(self, message: str) -> None:
-        raise UsageError(f"run_docs.py: {message}")
 
 
 @dataclass
@@ -316,34 +306,31 @@ def arguments(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Checks and runs the documents' commands; exit 1 if one fails."""
-    try:
-        args = arguments(sys.argv[1:] if argv is None else argv)
-        failed = []
-        for document in args.documents or DOCUMENTS:
-            bad = problems(document)
-            for line in bad:
-                print(f"run_docs: {line}")
-            with contextlib.ExitStack() as stack:
-                if args.workdir:
-                    folder = Path(args.workdir).resolve() / document.replace("/", "_")
-                    folder.mkdir(parents=True, exist_ok=True)
-                else:
-                    folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="run_docs-")))
-                outcomes = run_document(document, folder, args.small)
-            if args.show:
-                for outcome in outcomes:
-                    for code, run in zip([c for c in outcome.codes if c is not None], outcome.runs):
-                        print("\n".join([f"$ {code}"] + [f"# {line}".rstrip() for line in run.printed]))
-            if bad or any(o.error for o in outcomes):
-                failed.append(document)
-        print(f"run_docs: failed: {', '.join(failed)}" if failed else "run_docs: every block ran")
-        return 1 if failed else 0
-    except UsageError as e:
-        print(e, file=sys.stderr)
-        return 2
-    except CommandError as e:
-        print(f"run_docs.py: {e}", file=sys.stderr)
-        return 1
+    return exit_status("run_docs.py", lambda: run_main(arguments(sys.argv[1:] if argv is None else argv)))
+
+
+def run_main(args: argparse.Namespace) -> int:
+    """:func:`main`'s work."""
+    failed = []
+    for document in args.documents or DOCUMENTS:
+        bad = problems(document)
+        for line in bad:
+            print(f"run_docs: {line}")
+        with contextlib.ExitStack() as stack:
+            if args.workdir:
+                folder = Path(args.workdir).resolve() / document.replace("/", "_")
+                folder.mkdir(parents=True, exist_ok=True)
+            else:
+                folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="run_docs-")))
+            outcomes = run_document(document, folder, args.small)
+        if args.show:
+            for outcome in outcomes:
+                for code, run in zip([c for c in outcome.codes if c is not None], outcome.runs):
+                    print("\n".join([f"$ {code}"] + [f"# {line}".rstrip() for line in run.printed]))
+        if bad or any(o.error for o in outcomes):
+            failed.append(document)
+    print(f"run_docs: failed: {', '.join(failed)}" if failed else "run_docs: every block ran")
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

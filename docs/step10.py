@@ -40,7 +40,8 @@ DOCS = Path(__file__).resolve().parent
 if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
     sys.path.insert(0, str(DOCS))
 
-from docblocks import TIME, Command, CommandError, Run, block_commands, fenced_blocks, is_output, run_command  # noqa: E402
+from docblocks import (TIME, Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402
+                       fenced_blocks, is_output, run_command)
 
 TUTORIAL = DOCS / "tutorial.md"
 HEADING = "## 10. "
@@ -65,17 +66,6 @@ SECONDS = re.compile(r"\b\d+(?:\.\d+)? s\b")
 
 
 StepError = CommandError  # the tutorial or a command failed: reported as one line, exit 1
-
-
-class UsageError(Exception):
-    """Bad command-line input: reported as one line, exit 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """Reports a usage error as one line (argparse prints the usage too)."""
-
-    def error(self, message: str) -> None:
-        raise UsageError(f"step10.py: {message}")
 
 
 @dataclass
@@ -267,32 +257,29 @@ def arguments(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Runs step 10 and writes, prints or checks what it printed; the exit status."""
-    try:
-        args = arguments(sys.argv[1:] if argv is None else argv)
-        lines = TUTORIAL.read_text().splitlines()
-        with contextlib.ExitStack() as stack:
-            if args.workdir:
-                folder = Path(args.workdir).resolve()
-                folder.mkdir(parents=True, exist_ok=True)
-            else:
-                folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="step10-")))
-            step = run_step(folder, args.small)
-            new = render(lines, step)
-            if args.check:
-                return check(lines, new, step, folder, args.small)
-            if args.small:
-                start, end = section(new)
-                print("\n".join(new[start:end]))
-                print("\n".join(f"step10: would copy {s} -> docs/{t}" for s, t in figures(lines)))
-                return 0
-            write(lines, new, folder)
+    return exit_status("step10.py", lambda: run_main(arguments(sys.argv[1:] if argv is None else argv)))
+
+
+def run_main(args: argparse.Namespace) -> int:
+    """:func:`main`'s work."""
+    lines = TUTORIAL.read_text().splitlines()
+    with contextlib.ExitStack() as stack:
+        if args.workdir:
+            folder = Path(args.workdir).resolve()
+            folder.mkdir(parents=True, exist_ok=True)
+        else:
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="step10-")))
+        step = run_step(folder, args.small)
+        new = render(lines, step)
+        if args.check:
+            return check(lines, new, step, folder, args.small)
+        if args.small:
+            start, end = section(new)
+            print("\n".join(new[start:end]))
+            print("\n".join(f"step10: would copy {s} -> docs/{t}" for s, t in figures(lines)))
             return 0
-    except UsageError as e:
-        print(e, file=sys.stderr)
-        return 2
-    except StepError as e:
-        print(f"step10.py: {e}", file=sys.stderr)
-        return 1
+        write(lines, new, folder)
+        return 0
 
 
 if __name__ == "__main__":

@@ -10,25 +10,13 @@ is not skipped by a visible annotation runs (exit 0, no exception). Tutorial ste
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
 import pytest
 
-RUN_DOCS = Path(__file__).resolve().parents[2] / "docs" / "run_docs.py"
-
-
-def load_run_docs():
-    """``docs/run_docs.py`` as a module (docs/ is no package)."""
-    spec = importlib.util.spec_from_file_location("run_docs", RUN_DOCS)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["run_docs"] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
-run_docs = load_run_docs()
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "docs"))  # docs/ is no package
+import run_docs  # noqa: E402
 
 
 @pytest.mark.parametrize("document", run_docs.DOCUMENTS)
@@ -53,13 +41,16 @@ def test_skips_say_why_and_step_10_is_left_to_test_tutorial():
 
 
 def test_a_python_block_that_does_not_say_it_continues_starts_afresh(tmp_path):
-    # The name check and the run agree: a block without '# continues' sees none of the names before it.
-    (tmp_path / "doc.md").write_text("```python\nx = 1\n```\n\n```python\nprint(x)\n```\n\n"
-                                     "```python\n# continues the block above\nprint(x)\n```\n")
+    # The name check follows the run: only a block starting '# continues' sees the names before it.
+    (tmp_path / "doc.md").write_text("```python\nx = 1\n```\n\n```python\n# continues the block above\nprint(x)\n```\n\n"
+                                     "```python\nprint(x)\n```\n")
     steps = run_docs.steps(str(tmp_path / "doc.md"))
-    assert [s.continues for s in steps] == [False, False, True]
-    assert run_docs.undefined(steps) == [f"{steps[1].where()}: uses x, defined by no earlier block it continues "
+    assert [s.continues for s in steps] == [False, True, False]
+    assert run_docs.undefined(steps) == [f"{steps[2].where()}: uses x, defined by no earlier block it continues "
                                          "(define it, or start the block with '# continues ...')"]
+    outcomes = run_docs.run_document(str(tmp_path / "doc.md"), tmp_path, small=False, log=lambda line: None)
+    assert [o.runs[0].printed if o.runs else None for o in outcomes] == [[], ["1"], None]
+    assert "NameError" in outcomes[2].error
 
 
 def test_a_placeholder_in_a_command_is_found(tmp_path):
