@@ -72,7 +72,7 @@ SHRINK_SCENARIO = ("sed 's/elements_per_side = 16/elements_per_side = 8/; s/pitc
 """The default scenario with 256 elements of twice the pitch (the same aperture) instead of 1024."""
 VERBS_ON_THE_DEFAULT = re.compile(r"^arfi (simulate|calibrate|estimate|field|diagnose)\b(?!.*--scenario)", re.M)
 SMALL = (
-    # (document, text in its commands (a str, or a re.Pattern for re.sub), replacement, times it
+    # (document, text in its commands or the files it writes (a str, or a re.Pattern for re.sub), replacement, times it
     # occurs, why). The replacement keeps each command's verb, inputs and options, and what it
     # shows; only the size changes. A replacement None leaves out the whole command that holds the text.
     ("README.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
@@ -88,9 +88,19 @@ SMALL = (
     ("docs/tutorial.md", "arfi.Simulation()", 'arfi.Simulation(arfi.Scenario.load("small.toml"))', 1,
      "the Python likewise"),
     ("docs/tutorial.md", "--groups 1024", "--groups 256", 5, "per element: 256 elements"),
-    ("docs/tutorial.md", "--json diagnosis.json", "--json diagnosis.json --time-limit-s 10", 1,
-     "the library's effects fitted for 10 s at most (20-90 s in all; python/tests/test_diagnose.py runs diagnoses)"),
-    ("docs/diagnose.md", ".diagnose(image)", ".diagnose(image, time_limit_s=10)", 1, "as for the tutorial's"),
+    ("docs/tutorial.md", "--json diagnosis.json", "--json diagnosis.json --effects amplitude,broadening", 1,
+     "only the two effects it names at full size (the whole library: 85 s on 2 loaded cores; "
+     "python/tests/test_diagnose.py runs it)"),
+    ("docs/diagnose.md", ".diagnose(image)", ".diagnose(image, effects=[\"amplitude\", \"broadening\"])", 1,
+     "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)"),
+    ("docs/tutorial.md", "spacing_mm = 0.375", "spacing_mm = 0.75", 1,
+     "plate.toml's grid at λ/4 in water instead of λ/8 (the plate's field takes a quarter of the time)"),
+    ("docs/head.md", "arfi phantom --out", "arfi phantom --voxel-mm 2 --out", 2,
+     "the head CT in 2 mm voxels instead of 0.5 mm (as tutorial step 10 at its small size)"),
+    ("docs/head.md", "arfi field --scenario head_hemi.toml", None, 1,
+     "not run: the 1024-element hemisphere at 650 kHz marches a 540 x 540 x 256 grid (tutorial step 10 runs "
+     "a hemisphere through a head at a small size: python/tests/test_tutorial.py)"),
+    ("docs/head.md", "arfi predict --scenario head_hemi.toml", None, 1, "not run: as the hemisphere's field (80 s, 3.8 GiB)"),
     ("docs/tutorial.md", "arfi sweep --noise-rad 0.01 0.02 0.05 --images 1 2 3 --methods lbfgs nelder-mead --seeds 5 --out sweep",
      None, 1, "not run: 90 trials on a local dask cluster, minutes (python/tests/test_sweep.py runs sweeps)"),
 )
@@ -235,10 +245,16 @@ def substitutions(document: str) -> list[tuple[str, str, int, str]]:
     return [(old, new, times, why) for doc, old, new, times, why in SMALL if doc == document]
 
 
-def shrink(document: str, document_steps: list[Step]) -> dict[tuple[int, int], str | None]:
-    """The commands at the small size: code by (step, command) index, each substitution of
-    :data:`SMALL` made where it occurs, the number of times it says (None: a command left out)."""
+def texts(document_steps: list[Step]) -> dict[tuple[int, int], str]:
+    """The commands by (step, command) index, and each file a step writes by (step, -1)."""
     codes = {(i, j): c.code for i, s in enumerate(document_steps) if s.action == "run" for j, c in enumerate(s.commands)}
+    return codes | {(i, -1): s.text for i, s in enumerate(document_steps) if s.action == "file"}
+
+
+def shrink(document: str, document_steps: list[Step]) -> dict[tuple[int, int], str | None]:
+    """:func:`texts` at the small size: each substitution of :data:`SMALL` made where it occurs,
+    the number of times it says (None: a command left out)."""
+    codes: dict[tuple[int, int], str | None] = dict(texts(document_steps))
     for old, new, times, _ in substitutions(document):
         if isinstance(old, re.Pattern):
             done = {k: (None, 0) if code is None else old.subn(new, code) for k, code in codes.items()}
@@ -258,15 +274,14 @@ def run_document(document: str, folder: Path, small: bool, log=print) -> list[Ou
     """Runs ``document``'s blocks in ``folder`` (at the small size if ``small``) until one fails;
     an outcome per step that runs or writes a file."""
     document_steps = steps(document)
-    codes = shrink(document, document_steps) if small else {
-        (i, j): c.code for i, s in enumerate(document_steps) for j, c in enumerate(s.commands)}
+    codes = shrink(document, document_steps) if small else texts(document_steps)
     outcomes, namespace = [], None
     for i, step in enumerate(document_steps):
         if step.action == "skip":
             log(f"run_docs: {step.where()}: skipped {step.note}")
             continue
         if step.action == "file":
-            (folder / step.note).write_text(step.text + "\n")
+            (folder / step.note).write_text(codes[(i, -1)] + "\n")
             log(f"run_docs: {step.where()}: wrote {step.note}")
             continue
         if step.language == "python" and not (step.continues and namespace is not None):
