@@ -70,11 +70,13 @@ ELSEWHERE = {
 SHRINK_SCENARIO = ("sed 's/elements_per_side = 16/elements_per_side = 8/; s/pitch_mm = 2.5/pitch_mm = 5.0/; "
                    "s/element_size_mm = 2.3/element_size_mm = 4.6/'")
 """The default scenario with 256 elements of twice the pitch (the same aperture) instead of 1024."""
+# a verb on the embedded default: none of --scenario on the command's first line
 VERBS_ON_THE_DEFAULT = re.compile(r"^arfi (simulate|calibrate|estimate|field|diagnose)\b(?!.*--scenario)", re.M)
 SMALL = (
-    # (document, text in its commands or the files it writes (a str, or a re.Pattern for re.sub), replacement, times it
-    # occurs, why). The replacement keeps each command's verb, inputs and options, and what it
-    # shows; only the size changes. A replacement None leaves out the whole command that holds the text.
+    # (document, text in its commands or in the files its blocks write (a str, or a re.Pattern for
+    # re.sub), replacement, times it occurs, why). The replacement keeps each command's verb,
+    # inputs and options, and what it shows; only the size changes. A replacement None leaves out
+    # the whole command that holds the text.
     ("README.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
      "one of the five validation cases (17 s for all five; python/tests/test_validate.py runs the suite)"),
     ("docs/validation.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
@@ -91,22 +93,21 @@ SMALL = (
     ("docs/tutorial.md", "--json diagnosis.json", "--json diagnosis.json --effects amplitude,broadening", 1,
      "only the two effects it names at full size (the whole library: 85 s on 2 loaded cores; "
      "python/tests/test_diagnose.py runs it)"),
-    ("docs/diagnose.md", ".diagnose(image)", ".diagnose(image, effects=[\"amplitude\", \"broadening\"])", 1,
-     "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)"),
     ("docs/tutorial.md", "spacing_mm = 0.375", "spacing_mm = 0.75", 1,
      "plate.toml's grid at λ/4 in water instead of λ/8 (the plate's field takes a quarter of the time)"),
+    ("docs/diagnose.md", ".diagnose(image)", ".diagnose(image, effects=[\"amplitude\", \"broadening\"])", 1,
+     "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)"),
     ("docs/head.md", "arfi phantom --out", "arfi phantom --voxel-mm 2 --out", 2,
      "the head CT in 2 mm voxels instead of 0.5 mm (as tutorial step 10 at its small size)"),
     ("docs/head.md", "arfi field --scenario head_hemi.toml", None, 1,
      "not run: the 1024-element hemisphere at 650 kHz marches a 540 x 540 x 256 grid (tutorial step 10 runs "
      "a hemisphere through a head at a small size: python/tests/test_tutorial.py)"),
-    ("docs/head.md", "arfi predict --scenario head_hemi.toml", None, 1, "not run: as the hemisphere's field (80 s, 3.8 GiB)"),
+    ("docs/head.md", "arfi predict --scenario head_hemi.toml", None, 1, "not run: as the hemisphere's field (80-330 s, 3.8 GiB)"),
     ("docs/tutorial.md", "arfi sweep --noise-rad 0.01 0.02 0.05 --images 1 2 3 --methods lbfgs nelder-mead --seeds 5 --out sweep",
-     None, 1, "not run: 90 trials on a local dask cluster, minutes (python/tests/test_sweep.py runs sweeps)"),
+     None, 1, "not run: 90 trials on a local dask cluster, 258 s on 2 loaded cores (python/tests/test_sweep.py runs sweeps)"),
 )
 ANNOTATION = re.compile(r"^<!-- docs-run: (skip|file) (.*\S) -->$")
 CONTINUES = re.compile(r"^# continues\b")
-PLACEHOLDERS = ("…", "...")
 
 
 @dataclass

@@ -40,7 +40,8 @@ DOCS = Path(__file__).resolve().parent
 if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
     sys.path.insert(0, str(DOCS))
 
-from docblocks import (TIME, Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402
+# TIME and is_output are used by python/tests/test_tutorial.py through this module
+from docblocks import (TIME, Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402, F401
                        fenced_blocks, is_output, run_command)
 
 TUTORIAL = DOCS / "tutorial.md"
