@@ -29,18 +29,21 @@ from __future__ import annotations
 import argparse
 import contextlib
 import difflib
-import io
-import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
+if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
+    sys.path.insert(0, str(DOCS))
+
+# TIME and is_output are used by python/tests/test_tutorial.py through this module
+from docblocks import (TIME, Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402, F401
+                       fenced_blocks, is_output, run_command)
+
 TUTORIAL = DOCS / "tutorial.md"
 HEADING = "## 10. "
 TABLE_HEADER = "| drive through the patient's skull |"
@@ -59,49 +62,11 @@ TABLE_ROWS = (
     ("`optimal` of `truth.json` (every wave in phase at the target)", "optimal"),
 )
 TIMED_S = 1.0  # commands faster than this get no time after them
-TIME = re.compile(r"\s+# \d+ s$")  # a command line's trailing time
 NUMBER = re.compile(r"[-+]?(?:\d+(?:\.\d+)?|\.\d+)(?:e[-+]?\d+)?")
 SECONDS = re.compile(r"\b\d+(?:\.\d+)? s\b")
 
 
-class StepError(Exception):
-    """The tutorial or a command failed: reported as one line, exit 1."""
-
-
-class UsageError(Exception):
-    """Bad command-line input: reported as one line, exit 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """Reports a usage error as one line (argparse prints the usage too)."""
-
-    def error(self, message: str) -> None:
-        raise UsageError(f"step10.py: {message}")
-
-
-@dataclass
-class Command:
-    """One command of step 10 as the tutorial writes it, with the ``# ...`` lines after it."""
-
-    kind: str
-    """``"bash"`` or ``"python"``."""
-    code: str
-    """The command (a bash command's continuation lines joined by newlines; its time left out)."""
-    first: int
-    """Index in the tutorial's lines of the command's first line."""
-    last: int
-    """Index of its last line."""
-    output: list[str]
-    """The printed lines the tutorial shows after it (without the ``# ``)."""
-
-
-@dataclass
-class Run:
-    """What one command printed and how long it took."""
-
-    code: str
-    printed: list[str]
-    seconds: float
+StepError = CommandError  # the tutorial or a command failed: reported as one line, exit 1
 
 
 @dataclass
@@ -123,64 +88,11 @@ def section(lines: list[str]) -> tuple[int, int]:
     return starts[0], end
 
 
-def is_output(line: str) -> bool:
-    """Whether ``line`` is a printed line shown after a command (``# ...``)."""
-    return line == "#" or line.startswith("# ")
-
-
-def output_after(lines: list[str], i: int) -> list[str]:
-    """The ``# ...`` lines from index ``i`` on, without their ``# ``."""
-    out = []
-    while i < len(lines) and is_output(lines[i]):
-        out.append(lines[i][2:])
-        i += 1
-    return out
-
-
-def python_command(lines: list[str], begin: int, end: int) -> Command:
-    """The ``python`` block whose lines are ``lines[begin:end]``: one command, its ``# ...`` lines last."""
-    last = end - 1
-    while last >= begin and is_output(lines[last]):
-        last -= 1
-    return Command("python", "\n".join(lines[begin:last + 1]), begin, last, output_after(lines, last + 1))
-
-
-def bash_commands(lines: list[str], begin: int, end: int) -> list[Command]:
-    """The commands of the ``bash`` block whose lines are ``lines[begin:end]`` (a command continues
-    over lines ending in a backslash)."""
-    commands, i = [], begin
-    while i < end:
-        if not lines[i].strip():
-            i += 1
-            continue
-        if is_output(lines[i]):
-            raise StepError(f"{TUTORIAL}:{i + 1}: a '#' line that follows no command")
-        first = i
-        while lines[i].endswith("\\") and i + 1 < end:
-            i += 1
-        code = "\n".join(lines[first:i] + [TIME.sub("", lines[i])])
-        output = output_after(lines, i + 1)
-        commands.append(Command("bash", code, first, i, output))
-        i += 1 + len(output)
-    return commands
-
-
 def parse(lines: list[str]) -> list[Command]:
     """Step 10's commands in order: every command of its ``bash`` blocks and its ``python`` blocks."""
     start, end = section(lines)
-    commands, i = [], start
-    while i < end:
-        fence = lines[i].strip()
-        if fence.startswith("```") and fence != "```":
-            close = next((j for j in range(i + 1, end) if lines[j].strip() == "```"), None)
-            if close is None:
-                raise StepError(f"{TUTORIAL}:{i + 1}: a code block that does not close")
-            if fence == "```bash":
-                commands += bash_commands(lines, i + 1, close)
-            elif fence == "```python":
-                commands.append(python_command(lines, i + 1, close))
-            i = close
-        i += 1
+    commands = [c for block in fenced_blocks(lines, start, end, str(TUTORIAL))
+                for c in block_commands(lines, block, str(TUTORIAL))]
     if not commands:
         raise StepError(f"{TUTORIAL}: step 10 has no commands")
     return commands
@@ -196,36 +108,6 @@ def shrink(codes: list[str]) -> list[str]:
                             "not once: update SMALL in docs/step10.py")
         codes[where[0]] = codes[where[0]].replace(old, new)
     return codes
-
-
-def run_bash(code: str, folder: Path) -> list[str]:
-    """Runs ``code`` through bash in ``folder`` with this interpreter's ``arfi`` first on the PATH;
-    its printed lines."""
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    done = subprocess.run(["bash", "-c", code], cwd=folder, env=env, capture_output=True, text=True)
-    if done.returncode != 0:
-        why = (done.stderr.strip().splitlines() or ["no message"])[-1]
-        raise StepError(f"`{code.splitlines()[0]}` exited {done.returncode}: {why}")
-    return done.stdout.splitlines()
-
-
-def run_python(code: str, folder: Path) -> list[str]:
-    """Runs ``code`` with ``exec`` in ``folder``; its printed lines."""
-    printed, back = io.StringIO(), os.getcwd()
-    os.chdir(folder)  # contextlib.chdir is Python 3.11
-    try:
-        with contextlib.redirect_stdout(printed):
-            exec(compile(code, "tutorial step 10", "exec"), {"__name__": "__tutorial__"})
-    finally:
-        os.chdir(back)
-    return printed.getvalue().splitlines()
-
-
-def run_command(kind: str, code: str, folder: Path) -> Run:
-    """Runs one command, timed."""
-    t = time.perf_counter()
-    printed = (run_bash if kind == "bash" else run_python)(code, folder)
-    return Run(code, printed, time.perf_counter() - t)
 
 
 def focal_table(folder: Path) -> list[tuple[str, float, float]]:
@@ -376,32 +258,29 @@ def arguments(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Runs step 10 and writes, prints or checks what it printed; the exit status."""
-    try:
-        args = arguments(sys.argv[1:] if argv is None else argv)
-        lines = TUTORIAL.read_text().splitlines()
-        with contextlib.ExitStack() as stack:
-            if args.workdir:
-                folder = Path(args.workdir).resolve()
-                folder.mkdir(parents=True, exist_ok=True)
-            else:
-                folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="step10-")))
-            step = run_step(folder, args.small)
-            new = render(lines, step)
-            if args.check:
-                return check(lines, new, step, folder, args.small)
-            if args.small:
-                start, end = section(new)
-                print("\n".join(new[start:end]))
-                print("\n".join(f"step10: would copy {s} -> docs/{t}" for s, t in figures(lines)))
-                return 0
-            write(lines, new, folder)
+    return exit_status("step10.py", lambda: run_main(arguments(sys.argv[1:] if argv is None else argv)))
+
+
+def run_main(args: argparse.Namespace) -> int:
+    """:func:`main`'s work."""
+    lines = TUTORIAL.read_text().splitlines()
+    with contextlib.ExitStack() as stack:
+        if args.workdir:
+            folder = Path(args.workdir).resolve()
+            folder.mkdir(parents=True, exist_ok=True)
+        else:
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="step10-")))
+        step = run_step(folder, args.small)
+        new = render(lines, step)
+        if args.check:
+            return check(lines, new, step, folder, args.small)
+        if args.small:
+            start, end = section(new)
+            print("\n".join(new[start:end]))
+            print("\n".join(f"step10: would copy {s} -> docs/{t}" for s, t in figures(lines)))
             return 0
-    except UsageError as e:
-        print(e, file=sys.stderr)
-        return 2
-    except StepError as e:
-        print(f"step10.py: {e}", file=sys.stderr)
-        return 1
+        write(lines, new, folder)
+        return 0
 
 
 if __name__ == "__main__":
