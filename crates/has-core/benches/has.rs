@@ -12,8 +12,8 @@
 //! to the last plane) so a regression can be located without a profiler.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::{build_model, Measurement, Model, Objective};
+use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::{condense, Estimator};
 use has_core::physics::aberration::SkullScreen;
 use has_core::physics::fft::{each_pair, Fft2};

@@ -17,7 +17,7 @@
 //! are weighted by that beam's pressure; see [`crate::physics::propagation`]).
 
 use crate::error::{HasError, Result};
-use crate::inverse::phase::wrap;
+use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
 use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};

@@ -13,15 +13,20 @@
 //! `B` is stored in single precision as real and imaginary parts; the products for all images at
 //! once run over fixed blocks of samples (deterministic for any number of threads) in loops
 //! written for their shape (`products`). The cost itself is [`ElementCost`].
+//!
+//! Fitted with the phases on this basis: the nuisance parameters of the image ([`nuisance`]) and
+//! the MR view, broadening width and registration shift ([`view_fit`]).
 
 mod cost;
+pub mod nuisance;
 mod products;
+pub mod view_fit;
 
 pub use cost::{ElementCost, ElementTerm, LinearNuisance};
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
-use crate::inverse::nuisance::Nuisance;
+use crate::inverse::element::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::grid::Grid;
 use crate::physics::mr::MrSampler;
@@ -88,8 +93,8 @@ impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches, on
     /// [`basis_grid`]'s grid where it gives one, and keeps the
     /// samples that pixels `u x v` depend on, also with the views `reach` fits: another
-    /// broadening width (up to [`crate::inverse::nuisance::width_reach`]) and a registration
-    /// shift (up to [`crate::inverse::nuisance::SHIFT_REACH_MM`]); see
+    /// broadening width (up to [`crate::inverse::element::nuisance::width_reach`]) and a registration
+    /// shift (up to [`crate::inverse::element::nuisance::SHIFT_REACH_MM`]); see
     /// [`Nuisance::window_width`]. `progress(done, total)` is called after each batch; `cancel`,
     /// when set by another thread, ends the build before the next batch
     /// ([`HasError::Interrupted`]).

@@ -12,7 +12,7 @@
 //! every cost evaluation (variable projection: the phase gradient at the projected optimum is the
 //! gradient with them held fixed). W and the shift change the sampling of the recorded
 //! `|p|²`: they are fitted by Nelder–Mead with the phases held, alternating with the phase search
-//! ([`crate::inverse::view_fit::fit_view`]); each of their evaluations re-samples fixed `|p|²` (no matrix products over
+//! ([`crate::inverse::element::view_fit::fit_view`]); each of their evaluations re-samples fixed `|p|²` (no matrix products over
 //! the element basis).
 
 use crate::error::{HasError, Result};
