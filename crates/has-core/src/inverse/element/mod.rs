@@ -63,7 +63,7 @@ pub const BASIS_SPACING_PIXELS: f64 = 0.75;
 /// over; the steps to the window cost a third of the λ/4 grid's, and the window holds fewer
 /// samples. Its images differ from the simulation's own by about 1 % of their peak at 650 kHz,
 /// well below an MR-ARFI image's noise (`tests/element_basis.rs`); where the wavelength alone
-/// would allow a spacing near the pixel's (220 kHz: 2.6 mm against 1.4 mm pixels) they differed
+/// would allow a spacing near the pixel's (220 kHz: 2.6 mm against 1.4 mm pixels) they differ
 /// by 20 %, hence the pixel's bound. Through reverberating bone the simulation's grid is kept.
 pub fn basis_grid(sim: &Simulation) -> Result<Option<Grid>> {
     let pixel = sim.mr.pixel_size();
@@ -292,8 +292,8 @@ pub fn build_element_model(
 
 /// Keeps the element basis of the last per-element model built through it, for the next on the
 /// same simulation: the basis depends only on the simulation and the pixel box, so another
-/// estimate from the same images (another prior, seed or limit) skips the marching (about 15 s
-/// for 1024 elements). Holds at most one basis ([`FieldBasis::bytes`]); a cache must only ever
+/// estimate from the same images (another prior, seed or limit) skips the marching (one march
+/// per element). Holds at most one basis ([`FieldBasis::bytes`]); a cache must only ever
 /// see one simulation.
 #[derive(Debug, Default)]
 pub struct BasisCache(Mutex<Option<Arc<FieldBasis>>>);

@@ -52,16 +52,17 @@ impl Method {
     }
 }
 
-/// Default evaluation limit of the per-element search. Measured 2026-11-24 without a prior (1024
-/// elements, 4 images, seeds 0–2): after 150 evaluations the best point's recovered focus
-/// changed by at most 0.01 and its cost by under 1 % (the images do not determine more); with a
-/// prior the search converges in 50–160.
+/// Default evaluation limit of the per-element search. Without a prior (1024 elements, 4 images)
+/// the best point's recovered focus changes by at most 0.01 and its cost by under 1 % after 150
+/// evaluations (the images do not determine more); with a prior the search converges in 50–160
+/// (BENCHMARKS.md, per-element estimation).
 pub const ELEMENT_EVALUATIONS: usize = 200;
 
 /// Default evaluation limit of the per-element search when W or the shift is fitted (its
-/// [`VIEW_ROUNDS`] rounds share it). Measured 2026-11-25 with the smooth prior (1024 elements, 4
-/// images, amplitude, W and backgrounds fitted, seeds 1–2): 120 evaluations end at the same
-/// focus (0.881, 0.879) and misfit (1.002, 1.004) as 200, in 51–54 s against 67–74 s.
+/// [`VIEW_ROUNDS`] rounds share it). With the smooth prior (1024 elements, 4 images, amplitude,
+/// W and backgrounds fitted) 120 evaluations end at the same focus and misfit as 200
+/// (BENCHMARKS.md, nuisance fitted with the phases), and every evaluation is a cost and gradient
+/// over the whole element basis.
 pub const VIEW_ELEMENT_EVALUATIONS: usize = 120;
 
 /// What to estimate with: the method and its limits (each `None`: the method's default).
@@ -93,7 +94,8 @@ pub struct EstimateRequest {
     /// posterior optimum (see [`crate::inverse::prior`]).
     pub prior: Option<Prior>,
     /// Per element: also suggest the next acquisition, the focus shift whose image is expected
-    /// to raise the focus most ([`crate::inverse::estimate::information`]; about 10 s for 1024 elements).
+    /// to raise the focus most ([`crate::inverse::estimate::information`]; a posterior covariance over all elements per
+    /// candidate shift).
     pub suggest: bool,
 }
 

@@ -56,15 +56,14 @@ pub fn one_acquisition(terms: &[ElementTerm]) -> bool {
 /// A smooth prior is checked against the element `positions` as a search would check it.
 ///
 /// Used per element for [`one_acquisition`]: one in-focus acquisition cannot check a correction
-/// of a prediction. Measured 2026-11-25 (1024 elements, the smooth prior 0.8 rad over 15 mm,
-/// 0.02 rad, seeds 1–6): the posterior optimum left 0.53, 0.85, 0.83, 0.82, 0.86, 0.85 of the
-/// ideal focus against the prediction's 0.72, 0.72, 0.74, 0.70, 0.83, 0.83 (mean 0.79 against
-/// 0.76). Seed 1's optimum is the only one from six random starts, fits the image better than
-/// the truth does, and predicts a held-out defocused image better than the prediction does:
-/// nothing in the data flags it. Keeping the prediction gives up that small mean gain so as
-/// never to end below it; with a second, defocused acquisition (5 or 20 mm) all six seeds gained
-/// (0.83–0.91). A single defocused image, or one with random known phases, is kept as well: not
-/// measured.
+/// of a prediction. With 1024 elements, the smooth prior (0.8 rad over 15 mm) and 0.02 rad noise,
+/// the posterior optimum of one in-focus image gains a little focus over the prediction on
+/// average, but on some aberrations ends well below it: that optimum, the only one random starts
+/// find, fits the image better than the truth does and predicts a held-out defocused image better
+/// than the prediction does, so nothing in the data flags it. Keeping the prediction gives up
+/// that small mean gain so as never to end below it; with a second, defocused acquisition (5 or
+/// 20 mm) the search gains over the prediction. A single defocused image, or one with random
+/// known phases, is kept as well, untested.
 fn keep_prediction(
     cost: ElementCost,
     noise: f64,
@@ -188,9 +187,9 @@ pub(super) fn estimate_per_element(
     let time_limit = estimator(request, Method::Lbfgs, None)?.time_limit;
     // Without a prior the element search starts from a fit of the array's default groups (and
     // that fit's assessment is the estimate's). With one it starts from the prediction: a
-    // default-group fit to element-level data pulls the group phases away from it (measured
-    // seed 1 of a 1024-element skull screen: the group posterior's spread 0.27 of the ideal
-    // focus against the prediction's 0.84), and the assessment is the element posterior's.
+    // default-group fit to element-level data pulls the group phases away from it (on a
+    // 1024-element skull screen, to a start that leaves far less focus than the prediction),
+    // and the assessment is the element posterior's.
     let warm_start = match &prior {
         Some(p) => WarmStart::Prediction(p),
         None => {
