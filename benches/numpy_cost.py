@@ -1,6 +1,6 @@
 """The hybrid cost (paper Eq. 4) and its gradient in plain NumPy, from the per-pixel group kernels
 that ``arfi.CostModel.terms()`` exposes: the same algorithm as has-core's ``HybridCost``
-(crates/has-core/src/inverse/cost.rs), written for the benchmark and used by the tests as a reference.
+(crates/has-core/src/inverse/cost/mod.rs), written for the benchmark and used by the tests as a reference.
 
 Each masked pixel is ``d_i = Σ_g K_i[g,g] + 2·Re Σ_{g<h} K_i[g,h]·conj(v_g)·v_h`` with
 ``v = exp(i·(phi + offset))``; ``J = Σ (s·d - m)²``; ``∂J/∂phi_g = 4·s·Im(conj(v_g)·(R v)_g)``

@@ -13,7 +13,7 @@ mod scenario;
 mod simulation;
 mod validation;
 
-use has_core::inverse::estimation::Method;
+use has_core::inverse::estimate::workflow::Method;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenario_toml_with_grid};

@@ -1,6 +1,6 @@
 //! `ModeFit`: a prior mode's coefficient fitted to images, as a typed result.
 
-use has_core::inverse::mode_fit::ModeFit;
+use has_core::inverse::prior::mode_fit::ModeFit;
 use pyo3::prelude::*;
 
 /// A prior mode's coefficient fitted to MR-ARFI images on a model that holds what the mode

@@ -1,7 +1,7 @@
 //! Phase arithmetic of the core for NumPy arrays: wrapping and the paper's phase error.
 
 use crate::error::invalid;
-use has_core::inverse::phase;
+use has_core::phase;
 use numpy::{IntoPyArray, PyArrayDyn, PyReadonlyArray1, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 

@@ -3,9 +3,9 @@
 //! attribute and its JSON key are one name.
 
 use has_core::inverse::calibrate::Calibration;
-use has_core::inverse::estimation::{EstimateReport, Method};
-use has_core::inverse::information::{Candidate, ShiftSuggestion};
-use has_core::inverse::nuisance::FittedNuisance;
+use has_core::inverse::element::nuisance::FittedNuisance;
+use has_core::inverse::estimate::information::{Candidate, ShiftSuggestion};
+use has_core::inverse::estimate::workflow::{EstimateReport, Method};
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};

@@ -3,7 +3,7 @@
 //!
 //! Run with `cargo bench -p has-core` (a few minutes on 2 cores); filter with
 //! `cargo bench -p has-core -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal
-//! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s; estimation (issue 3): one cost evaluation
+//! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s; estimation (the paper's 16 groups): one cost evaluation
 //! for 16 groups ≤ 20 µs, `build_model` + Nelder–Mead (≤ 8000 evaluations) ≤ 5 s, 20-start
 //! L-BFGS ≤ 5 s.
 //!
@@ -12,8 +12,8 @@
 //! to the last plane) so a regression can be located without a profiler.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::{build_model, Measurement, Model, Objective};
+use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::{condense, Estimator};
 use has_core::physics::aberration::SkullScreen;
 use has_core::physics::fft::{each_pair, Fft2};
@@ -134,7 +134,7 @@ fn bench_breakdown(c: &mut Criterion) {
     g.finish();
 }
 
-/// The estimation workload of issue 3: one noisy (0.02 rad) MR-ARFI image of the default scenario
+/// The estimation workload of the targets: one noisy (0.02 rad) MR-ARFI image of the default scenario
 /// with a skull-like aberration (`SkullScreen::default()`, seed 1) condensed to the 16 groups.
 fn aberrated_measurement(sim: &Simulation) -> Vec<Measurement> {
     let positions = sim.transducer.reference_points();
@@ -174,7 +174,7 @@ fn bench_has_step(c: &mut Criterion) {
 }
 
 /// Cost and cost + gradient for 1024 groups (one per element): the field-basis model of
-/// `arfi estimate --groups 1024` (its build, about 50 s and 750 MB, is not timed).
+/// `arfi estimate --groups 1024` (its build, one march per element into a basis of about 750 MB, is not timed).
 fn bench_estimation_1024(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     let meas = aberrated_measurement(&sim);

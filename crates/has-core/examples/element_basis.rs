@@ -3,8 +3,8 @@
 //! Builds the element basis, checks it against the direct image, and estimates 1024 phases from
 //! `images` noise-free images with known random steering-offset diversity.
 
-use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::{build_model, Measurement, Objective};
+use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::{condense, phase_error, Estimator};
 use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;

@@ -26,6 +26,7 @@ pub mod inverse;
 pub mod memory;
 pub mod nifti;
 pub mod numeric;
+pub mod phase;
 pub mod physics;
 pub mod prediction;
 pub mod reference;

@@ -39,8 +39,8 @@ pub fn check(what: impl FnOnce() -> String, bytes: u64, suggestion: &str) -> Res
 /// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`; nothing
 /// elsewhere). Call after dropping a HAS plan: glibc keeps freed plane-sized buffers in its heap,
 /// and a plan built next beside them does not reuse them all, so that two plans built one after
-/// the other cost the process the memory of both (measured: a 650 kHz head's prediction held
-/// 3 GB of its first plan's 4 GB through the second's build).
+/// the other cost the process the memory of both (a 650 kHz head's prediction would hold 3 GB of
+/// its first plan's 4 GB through the second's build).
 pub fn release_freed() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: malloc_trim only returns free heap pages to the system; it takes no pointer.

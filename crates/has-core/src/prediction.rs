@@ -17,7 +17,7 @@
 //! are weighted by that beam's pressure; see [`crate::physics::propagation`]).
 
 use crate::error::{HasError, Result};
-use crate::inverse::phase::wrap;
+use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
 use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
@@ -86,8 +86,7 @@ fn focal_pressure(h: &[C64], drive: impl Fn(usize) -> f64) -> f64 {
 /// The prediction at `target` (m; `None`: the focus) of a scenario with a `[ct]`:
 /// [`predict_scenario_with`] without its options. Its simulations are built without calibrating
 /// the ARFI amplitude from the ideal image, which a prediction does not use (through a
-/// reverberating head that is one whole march more: about 5 s of a 650 kHz hemisphere's
-/// prediction).
+/// reverberating head that is one whole march more, with all its round trips).
 pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result<Prediction> {
     Ok(predict_scenario_with(scenario, target, PredictionOptions::default())?.prediction)
 }

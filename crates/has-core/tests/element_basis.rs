@@ -2,10 +2,10 @@
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
 mod common;
-use has_core::inverse::basis::{build_element_model, BasisCache};
 use has_core::inverse::cost::{build_model, Measurement, Objective};
+use has_core::inverse::element::nuisance::Nuisance;
+use has_core::inverse::element::{build_element_model, BasisCache};
 use has_core::inverse::estimate::{condense, Estimator};
-use has_core::inverse::nuisance::Nuisance;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
 use ndarray::Array2;
@@ -165,7 +165,7 @@ fn assert_gradient(cost: &dyn Objective) {
 /// 1.4 mm MR pixels), and none through a bone plate, which reverberates.
 #[test]
 fn the_basis_grid_is_coarser_only_where_it_holds_the_images() {
-    use has_core::inverse::basis::basis_grid;
+    use has_core::inverse::element::basis_grid;
     use has_core::scenario::Scenario;
     let sim = |text: &str| Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap();
     let phantom = sim("[transducer]\nelements_per_side = 2\n");

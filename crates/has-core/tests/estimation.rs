@@ -254,7 +254,7 @@ fn estimation_is_deterministic() {
 /// rad, the L-BFGS tolerance), and the requests it refuses, each naming the parameter.
 #[test]
 fn the_estimation_workflow_estimates_per_group_and_names_what_it_refuses() {
-    use has_core::inverse::estimation::{estimate_aberration, EstimateRequest, Method};
+    use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateRequest, Method};
     let s = sim();
     let truth = group_truth(3);
     let m = measurements(&truth, 0.0, 2, 3);

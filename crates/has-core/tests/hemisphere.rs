@@ -166,7 +166,7 @@ fn element_responses_between_grid_points_match_the_direct_sum(sim: &Simulation) 
         let common = h.iter().zip(&direct).map(|(h, r)| h * r.conj()).sum::<C64>().arg();
         let (mut num, mut den) = (0.0, 0.0);
         for (h, r) in h.iter().zip(&direct) {
-            let dphi = has_core::inverse::phase::wrap((h * r.conj()).arg() - common);
+            let dphi = has_core::phase::wrap((h * r.conj()).arg() - common);
             num += r.norm() * dphi * dphi;
             den += r.norm();
         }

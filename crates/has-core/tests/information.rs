@@ -4,13 +4,13 @@
 //! On a 256-element version of the default array to keep the marches short.
 
 mod common;
-use has_core::inverse::basis::build_element_model;
 use has_core::inverse::cost::Measurement;
-use has_core::inverse::information::{
+use has_core::inverse::element::build_element_model;
+use has_core::inverse::estimate::information::{
     error_covariance, expected_focus, fisher, focal_fields, image_jacobian, suggest_focus_shift, Spread, CANDIDATE_SHIFTS_MM,
 };
 use has_core::inverse::linear::cholesky;
-use has_core::inverse::smooth_prior::error_modes;
+use has_core::inverse::prior::smooth::error_modes;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
 use ndarray::Array2;

@@ -4,7 +4,7 @@
 //! standard deviations (a Gaussian posterior's 99.7 %), plus the prior's pull towards zero.
 
 use has_core::inverse::cost::Measurement;
-use has_core::inverse::mode_fit::{fit_mode, ModeFit};
+use has_core::inverse::prior::mode_fit::{fit_mode, ModeFit};
 use has_core::physics::aberration::SkullScreen;
 use has_core::{Scenario, Simulation};
 use std::sync::OnceLock;

@@ -10,7 +10,7 @@
 
 use has_core::inverse::cost::{build_model, check_image, Measurement};
 use has_core::inverse::diagnose::{diagnose, DiagnoseOptions};
-use has_core::inverse::estimation::{estimate_aberration, EstimateRequest};
+use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateRequest};
 use has_core::physics::mr::{add_noise, focal_peak};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;

@@ -9,11 +9,11 @@
 //!
 //! Measured on 2026-11-24 with ARFI_FULL_SWEEPS=1 (seeds 1–5, 820 s): see the test's comment.
 
-use has_core::inverse::basis::BasisCache;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::diagnose::{effect_images, Effects};
-use has_core::inverse::estimation::{estimate_aberration_with, EstimateReport, EstimateRequest};
-use has_core::inverse::nuisance::Nuisance;
+use has_core::inverse::element::nuisance::Nuisance;
+use has_core::inverse::element::BasisCache;
+use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateReport, EstimateRequest};
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::physics::mr::add_noise;

@@ -299,7 +299,7 @@ fn a_ten_percent_error_in_the_ct_conversion_costs_focus() {
         for factor in [0.9, 1.1] {
             let wrong = predict(bowl_through_shell(&dir, &format!("{key} = {}\n", default * factor)), None).unwrap();
             let kept = truth.pressure_with(&wrong.phases).unwrap() / best;
-            let rms = (wrong.phases.iter().zip(&truth.phases).map(|(a, b)| has_core::inverse::phase::wrap(a - b).powi(2)).sum::<f64>()
+            let rms = (wrong.phases.iter().zip(&truth.phases).map(|(a, b)| has_core::phase::wrap(a - b).powi(2)).sum::<f64>()
                 / truth.phases.len() as f64)
                 .sqrt();
             println!("ct.{key} x {factor}: phase error {rms:.3} rad RMS, keeps {kept:.4} of the best focus");
@@ -392,7 +392,7 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
         })
         .collect();
     let common = change.iter().sum::<has_core::Complex64>().arg();
-    let exact: Vec<f64> = change.iter().map(|c| has_core::inverse::phase::wrap(c.arg() - common) / (100.0 * BONE_SPEED_STEP)).collect();
+    let exact: Vec<f64> = change.iter().map(|c| has_core::phase::wrap(c.arg() - common) / (100.0 * BONE_SPEED_STEP)).collect();
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let corr = dot(&g, &exact) / (rms(&g) * rms(&exact) * g.len() as f64);

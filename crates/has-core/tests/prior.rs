@@ -3,11 +3,11 @@
 //! check is against the known applied aberration over seeds 1–5; tolerances are stated where used.
 
 use has_core::inverse::cost::Measurement;
+use has_core::inverse::element::nuisance::Nuisance;
+use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateRequest};
 use has_core::inverse::estimate::{condense, phase_error, wrap};
-use has_core::inverse::estimation::{estimate_aberration, EstimateRequest};
-use has_core::inverse::nuisance::Nuisance;
+use has_core::inverse::prior::smooth::error_modes;
 use has_core::inverse::prior::Prior;
-use has_core::inverse::smooth_prior::error_modes;
 use has_core::physics::aberration::SkullScreen;
 use has_core::{Scenario, Simulation};
 use ndarray::Array2;

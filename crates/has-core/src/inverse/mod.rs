@@ -1,18 +1,23 @@
-//! The inverse layer: phase arithmetic, the hybrid cost and its per-element field basis, the
-//! estimators, a predicted aberration as prior and the estimation workflow, what per-element
-//! acquisitions tell (and which to take next), calibration, and the model-discrepancy workflow.
+//! The inverse layer: from measured MR-ARFI images back to the phase aberration. It uses the
+//! forward model (physics, simulation) and nothing outside it uses it. Its families, each using
+//! only those listed before it:
+//!
+//! - [`linear`]: small dense linear algebra (variable projection, Cholesky) the families share.
+//! - [`cost`]: the hybrid cost of paper Eq. 4 on per-pixel group kernels, the [`cost::Objective`]
+//!   every estimator minimises, and the way from measured images to it (masks, noise floor).
+//! - [`calibrate`]: the broadening width fitted to a no-aberration image (paper Eq. 2).
+//! - [`element`]: per-element estimation's own model: the field basis of every element, its cost
+//!   and gradient, and the nuisance and MR view fitted with the phases.
+//! - [`prior`]: a predicted aberration as prior (independent or smooth errors) and the fit of a
+//!   prediction's error mode to images.
+//! - [`estimate`]: the estimators, the assessment of their answer, the information of
+//!   per-element acquisitions (and the next to take), and the estimation workflow as one call.
+//! - [`diagnose`]: the model-discrepancy workflow, which names the effects the model lacks.
 
-pub mod basis;
 pub mod calibrate;
 pub mod cost;
 pub mod diagnose;
+pub mod element;
 pub mod estimate;
-pub mod estimation;
-pub mod information;
 pub mod linear;
-pub mod mode_fit;
-pub mod nuisance;
-pub mod phase;
 pub mod prior;
-pub mod smooth_prior;
-pub mod view_fit;

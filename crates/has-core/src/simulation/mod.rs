@@ -5,7 +5,7 @@
 //! only the ARFI images, fits and diagnoses report why they cannot be made.
 
 use crate::error::{HasError, Result};
-use crate::inverse::phase::wrap;
+use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Material, Medium};
 use crate::physics::mr::{add_noise, focal_peak, MrGeometry, MrSampler};

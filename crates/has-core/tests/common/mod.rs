@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests (each test file is its own crate: `mod common;`).
 #![allow(dead_code)]
 
-use has_core::inverse::basis::basis_grid;
+use has_core::inverse::element::basis_grid;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 

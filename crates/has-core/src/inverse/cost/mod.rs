@@ -20,7 +20,7 @@ use crate::error::{HasError, Result};
 use num_complex::Complex64 as C64;
 
 /// What an estimator minimises: a cost over phases (rad), one per group or element, and its
-/// gradient. Implemented by [`HybridCost`] and [`crate::inverse::basis::ElementCost`].
+/// gradient. Implemented by [`HybridCost`] and [`crate::inverse::element::ElementCost`].
 pub trait Objective: Sync {
     /// Number of phases.
     fn n_phases(&self) -> usize;

@@ -173,7 +173,7 @@ fn group_constant(per_element: &[f64], groups: &[usize], g: usize) -> Option<Vec
     for (&p, &k) in per_element.iter().zip(groups) {
         match value[k] {
             None => value[k] = Some(p),
-            Some(q) if (crate::inverse::phase::wrap(p - q)).abs() < 1e-12 => {}
+            Some(q) if (crate::phase::wrap(p - q)).abs() < 1e-12 => {}
             Some(_) => return None,
         }
     }

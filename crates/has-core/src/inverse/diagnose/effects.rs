@@ -351,7 +351,7 @@ pub enum Value {
 pub(super) fn params_of(effect: Effect, after: &Effects, before: &Effects) -> Vec<(&'static str, Value)> {
     let f = &after.field;
     match effect {
-        Effect::PhaseAberration => vec![("group_phases_rad", Value::Numbers(crate::inverse::phase::centred(&f.group_phases)))],
+        Effect::PhaseAberration => vec![("group_phases_rad", Value::Numbers(crate::phase::centred(&f.group_phases)))],
         Effect::ElementDropout => {
             let new: Vec<usize> = f.dead_groups.iter().copied().filter(|g| !before.field.dead_groups.contains(g)).collect();
             vec![("dead_groups", Value::Indices(new))]

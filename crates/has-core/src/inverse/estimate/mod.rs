@@ -5,10 +5,16 @@
 //! the analytic gradient, on any [`Objective`] (group kernels or the per-element basis). The common phase is unobservable, so group 0 is held at zero during
 //! the search; reported phases have zero circular mean. Every run has an evaluation limit and an
 //! optional time limit; a non-finite cost is replaced by a large finite penalty.
+//!
+//! Around them: whether the data decide ([`Assessment`]: rivals within the noise, misfit), what
+//! per-element acquisitions tell and which to take next ([`information`]), and the estimation
+//! workflow as one call ([`workflow`]).
 
 mod assess;
+pub mod information;
 mod problem;
 mod solvers;
+pub mod workflow;
 
 pub use assess::{chi2_95, misfit, propose_diversity, rival_solutions, Assessment, RivalSolution};
 use problem::Problem;
@@ -16,7 +22,7 @@ use solvers::{lbfgs_run, restarted_nelder_mead};
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Objective;
-pub use crate::inverse::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
+pub use crate::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
 use argmin::core::Executor;
 use argmin::solver::particleswarm::ParticleSwarm;
 use rand::{Rng, SeedableRng};
@@ -41,7 +47,7 @@ pub enum Stop {
     /// Cancelled by another thread (Ctrl-C).
     Interrupted,
     /// No search ran: the prediction of a prior was kept (see
-    /// [`crate::inverse::estimation::one_acquisition`]).
+    /// [`crate::inverse::estimate::workflow::one_acquisition`]).
     PredictionKept,
 }
 
@@ -88,7 +94,7 @@ pub enum Method {
 ///
 /// ```
 /// use has_core::inverse::cost::{build_model, Measurement};
-/// use has_core::{inverse::phase::phase_error, Estimator, Scenario, Simulation};
+/// use has_core::{phase::phase_error, Estimator, Scenario, Simulation};
 /// let sim = Simulation::new(&Scenario::default())?;
 /// let truth: Vec<f64> = (0..16).map(|g| 0.4 * (g as f64).sin()).collect();
 /// let image = sim.arfi_image(&truth)?; // noise-free, one image

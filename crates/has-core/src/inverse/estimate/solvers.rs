@@ -21,8 +21,8 @@ use std::time::Instant;
 /// absolute eigenvalues) a vertex at `x + s_i·v_i`, `s_i = sqrt(2·J(x)/|λ_i|)` clamped to
 /// [1e-4, π/2] rad, the distance at which the quadratic model would have used up the cost.
 /// Stops when a restart lowers the best cost by less than 0.1 % (or less than `tolerance/100`:
-/// with `tolerance` itself, a noise-free fit whose cost had reached 1e-6 stopped 0.2 rad short of
-/// the truth with the truth downhill) or the budget is spent.
+/// with `tolerance` itself, a noise-free fit whose cost is down to 1e-6 can stop tenths of a rad
+/// short of the truth with the truth still downhill) or the budget is spent.
 pub(super) fn restarted_nelder_mead(
     p: &Problem,
     start: Vec<f64>,

@@ -607,7 +607,8 @@ impl HasPlan {
 }
 
 /// Runs `f` on a rayon worker: the parallel loops of every step then stay inside the pool
-/// instead of waking the calling thread at each of them (20–30 % faster from Python's thread).
+/// instead of waking the calling thread at each of them (called from outside the pool, e.g. from
+/// Python's thread, each loop is queued to the pool and its caller woken when it is done).
 pub(super) fn in_pool(f: impl FnOnce() + Send) {
     rayon::scope(|s| s.spawn(|_| f()));
 }

@@ -13,10 +13,16 @@
 //! The prior anchors the common phase (the images see only phase differences), removes the
 //! twin that one in-focus image cannot tell apart, and makes per-element estimation from a few
 //! images well posed.
+//!
+//! Errors correlated over the aperture are [`smooth`]; the coefficient of a prediction's error
+//! mode fitted to images is [`mode_fit`].
+
+pub mod mode_fit;
+pub mod smooth;
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Objective;
-use crate::inverse::phase::condense;
+use crate::phase::condense;
 
 /// The smallest noise floor (rad) the likelihood uses: noise-free images would otherwise give
 /// the prior no weight at all.
@@ -51,7 +57,7 @@ impl Prior {
 
     /// The same prior with errors that form a smooth field over the aperture, correlated over
     /// `length_m` (m, finite, > 0): per-element estimates then search the smooth corrections of
-    /// the prediction (see [`crate::inverse::smooth_prior`]); group estimates keep the
+    /// the prediction (see [`crate::inverse::prior::smooth`]); group estimates keep the
     /// independent prior of the group means.
     pub fn with_correlation_length(mut self, length_m: f64) -> Result<Self> {
         if !(length_m.is_finite() && length_m > 0.0) {
@@ -65,7 +71,7 @@ impl Prior {
     /// (rad, one value per predicted phase: the change of the predicted phases when one of the
     /// prediction's inputs is off by one standard deviation, e.g. the CT conversion's bone sound
     /// speed) adds `a·g` with `a ~ N(0, 1)` to the error `W·a` of the smooth prior (see
-    /// [`crate::inverse::smooth_prior`]). A per-element estimate then fits each mode's
+    /// [`crate::inverse::prior::smooth`]). A per-element estimate then fits each mode's
     /// coefficient with the smooth corrections: an error spread over the whole aperture by one
     /// misjudged constant is one number for the images to find, not hundreds. Modes hold one
     /// value per element (checked by the estimate, also when the predicted phases are given per

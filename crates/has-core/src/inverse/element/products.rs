@@ -3,7 +3,8 @@
 //! imaginary parts, row-major, single precision) and a few columns `V` or `H` (one per image).
 //!
 //! A general matrix product packs `B` on every call, which at a few columns costs more than the
-//! multiplications (more than half of a per-element estimate's time went to packing); these loops
+//! multiplications (packing would take more than half of a per-element estimate's time,
+//! BENCHMARKS.md, the element basis's products); these loops
 //! read each row of `B` once per call instead. Sums run in [`LANES`] single-precision partial
 //! sums, in a fixed order: on one CPU the same bits for any number of threads. Compiled for AVX2
 //! with fused multiply-adds too, chosen at run time (the crate builds for baseline x86-64); the

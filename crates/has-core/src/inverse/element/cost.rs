@@ -23,7 +23,7 @@ pub struct ElementTerm {
 
 /// The joint cost of paper Eq. 4 over images, on the per-element basis: the same `J` as
 /// [`crate::inverse::cost::HybridCost`] with one phase per element, optionally with nuisance
-/// parameters ([`crate::inverse::nuisance`]): the model value of pixel `i` of image `k` is
+/// parameters ([`crate::inverse::element::nuisance`]): the model value of pixel `i` of image `k` is
 /// `s·d_k,i + b_k·(1, u_i, v_i)` with the scale `s` and the background planes `b_k` solved by
 /// least squares for each `phases`, and `d` formed with the cost's view (W, shift).
 #[derive(Debug, Clone)]

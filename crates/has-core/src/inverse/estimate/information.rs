@@ -10,7 +10,7 @@
 //! With white noise `sigma` on the masked pixels the Fisher information is
 //! `F = Σ_k J_kᵀ·J_k/sigma²`. A Gaussian prior on the error gives the posterior covariance
 //! `C = (F + I/s²)⁻¹` for independent errors of std `s`, and `C = W·(I + Wᵀ·F·W)⁻¹·Wᵀ` for the
-//! smooth error modes `W` of [`crate::inverse::smooth_prior`] (what such an estimate can move).
+//! smooth error modes `W` of [`crate::inverse::prior::smooth`] (what such an estimate can move).
 //! Without a prior the errors are taken as a smooth field of the spread of uniform phases,
 //! `pi/sqrt(3)` ([`Spread::for_prior`]).
 //!
@@ -28,11 +28,11 @@
 //! (amplitude scale, background planes) is taken as known.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::{ElementCost, FieldBasis};
 use crate::inverse::cost::mask_pixels;
+use crate::inverse::element::{ElementCost, FieldBasis};
 use crate::inverse::linear::spd_inverse;
+use crate::inverse::prior::smooth::{error_modes, SmoothErrors};
 use crate::inverse::prior::Prior;
-use crate::inverse::smooth_prior::{error_modes, SmoothErrors};
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;

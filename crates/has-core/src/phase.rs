@@ -1,5 +1,6 @@
-//! Phase arithmetic shared by the estimators, the cost and the reports: wrapping, circular
-//! means, the phase error metric and the twin of an aberration under a point reflection.
+//! Phase arithmetic shared by the forward model, the estimators, the cost and the reports:
+//! wrapping, circular means, the phase error metric and the twin of an aberration under a point
+//! reflection.
 
 use crate::error::{HasError, Result};
 use num_complex::Complex64 as C64;

@@ -18,8 +18,8 @@
 //! until a step is short against the posterior's spread.
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::{image_known_per_element, BACKGROUND_MARGIN};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
+use crate::inverse::element::{image_known_per_element, BACKGROUND_MARGIN};
 use crate::numeric;
 use crate::physics::mr::MrSampler;
 use crate::simulation::Simulation;

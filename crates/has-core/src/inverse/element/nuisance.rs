@@ -12,7 +12,7 @@
 //! every cost evaluation (variable projection: the phase gradient at the projected optimum is the
 //! gradient with them held fixed). W and the shift change the sampling of the recorded
 //! `|p|²`: they are fitted by Nelder–Mead with the phases held, alternating with the phase search
-//! ([`crate::inverse::view_fit::fit_view`]); each of their evaluations re-samples fixed `|p|²` (no matrix products over
+//! ([`crate::inverse::element::view_fit::fit_view`]); each of their evaluations re-samples fixed `|p|²` (no matrix products over
 //! the element basis).
 
 use crate::error::{HasError, Result};
@@ -94,7 +94,7 @@ impl Nuisance {
     /// (m): [`width_reach`] when W is fitted, plus a quarter of [`SHIFT_REACH_MM`] when the shift
     /// is (the Gaussian reaches 4 widths, so that covers the shifted pixels); `width` itself when
     /// neither. Fitting W alone so records 12 % fewer window samples than both (62 923 against
-    /// 71 155 for the default scenario's four images; measured 2026-11-25).
+    /// 71 155 for the default scenario's four images).
     pub fn window_width(&self, width: f64) -> f64 {
         let w = if self.broadening { width_reach(width) } else { width };
         if self.registration_shift {

@@ -1,10 +1,10 @@
 //! The fit of the MR view (broadening width W, registration shift) of a per-element cost with
 //! the phases held: Nelder–Mead on fixed `|p|²`, the scale and backgrounds projected out (see
-//! [`crate::inverse::nuisance`]).
+//! [`crate::inverse::element::nuisance`]).
 
 use crate::error::{HasError, Result};
-use crate::inverse::basis::ElementCost;
-use crate::inverse::nuisance::{width_reach, Nuisance, SHIFT_REACH_MM};
+use crate::inverse::element::nuisance::{width_reach, Nuisance, SHIFT_REACH_MM};
+use crate::inverse::element::ElementCost;
 use argmin::core::{CostFunction, Error as ArgminError, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 

@@ -13,15 +13,20 @@
 //! `B` is stored in single precision as real and imaginary parts; the products for all images at
 //! once run over fixed blocks of samples (deterministic for any number of threads) in loops
 //! written for their shape (`products`). The cost itself is [`ElementCost`].
+//!
+//! Fitted with the phases on this basis: the nuisance parameters of the image ([`nuisance`]) and
+//! the MR view, broadening width and registration shift ([`view_fit`]).
 
 mod cost;
+pub mod nuisance;
 mod products;
+pub mod view_fit;
 
 pub use cost::{ElementCost, ElementTerm, LinearNuisance};
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
-use crate::inverse::nuisance::Nuisance;
+use crate::inverse::element::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::grid::Grid;
 use crate::physics::mr::MrSampler;
@@ -58,7 +63,7 @@ pub const BASIS_SPACING_PIXELS: f64 = 0.75;
 /// over; the steps to the window cost a third of the λ/4 grid's, and the window holds fewer
 /// samples. Its images differ from the simulation's own by about 1 % of their peak at 650 kHz,
 /// well below an MR-ARFI image's noise (`tests/element_basis.rs`); where the wavelength alone
-/// would allow a spacing near the pixel's (220 kHz: 2.6 mm against 1.4 mm pixels) they differed
+/// would allow a spacing near the pixel's (220 kHz: 2.6 mm against 1.4 mm pixels) they differ
 /// by 20 %, hence the pixel's bound. Through reverberating bone the simulation's grid is kept.
 pub fn basis_grid(sim: &Simulation) -> Result<Option<Grid>> {
     let pixel = sim.mr.pixel_size();
@@ -88,8 +93,8 @@ impl FieldBasis {
     /// Marches every element's field (steering phase, unit drive) in batches, on
     /// [`basis_grid`]'s grid where it gives one, and keeps the
     /// samples that pixels `u x v` depend on, also with the views `reach` fits: another
-    /// broadening width (up to [`crate::inverse::nuisance::width_reach`]) and a registration
-    /// shift (up to [`crate::inverse::nuisance::SHIFT_REACH_MM`]); see
+    /// broadening width (up to [`crate::inverse::element::nuisance::width_reach`]) and a registration
+    /// shift (up to [`crate::inverse::element::nuisance::SHIFT_REACH_MM`]); see
     /// [`Nuisance::window_width`]. `progress(done, total)` is called after each batch; `cancel`,
     /// when set by another thread, ends the build before the next batch
     /// ([`HasError::Interrupted`]).
@@ -287,8 +292,8 @@ pub fn build_element_model(
 
 /// Keeps the element basis of the last per-element model built through it, for the next on the
 /// same simulation: the basis depends only on the simulation and the pixel box, so another
-/// estimate from the same images (another prior, seed or limit) skips the marching (about 15 s
-/// for 1024 elements). Holds at most one basis ([`FieldBasis::bytes`]); a cache must only ever
+/// estimate from the same images (another prior, seed or limit) skips the marching (one march
+/// per element). Holds at most one basis ([`FieldBasis::bytes`]); a cache must only ever
 /// see one simulation.
 #[derive(Debug, Default)]
 pub struct BasisCache(Mutex<Option<Arc<FieldBasis>>>);
