@@ -36,27 +36,27 @@ def images(terms: Sequence, phases: NDArray[np.float64]) -> list[NDArray[np.floa
     return out
 
 
-def _scale(terms: Sequence, model: list[NDArray[np.float64]], fit_scale: bool) -> float:
-    if not fit_scale:
+def _scale(terms: Sequence, model: list[NDArray[np.float64]], fit_amplitude: bool) -> float:
+    if not fit_amplitude:
         return 1.0
     d = np.concatenate(model)
     dd = float(d @ d)
     return float(d @ np.concatenate([t.measured_rad for t in terms])) / dd if dd > 0 else 1.0
 
 
-def cost(terms: Sequence, phases: NDArray[np.float64], fit_scale: bool = False) -> float:
+def cost(terms: Sequence, phases: NDArray[np.float64], fit_amplitude: bool = False) -> float:
     """``J`` (rad²)."""
     model = images(terms, phases)
-    s = _scale(terms, model, fit_scale)
+    s = _scale(terms, model, fit_amplitude)
     return float(sum(np.sum((s * d - t.measured_rad) ** 2) for d, t in zip(model, terms)))
 
 
-def cost_and_gradient(terms: Sequence, phases: NDArray[np.float64], fit_scale: bool = False) -> tuple[float, NDArray[np.float64]]:
+def cost_and_gradient(terms: Sequence, phases: NDArray[np.float64], fit_amplitude: bool = False) -> tuple[float, NDArray[np.float64]]:
     """``J`` and ``∂J/∂phi`` (the fitted scale drops out of the gradient: envelope theorem)."""
     g = len(phases)
     a, b = _pairs(g)
     model = images(terms, phases)
-    s = _scale(terms, model, fit_scale)
+    s = _scale(terms, model, fit_amplitude)
     total, grad = 0.0, np.zeros(g)
     for t, d in zip(terms, model):
         v = _drives(t, phases)

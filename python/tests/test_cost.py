@@ -23,10 +23,10 @@ def aberrated(sim):
     return truth, images, [None, diversity]
 
 
-@pytest.mark.parametrize("fit_scale", [False, True])
-def test_cost_matches_numpy_from_the_exposed_kernels(sim, aberrated, fit_scale):
+@pytest.mark.parametrize("fit_amplitude", [False, True])
+def test_cost_matches_numpy_from_the_exposed_kernels(sim, aberrated, fit_amplitude):
     truth, images, known = aberrated
-    model = sim.cost_model(images, known, fit_amplitude=fit_scale)
+    model = sim.cost_model(images, known, fit_amplitude=fit_amplitude)
     terms = model.terms()
     assert model.n_groups == sim.n_groups == 16
     assert [t.diagonal.shape[1] for t in terms] == [16, 16] and terms[0].upper.shape[1] == 16 * 15 // 2
@@ -36,10 +36,10 @@ def test_cost_matches_numpy_from_the_exposed_kernels(sim, aberrated, fit_scale):
     for phases in [np.zeros(16), truth, rng.uniform(-np.pi, np.pi, 16)]:
         # Same sums in another order: agreement to ~1e-12 of the cost's size.
         j = model.cost(phases)
-        assert j == pytest.approx(numpy_cost.cost(terms, phases, fit_scale), rel=1e-10, abs=1e-14)
+        assert j == pytest.approx(numpy_cost.cost(terms, phases, fit_amplitude), rel=1e-10, abs=1e-14)
         j2, grad = model.cost_and_gradient(phases)
         assert j2 == pytest.approx(j, rel=1e-12, abs=1e-15)
-        ref_j, ref_grad = numpy_cost.cost_and_gradient(terms, phases, fit_scale)
+        ref_j, ref_grad = numpy_cost.cost_and_gradient(terms, phases, fit_amplitude)
         assert ref_j == pytest.approx(j, rel=1e-10, abs=1e-14)
         np.testing.assert_allclose(grad, ref_grad, rtol=0, atol=1e-10 * np.linalg.norm(ref_grad) + 1e-15)
 

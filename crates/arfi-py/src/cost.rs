@@ -42,7 +42,7 @@ impl CoreCostModel {
 
     #[getter]
     fn fit_amplitude(&self) -> bool {
-        self.cost.fit_scale
+        self.cost.fit_amplitude
     }
 
     #[getter]

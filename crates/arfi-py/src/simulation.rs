@@ -421,7 +421,7 @@ impl CoreSimulation {
             time_limit_s,
             seed,
             starts,
-            fit_scale: fit_amplitude,
+            fit_amplitude,
             nuisance,
             threshold,
             prior,
@@ -455,7 +455,7 @@ impl CoreSimulation {
         let cancel = AtomicBool::new(false);
         let model = run_interruptible(py, &cancel, || build_model(sim, &measurements, sim.mask_fraction, 3))?.map_err(to_py)?;
         let mut cost = model.cost;
-        cost.fit_scale = fit_amplitude;
+        cost.fit_amplitude = fit_amplitude;
         Ok(CoreCostModel { cost: Arc::new(cost), noise: model.noise })
     }
 

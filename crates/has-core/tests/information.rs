@@ -1,4 +1,4 @@
-//! The linearised information of per-element acquisitions ([`has_core::inverse::information`]),
+//! The linearised information of per-element acquisitions ([`has_core::inverse::estimate::information`]),
 //! checked against references that are not the module: central finite differences of the basis
 //! images, the closed form for independent errors, and Monte Carlo draws of correlated errors.
 //! On a 256-element version of the default array to keep the marches short.

@@ -1,4 +1,4 @@
-//! A prior mode's coefficient fitted to images (`inverse::mode_fit`), on images the model makes
+//! A prior mode's coefficient fitted to images (`inverse::prior::mode_fit`), on images the model makes
 //! itself of a known coefficient (the default scenario, three images in focus and defocused by
 //! ±5 mm, 0.01 rad noise): the fit must find the coefficient within three of its own posterior
 //! standard deviations (a Gaussian posterior's 99.7 %), plus the prior's pull towards zero.

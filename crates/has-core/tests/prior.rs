@@ -268,7 +268,7 @@ fn smooth_field(positions: &[[f64; 3]], std_rad: f64, length: f64, seed: u64) ->
 /// so by at most `S/2 = 0.25` rad RMS over the elements, a focal loss of at most
 /// `1 - exp(-(S/2)²) = 0.06`. Measured on seeds 1–4 (prediction alone 0.996, 0.994, 0.995,
 /// 0.992): fitted on the focal-zone masks the estimate left 0.780, 0.661, 0.774, 0.821, the fitted
-/// scale raised to 0.46–0.57 (see [`has_core::inverse::basis::fits_whole_box`]); fitted on every
+/// scale raised to 0.46–0.57 (see [`has_core::inverse::element::fits_whole_box`]); fitted on every
 /// pixel of the box, 0.987, 0.963, 0.996, 0.989 (scale 0.29–0.31, at most 0.031 below). Every
 /// seed failed before, so seed 1 runs by default (one estimate on 256 elements), 1–4 with
 /// `ARFI_FULL_SWEEPS=1`.

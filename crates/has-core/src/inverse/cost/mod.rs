@@ -56,7 +56,7 @@ pub struct Term {
 }
 
 /// The joint cost `J(phi) = Σ_k Σ_{i in mask_k} (s·d_k,i(phi + offset_k) - m_k,i)²` over images.
-/// `s = 1`, or, with `fit_scale`, the least-squares scale `s = <d, m> / <d, d>` for each `phi`
+/// `s = 1`, or, with `fit_amplitude`, the least-squares scale `s = <d, m> / <d, d>` for each `phi`
 /// (one for all images): a free amplitude that absorbs a uniform loss of focal intensity the
 /// phases cannot explain (e.g. element-level aberration within groups).
 #[derive(Debug, Clone)]
@@ -66,7 +66,7 @@ pub struct HybridCost {
     /// Number of group phases `G`.
     pub n_groups: usize,
     /// Fit the least-squares scale `s` (otherwise `s = 1`).
-    pub fit_scale: bool,
+    pub fit_amplitude: bool,
 }
 
 impl HybridCost {
@@ -81,7 +81,7 @@ impl HybridCost {
                 return Err(HasError::invalid(format!("image[{k}]"), "empty mask"));
             }
         }
-        Ok(HybridCost { terms, n_groups, fit_scale: false })
+        Ok(HybridCost { terms, n_groups, fit_amplitude: false })
     }
 
     /// Number of masked pixels over all images.
@@ -102,15 +102,15 @@ impl HybridCost {
             .collect()
     }
 
-    /// The scale applied to the model images for these images (1 unless `fit_scale`).
+    /// The scale applied to the model images for these images (1 unless `fit_amplitude`).
     fn scale_for(&self, images: &[Vec<f64>]) -> f64 {
-        if !self.fit_scale {
+        if !self.fit_amplitude {
             return 1.0;
         }
         least_squares_scale(images.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
     }
 
-    /// The amplitude scale at `phases` (1 unless `fit_scale`).
+    /// The amplitude scale at `phases` (1 unless `fit_amplitude`).
     pub fn scale(&self, phases: &[f64]) -> f64 {
         self.scale_for(&self.images(phases))
     }

@@ -372,6 +372,14 @@ pub(super) fn params_of(effect: Effect, after: &Effects, before: &Effects) -> Ve
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::inverse::element::nuisance::Nuisance;
+
+    #[test]
+    fn nuisance_fitted_with_the_phases_is_named_as_its_effect() {
+        // An estimate's fit_nuisance takes and reports the names diagnose gives the same effects.
+        let same = [Effect::Amplitude, Effect::Broadening, Effect::RegistrationShift, Effect::BackgroundPhase];
+        assert_eq!(Nuisance::NAMES, same.map(|e| e.name()));
+    }
 
     #[test]
     fn the_table_names_every_reported_parameter_and_each_can_be_set() {

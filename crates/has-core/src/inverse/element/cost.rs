@@ -32,8 +32,8 @@ pub struct ElementCost {
     pub basis: Arc<FieldBasis>,
     /// One term per measured image.
     pub terms: Vec<ElementTerm>,
-    /// Fit one least-squares amplitude scale for all images (see `HybridCost::fit_scale`).
-    pub fit_scale: bool,
+    /// Fit one least-squares amplitude scale for all images (see `HybridCost::fit_amplitude`).
+    pub fit_amplitude: bool,
     /// Fit a background plane (offset and slopes along u and v) per image.
     pub fit_background: bool,
     /// The MR sampling the images are formed with: the basis' own, or another W and shift.
@@ -71,7 +71,7 @@ impl ElementCost {
         }
         let sampler = basis.sampler.clone();
         let coords = [0, 1].map(|k| sampler.pixels[k].clone().map(|i| sampler.geometry.pixel_center(k, i) * 1e3).collect());
-        Ok(ElementCost { basis, terms, fit_scale: false, fit_background: false, sampler, coords })
+        Ok(ElementCost { basis, terms, fit_amplitude: false, fit_background: false, sampler, coords })
     }
 
     /// The same cost with the images formed with broadening widths `widths` and shift `shift`
@@ -153,7 +153,7 @@ impl ElementCost {
     pub fn linear_fit(&self, model: &[Vec<f64>]) -> LinearNuisance {
         let k = self.terms.len();
         let scale_only = || {
-            let s = if self.fit_scale {
+            let s = if self.fit_amplitude {
                 crate::inverse::cost::least_squares_scale(model.iter().zip(&self.terms).map(|(d, t)| (d.as_slice(), t.measured.as_slice())))
             } else {
                 1.0
@@ -163,16 +163,16 @@ impl ElementCost {
         if !self.fit_background {
             return scale_only();
         }
-        let o = usize::from(self.fit_scale);
+        let o = usize::from(self.fit_amplitude);
         let m = o + 3 * k;
         let mut a = vec![vec![0.0; m + 1]; m];
         for (c, (d, t)) in model.iter().zip(&self.terms).enumerate() {
             for ((&p, &x), &y) in t.mask.iter().zip(d).zip(&t.measured) {
                 let (u, v) = self.uv(p);
-                let target = if self.fit_scale { y } else { y - x };
+                let target = if self.fit_amplitude { y } else { y - x };
                 let mut cols = [(0, 0.0); 4];
                 let mut n = 0;
-                if self.fit_scale {
+                if self.fit_amplitude {
                     cols[0] = (0, x);
                     n = 1;
                 }
@@ -190,7 +190,7 @@ impl ElementCost {
         }
         match crate::inverse::linear::solve_augmented(a) {
             Some(x) => LinearNuisance {
-                scale: if self.fit_scale { x[0] } else { 1.0 },
+                scale: if self.fit_amplitude { x[0] } else { 1.0 },
                 background: (0..k).map(|c| [x[o + 3 * c], x[o + 3 * c + 1], x[o + 3 * c + 2]]).collect(),
             },
             None => scale_only(),

@@ -362,7 +362,7 @@ impl BasisCache {
         }
         let basis = self.basis(sim, u, v, nuisance, progress, cancel)?;
         let mut cost = ElementCost::new(basis, terms)?;
-        cost.fit_scale = nuisance.amplitude;
+        cost.fit_amplitude = nuisance.amplitude;
         cost.fit_background = nuisance.background_phase;
         Ok(ElementModel { cost, noise })
     }

@@ -39,7 +39,8 @@ pub struct Nuisance {
 }
 
 impl Nuisance {
-    /// The names accepted, in the order reported.
+    /// The names accepted, in the order reported: the model-discrepancy workflow's names of the
+    /// same effects (`diagnose::Effect::name`; a test there holds them equal).
     pub const NAMES: [&'static str; 4] = ["amplitude", "broadening", "registration_shift", "background_phase"];
 
     /// Every nuisance parameter.
@@ -52,21 +53,24 @@ impl Nuisance {
     pub fn parse<S: AsRef<str>>(names: &[S]) -> Result<Self> {
         let mut n = Nuisance::default();
         for name in names {
-            match name.as_ref() {
-                "amplitude" => n.amplitude = true,
-                "broadening" => n.broadening = true,
-                "registration_shift" => n.registration_shift = true,
-                "background_phase" => n.background_phase = true,
-                "all" => n = Nuisance::all(),
-                other => {
-                    return Err(HasError::invalid(
-                        "fit_nuisance",
-                        format!("unknown nuisance parameter \"{other}\"; expected some of {} or \"all\"", Nuisance::NAMES.join(", ")),
-                    ))
-                }
+            let name = name.as_ref();
+            if name == "all" {
+                n = Nuisance::all();
+            } else if let Some(k) = Nuisance::NAMES.iter().position(|&known| known == name) {
+                *n.flags_mut()[k] = true;
+            } else {
+                return Err(HasError::invalid(
+                    "fit_nuisance",
+                    format!("unknown nuisance parameter \"{name}\"; expected some of {} or \"all\"", Nuisance::NAMES.join(", ")),
+                ));
             }
         }
         Ok(n)
+    }
+
+    /// The switches in [`Nuisance::NAMES`] order.
+    fn flags_mut(&mut self) -> [&mut bool; 4] {
+        [&mut self.amplitude, &mut self.broadening, &mut self.registration_shift, &mut self.background_phase]
     }
 
     /// The names of the parameters fitted, in [`Nuisance::NAMES`] order.

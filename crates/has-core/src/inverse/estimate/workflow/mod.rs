@@ -82,9 +82,9 @@ pub struct EstimateRequest {
     /// L-BFGS starts (default 20).
     pub starts: Option<usize>,
     /// Fit a free amplitude scale too.
-    pub fit_scale: bool,
+    pub fit_amplitude: bool,
     /// Nuisance parameters fitted jointly with per-element phases (the amplitude also with
-    /// `fit_scale`: see [`EstimateRequest::fitted_nuisance`]); group estimates fit the amplitude
+    /// `fit_amplitude`: see [`EstimateRequest::fitted_nuisance`]); group estimates fit the amplitude
     /// only.
     pub nuisance: Nuisance,
     /// A rival solution counts as ambiguous when it would leave less than this fraction of the
@@ -108,7 +108,7 @@ impl Default for EstimateRequest {
             time_limit_s: None,
             seed: 0,
             starts: None,
-            fit_scale: false,
+            fit_amplitude: false,
             nuisance: Nuisance::default(),
             threshold: 0.9,
             prior: None,
@@ -118,9 +118,9 @@ impl Default for EstimateRequest {
 }
 
 impl EstimateRequest {
-    /// The nuisance fitted: `nuisance`, with the amplitude also when `fit_scale`.
+    /// The nuisance fitted: `nuisance`, with the amplitude also when `fit_amplitude`.
     pub fn fitted_nuisance(&self) -> Nuisance {
-        Nuisance { amplitude: self.fit_scale || self.nuisance.amplitude, ..self.nuisance }
+        Nuisance { amplitude: self.fit_amplitude || self.nuisance.amplitude, ..self.nuisance }
     }
 }
 
@@ -136,7 +136,7 @@ pub struct EstimateReport {
     pub noise: f64,
     /// Pixels the estimate was fitted on.
     pub n_pixels: usize,
-    /// The fitted amplitude scale (1 unless `fit_scale`; per element: 1).
+    /// The fitted amplitude scale (1 unless `fit_amplitude`; per element: 1).
     pub scale: f64,
     /// The default-group warm start of a per-element estimate.
     pub group_phases: Option<Vec<f64>>,
@@ -259,7 +259,7 @@ pub fn estimate_aberration_with(
         est = est.with_max_evaluations(n)?;
     }
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
-    model.cost.fit_scale = request.fitted_nuisance().amplitude;
+    model.cost.fit_amplitude = request.fitted_nuisance().amplitude;
     let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),

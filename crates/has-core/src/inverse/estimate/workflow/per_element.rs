@@ -195,7 +195,7 @@ pub(super) fn estimate_per_element(
             let sigma = point_reflection(&positions, &grouped.groups);
             let est = estimator(request, Method::Lbfgs, sigma.clone())?;
             let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
-            group_model.cost.fit_scale = request.fit_scale;
+            group_model.cost.fit_amplitude = request.fit_amplitude;
             let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, cancel)?;
             WarmStart::Groups { elements: grouped.element_phases(&group.phases)?, groups: group.phases, assessment }
         }
