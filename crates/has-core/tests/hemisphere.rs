@@ -133,11 +133,8 @@ fn straight_ray_drive(sim: &Simulation, target: [f64; 3]) -> Vec<C64> {
 /// march and a direct sum over 1024 discs per pixel).
 #[test]
 fn hemisphere_focal_plane_matches_a_direct_rayleigh_sommerfeld_sum() {
-    let foci: &[[f64; 3]] = if std::env::var_os("ARFI_FULL_SWEEPS").is_some() {
-        &[[0.0, 0.0, 150.0], [10.0, 0.0, 140.0]]
-    } else {
-        &[[10.0, 0.0, 140.0]]
-    };
+    let foci: &[[f64; 3]] =
+        if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { &[[0.0, 0.0, 150.0], [10.0, 0.0, 140.0]] } else { &[[10.0, 0.0, 140.0]] };
     for &focus in foci {
         let t = Instant::now();
         let sim = Simulation::new(&hemisphere_in_water(focus)).unwrap();
