@@ -14,8 +14,9 @@ radian around the prior; that costs under 0.01 of the focus (measured 0.003 at m
 here), so the estimate must never fall more than 0.01 below the prediction alone. 0.95 of the
 optimum is the issue's floor; the 220 kHz phantom's predictions reach 0.99.
 
-1 mm CT voxels (clinical CTs have 0.5-1 mm) and 256 elements keep a seed at about 35 s; ``ARFI_FULL_SWEEPS=1`` runs five
-seeds instead of two.
+1 mm CT voxels (clinical CTs have 0.5-1 mm) and 256 elements keep a seed to one CT phantom, one
+prediction, three simulated images and one estimate; the default run takes head seed 0 (every
+assertion holds per seed: no rate), ``ARFI_FULL_SWEEPS=1`` runs seeds 0-4 (docs/testing.md).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from arfi.prediction import predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
-SEEDS = [0, 1, 2, 3, 4] if os.environ.get("ARFI_FULL_SWEEPS") == "1" else [0, 3]
+SEEDS = [0, 1, 2, 3, 4] if os.environ.get("ARFI_FULL_SWEEPS") else [0]
 
 
 def head_scenarios(d: Path, seed: int) -> None:

@@ -26,6 +26,10 @@ def run(threads: int) -> str:
 def test_results_are_bit_identical_with_one_and_two_threads_and_across_runs():
     # FFT rows are independent, sums run in a fixed order, starts are seeded: the image, the field,
     # the estimate and a diagnosis (parallel candidate fits) must not depend on the thread count
-    # or the run.
+    # or the run. Each run is its own process, so one thread against two also compares two runs;
+    # the full mode (ARFI_FULL_SWEEPS=1, docs/testing.md) adds a second two-thread run.
     one = run(1)
-    assert one == run(2) == run(2)
+    if os.environ.get("ARFI_FULL_SWEEPS"):
+        assert one == run(2) == run(2)
+    else:
+        assert one == run(2)

@@ -1,12 +1,18 @@
 """The paper's loop 2 with a measured safeguard (issue 3): successive images with the current
 correction applied, fitted jointly; a correction is kept only if the scanner shows it better."""
 
+import os
+
 import numpy as np
 import pytest
 
 from arfi.loop import loop2, robust_focal
 
 NOISE = 0.02
+
+# Seeds of the sweeps below: the first by default, 1-5 with ARFI_FULL_SWEEPS=1 (docs/testing.md);
+# each seed is a loop of 16-group estimates, two or three of them on several images.
+SEEDS = range(1, 6) if os.environ.get("ARFI_FULL_SWEEPS") else range(1, 2)
 
 
 def run_loop(sim, applied, seed, iterations):
@@ -25,8 +31,9 @@ def test_a_16_group_correction_of_1024_aberrations_never_makes_the_focus_worse(s
     # Issue 3 acceptance. With the default skull screen the fitted 16-group estimates of these
     # element-level aberrations all leave a weaker focus than no correction (measured 2026-11-23:
     # true focus 0.13-0.34 of ideal after correction vs 0.25-0.53 aberrated), so the safeguard
-    # must see that in the noisy images and keep no correction. The check is on noise-free truth.
-    for seed in range(1, 6):
+    # must see that in the noisy images and keep no correction. The check is on noise-free truth,
+    # the same for every seed (no rate): seed 1 by default, 1-5 in the full mode.
+    for seed in SEEDS:
         applied = sim.skull_phases(seed)
         r = run_loop(sim, applied, seed, iterations=2)
         aberrated = sim.arfi_image(applied).max()
@@ -40,9 +47,11 @@ def test_loop2_refocuses_16_group_aberrations_one_image_cannot(sim, ideal):
     # and its twin phi(u) -> -phi(-u) fit it almost equally well); loop 2 adds the corrected
     # images to the joint fit. Measured 2026-11-23 (3 iterations, seeds 1-5): kept corrections
     # recover 0.88, 0.85, 0.98, 0.90, 0.97 of the ideal focus (mean 0.92; paper loop 1: 0.83).
-    # Required: mean >= 0.85 and never below the aberrated focus.
+    # Required: mean >= 0.85 and never below the aberrated focus. The mean is over the seeds run:
+    # in the default run seed 1 alone must reach it (the single-seed form of the claim; seed 1 is
+    # the lowest of the five seeds but one), over 1-5 in the full mode.
     recovered = []
-    for seed in range(1, 6):
+    for seed in SEEDS:
         applied = sim.condense(sim.skull_phases(seed))[sim.groups]
         r = run_loop(sim, applied, seed, iterations=3)
         corrected = sim.arfi_image(applied - r.correction_rad[sim.groups]).max()

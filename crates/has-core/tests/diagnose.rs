@@ -95,10 +95,18 @@ fn param(d: &Diagnosis, name: &str) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-/// Seeds per case: `ci` in the default run, `full` with `ARFI_FULL_SWEEPS=1` set (CI time); the
-/// hit rates of issue 4 come from the full runs and from examples/hidden_effects.rs (10 seeds).
+/// Whether `ARFI_FULL_SWEEPS` is set: the full mode runs every seed and case of a sweep
+/// (docs/testing.md), the default run one of each.
+fn full() -> bool {
+    std::env::var_os("ARFI_FULL_SWEEPS").is_some()
+}
+
+/// Seeds per case: `ci` in the default run, `full` with `ARFI_FULL_SWEEPS=1` set (each seed is
+/// one or more diagnoses, each fitting every effect of the library, some by re-marching the
+/// field); the hit rates of issue 4 come from the full runs and from examples/hidden_effects.rs
+/// (10 seeds).
 fn seeds(ci: u64, full: u64) -> std::ops::RangeInclusive<u64> {
-    1..=if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { full } else { ci }
+    1..=if self::full() { full } else { ci }
 }
 
 /// The gap at the end: residual RMS over the noise floor (required ≤ 1.2).
@@ -139,9 +147,10 @@ fn a_hidden_registration_shift_is_named_and_measured() {
 #[test]
 fn noise_only_names_nothing() {
     // Issue 4: on noise-only data no effect is named in at least 95 % of 20 seeds (the full
-    // run); the default run takes the first 5 and allows none.
+    // run, a rate); the default run takes the first seed and allows none (0.05 of one seed), so
+    // a workflow that names an effect on this noise fails it.
     let s = sim();
-    let n = seeds(5, 20).count() as u64;
+    let n = seeds(1, 20).count() as u64;
     let named: Vec<(u64, Vec<&str>)> = (100..100 + n)
         .map(|seed| (seed, names(&run(s, &s.noisy_arfi_image(&[], NOISE, seed).unwrap()))))
         .filter(|r| !r.1.is_empty())
@@ -326,6 +335,11 @@ fn a_hidden_phase_aberration_is_named_from_diversity_images() {
     assert!(recovered > 0.9, "recovered {recovered}");
 }
 
+/// Both effects of a hidden pair are named (and a hidden shift measured within 0.3 mm). The
+/// default run takes the first pair, a view effect with a shift (two effects named in turn, the
+/// second one measured after the first); the full mode adds a field effect with a shift and two
+/// view effects without. Each pair draws its strengths in turn from one generator, so the first
+/// pair is the same in both modes.
 #[test]
 fn pairs_of_hidden_effects_are_both_named() {
     let s = sim();
@@ -335,7 +349,7 @@ fn pairs_of_hidden_effects_are_both_named() {
         (Effect::ElementDropout, Effect::RegistrationShift),
         (Effect::Amplitude, Effect::BackgroundPhase),
     ];
-    for (seed, (a, b)) in (1..).zip(pairs) {
+    for (seed, (a, b)) in (1..).zip(pairs).take(if full() { 3 } else { 1 }) {
         let mut e = Effects::none(s);
         for effect in [a, b] {
             match effect {

@@ -75,10 +75,16 @@ fn one_image(truth: &[f64], noise: f64, seed: u64) -> Vec<Measurement> {
 /// focus at most 0.009 below the prediction's (where the prediction alone gives 0.95–1.0, so a
 /// little image noise costs a little focus) and at least the images-alone estimate's; at 0.6 rad
 /// it raises the mean recovery from 0.79 to 0.88.
+///
+/// Every check per case runs on seed 1 by default; the mean gain over seeds 1–5 (a statistic)
+/// with `ARFI_FULL_SWEEPS=1`, and by default the single-seed form of it: on seed 1 the 0.6 rad
+/// prediction gains from the image.
 #[test]
 fn one_image_with_a_prior_is_never_worse_than_the_prior_and_never_a_twin() {
     let mut gain = 0.0;
-    for seed in 1..=5u64 {
+    let seeds = seeds(1, 5);
+    let n = seeds.clone().count() as f64;
+    for seed in seeds {
         let truth = group_truth(seed);
         let m = one_image(&truth, 0.02, seed);
         let alone = estimate_aberration(sim(), &m, &EstimateRequest::default(), None, None).unwrap();
@@ -92,6 +98,7 @@ fn one_image_with_a_prior_is_never_worse_than_the_prior_and_never_a_twin() {
                 (recovered(&truth, &prediction), recovered(&truth, &alone.estimate.phases), recovered(&truth, &post.estimate.phases));
             let (e_prior, e_post) = (phase_error(&prediction, &truth), phase_error(&post.estimate.phases, &truth));
             let case = format!("seed {seed}, error {error}: recovered prior {r_prior:.3} images {r_images:.3} posterior {r_post:.3}; phase error prior {e_prior:.3} posterior {e_post:.3}");
+            println!("{case}");
             assert!(post.prior_used, "{case}");
             // Phase error: 0.01 rad of slack for the noise (the posterior may trade a little).
             assert!(e_post <= e_prior + 0.01, "{case}");
@@ -102,11 +109,12 @@ fn one_image_with_a_prior_is_never_worse_than_the_prior_and_never_a_twin() {
             // Ambiguity judged on the posterior: a confident answer is a good one.
             assert!(post.assessment.ambiguous || r_post > 0.9, "{case}");
             if error == 0.6 {
-                gain += (r_post - r_prior) / 5.0;
+                gain += (r_post - r_prior) / n;
             }
         }
     }
-    // A poor prediction gains from one image on average (measured +0.09; at least +0.04).
+    // A poor prediction gains from one image on average (measured +0.09 over seeds 1-5; at least
+    // +0.04), and on seed 1 alone (the default run) by the same margin.
     assert!(gain > 0.04, "mean gain over the prediction {gain:.3}");
 }
 
