@@ -183,9 +183,10 @@ impl Diagnosis {
 /// from the simulation's model. `cancel`, when set by another thread, ends the run promptly
 /// with [`HasError::Interrupted`].
 ///
-/// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm.
+/// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm
+/// (compiled, not run here: `tests/diagnose.rs` runs this diagnosis and checks it).
 ///
-/// ```
+/// ```no_run
 /// use has_core::physics::mr::add_noise;
 /// use has_core::inverse::cost::Measurement;
 /// use has_core::inverse::diagnose::{diagnose, DiagnoseOptions, Effect};
