@@ -35,7 +35,7 @@ from typing import Any, Callable
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# Targets of the "core" issue.
+# Targets of the core benchmarks.
 TARGET_RUN_S = 0.5  # one HAS run to the focal slab
 TARGET_GROUPS_S = 3.0  # 16 group fields in one batch
 TARGET_PEAK_BYTES = 1 << 30  # peak memory of the default run

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Curved sources and bone plates: arfi against a NumPy direct Rayleigh sum, side by side.
 
-``--case bowl`` (the issue's case): an 85 mm bowl (aperture 80 mm, 550 kHz) in lossless water.
+``--case bowl`` (the acceptance case): an 85 mm bowl (aperture 80 mm, 550 kHz) in lossless water.
 arfi projects the bowl onto its source plane once per scenario (the Rayleigh integral on a radial
 line, the bowl being symmetric about its axis, interpolated onto the pixels) and marches it. The
 NumPy reference is the obvious algorithm: the same Rayleigh integral,

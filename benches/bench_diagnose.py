@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Timings of ``arfi diagnose`` (issue 4 target: one 128 x 96 image with the full library in at
+"""Timings of ``arfi diagnose`` (target: one 128 x 96 image with the full library in at
 most 30 s on 2 cores), in one Python process, on the embedded default scenario.
 
 Cases (0.02 rad noise, seeded): noise only; the paper's story (a model without broadening meets

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Timings of the hybrid estimation (issue 3) on the embedded default scenario, in one Python process.
+"""Timings of the hybrid estimation on the embedded default scenario, in one Python process.
 
 The workload is the paper's single-image 16-group case: one MR-ARFI image of the default scenario
 with a skull-like aberration (``sim.skull_phases(seed)`` condensed to the 16 groups) and 0.02 rad
@@ -46,7 +46,7 @@ from arfi.estimation import phase_error
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# Targets of issue 3 (2 cores).
+# Targets of the estimation (2 cores).
 TARGET_COST_S = 20e-6  # one cost evaluation for 16 groups
 TARGET_NM_S = 5.0  # build_model + Nelder-Mead (<= 8000 evaluations), end to end
 TARGET_LBFGS_S = 5.0  # 20-start L-BFGS

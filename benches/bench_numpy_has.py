@@ -4,7 +4,7 @@ one process, on the same inputs: the default scenario's steered source plane mar
 planes, keeping the focal plane and the on-axis samples (what ``sim.field()`` does).
 
 Checks that the two agree (max |p_numpy - p_arfi| / max |p_arfi| on the focal plane ≤ 1e-6,
-the issue's bound; they differ by FFT rounding only) and prints the medians and the ratio:
+the required bound; they differ by FFT rounding only) and prints the medians and the ratio:
 
 - ``arfi sim.field()``: source plane (1024 elements) + march, through the Python binding;
 - ``numpy march``: the march alone (its plan, like arfi's, built beforehand);

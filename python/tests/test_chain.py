@@ -10,9 +10,9 @@ prediction (``Prediction.pressure_with``: the sum of each element's response thr
 skull), as a fraction of the most any phases give there.
 
 Tolerances: the images' 0.02 rad noise moves a per-element estimate by a few hundredths of a
-radian around the prior; that costs under 0.01 of the focus (measured 0.003 at most over the seeds
-here), so the estimate must never fall more than 0.01 below the prediction alone. 0.95 of the
-optimum is the issue's floor; the 220 kHz phantom's predictions reach 0.99.
+radian around the prior; that costs a few thousandths of the focus, under 0.01, so the estimate
+must never fall more than 0.01 below the prediction alone. 0.95 of the optimum is the chain's
+required floor; the 220 kHz phantom's predictions reach 0.99.
 
 1 mm CT voxels (clinical CTs have 0.5-1 mm) and 256 elements keep a seed to one CT phantom, one
 prediction, three simulated images and one estimate; the default run takes head seed 0 (every
@@ -88,7 +88,7 @@ def test_the_chain_through_a_head_corrects_as_documented(tmp_path, capsys, seed)
     assert r["estimate"] >= 0.95 and r["estimate"] >= r["prediction"] - 0.01, line
     # The images find the patient's bone 10 % faster than the conversion (the prediction's JSON
     # gives its bone-speed mode, so the estimate fits it first on the head with the CT's bone):
-    # within three of the fit's own standard deviations (measured 0.1-1.3 over seeds 0-4).
+    # within three of the fit's own standard deviations (over seeds 0-4 the fit lands within 1.3).
     bone = r["bone_speed_fit"]
     assert abs(bone["percent"] - 10.0) < 3.0 * bone["std_percent"], line
     # `simulate` reports the focus at the target, not a hotter place in the skull or scalp.

@@ -54,7 +54,7 @@ def test_cli_diagnose_bad_input_is_one_line_exit_2(tmp_path, capsys):
 
 def test_several_images_at_once_and_effect_images(sim):
     # A calibration image and one with known group phases, both 0.9 mm off in x: the shift is
-    # named once for both, within 0.3 mm (issue 4).
+    # named once for both, within 0.3 mm (the workflow's required accuracy for a shift).
     known = np.linspace(-1.0, 1.0, sim.n_groups)
     images = [m + np.random.default_rng(k).normal(0.0, 0.02, m.shape)
               for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))]
@@ -117,7 +117,7 @@ def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("effect, hidden", [
-    # One effect per kind of value: numbers (the anisotropic widths effect_images used to refuse),
+    # One effect per kind of value: numbers (the anisotropic widths, a pair effect_images takes by name),
     # group indices and one phase per group. Every effect's round trip is tested in Rust
     # (tests/diagnose.rs); this is the path through the bindings' dict.
     ("broadening_anisotropic", {"broadening_width_u_mm": 2.0, "broadening_width_v_mm": 3.6}),

@@ -28,7 +28,7 @@ def recovered(sim, truth, estimate):
 def test_the_prior_makes_one_image_better_than_either_alone(sim, case):
     # The images alone land near the twin here (0.44 of the ideal focus, flagged ambiguous); the
     # prediction alone gives 0.63 (phase error 0.81 rad); the posterior 0.91 (0.37 rad, not
-    # ambiguous). Measured 2026-11-24; asserted: better than either by at least 0.02.
+    # ambiguous). Asserted: better than either by at least 0.02.
     truth, image, prediction = case
     alone = sim.estimate(image)
     post = sim.estimate(image, prior=prediction, prior_std_rad=0.6)

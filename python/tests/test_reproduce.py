@@ -17,7 +17,7 @@ def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):
     ladder = {rung["name"]: rung for rung in r["ladder"]}
     assert list(ladder) == RUNGS and all(len(rung["recovered_fractions"]) == 1 for rung in r["ladder"])
     frac = {name: rung["mean_recovered_fraction"] for name, rung in ladder.items()}
-    # Seed 0 (measured 2026-11-24): diversity and loop 2 near the ideal focus; the prediction's 1.3 rad error leaves
+    # Seed 0: diversity and loop 2 near the ideal focus; the prediction's 1.3 rad error leaves
     # 0.67, one image with it as prior 0.85; never below the prediction alone (0.02 slack: image noise).
     assert frac["diversity"] > 0.9 and frac["loop 2"] > 0.8
     assert frac["prediction + MR-ARFI"] >= frac["CT-like prediction alone"] - 0.02

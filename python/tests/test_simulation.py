@@ -164,8 +164,8 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
 
 def test_focus_shift_phases_move_the_focus_where_asked(sim):
     # Steering physics, not the code: with the phases for a 3 mm lateral shift the focal-plane peak
-    # moves 3 mm in x (within one grid step, 0.68 mm: measured 2.73 mm); with a +10 mm axial shift
-    # the peak on the axis moves deeper by 5-15 mm (measured 9.5 mm: the axial peak of a focused
+    # moves 3 mm in x (within one grid step, 0.68 mm: it lands about 0.3 mm short); with a +10 mm
+    # axial shift the peak on the axis moves deeper by 5-15 mm (about 9.5 mm: the axial peak of a focused
     # beam sits short of its geometric focus). No shift, no phases; bad shifts are refused naming
     # the parameter.
     assert np.allclose(sim.focus_shift_phases((0.0, 0.0, 0.0)), 0.0)

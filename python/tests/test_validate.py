@@ -63,7 +63,7 @@ def _rows(md: str) -> dict[str, list[Any]]:
 
 
 def test_the_documented_table_is_what_the_suite_prints_now():
-    # docs/validation.md shows the suite's table; it must be today's, to the last digit printed
+    # docs/validation.md shows the suite's table; it must be the current code's, to the last digit printed
     # (give or take one in that digit: floating-point sums may differ between machines).
     from pathlib import Path
 

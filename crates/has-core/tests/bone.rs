@@ -307,13 +307,13 @@ fn compare(label: &str, layers: &[Layer], model: InterfaceModel) -> Comparison {
 
 const CORTICAL: Layer = Layer { name: "cortical", c: 2800.0, rho: 1850.0, a0: 4.0, steps: 17 };
 
-/// The issue's case: 6.5 mm cortical plate (2800 m/s, 1850 kg/m³, 4 dB/cm/MHz), about one
+/// The acceptance case: 6.5 mm cortical plate (2800 m/s, 1850 kg/m³, 4 dB/cm/MHz), about one
 /// wavelength in bone, met by the F-number-1 beam at up to ~30°, next to the critical angle.
 #[test]
 fn cortical_plate_matches_the_exact_layered_solution() {
     let angular = compare("6.5 mm cortical plate", &[CORTICAL], InterfaceModel::Angular);
     let normal = compare("6.5 mm cortical plate", &[CORTICAL], InterfaceModel::NormalIncidence);
-    // Tolerances from the issue: 5 % focal pressure, 0.5 mm focal position, correlation 0.99.
+    // Required accuracy: 5 % focal pressure, 0.5 mm focal position, correlation 0.99.
     // What remains is HAS's own approximation inside the plate (one k̄ per slab is exact for a
     // uniform plate) and the λ/8 sampling: the interface operators are exact for planar layers.
     assert!(angular.pressure_error.abs() < 0.05, "focal pressure off by {:.2} %", 100.0 * angular.pressure_error);
@@ -323,8 +323,8 @@ fn cortical_plate_matches_the_exact_layered_solution() {
     // standing field to the series' truncation (1e-3 of the incident amplitude).
     assert!(angular.inside_error < 1e-2, "field inside the plate off by {:.2e} of the focal pressure", angular.inside_error);
     // The normal-incidence step, one way, overestimates the transmission of the oblique waves
-    // and ignores the reverberation: it fails the same acceptance (measured 2026-11-24: +9.8 %
-    // focal pressure, correlation 0.977), which is why it is not the default.
+    // and ignores the reverberation: it fails the same acceptance (about 10 % too much focal
+    // pressure, correlation about 0.98), which is why it is not the default.
     assert!(normal.pressure_error > 0.05, "normal incidence only {:+.2} % off", 100.0 * normal.pressure_error);
     assert!(normal.correlation < 0.99, "normal incidence correlation {}", normal.correlation);
 }

@@ -81,9 +81,9 @@ fn a_plate_read_from_a_ct_gives_the_field_of_the_same_plate_as_a_region() {
     // The plate matters (it costs over 30 % of the focal pressure) ...
     assert!(peak < 0.7 * water_peak);
     // ... and the CT gives the region's field: the plate's faces lie on grid planes, so every cell
-    // and every steering ray sees the same material either way (measured 2e-16). The bound allows
-    // for the affine's single precision (it moves the voxel faces by ~1e-9 m) should a steering
-    // sample land on a face.
+    // and every steering ray sees the same material either way (the fields agree to rounding). The
+    // bound allows for the affine's single precision (it moves the voxel faces by ~1e-9 m) should
+    // a steering sample land on a face.
     assert!(worst < 1e-4, "worst {worst}");
     std::fs::remove_dir_all(dir).ok();
 }
@@ -162,11 +162,11 @@ fn a_plate_thinner_than_its_cells_keeps_its_delay_wherever_it_lies_on_the_grid()
         coarse_worst = coarse_worst.max((coarse / exact).arg().abs());
         amplitude_worst = amplitude_worst.max((ct.norm() / exact.norm() - 1.0).abs());
     }
-    // Measured: CT phase within 0.12 rad of the exact layering at every shift, the coarse
-    // region's rounding (a step set in [grid], so its faces are not all on planes) up to 0.89 rad
+    // The CT's phase stays within about 0.12 rad of the exact layering at every shift, the coarse
+    // region's rounding (a step set in [grid], so its faces are not all on planes) up to 0.9 rad
     // off. The cells at the faces take the impedance at their centre: sharp faces at the nearest
     // planes, so the plate reflects as one of 2 or 3 whole steps would, 0-8 % below the exact
-    // focal pressure (averaged impedances graded the faces: 10-18 % above it). Bounds: phase
+    // focal pressure (averaged impedances would grade the faces: 10-18 % above it). Bounds: phase
     // 0.15 rad and below a third of the rounding's error; amplitude 12 %.
     assert!(ct_worst < 0.15 && ct_worst < coarse_worst / 3.0, "{ct_worst} {coarse_worst}");
     assert!(amplitude_worst < 0.12, "{amplitude_worst}");

@@ -130,8 +130,8 @@ fn bowl_axis_matches_oneil() {
     );
     // O'Neil's formula is the on-axis value of the same Rayleigh integral the source projection
     // evaluates, so the remaining errors are numerical: midpoint quadrature of the cap at λ/8, the
-    // λ/4 sampling of the source plane, and the finite grid with its absorbing layer. Tolerances
-    // from the issue: 3 % on the focal pressure, 0.5 mm on the focal position (below one λ/4 step,
+    // λ/4 sampling of the source plane, and the finite grid with its absorbing layer. Required
+    // accuracy: 3 % on the focal pressure, 0.5 mm on the focal position (below one λ/4 step,
     // so the HAS peak is located by a parabola through the three largest samples), and 5 % of the
     // peak along the axis from 0.5R to 1.3R.
     assert!((p_has / p_ref - 1.0).abs() < 0.03, "focal pressure off by {:.2} %", 100.0 * (p_has / p_ref - 1.0));
@@ -139,9 +139,10 @@ fn bowl_axis_matches_oneil() {
     assert!(profile_err < 0.05, "axis profile off by {:.2} % of the peak", 100.0 * profile_err);
 
     // Reported, not asserted (see `power_is_conserved_in_lossless_water`): the bowl's rim radiates
-    // edge waves at all angles, and those reaching the absorbing layer leave the grid. Measured
-    // from 16 mm to 127 mm at λ/2 spacing: 3.3 % lost on a 120 mm grid, 2.3 % on 200 mm, 1.9 % on
-    // 280 mm (a broad angular distribution, not a leak of the march).
+    // edge waves at all angles, and those reaching the absorbing layer leave the grid. From 16 mm
+    // to 127 mm at λ/2 spacing the loss falls only slowly with the grid's width: about 3 % of the
+    // power on a 120 mm grid, 2 % on 200 mm and 280 mm (a broad angular distribution, not a leak
+    // of the march).
     let pw = |z: f64| rec.power[g.plane_index(z)];
     eprintln!(
         "[oneil] power through planes (default grid, 10 mm layer): {:.3} W at z0 + 5 mm, {:.3} W at R, {:.3} W at 1.5R ({:+.2} %)",
@@ -263,14 +264,14 @@ fn planar_array_focal_plane_matches_rayleigh_sommerfeld() {
             complex_corr,
             dot.arg()
         );
-        // Tolerances from the issue. The difference is the source discretisation: exact-coverage
+        // Required accuracy against the direct sum. The difference is the source discretisation: exact-coverage
         // rasterisation convolves each element with the pixel, which scales a plane-wave
         // component by sinc(kx·dx/2)·sinc(ky·dy/2); for the directions that reach the focus
         // (up to ~35° off axis) that costs about 1.4 % of the peak at λ/4 and a quarter of it
         // at λ/8.
         assert!(corr >= 0.99, "{label}: |p| correlation {corr}");
         assert!(peak_err.abs() <= 0.02, "{label}: peak off by {:.2} %", 100.0 * peak_err);
-        // Not in the issue: the complex fields must agree too (phase sign conventions of the
+        // Beyond that requirement: the complex fields must agree too (phase sign conventions of the
         // steering and of the propagator), |<p_HAS, p_RS>| / (|p_HAS|·|p_RS|) >= 0.99.
         assert!(complex_corr >= 0.99, "{label}: complex correlation {complex_corr}");
         peak_errors.push(peak_err.abs());
@@ -329,7 +330,7 @@ fn power_is_conserved_in_lossless_water() {
 
     // (a) The paper's planar array, steered to 85 mm, on a periodic grid (no absorbing layer), 0 to 127.5 mm.
     // Its pitch (2.5 mm = 0.92 λ) gives grating lobes at 40–90° off axis that leave any grid of
-    // practical width (measured: 20 % of the power has reached the layer of a 250 mm grid by
+    // practical width (20 % of the power reaches the layer of a 250 mm grid by
     // z = 127 mm), so "nothing hits the layer" is obtained by having no layer: the lateral
     // boundaries are periodic and power can only be lost by the propagation itself.
     let sim = Simulation::new(&water_scenario(PLANAR, "sponge_width_mm = 0.0\nz_max_mm = 127.5")).unwrap();
@@ -359,7 +360,7 @@ fn power_is_conserved_in_lossless_water() {
     );
     // The angular-spectrum step is unitary on propagating components and the water screen has unit
     // modulus, so only evanescent components (decayed by > e^-5 beyond 5 mm except a thin shell
-    // next to k) may change the power. 1 % is the issue's tolerance; the measured change is far below.
+    // next to k) may change the power. 1 % is the required tolerance; the change is far below it.
     assert!(dev < 0.01, "power changed by {:.3} % beyond 5 mm", 100.0 * dev);
     assert!((p[0] / direct - 1.0).abs() < 1e-9, "recorded source power differs from the direct sum");
     assert!((last / propagating - 1.0).abs() < 0.01, "power at depth is not the propagating part of the source");
@@ -436,7 +437,7 @@ fn plane_wave_decays_as_exp_minus_alpha_d() {
             (-alpha * d).exp()
         );
         worst = worst.max(amp_err);
-        // Tolerance 1 % (from the issue); for a plane wave the angular-spectrum step is exact and the
+        // Tolerance 1 % (the required accuracy); for a plane wave the angular-spectrum step is exact and the
         // screen applies exp(-alpha·dz) per step, so any error here would be a bug, not discretisation.
         assert!(amp_err < 0.01);
         assert!(phase_err < 1e-6);
@@ -524,7 +525,7 @@ fn refraction_moves_the_focus_as_snell_predicts() {
             (shift_has - shift_snell).abs() * 1e3,
             g.dz * 1e3
         );
-        // Tolerance from the issue: one grid step. The ray estimate ignores diffraction (which
+        // Tolerance (the required accuracy): one grid step. The ray estimate ignores diffraction (which
         // moves a focus of this Fresnel number towards the source by ~2 mm in both media and
         // changes a little with the wavelength in the phantom) and locates the focus of an
         // aberrated beam at the mean ray crossing (the best focus for pure spherical aberration).

@@ -68,14 +68,14 @@ fn predicted_phases_restore_the_focus_through_a_shifted_uneven_shell() {
     // A shell of outer radius 20 mm whose centre lies 4 mm beside and 4 mm before the focus, its
     // inner surface (radius 15 mm) shifted 4 mm from the outer one: 1 to 9 mm of bone, crossed
     // by each element's path at an angle and length of its own. (A shell of even thickness merely
-    // shifted aberrates little: 3 mm shifted by (5, 0, -4) mm left 0.98 of the best focus.) The
+    // shifted aberrates little: 3 mm shifted by (5, 0, -4) mm leaves 0.98 of the best focus.) The
     // checks:
     // - the shell aberrates: the uncorrected focus is below 0.8 of the best the skull allows
     //   (Σ|h_e|, every element's wave arriving in phase);
-    // - the predicted phases restore at least 0.9 of that best (the target), applied as
-    //   added phases through the forward march of the whole array (`Simulation::field`), which
-    //   must also agree with the prediction's own focal pressure (the sum of reciprocal
-    //   responses) to 1e-5 (single-precision Rayleigh sums).
+    // - the predicted phases restore at least 0.9 of that best (the prediction's required
+    //   accuracy), applied as added phases through the forward march of the whole array
+    //   (`Simulation::field`), which must also agree with the prediction's own focal pressure
+    //   (the sum of reciprocal responses) to 1e-5 (single-precision Rayleigh sums).
     let dir = scratch("shifted");
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
         .unwrap();
@@ -159,12 +159,12 @@ fn a_concentric_shell_costs_the_layer_transmission_and_leaves_the_focus() {
     // soft tissue), its predicted phase the same for every element, the focal pressure |T| of
     // water's and the focus in place. Only the half of the shell before the focus is bone: the
     // far half would send its echo back into the focus (a concave mirror about it), which a
-    // single transmission does not hold (measured with the whole shell: 0.44 of water's focal
-    // pressure against |T| = 0.33). Grid 0.375 mm (λ/8) and CT voxels of 0.25 mm: at 0.75 mm
+    // single transmission does not hold (with the whole shell the focus gets 0.44 of water's
+    // focal pressure against |T| = 0.33). Grid 0.375 mm (λ/8) and CT voxels of 0.25 mm: at 0.75 mm
     // and 0.5 mm the cells that average bone and water grade the faces, which then reflect less
     // (transmission 12–16 % above the exact layer's; the same as a plate in tests/ct.rs).
-    // Measured against the elements' polar angle (0 to 34°) this also checks what marching along
-    // z does to an oblique layer.
+    // Checked over the elements' polar angle (0 to 34°), this also tests what marching along z
+    // does to an oblique layer.
     let dir = scratch("concentric");
     let center = [0.0, 0.0, 50e-3];
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, center, 28e-3, center, 25e-3, center[2], 0.25e-3)).unwrap();
@@ -259,10 +259,10 @@ fn straight_rays_focus_through_a_concentric_soft_tissue_sphere() {
     // straight-ray steering is exact and every wave must arrive at the focus in phase (no bone:
     // the reference is the head itself). The vertical screen marches each oblique path with the
     // phase of its vertical extent; the oblique screen along the path (see
-    // `physics::propagation::Screen`). Measured: 0.9998 of the best focus, 0.9982 with the vertical
-    // screen (at 34° from the axis at most; a 650 kHz hemisphere out to 60° through a 60 mm sphere
-    // gave 0.9996 and 0.9705). Tolerance: a shortfall below 0.05 %, and the vertical screen's at
-    // least three times the oblique one's.
+    // `physics::propagation::Screen`). The oblique screen falls short of the best focus by about
+    // 0.02 %, the vertical one by about 0.2 % (paths at 34° from the axis at most; out to 60°, a
+    // 650 kHz hemisphere through a 60 mm sphere, about 0.04 % and 3 %). Tolerance: a shortfall
+    // below 0.05 %, and the vertical screen's at least three times the oblique one's.
     let dir = scratch("tissue-sphere");
     let center = [0.0, 0.0, 50e-3];
     std::fs::write(dir.join("shell.nii"), shell_ct(40.0, center, 28e-3, center, 0.0, f64::INFINITY, 0.5e-3)).unwrap();
@@ -349,8 +349,8 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     // common phase. The paths meet the outer face within 16° of its normal, and a plane layer
     // at normal incidence misses what the wave model keeps: refraction into the faster bone
     // (a path up to 11 % longer at 16°), faces that are not parallel, and the 0.5 mm cells'
-    // grading of them. Measured: slope 1.18 of the model's sensitivity on the layers',
-    // correlation 0.946. Tolerance: correlation at least 0.93 (the shape over the aperture,
+    // grading of them. The model's sensitivity regressed on the layers' has a slope of about 1.2
+    // and a correlation of about 0.95. Tolerance: correlation at least 0.93 (the shape over the aperture,
     // which is what an estimate fits the mode's coefficient on) and a slope of 0.9–1.4.
     use has_core::physics::ct::{BoneModel, HuConversion};
     use has_core::prediction::{bone_speed_sensitivity, BONE_SPEED_STEP};
