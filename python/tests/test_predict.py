@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -138,10 +137,10 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
     # The report marches the kept skull's simulation; without one it says how to get it.
     from arfi.report import predict_report
 
-    p = predict(Scenario.load(head / "head.toml"), keep_simulation=True)
-    assert p.simulation is not None
+    p = predict(Scenario.load(head / "head.toml"))
+    assert p.simulation is None
     with pytest.raises(ValueError, match="keep_simulation=True"):
-        predict_report(tmp_path / "r2", dataclasses.replace(p, simulation=None), {})
+        predict_report(tmp_path / "r2", p, {})
     assert not (tmp_path / "r2").exists()
 
 

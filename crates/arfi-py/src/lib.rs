@@ -36,6 +36,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::NextAcquisition>()?;
     m.add_class::<results::ShiftCandidate>()?;
     m.add_class::<diagnose::CoreDiagnosis>()?;
+    m.add_class::<prediction::CorePrediction>()?;
     m.add_class::<diagnose::DiagnosisStep>()?;
     m.add_class::<diagnose::EffectCandidate>()?;
     m.add_class::<diagnose::AlternativeFit>()?;

@@ -1,50 +1,213 @@
-//! `predict`: the CT-based prediction of each element's aberration.
+//! `predict`: the CT-based prediction of each element's aberration, as a typed result.
 
 use crate::error::to_py;
 use crate::scenario::parse_scenario;
 use crate::simulation::CoreSimulation;
-use has_core::prediction::{predict_scenario_with, PredictionOptions};
-use numpy::IntoPyArray;
+use has_core::prediction::{predict_scenario_with, Prediction, PredictionOptions};
+use num_complex::Complex64 as C64;
+use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// Builds the scenario's simulation and predicts at `target_mm` (default: the focus), by
-/// reciprocity (see `has_core::prediction`): dict with `phases_rad`, `transmission`,
-/// `reference_steering_rad` (per element), `target_mm` and the focal pressures (Pa)
-/// `reference_pa`, `reference_optimal_pa`, `uncorrected_pa`, `ray_steering_pa`, `corrected_pa`, `optimal_pa`,
-/// and `skull_responses` (complex Pa per unit drive, per element); with
-/// `bone_speed_sensitivity`, also `bone_speed_sensitivity_rad_per_percent` (per element; one
-/// more simulation of the skull), else that key is `None`; with `keep_simulation`, `simulation`:
-/// the skull's `CoreSimulation` (its ARFI amplitude not calibrated), else `None`.
+/// reciprocity (see `has_core::prediction`): the prediction and, with `keep_simulation`, the
+/// skull's `CoreSimulation` (its ARFI amplitude not calibrated), else `None`. With
+/// `bone_speed_sensitivity`, the prediction also holds
+/// `bone_speed_sensitivity_rad_per_percent` (one more simulation of the skull).
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false))]
-pub(crate) fn predict<'py>(
-    py: Python<'py>,
+pub(crate) fn predict(
+    py: Python<'_>,
     text: &str,
     format: &str,
     base_dir: Option<&str>,
     target_mm: Option<[f64; 3]>,
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<(CorePrediction, Option<CoreSimulation>)> {
     let scenario = parse_scenario(text, format, base_dir)?;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
     let options = PredictionOptions { bone_speed_sensitivity, keep_simulation };
     let run = py.detach(|| predict_scenario_with(&scenario, target, options)).map_err(to_py)?;
-    let p = run.prediction;
-    let d = PyDict::new(py);
-    d.set_item("phases_rad", p.phases.into_pyarray(py))?;
-    d.set_item("transmission", p.transmission.into_pyarray(py))?;
-    d.set_item("reference_steering_rad", p.reference_steering.into_pyarray(py))?;
-    d.set_item("target_mm", p.target.map(|v| v * 1e3).to_vec())?;
-    d.set_item("reference_pa", p.reference_pressure)?;
-    d.set_item("uncorrected_pa", p.uncorrected_pressure)?;
-    d.set_item("ray_steering_pa", p.ray_steering_pressure)?;
-    d.set_item("corrected_pa", p.corrected_pressure)?;
-    d.set_item("optimal_pa", p.optimal_pressure)?;
-    d.set_item("reference_optimal_pa", p.reference_optimal_pressure)?;
-    d.set_item("skull_responses", p.skull_responses.into_pyarray(py))?;
-    d.set_item("bone_speed_sensitivity_rad_per_percent", run.bone_speed_sensitivity.map(|g| g.into_pyarray(py)))?;
-    d.set_item("simulation", run.simulation.map(CoreSimulation::from))?;
-    Ok(d)
+    let prediction = CorePrediction { prediction: run.prediction, bone_speed_sensitivity: run.bone_speed_sensitivity, simulation: None };
+    Ok((prediction, run.simulation.map(CoreSimulation::from)))
+}
+
+/// What the scenario's CT bone does to each element's wave at the target, by reciprocity.
+///
+/// Each element's complex pressure `h_e` at the target (unit drive) is computed through the head
+/// with its CT and through the same head with the CT's bone read as soft tissue (the
+/// *reference*: the head without its skull, which the estimation's model assumes), from one
+/// transposed march each instead of one march per element. `phases_rad` is
+/// `arg(h_skull · conj(h_reference))` less its weighted circular mean: the aberration in the sign
+/// of an estimate's `phases_rad` (driving the reference steering minus it corrects; it is the
+/// `--prior` of `arfi estimate`). The focal pressures (Pa) are exact sums of the responses.
+#[pyclass(module = "arfi._core", name = "Prediction", frozen)]
+pub(crate) struct CorePrediction {
+    prediction: Prediction,
+    bone_speed_sensitivity: Option<Vec<f64>>,
+    simulation: Option<Py<PyAny>>,
+}
+
+#[pymethods]
+impl CorePrediction {
+    /// Predicted aberration per element (rad, wrapped to (-pi, pi]).
+    #[getter]
+    fn phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.prediction.phases.clone().into_pyarray(py)
+    }
+
+    /// Per element, `|h_skull| / |h_reference|` at the target.
+    #[getter]
+    fn transmission<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.prediction.transmission.clone().into_pyarray(py)
+    }
+
+    /// Steering phases (rad) toward the target through the head without bone (straight-ray times
+    /// of flight; at the focus, those of the estimation's model).
+    #[getter]
+    fn reference_steering_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.prediction.reference_steering.clone().into_pyarray(py)
+    }
+
+    /// The point predicted for (transducer frame, mm); between grid points the fields are
+    /// interpolated there (band-limited across, an angular-spectrum sub-step along z).
+    #[getter]
+    fn target_mm(&self) -> (f64, f64, f64) {
+        let t = self.prediction.target.map(|v| v * 1e3);
+        (t[0], t[1], t[2])
+    }
+
+    /// Focal |p| (Pa) of the reference steering in the head without bone.
+    #[getter]
+    fn reference_pa(&self) -> f64 {
+        self.prediction.reference_pressure
+    }
+
+    /// The most any phases give (Pa) in the head without bone, `sum |h_reference|`:
+    /// `reference_pa` falls short of it by what straight rays miss without any bone (refraction,
+    /// oblique paths through soft tissue), which a correction relative to the reference steering
+    /// keeps.
+    #[getter]
+    fn reference_optimal_pa(&self) -> f64 {
+        self.prediction.reference_optimal_pressure
+    }
+
+    /// Focal |p| (Pa) of the reference steering through the skull (the aberrated focus).
+    #[getter]
+    fn uncorrected_pa(&self) -> f64 {
+        self.prediction.uncorrected_pressure
+    }
+
+    /// Focal |p| (Pa) of the scenario's own steering toward the target (straight rays through the
+    /// CT's bone) through the skull.
+    #[getter]
+    fn ray_steering_pa(&self) -> f64 {
+        self.prediction.ray_steering_pressure
+    }
+
+    /// Focal |p| (Pa) of the reference steering minus `phases_rad` through the skull.
+    #[getter]
+    fn corrected_pa(&self) -> f64 {
+        self.prediction.corrected_pressure
+    }
+
+    /// The most any phases give (Pa) through the skull at this drive amplitude: `sum |h_skull|`.
+    #[getter]
+    fn optimal_pa(&self) -> f64 {
+        self.prediction.optimal_pressure
+    }
+
+    /// Per element, `h_skull`: its complex pressure (Pa) at the target through the skull when it
+    /// alone is driven with a unit phasor.
+    #[getter]
+    fn skull_responses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<C64>> {
+        self.prediction.skull_responses.clone().into_pyarray(py)
+    }
+
+    /// Per element, how `phases_rad` moves (rad) per percent of the CT conversion's bone sound
+    /// speed (`predict(..., bone_speed_sensitivity=True)`; else None): a finite difference over
+    /// +10 % through the wave model, its weighted common phase removed. `s` times it is the
+    /// prediction's error if the conversion's bone is `s` percent off: give it to an estimate as
+    /// a prior mode (`prior_modes`; the CLI's `--prior-bone-speed-std-percent`).
+    #[getter]
+    fn bone_speed_sensitivity_rad_per_percent<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.bone_speed_sensitivity.clone().map(|g| g.into_pyarray(py))
+    }
+
+    /// The skull's simulation the prediction marched (`predict(..., keep_simulation=True)`; else
+    /// None): fields, sections and element maps of the predicted drives without building its
+    /// plan again. Its ARFI amplitude is not calibrated: not for MR-ARFI images.
+    #[getter]
+    fn simulation(&self, py: Python<'_>) -> Option<Py<PyAny>> {
+        self.simulation.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    /// The same prediction holding `simulation` (what `predict(..., keep_simulation=True)`
+    /// attaches: the skull's `arfi.Simulation`).
+    fn with_simulation(&self, simulation: Py<PyAny>) -> Self {
+        CorePrediction {
+            prediction: self.prediction.clone(),
+            bone_speed_sensitivity: self.bone_speed_sensitivity.clone(),
+            simulation: Some(simulation),
+        }
+    }
+
+    /// Focal |p| (Pa) at the target through this prediction's skull when the array drives the
+    /// reference steering minus `phases_rad` (one per element): e.g. an estimate's, another
+    /// prediction's, or zeros for the uncorrected beam; exact in the model.
+    fn pressure_with(&self, phases_rad: Vec<f64>) -> PyResult<f64> {
+        self.prediction.pressure_with(&phases_rad).map_err(|e| to_py(e.naming("phases_rad")))
+    }
+
+    /// Phases (rad) to add to a simulation's own `steering_rad` to drive the corrected array
+    /// (reference steering minus the prediction), e.g.
+    /// `sim.field(p.correction_rad(sim.steering_phases_rad))`.
+    fn correction_rad<'py>(&self, py: Python<'py>, steering_rad: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let steering = &steering_rad;
+        let p = &self.prediction;
+        if steering.len() != p.phases.len() {
+            return Err(crate::error::invalid("steering_rad", format!("has {} values for {} elements", steering.len(), p.phases.len())));
+        }
+        let c: Vec<f64> = p.reference_steering.iter().zip(&p.phases).zip(steering).map(|((r, ph), s)| r - ph - s).collect();
+        Ok(c.into_pyarray(py))
+    }
+
+    /// The JSON `arfi predict` writes: the per-element vectors, `target_mm` and the focal
+    /// pressures under `focal_pressure_pa` (each attribute's name without `_pa`).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = &self.prediction;
+        let d = PyDict::new(py);
+        d.set_item("phases_rad", p.phases.clone())?;
+        d.set_item("transmission", p.transmission.clone())?;
+        d.set_item("reference_steering_rad", p.reference_steering.clone())?;
+        d.set_item("target_mm", p.target.map(|v| v * 1e3).to_vec())?;
+        let focal = PyDict::new(py);
+        for (name, value) in [
+            ("reference", self.reference_pa()),
+            ("reference_optimal", self.reference_optimal_pa()),
+            ("uncorrected", self.uncorrected_pa()),
+            ("ray_steering", self.ray_steering_pa()),
+            ("corrected", self.corrected_pa()),
+            ("optimal", self.optimal_pa()),
+        ] {
+            focal.set_item(name, value)?;
+        }
+        d.set_item("focal_pressure_pa", focal)?;
+        if let Some(g) = &self.bone_speed_sensitivity {
+            d.set_item("bone_speed_sensitivity_rad_per_percent", g.clone())?;
+        }
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        let p = &self.prediction;
+        format!(
+            "Prediction({} elements, uncorrected {:.3} MPa, corrected {:.3} MPa, optimal {:.3} MPa)",
+            p.phases.len(),
+            p.uncorrected_pressure / 1e6,
+            p.corrected_pressure / 1e6,
+            p.optimal_pressure / 1e6
+        )
+    }
 }
