@@ -36,10 +36,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::NextAcquisition>()?;
     m.add_class::<results::ShiftCandidate>()?;
     m.add_class::<diagnose::CoreDiagnosis>()?;
-    m.add_class::<prediction::CorePrediction>()?;
     m.add_class::<diagnose::DiagnosisStep>()?;
     m.add_class::<diagnose::EffectCandidate>()?;
     m.add_class::<diagnose::AlternativeFit>()?;
+    m.add_class::<prediction::CorePrediction>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;

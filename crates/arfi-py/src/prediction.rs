@@ -181,7 +181,7 @@ impl CorePrediction {
         d.set_item("phases_rad", p.phases.clone())?;
         d.set_item("transmission", p.transmission.clone())?;
         d.set_item("reference_steering_rad", p.reference_steering.clone())?;
-        d.set_item("target_mm", p.target.map(|v| v * 1e3).to_vec())?;
+        d.set_item("target_mm", self.target_mm())?;
         let focal = PyDict::new(py);
         for (name, value) in [
             ("reference", self.reference_pa()),

@@ -89,7 +89,7 @@ impl CoreCalibration {
         let c = &self.0;
         format!(
             "Calibration(broadening_width_mm={:.3}, amplitude={:.6e}, cost={:.4}, n_pixels={}, noise_rad={:.4})",
-            c.broadening_width * 1e3,
+            self.broadening_width_mm(),
             c.amplitude,
             c.cost,
             c.n_pixels,
