@@ -100,6 +100,21 @@ def _distributed() -> Any:
     return dask.distributed
 
 
+def _refuse_unreachable(scheduler: str) -> None:
+    """A ``ValueError`` at once when nothing listens at a ``tcp://host:port`` scheduler (dask's
+    client would retry until its 10 s timeout); other addresses are left to dask."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(scheduler)
+    if parts.scheme != "tcp" or parts.hostname is None or parts.port is None:
+        return
+    try:
+        socket.create_connection((parts.hostname, parts.port), timeout=10.0).close()
+    except OSError as e:
+        raise ValueError(f"scheduler: cannot connect to {scheduler} ({e})") from None
+
+
 def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
     """A client on the cluster at ``scheduler``, or on a new local cluster of ``workers``
     single-threaded worker processes (each runs arfi on one thread: trials are the parallelism)."""
@@ -107,6 +122,7 @@ def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
     Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if scheduler:
+        _refuse_unreachable(scheduler)
         try:
             return Client(scheduler, timeout="10s"), None
         except (OSError, TimeoutError) as e:

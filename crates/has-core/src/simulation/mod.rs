@@ -209,6 +209,21 @@ impl Simulation {
     /// driven as before) in a medium whose material `material` has another sound speed (m/s)
     /// and attenuation (dB/cm/MHz); rebuilds the HAS plan and the force coefficients.
     pub fn with_material(&self, material: usize, sound_speed: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
+        let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
+        self.with_material_recording(material, sound_speed, attenuation_db_cm_mhz, &spec).map(|(sim, _)| sim)
+    }
+
+    /// [`Simulation::with_material`], and the new plan's recording `spec` of the steered beam
+    /// ([`Simulation::steered_source`]): the build marches that beam to fix the plan's mean
+    /// wavenumbers, so the recording costs no second march and equals the new plan's
+    /// `propagate` of the steered source.
+    pub fn with_material_recording(
+        &self,
+        material: usize,
+        sound_speed: f64,
+        attenuation_db_cm_mhz: f64,
+        spec: &RecordSpec,
+    ) -> Result<(Self, Recording)> {
         let Some(m) = self.medium.materials.get(material) else {
             return Err(HasError::invalid("material", format!("index {material} names no material")));
         };
@@ -216,10 +231,9 @@ impl Simulation {
         let changed = Material { sound_speed, attenuation_db_cm_mhz, ..m.clone() };
         changed.validate()?;
         medium.materials[material] = changed;
-        let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
-        let (plan, _) = HasPlan::build(&self.grid, &medium, self.frequency, &self.steered_source, &self.plan.options, &spec)?;
+        let (plan, recording) = HasPlan::build(&self.grid, &medium, self.frequency, &self.steered_source, &self.plan.options, spec)?;
         let sampler = self.sampler_on(&self.grid, &medium)?;
-        Ok(Simulation { medium, plan, sampler: Ok(sampler), ..self.clone() })
+        Ok((Simulation { medium, plan, sampler: Ok(sampler), ..self.clone() }, recording))
     }
 
     /// Replaces the element → group map (every group from 0 to G-1 must have an element).

@@ -6,7 +6,7 @@ use super::Effects;
 use crate::error::{HasError, Result};
 use crate::inverse::linear::solve_augmented;
 use crate::physics::mr::MrSampler;
-use crate::physics::propagation::{RecordSpec, Window};
+use crate::physics::propagation::{RecordSpec, Recording, Window};
 use crate::simulation::Simulation;
 use crate::Complex64 as C64;
 use ndarray::Array2;
@@ -109,9 +109,10 @@ impl<'a> Forward<'a> {
 
     /// [`Forward::powers`], computed.
     fn march(&self, state: &FieldState) -> Result<Power> {
-        let (sim, ratio) = self.in_medium(state)?;
-        let sim = sim.as_ref();
         let s = self.sim;
+        let spec = RecordSpec { window: Some(self.window.clone()), reflections: s.reflections, ..Default::default() };
+        let (sim, ratio, steered) = self.rebuilt(state, Some(&spec))?;
+        let sim = sim.as_ref();
         if let Some(&d) = state.dead_groups.iter().find(|&&d| d >= s.n_groups) {
             return Err(HasError::invalid("dead_groups", format!("group {d} does not exist ({} groups)", s.n_groups)));
         }
@@ -135,11 +136,14 @@ impl<'a> Forward<'a> {
                 s.source.field(&drive)
             })
             .collect::<Result<Vec<_>>>()?;
-        let spec = RecordSpec { window: Some(self.window.clone()), reflections: s.reflections, ..Default::default() };
-        let power: Vec<Vec<f64>> = sim
-            .plan
-            .propagate_batch(&sources, &spec)?
-            .into_iter()
+        // An image of the steered beam itself (no phases added, no group dead) takes the
+        // recording the rebuild marched; the others are marched together.
+        let is_steered = |source: &Vec<C64>| steered.is_some() && source.as_slice() == sim.steered_source();
+        let to_march: Vec<Vec<C64>> = sources.iter().filter(|source| !is_steered(source)).cloned().collect();
+        let mut marched = sim.plan.propagate_batch(&to_march, &spec)?.into_iter();
+        let recordings = sources.iter().map(|source| if is_steered(source) { steered.clone() } else { marched.next() });
+        let power: Vec<Vec<f64>> = recordings
+            .map(|rec| rec.expect("one recording per source"))
             .map(|rec| rec.window.iter().zip(&self.in_material).map(|(p, &m)| p.norm_sqr() * if m { ratio } else { 1.0 }).collect())
             .collect();
         Ok(Arc::new(power))
@@ -148,14 +152,24 @@ impl<'a> Forward<'a> {
     /// The simulation in the medium of `state`, and the ratio of its force coefficient
     /// `alpha/(rho·c²)` in the focal material to the model's (the samplers keep the model's).
     pub(super) fn in_medium(&self, state: &FieldState) -> Result<(std::borrow::Cow<'a, Simulation>, f64)> {
+        self.rebuilt(state, None).map(|(sim, ratio, _)| (sim, ratio))
+    }
+
+    /// [`Forward::in_medium`], and when the medium is rebuilt with `spec` given, the new plan's
+    /// recording `spec` of the steered beam (the build's own march).
+    fn rebuilt(&self, state: &FieldState, spec: Option<&RecordSpec>) -> Result<(std::borrow::Cow<'a, Simulation>, f64, Option<Recording>)> {
         let model = &self.sim.medium.materials[self.material];
         if state.sound_speed == model.sound_speed && state.attenuation_db_cm_mhz == model.attenuation_db_cm_mhz {
-            return Ok((std::borrow::Cow::Borrowed(self.sim), 1.0));
+            return Ok((std::borrow::Cow::Borrowed(self.sim), 1.0, None));
         }
-        let sim = self.sim.with_material(self.material, state.sound_speed, state.attenuation_db_cm_mhz)?;
+        let (c, a) = (state.sound_speed, state.attenuation_db_cm_mhz);
+        let (sim, steered) = match spec {
+            Some(spec) => self.sim.with_material_recording(self.material, c, a, spec).map(|(sim, rec)| (sim, Some(rec)))?,
+            None => (self.sim.with_material(self.material, c, a)?, None),
+        };
         let coef = |m: &crate::physics::medium::Material| m.properties(self.sim.frequency).force_coefficient();
         let ratio = coef(&sim.medium.materials[self.material]) / coef(model);
-        Ok((std::borrow::Cow::Owned(sim), ratio))
+        Ok((std::borrow::Cow::Owned(sim), ratio, steered))
     }
 
     /// The sampler of the slice moved `dz_mm` along its normal, and its window.
