@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -14,7 +13,6 @@ from arfi import _core
 from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
-from arfi.focal import axis_focus, plane_focus
 from arfi.scenario import Scenario
 from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
 
@@ -58,64 +56,9 @@ def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
     return a.astype(np.int64)
 
 
-@dataclass(frozen=True)
-class Field:
-    """Complex pressure amplitude (Pa) on one plane and along the beam's axis (the line from the
-    array's centre through the target): the arrays ``arfi field`` writes to its ``.npz``."""
-
-    pressure: NDArray[np.complex128]
-    """Shape (ny, nx)."""
-    x_mm: NDArray[np.float64]
-    y_mm: NDArray[np.float64]
-    z_mm: float
-    axis_pressure: NDArray[np.complex128]
-    axis_z_mm: NDArray[np.float64]
-    surface_pressure_pa: float
-    axis_x_mm: NDArray[np.float64]
-    """x of each axis sample (0 for a target on the z axis)."""
-    axis_y_mm: NDArray[np.float64]
-    target_mm: tuple[float, float, float]
-    """The steering target (transducer frame)."""
-
-    def focus(self) -> dict[str, Any]:
-        """The focal peak near the target on the plane (``plane_peak_*``; the lobe around the
-        axis's point on the plane) and along the axis (``axis_peak_*``), the target and the plane
-        peak's distance from the axis point (``peak_to_target_mm``), and any hotter place
-        elsewhere (``plane_hottest_*``, ``axis_hottest_*``: None when the peak is the hottest;
-        see :mod:`arfi.focal`). Pa and mm."""
-        t = self.target_mm
-        at = (t[0] * self.z_mm / t[2], t[1] * self.z_mm / t[2]) if t[2] > 0 else (0.0, 0.0)
-        plane = plane_focus(self.pressure, self.x_mm, self.y_mm, at)
-        axis = axis_focus(self.axis_pressure, np.column_stack([self.axis_x_mm, self.axis_y_mm, self.axis_z_mm]), t[2])
-        return {
-            "target_mm": list(t),
-            "plane_peak_pa": plane["peak_pa"],
-            "plane_peak_x_mm": plane["peak_mm"][0],
-            "plane_peak_y_mm": plane["peak_mm"][1],
-            "peak_to_target_mm": float(np.hypot(plane["peak_mm"][0] - at[0], plane["peak_mm"][1] - at[1])),
-            "plane_hottest_pa": plane["hottest_pa"],
-            "plane_hottest_mm": plane["hottest_mm"],
-            "axis_peak_pa": axis["peak_pa"],
-            "axis_peak_z_mm": axis["peak_mm"][2],
-            "axis_peak_mm": axis["peak_mm"],
-            "axis_hottest_pa": axis["hottest_pa"],
-            "axis_hottest_mm": axis["hottest_mm"],
-        }
-
-
-@dataclass(frozen=True)
-class Section:
-    """The beam on the x–z plane nearest ``y_mm``: complex pressure amplitude (Pa) of each drive
-    and the sound speed (m/s) the march used, every grid plane from the source plane on (a
-    skull slice with the beam through it)."""
-
-    pressure: NDArray[np.complex128]
-    """Shape (drives, nz, nx), in the order the phases were given."""
-    sound_speed_m_s: NDArray[np.float64]
-    """Shape (nz, nx): the slab each plane was reached through."""
-    x_mm: NDArray[np.float64]
-    z_mm: NDArray[np.float64]
-    y_mm: float
+# The beam results are the core's types (arrays in Pa and mm; ``Field.focus()`` computed there).
+Field = _core.Field
+Section = _core.Section
 
 
 class Simulation:
@@ -252,8 +195,7 @@ class Simulation:
 
     def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
-        d = self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
-        return Field(**{**d, "target_mm": tuple(float(v) for v in d["target_mm"])})
+        return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
 
     def tissue_at(self, points_mm: ArrayLike) -> list[str]:
         """The tissue at each point (mm, transducer frame, shape (n, 3) or (3,)): ``"bone"`` or
@@ -274,7 +216,7 @@ class Simulation:
         else:
             drives = [as_phases(cast(ArrayLike, phases))]
         y = None if y_mm is None else as_number(y_mm, "y_mm")
-        return Section(**self._core.section(drives, y))
+        return self._core.section(drives, y)
 
     def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
         """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).

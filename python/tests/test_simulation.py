@@ -59,6 +59,16 @@ def test_field_on_the_focal_plane(sim):
     assert f.z_mm == pytest.approx(85.0, abs=sim.grid["dz_mm"] / 2)
     focus = f.focus()
     assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
+    # The keys `arfi field` writes to its JSON, in order; no hotter place than the focus in water.
+    assert list(focus) == ["target_mm", "plane_peak_pa", "plane_peak_x_mm", "plane_peak_y_mm", "peak_to_target_mm",
+                           "plane_hottest_pa", "plane_hottest_mm", "axis_peak_pa", "axis_peak_z_mm", "axis_peak_mm",
+                           "axis_hottest_pa", "axis_hottest_mm"]
+    assert focus["plane_hottest_pa"] is None and focus["axis_hottest_mm"] is None and focus["target_mm"] == [0.0, 0.0, 85.0]
+    # The peak on the plane is its largest |p| here (a focus in water), at the sample the keys name.
+    j, i = np.unravel_index(np.argmax(np.abs(f.pressure)), f.pressure.shape)
+    assert focus["plane_peak_pa"] == np.abs(f.pressure).max() and (focus["plane_peak_x_mm"], focus["plane_peak_y_mm"]) == (f.x_mm[i], f.y_mm[j])
+    # An attribute is one array (made once), not a copy per access.
+    assert f.pressure is f.pressure and f.axis_z_mm is f.axis_z_mm
     # Focal gain of a 81 mm aperture at 85 mm: between 10 and 25 times the face pressure.
     assert 10 < focus["plane_peak_pa"] / f.surface_pressure_pa < 25
 

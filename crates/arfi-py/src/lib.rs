@@ -4,6 +4,7 @@ mod convert;
 mod cost;
 mod diagnose;
 mod error;
+mod field;
 mod interrupt;
 mod mode_fit;
 mod phase;
@@ -40,6 +41,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<diagnose::EffectCandidate>()?;
     m.add_class::<diagnose::AlternativeFit>()?;
     m.add_class::<prediction::CorePrediction>()?;
+    m.add_class::<field::CoreField>()?;
+    m.add_class::<field::CoreSection>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;

@@ -4,6 +4,7 @@ use crate::convert::{measurements, phases_vec};
 use crate::cost::CoreCostModel;
 use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
+use crate::field::{CoreField, CoreSection};
 use crate::interrupt::run_interruptible;
 use crate::mode_fit::CoreModeFit;
 use crate::results::{CoreCalibration, CoreEstimate};
@@ -156,22 +157,10 @@ impl CoreSimulation {
 
     /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
     #[pyo3(signature = (phases=None, z_mm=None))]
-    fn field<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'py, f64>>, z_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn field(&self, py: Python<'_>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>) -> PyResult<CoreField> {
         let phases = phases_vec(phases);
         let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
-        let d = PyDict::new(py);
-        let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
-        d.set_item("pressure", f.pressure.into_pyarray(py))?;
-        d.set_item("x_mm", mm(&f.x).into_pyarray(py))?;
-        d.set_item("y_mm", mm(&f.y).into_pyarray(py))?;
-        d.set_item("z_mm", f.z * 1e3)?;
-        d.set_item("axis_pressure", f.axis_pressure.into_pyarray(py))?;
-        d.set_item("axis_z_mm", mm(&f.axis_z).into_pyarray(py))?;
-        d.set_item("axis_x_mm", f.axis_xy.iter().map(|p| p[0] * 1e3).collect::<Vec<f64>>().into_pyarray(py))?;
-        d.set_item("axis_y_mm", f.axis_xy.iter().map(|p| p[1] * 1e3).collect::<Vec<f64>>().into_pyarray(py))?;
-        d.set_item("surface_pressure_pa", f.surface_pressure)?;
-        d.set_item("target_mm", self.inner.focus.map(|v| v * 1e3).to_vec())?;
-        Ok(d)
+        Ok(CoreField::new(py, f, self.inner.focus))
     }
 
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the
@@ -187,17 +176,10 @@ impl CoreSimulation {
     /// Pressure on the x–z section nearest `y_mm` (default: the focus's) for each drive in
     /// `phases`, with the sound speed there.
     #[pyo3(signature = (phases, y_mm=None))]
-    fn section<'py>(&self, py: Python<'py>, phases: Vec<PyReadonlyArray1<'py, f64>>, y_mm: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn section(&self, py: Python<'_>, phases: Vec<PyReadonlyArray1<'_, f64>>, y_mm: Option<f64>) -> PyResult<CoreSection> {
         let added: Vec<Vec<f64>> = phases.into_iter().map(|p| phases_vec(Some(p))).collect();
         let s = py.detach(|| self.inner.section(&added, y_mm.map(|y| y * 1e-3))).map_err(to_py)?;
-        let mm = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<f64>>();
-        let d = PyDict::new(py);
-        d.set_item("pressure", s.pressure.into_pyarray(py))?;
-        d.set_item("sound_speed_m_s", s.sound_speed.into_pyarray(py))?;
-        d.set_item("x_mm", mm(&s.x).into_pyarray(py))?;
-        d.set_item("z_mm", mm(&s.z).into_pyarray(py))?;
-        d.set_item("y_mm", s.y * 1e3)?;
-        Ok(d)
+        Ok(CoreSection::new(py, s))
     }
 
     /// MR-ARFI phase image (rad), shape (n_u, n_v); Gaussian noise of `noise_rad` if given.

@@ -22,6 +22,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod error;
+pub mod focal;
 pub mod inverse;
 pub mod memory;
 pub mod nifti;

@@ -1,0 +1,216 @@
+//! Typed beam results: a plane and the axis of one drive ([`CoreField`]) and the x–z section of
+//! several ([`CoreSection`]), their arrays made NumPy arrays once (an attribute returns the same
+//! array each time) with lengths in mm.
+
+use has_core::focal::{FieldFocus, Peak};
+use has_core::{Field, Section};
+use num_complex::Complex64 as C64;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Millimetres of lengths in metres.
+fn mm(v: &[f64]) -> Vec<f64> {
+    v.iter().map(|x| x * 1e3).collect()
+}
+
+/// Complex pressure amplitude (Pa) on one plane and along the beam's axis (the line from the
+/// array's centre through the target): the arrays `arfi field` writes to its `.npz`.
+#[pyclass(module = "arfi._core", name = "Field", frozen)]
+pub(crate) struct CoreField {
+    pressure: Py<PyArray2<C64>>,
+    x_mm: Py<PyArray1<f64>>,
+    y_mm: Py<PyArray1<f64>>,
+    z: f64,
+    axis_pressure: Py<PyArray1<C64>>,
+    axis_x_mm: Py<PyArray1<f64>>,
+    axis_y_mm: Py<PyArray1<f64>>,
+    axis_z_mm: Py<PyArray1<f64>>,
+    surface_pressure: f64,
+    focus: FieldFocus,
+}
+
+impl CoreField {
+    /// The field `f` of a beam steered to `target` (m).
+    pub(crate) fn new(py: Python<'_>, f: Field, target: [f64; 3]) -> Self {
+        let focus = f.focus(target);
+        let axis = |k: usize| f.axis_xy.iter().map(|p| p[k] * 1e3).collect::<Vec<f64>>().into_pyarray(py).unbind();
+        CoreField {
+            x_mm: mm(&f.x).into_pyarray(py).unbind(),
+            y_mm: mm(&f.y).into_pyarray(py).unbind(),
+            z: f.z,
+            axis_x_mm: axis(0),
+            axis_y_mm: axis(1),
+            axis_z_mm: mm(&f.axis_z).into_pyarray(py).unbind(),
+            surface_pressure: f.surface_pressure,
+            pressure: f.pressure.into_pyarray(py).unbind(),
+            axis_pressure: f.axis_pressure.into_pyarray(py).unbind(),
+            focus,
+        }
+    }
+}
+
+/// A position in metres as millimetres.
+fn point_mm<const N: usize>(p: [f64; N]) -> [f64; N] {
+    p.map(|v| v * 1e3)
+}
+
+/// The keys `<prefix>_hottest_pa` and `<prefix>_hottest_mm` of a peak (None when it is the
+/// hottest place).
+fn hottest_items<const N: usize>(d: &Bound<'_, PyDict>, prefix: &str, peak: &Peak<N>) -> PyResult<()> {
+    d.set_item(format!("{prefix}_hottest_pa"), peak.hottest.map(|h| h.0))?;
+    d.set_item(format!("{prefix}_hottest_mm"), peak.hottest.map(|h| point_mm(h.1).to_vec()))?;
+    Ok(())
+}
+
+#[pymethods]
+impl CoreField {
+    /// Complex pressure amplitude (Pa) on the plane, shape (ny, nx).
+    #[getter]
+    fn pressure(&self, py: Python<'_>) -> Py<PyArray2<C64>> {
+        self.pressure.clone_ref(py)
+    }
+
+    /// x of each column (mm).
+    #[getter]
+    fn x_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.x_mm.clone_ref(py)
+    }
+
+    /// y of each row (mm).
+    #[getter]
+    fn y_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.y_mm.clone_ref(py)
+    }
+
+    /// z of the plane (mm).
+    #[getter]
+    fn z_mm(&self) -> f64 {
+        self.z * 1e3
+    }
+
+    /// Complex pressure amplitude (Pa) along the axis, one sample per grid plane.
+    #[getter]
+    fn axis_pressure(&self, py: Python<'_>) -> Py<PyArray1<C64>> {
+        self.axis_pressure.clone_ref(py)
+    }
+
+    /// z of each axis sample (mm).
+    #[getter]
+    fn axis_z_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.axis_z_mm.clone_ref(py)
+    }
+
+    /// x of each axis sample (mm; 0 for a target on the z axis).
+    #[getter]
+    fn axis_x_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.axis_x_mm.clone_ref(py)
+    }
+
+    /// y of each axis sample (mm).
+    #[getter]
+    fn axis_y_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.axis_y_mm.clone_ref(py)
+    }
+
+    /// Pressure amplitude on every element face (Pa).
+    #[getter]
+    fn surface_pressure_pa(&self) -> f64 {
+        self.surface_pressure
+    }
+
+    /// The steering target (mm, transducer frame).
+    #[getter]
+    fn target_mm(&self) -> (f64, f64, f64) {
+        let t = point_mm(self.focus.target);
+        (t[0], t[1], t[2])
+    }
+
+    /// The focal peak near the target on the plane (`plane_peak_*`: the lobe around the axis's
+    /// point on the plane) and along the axis (`axis_peak_*`), the target and the plane peak's
+    /// distance from the axis point (`peak_to_target_mm`), and any hotter place elsewhere
+    /// (`plane_hottest_*`, `axis_hottest_*`: None when the peak is the hottest). Pa and mm.
+    fn focus<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let f = &self.focus;
+        let d = PyDict::new(py);
+        d.set_item("target_mm", point_mm(f.target).to_vec())?;
+        let plane = point_mm(f.plane.position);
+        d.set_item("plane_peak_pa", f.plane.pressure)?;
+        d.set_item("plane_peak_x_mm", plane[0])?;
+        d.set_item("plane_peak_y_mm", plane[1])?;
+        d.set_item("peak_to_target_mm", f.peak_to_target() * 1e3)?;
+        hottest_items(&d, "plane", &f.plane)?;
+        let axis = point_mm(f.axis.position);
+        d.set_item("axis_peak_pa", f.axis.pressure)?;
+        d.set_item("axis_peak_z_mm", axis[2])?;
+        d.set_item("axis_peak_mm", axis.to_vec())?;
+        hottest_items(&d, "axis", &f.axis)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let shape = self.pressure.bind(py).shape().to_vec();
+        format!("Field(z_mm={:.2}, plane {} x {}, {} axis samples)", self.z * 1e3, shape[1], shape[0], self.axis_z_mm.bind(py).len())
+    }
+}
+
+/// The beam on the x–z plane nearest `y_mm`: complex pressure amplitude (Pa) of each drive and the
+/// sound speed (m/s) the march used, every grid plane from the source plane on.
+#[pyclass(module = "arfi._core", name = "Section", frozen)]
+pub(crate) struct CoreSection {
+    pressure: Py<PyArray3<C64>>,
+    sound_speed_m_s: Py<PyArray2<f64>>,
+    x_mm: Py<PyArray1<f64>>,
+    z_mm: Py<PyArray1<f64>>,
+    y: f64,
+}
+
+impl CoreSection {
+    pub(crate) fn new(py: Python<'_>, s: Section) -> Self {
+        CoreSection {
+            x_mm: mm(&s.x).into_pyarray(py).unbind(),
+            z_mm: mm(&s.z).into_pyarray(py).unbind(),
+            y: s.y,
+            pressure: s.pressure.into_pyarray(py).unbind(),
+            sound_speed_m_s: s.sound_speed.into_pyarray(py).unbind(),
+        }
+    }
+}
+
+#[pymethods]
+impl CoreSection {
+    /// Complex pressure amplitude (Pa), shape (drives, nz, nx), in the order the phases were given.
+    #[getter]
+    fn pressure(&self, py: Python<'_>) -> Py<PyArray3<C64>> {
+        self.pressure.clone_ref(py)
+    }
+
+    /// Sound speed (m/s) of the slab each plane was reached through, shape (nz, nx).
+    #[getter]
+    fn sound_speed_m_s(&self, py: Python<'_>) -> Py<PyArray2<f64>> {
+        self.sound_speed_m_s.clone_ref(py)
+    }
+
+    /// x of each column (mm).
+    #[getter]
+    fn x_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.x_mm.clone_ref(py)
+    }
+
+    /// z of each row (mm): every grid plane from the source plane on.
+    #[getter]
+    fn z_mm(&self, py: Python<'_>) -> Py<PyArray1<f64>> {
+        self.z_mm.clone_ref(py)
+    }
+
+    /// y of the section (mm): the grid row nearest the one asked for.
+    #[getter]
+    fn y_mm(&self) -> f64 {
+        self.y * 1e3
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let shape = self.pressure.bind(py).shape().to_vec();
+        format!("Section(y_mm={:.2}, {} drives, {} planes x {} columns)", self.y * 1e3, shape[0], shape[1], shape[2])
+    }
+}
