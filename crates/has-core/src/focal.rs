@@ -78,7 +78,7 @@ pub fn focal_and_hottest(values: &ArrayViewD<'_, f64>, start: &[usize]) -> (Vec<
     let region = region_6db(values, &peak);
     let mut hottest: Option<(Vec<usize>, f64)> = None;
     for ((index, &v), &inside) in values.indexed_iter().zip(region.iter()) {
-        if !inside && hottest.as_ref().is_none_or(|h| v > h.1) {
+        if !inside && hottest.as_ref().map_or(true, |h| v > h.1) {
             hottest = Some((index.slice().to_vec(), v));
         }
     }
