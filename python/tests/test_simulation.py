@@ -60,9 +60,16 @@ def test_field_on_the_focal_plane(sim):
     focus = f.focus()
     assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
     # The keys `arfi field` writes to its JSON, in order; no hotter place than the focus in water.
-    assert list(focus) == ["target_mm", "plane_peak_pa", "plane_peak_x_mm", "plane_peak_y_mm", "peak_to_target_mm",
+    metrics = ["focal_peak_mm", "focal_peak_pa", "peak_to_target_mm", "fwhm_6db_mm", "fwhm_6db_across_mm", "fwhm_3db_mm",
+               "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index", "focal_tissue"]
+    assert list(focus) == ["target_mm", *metrics, "plane_peak_pa", "plane_peak_x_mm", "plane_peak_y_mm", "plane_peak_to_axis_mm",
                            "plane_hottest_pa", "plane_hottest_mm", "axis_peak_pa", "axis_peak_z_mm", "axis_peak_mm",
                            "axis_hottest_pa", "axis_hottest_mm"]
+    # Each metric is also the Field's attribute of the same name; the phantom's focus lies within a
+    # few mm of the target (the peak sits short of the geometric focus) and above the samples.
+    assert all(focus[k] == getattr(f, k) for k in metrics)
+    assert f.focal_tissue == "phantom" and f.peak_to_target_mm < 3.0 and f.focal_peak_pa >= focus["plane_peak_pa"]
+    assert f.isppa_w_cm2 == pytest.approx(f.focal_peak_pa**2 / (2 * 1040 * 1533) / 1e4, rel=1e-12)
     assert focus["plane_hottest_pa"] is None and focus["axis_hottest_mm"] is None and focus["target_mm"] == [0.0, 0.0, 85.0]
     # The peak on the plane is its largest |p| here (a focus in water), at the sample the keys name.
     j, i = np.unravel_index(np.argmax(np.abs(f.pressure)), f.pressure.shape)

@@ -5,9 +5,24 @@
 use has_core::focal::{FieldFocus, Peak};
 use has_core::{Field, Section};
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, ToPyArray};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::OnceLock;
+
+/// The focal metrics' attributes, in the order `focus()` writes them.
+const METRICS: [&str; 10] = [
+    "focal_peak_mm",
+    "focal_peak_pa",
+    "peak_to_target_mm",
+    "fwhm_6db_mm",
+    "fwhm_6db_across_mm",
+    "fwhm_3db_mm",
+    "focal_volume_6db_mm3",
+    "isppa_w_cm2",
+    "mechanical_index",
+    "focal_tissue",
+];
 
 /// Millimetres of lengths in metres.
 fn mm(v: &[f64]) -> Vec<f64> {
@@ -21,32 +36,37 @@ pub(crate) struct CoreField {
     pressure: Py<PyArray2<C64>>,
     x_mm: Py<PyArray1<f64>>,
     y_mm: Py<PyArray1<f64>>,
-    z: f64,
     axis_pressure: Py<PyArray1<C64>>,
     axis_x_mm: Py<PyArray1<f64>>,
     axis_y_mm: Py<PyArray1<f64>>,
     axis_z_mm: Py<PyArray1<f64>>,
-    surface_pressure: f64,
-    focus: FieldFocus,
+    /// The core's field (its arrays copied into the NumPy ones above, which a user may change).
+    field: Field,
+    target: [f64; 3],
+    focus: OnceLock<FieldFocus>,
 }
 
 impl CoreField {
     /// The field `f` of a beam steered to `target` (m).
     pub(crate) fn new(py: Python<'_>, f: Field, target: [f64; 3]) -> Self {
-        let focus = f.focus(target);
         let axis = |k: usize| f.axis_xy.iter().map(|p| p[k] * 1e3).collect::<Vec<f64>>().into_pyarray(py).unbind();
         CoreField {
             x_mm: mm(&f.x).into_pyarray(py).unbind(),
             y_mm: mm(&f.y).into_pyarray(py).unbind(),
-            z: f.z,
             axis_x_mm: axis(0),
             axis_y_mm: axis(1),
             axis_z_mm: mm(&f.axis_z).into_pyarray(py).unbind(),
-            surface_pressure: f.surface_pressure,
-            pressure: f.pressure.into_pyarray(py).unbind(),
-            axis_pressure: f.axis_pressure.into_pyarray(py).unbind(),
-            focus,
+            pressure: f.pressure.to_pyarray(py).unbind(),
+            axis_pressure: f.axis_pressure.to_pyarray(py).unbind(),
+            target,
+            focus: OnceLock::new(),
+            field: f,
         }
+    }
+
+    /// The plane's and the axis's focal peaks, found on the first call.
+    fn plane_and_axis(&self) -> &FieldFocus {
+        self.focus.get_or_init(|| self.field.focus(self.target))
     }
 }
 
@@ -86,7 +106,7 @@ impl CoreField {
     /// z of the plane (mm).
     #[getter]
     fn z_mm(&self) -> f64 {
-        self.z * 1e3
+        self.field.z * 1e3
     }
 
     /// Complex pressure amplitude (Pa) along the axis, one sample per grid plane.
@@ -116,29 +136,98 @@ impl CoreField {
     /// Pressure amplitude on every element face (Pa).
     #[getter]
     fn surface_pressure_pa(&self) -> f64 {
-        self.surface_pressure
+        self.field.surface_pressure
     }
 
     /// The steering target (mm, transducer frame).
     #[getter]
     fn target_mm(&self) -> (f64, f64, f64) {
-        let t = point_mm(self.focus.target);
+        let t = point_mm(self.target);
         (t[0], t[1], t[2])
     }
 
-    /// The focal peak near the target on the plane (`plane_peak_*`: the lobe around the axis's
-    /// point on the plane) and along the axis (`axis_peak_*`), the target and the plane peak's
-    /// distance from the axis point (`peak_to_target_mm`), and any hotter place elsewhere
-    /// (`plane_hottest_*`, `axis_hottest_*`: None when the peak is the hottest). Pa and mm.
-    fn focus<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let f = &self.focus;
+    /// The focal peak in 3-D near the target, sub-voxel (mm; None when the target lies outside the
+    /// grid or its -6 dB region reaches the grid's edge).
+    #[getter]
+    fn focal_peak_mm(&self) -> Option<[f64; 3]> {
+        self.field.metrics.as_ref().map(|m| point_mm(m.peak))
+    }
+
+    /// |p| at the focal peak (Pa), in situ.
+    #[getter]
+    fn focal_peak_pa(&self) -> Option<f64> {
+        self.field.metrics.as_ref().map(|m| m.peak_pressure)
+    }
+
+    /// Distance from the target to the focal peak (mm).
+    #[getter]
+    fn peak_to_target_mm(&self) -> Option<f64> {
+        self.field.metrics.as_ref().map(|m| m.peak_to_target() * 1e3)
+    }
+
+    /// The -6 dB extent along the beam and across it (the mean of two directions), mm.
+    #[getter]
+    fn fwhm_6db_mm(&self) -> Option<[f64; 2]> {
+        self.field.metrics.as_ref().map(|m| m.fwhm_6db.map(|v| v * 1e3))
+    }
+
+    /// The -6 dB extents across the beam: along the direction nearest x, then nearest y (mm).
+    #[getter]
+    fn fwhm_6db_across_mm(&self) -> Option<[f64; 2]> {
+        self.field.metrics.as_ref().map(|m| m.across_6db.map(|v| v * 1e3))
+    }
+
+    /// The -3 dB extent along the beam and across it (mm).
+    #[getter]
+    fn fwhm_3db_mm(&self) -> Option<[f64; 2]> {
+        self.field.metrics.as_ref().map(|m| m.fwhm_3db.map(|v| v * 1e3))
+    }
+
+    /// Volume of the -6 dB region around the focal peak (mm³).
+    #[getter]
+    fn focal_volume_6db_mm3(&self) -> Option<f64> {
+        self.field.metrics.as_ref().map(|m| m.volume_6db * 1e9)
+    }
+
+    /// Spatial-peak pulse-average intensity at the focal peak, p²/(2·ρ·c) (W/cm²).
+    #[getter]
+    fn isppa_w_cm2(&self) -> Option<f64> {
+        self.field.metrics.as_ref().map(|m| m.isppa * 1e-4)
+    }
+
+    /// Mechanical index at the focal peak, p[MPa]/√f[MHz] (in situ).
+    #[getter]
+    fn mechanical_index(&self) -> Option<f64> {
+        self.field.metrics.as_ref().map(|m| m.mechanical_index)
+    }
+
+    /// The tissue the focal peak lies in.
+    #[getter]
+    fn focal_tissue(&self) -> Option<String> {
+        self.field.metrics.as_ref().map(|m| m.tissue.clone())
+    }
+
+    /// What the field says at its target, in the JSON keys of `arfi field`: the focal metrics in
+    /// 3-D (`focal_peak_mm`, `focal_peak_pa`, `peak_to_target_mm`, `fwhm_6db_mm`,
+    /// `fwhm_6db_across_mm`, `fwhm_3db_mm`, `focal_volume_6db_mm3`, `isppa_w_cm2`,
+    /// `mechanical_index`, `focal_tissue`; None without a closed focal region), the focal peak on
+    /// the plane (`plane_peak_*`: the lobe around the axis's point there, and the peak's distance
+    /// from that point, `plane_peak_to_axis_mm`) and along the axis (`axis_peak_*`), and any hotter
+    /// place than the peak on each (`plane_hottest_*`, `axis_hottest_*`: None when the peak is the
+    /// hottest). Pa and mm.
+    fn focus<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let py = slf.py();
         let d = PyDict::new(py);
-        d.set_item("target_mm", point_mm(f.target).to_vec())?;
+        d.set_item("target_mm", point_mm(slf.get().target).to_vec())?;
+        for key in METRICS {
+            d.set_item(key, slf.getattr(key)?)?;
+        }
+        let f = slf.get().plane_and_axis();
         let plane = point_mm(f.plane.position);
         d.set_item("plane_peak_pa", f.plane.pressure)?;
         d.set_item("plane_peak_x_mm", plane[0])?;
         d.set_item("plane_peak_y_mm", plane[1])?;
-        d.set_item("peak_to_target_mm", f.peak_to_target() * 1e3)?;
+        d.set_item("plane_peak_to_axis_mm", f.peak_to_axis() * 1e3)?;
         hottest_items(&d, "plane", &f.plane)?;
         let axis = point_mm(f.axis.position);
         d.set_item("axis_peak_pa", f.axis.pressure)?;
@@ -150,7 +239,7 @@ impl CoreField {
 
     fn __repr__(&self, py: Python<'_>) -> String {
         let shape = self.pressure.bind(py).shape().to_vec();
-        format!("Field(z_mm={:.2}, plane {} x {}, {} axis samples)", self.z * 1e3, shape[1], shape[0], self.axis_z_mm.bind(py).len())
+        format!("Field(z_mm={:.2}, plane {} x {}, {} axis samples)", self.field.z * 1e3, shape[1], shape[0], self.axis_z_mm.bind(py).len())
     }
 }
 

@@ -64,6 +64,14 @@ fn bench_single_run(c: &mut Criterion) {
     g.bench_function("propagate_to_focal_slab_in_pool", |b| {
         b.iter(|| rayon::scope(|_| sim.plan.propagate(black_box(&source), &spec).unwrap()))
     });
+    // `arfi field`'s march (the focal plane and the axis), alone and as `Simulation::field` runs it
+    // with the box around the target and the focal metrics from it, then with the plane's and the
+    // axis's peaks. Target: the metrics add at most 10 %.
+    let g0 = &sim.grid;
+    let plane = RecordSpec { planes: vec![g0.plane_index(sim.focus[2])], axis: true, axis_slope: sim.axis_slope(), ..Default::default() };
+    g.bench_function("field_march_only", |b| b.iter(|| sim.plan.propagate(black_box(&source), &plane).unwrap()));
+    g.bench_function("field_with_focal_metrics", |b| b.iter(|| sim.field(black_box(&[]), None).unwrap()));
+    g.bench_function("field_with_metrics_and_plane_axis_peaks", |b| b.iter(|| sim.field(black_box(&[]), None).unwrap().focus(sim.focus)));
     g.finish();
 }
 

@@ -19,7 +19,9 @@ def register(sub: Any) -> None:
     p = sub.add_parser("field", help="complex pressure on a plane and the beam axis (.npz)",
                        description="Simulate the beam (HAS) and write the complex pressure amplitude (Pa) on the "
                        "plane z = Z and along the beam's axis (the line from the array's centre through the target). "
-                       "Prints the focal peak near the target, and names any hotter place (skull, scalp, water) as such.",
+                       "Prints the focal peak near the target on the plane, along the axis and in 3-D (its -6 dB extents "
+                       "and volume, I_SPPA and mechanical index there), and names any hotter place (skull, scalp, water) "
+                       "as such.",
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
@@ -32,15 +34,28 @@ def register(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
+def metrics_line(focus: dict[str, Any]) -> str:
+    """The focal region in 3-D: its peak, extents and volume, and the exposure there."""
+    if focus["focal_peak_mm"] is None:
+        return "field: no closed -6 dB focal region around the target inside the grid (no focal metrics)"
+    p = [round(v, 2) + 0.0 for v in focus["focal_peak_mm"]]  # + 0.0: no "-0.00" for a peak on the axis
+    along, across = focus["fwhm_6db_mm"]
+    return (f"field: focus in 3-D: {focus['focal_peak_pa'] / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
+            f"{focus['peak_to_target_mm']:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
+            f"across, {focus['focal_volume_6db_mm3']:.1f} mm³; in {focus['focal_tissue']}: I_SPPA "
+            f"{focus['isppa_w_cm2']:.1f} W/cm², MI {focus['mechanical_index']:.2f}")
+
+
 def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> list[str]:
     """The printed summary: the focal peak near the target on the plane and along the beam's axis,
     any hotter place named by its tissue (which ``focus`` gains as ``*_hottest_tissue``), and the
     propagation model."""
     t = tuple(focus["target_mm"])
     lines = [f"field: plane z = {f.z_mm:.2f} mm: focal peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
-             f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm, {focus['peak_to_target_mm']:.2f} mm "
+             f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm, {focus['plane_peak_to_axis_mm']:.2f} mm "
              f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
              f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"]
+    lines.append(metrics_line(focus))
     for where, key in (("on the plane", "plane"), ("on the axis", "axis")):
         if focus[f"{key}_hottest_pa"] is not None:
             p = focus[f"{key}_hottest_mm"]

@@ -5,6 +5,7 @@
 //! only the ARFI images, fits and diagnoses report why they cannot be made.
 
 use crate::error::{HasError, Result};
+use crate::focal::FocalMetrics;
 use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Material, Medium};
@@ -112,6 +113,9 @@ pub struct Field {
     pub axis_xy: Vec<[f64; 2]>,
     /// Pressure amplitude on every element face (Pa).
     pub surface_pressure: f64,
+    /// The focal region's metrics in 3-D ([`FocalMetrics`]); `None` when the target lies outside
+    /// the grid or the -6 dB region around it reaches the grid's edge.
+    pub metrics: Option<FocalMetrics>,
 }
 
 impl Simulation {
@@ -360,8 +364,9 @@ impl Simulation {
     }
 
     /// The field on the plane nearest `z` (default: the focus) and along the axis, for
-    /// `added` phases (per element or per group; empty: none). Needs no MR model: works in
-    /// lossless water.
+    /// `added` phases (per element or per group; empty: none), with the focal metrics in 3-D from
+    /// a box around the target recorded in the same march ([`FocalMetrics`]). Needs no MR model:
+    /// works in lossless water.
     ///
     /// ```
     /// use has_core::{Scenario, Simulation};
@@ -385,7 +390,7 @@ impl Simulation {
         let slope = self.axis_slope();
         let spec =
             RecordSpec { planes: vec![plane], axis: true, axis_slope: slope, reflections: self.reflections, ..RecordSpec::default() };
-        let mut rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
+        let (mut rec, metrics) = self.record_with_focus(&self.source_field(added)?, spec)?;
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
             pressure,
@@ -396,6 +401,7 @@ impl Simulation {
             axis_xy: (0..rec.axis.len()).map(|n| [slope[0] * g.z(n), slope[1] * g.z(n)]).collect(),
             axis_pressure: rec.axis,
             surface_pressure: self.source.face_pressure,
+            metrics,
         })
     }
 

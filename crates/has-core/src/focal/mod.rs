@@ -7,6 +7,10 @@
 //! connected to it through faces; the hottest sample outside that region is reported only when it
 //! is hotter than the focal peak.
 
+mod metrics;
+
+pub use metrics::FocalMetrics;
+
 use crate::simulation::Field;
 use ndarray::{ArrayD, ArrayViewD, Dimension, IxDyn};
 
@@ -125,7 +129,7 @@ pub struct FieldFocus {
 
 impl FieldFocus {
     /// Distance (m) in the plane from the axis's point to the plane's focal peak.
-    pub fn peak_to_target(&self) -> f64 {
+    pub fn peak_to_axis(&self) -> f64 {
         (self.plane.position[0] - self.axis_point[0]).hypot(self.plane.position[1] - self.axis_point[1])
     }
 }
