@@ -8,7 +8,7 @@
 //! trilinearly interpolated along a line through the refined peak, falls to 1/2 (-6 dB) or 1/√2
 //! (-3 dB) of its interpolated value there. The -6 dB volume counts the voxels of the peak's -6 dB
 //! region ([`super::region_6db`]) and, on its surface, the fraction of each voxel where the
-//! interpolated |p| is above the level. I_SPPA = p²/(2·ρ·c) with ρ and c at the peak; MI = p[MPa]/√f[MHz]
+//! interpolated |p| is above the level. I_SPPA = p²/(2·ρ·c) with ρ and c at the peak; MI = p/√f (p in MPa, f in MHz)
 //! (in situ, no derating: the simulation is of the tissue itself).
 
 use super::{climb, region_6db};
@@ -42,7 +42,7 @@ pub struct FocalMetrics {
     pub volume_6db: f64,
     /// Spatial-peak pulse-average intensity at the peak, p²/(2·ρ·c) (W/m²).
     pub isppa: f64,
-    /// Mechanical index at the peak, p[MPa]/√f[MHz].
+    /// Mechanical index at the peak, p/√f with p in MPa and f in MHz.
     pub mechanical_index: f64,
     /// The tissue the peak lies in (the medium's name for it).
     pub tissue: String,
