@@ -110,6 +110,11 @@ class Simulation:
         return int(self._core.n_elements)
 
     @property
+    def frequency_hz(self) -> float:
+        """The drive frequency (Hz)."""
+        return float(self._core.frequency_hz)
+
+    @property
     def n_groups(self) -> int:
         return int(self._core.n_groups)
 

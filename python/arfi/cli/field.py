@@ -11,6 +11,7 @@ import numpy as np
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, write_npz
 from arfi.focal import describe_tissue
+from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
 
 
@@ -29,6 +30,10 @@ def register(sub: Any) -> None:
                    "subtracted from the steering: the corrected beam (with --phases: both)")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
     p.add_argument("--out", required=True, metavar="F.npz")
+    p.add_argument("--mi-limit", type=float, default=MI_LIMIT, metavar="MI",
+                   help=f"mechanical index flagged when exceeded at the focal peak or a hotter place (default {MI_LIMIT:g})")
+    p.add_argument("--isppa-limit-w-cm2", type=float, default=ISPPA_LIMIT_W_CM2, metavar="I",
+                   help=f"I_SPPA (W/cm²) flagged when exceeded at the focal peak (default {ISPPA_LIMIT_W_CM2:g})")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
                   "through the plane's peak over the sound speed: one more march)")
     p.set_defaults(run=run)
@@ -70,6 +75,7 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
 
 def run(args: argparse.Namespace) -> int:
     npz_path(args.out)  # before the simulation
+    limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
     phases = read_optional_phases(args.phases, "--phases")
@@ -93,11 +99,17 @@ def run(args: argparse.Namespace) -> int:
         },
     )
     focus = f.focus()
-    print("\n".join(focus_lines(sim, f, focus, args.out)))
+    lines = focus_lines(sim, f, focus, args.out)
+    rows = exceeded(focus, sim.frequency_hz, *limits)
+    if rows:
+        lines.insert(-1, f"field: {summary(rows)}")
+    focus["safety"] = {"mechanical_index_limit": limits[0], "isppa_limit_w_cm2": limits[1], "exceeded": rows}
+    print("\n".join(lines))
     if args.report:
         from arfi.report import field_report
 
-        field_report(args.report, sim, f, {"out": args.out, **focus, "propagation": sim.propagation_summary()}, phases)
+        safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
+        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
                    "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0

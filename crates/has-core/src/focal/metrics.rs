@@ -12,15 +12,9 @@
 //! (in situ, no derating: the simulation is of the tissue itself).
 
 use super::{climb, region_6db};
-use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
-use crate::physics::propagation::{RecordSpec, Recording, Window};
-use crate::simulation::Simulation;
-use crate::Complex64 as C64;
+use crate::physics::propagation::Window;
 use ndarray::{Array3, ArrayD, IxDyn};
-
-/// How many times the box around the target doubles before the metrics are given up.
-const BOX_DOUBLINGS: usize = 3;
 
 /// Metrics of the focal region of one beam; lengths in m, pressures in Pa.
 #[derive(Debug, Clone, PartialEq)]
@@ -267,44 +261,6 @@ impl FocalBox<'_> {
             }
         }
         Ok(())
-    }
-}
-
-impl Simulation {
-    /// The recording `spec` of the beam from `source` (the plane-0 field), with a box around the
-    /// target recorded in the same march, and the focal metrics from that box. The box reaches
-    /// max(5 mm, 2 λ) sideways and max(20 mm, 8 λ) along z (λ at the target) and doubles, with
-    /// another march, while the -6 dB region reaches one of its faces.
-    pub(crate) fn record_with_focus(&self, source: &[C64], spec: RecordSpec) -> Result<(Recording, Option<FocalMetrics>)> {
-        let g = &self.grid;
-        let Some(voxel) = g.nearest(self.focus) else {
-            return Ok((self.plan.propagate(source, &spec)?, None));
-        };
-        let [x, y, z] = self.focus;
-        let wavelength = self.medium.properties_at(x, y, z, self.frequency).sound_speed / self.frequency;
-        let mut reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
-        let along = if z > 0.0 { self.focus.map(|v| v / (x * x + y * y + z * z).sqrt()) } else { [0.0, 0.0, 1.0] };
-        for doubling in 0..=BOX_DOUBLINGS {
-            let window = focal_window(g, voxel, reach[0], reach[1]);
-            let mut rec = self.plan.propagate(source, &RecordSpec { window: Some(window.clone()), ..spec.clone() })?;
-            let magnitude = Array3::from_shape_vec(
-                (window.planes.len(), window.rows.len(), window.cols.len()),
-                rec.window.iter().map(|p| p.norm_sqr().sqrt()).collect(),
-            )
-            .map_err(|e| HasError::invalid("window", e.to_string()))?;
-            rec.window = vec![];
-            let focal = FocalBox { grid: g, window: &window, magnitude };
-            let tissue = |[x, y, z]: [f64; 3]| {
-                let p = self.medium.properties_at(x, y, z, self.frequency);
-                (p.density, p.sound_speed, self.medium.tissue_at(x, y, z))
-            };
-            match focal.metrics(self.focus, along, self.frequency, tissue) {
-                Ok(m) => return Ok((rec, Some(m))),
-                Err(Shortfall::TooSmall) if doubling < BOX_DOUBLINGS => reach = reach.map(|r| 2.0 * r),
-                Err(_) => return Ok((rec, None)),
-            }
-        }
-        unreachable!("the last doubling returns")
     }
 }
 

@@ -10,8 +10,8 @@
 mod metrics;
 
 pub use metrics::FocalMetrics;
+pub(crate) use metrics::{focal_window, FocalBox, Shortfall};
 
-use crate::simulation::Field;
 use ndarray::{ArrayD, ArrayViewD, Dimension, IxDyn};
 
 /// The local maximum reached from `start` by steepest ascent over the neighbours (8 in 2-D, 2 in
@@ -102,7 +102,7 @@ pub struct Peak<const N: usize> {
 }
 
 /// The index of the sample of `coords` nearest `at` (the first of equals).
-fn nearest(coords: &[f64], at: f64) -> usize {
+pub(crate) fn nearest(coords: &[f64], at: f64) -> usize {
     let mut best = 0;
     for (i, c) in coords.iter().enumerate() {
         if (c - at).abs() < (coords[best] - at).abs() {
@@ -131,24 +131,6 @@ impl FieldFocus {
     /// Distance (m) in the plane from the axis's point to the plane's focal peak.
     pub fn peak_to_axis(&self) -> f64 {
         (self.plane.position[0] - self.axis_point[0]).hypot(self.plane.position[1] - self.axis_point[1])
-    }
-}
-
-impl Field {
-    /// The focal peaks of this field for the steering target `target` (m).
-    pub fn focus(&self, target: [f64; 3]) -> FieldFocus {
-        let axis_point = if target[2] > 0.0 { [target[0] * self.z / target[2], target[1] * self.z / target[2]] } else { [0.0; 2] };
-        let magnitude = self.pressure.mapv(|p| p.norm()).into_dyn();
-        let start = [nearest(&self.y, axis_point[1]), nearest(&self.x, axis_point[0])];
-        let (peak, hot) = focal_and_hottest(&magnitude.view(), &start);
-        let at = |j: &[usize]| [self.x[j[1]], self.y[j[0]]];
-        let plane = Peak { pressure: magnitude[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (magnitude[IxDyn(&h)], at(&h))) };
-        let line = ArrayD::from_shape_vec(IxDyn(&[self.axis_pressure.len()]), self.axis_pressure.iter().map(|p| p.norm()).collect())
-            .expect("one value per axis sample");
-        let (peak, hot) = focal_and_hottest(&line.view(), &[nearest(&self.axis_z, target[2])]);
-        let at = |k: &[usize]| [self.axis_xy[k[0]][0], self.axis_xy[k[0]][1], self.axis_z[k[0]]];
-        let axis = Peak { pressure: line[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (line[IxDyn(&h)], at(&h))) };
-        FieldFocus { target, axis_point, plane, axis }
     }
 }
 

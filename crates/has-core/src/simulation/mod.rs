@@ -20,6 +20,7 @@ use num_complex::Complex64 as C64;
 use std::sync::Arc;
 
 mod build;
+mod focus;
 mod grid;
 mod regrid;
 pub(crate) use build::Unbuilt;

@@ -1,0 +1,68 @@
+//! What a field says at its target: the focal peaks on its plane and axis, and the focal metrics
+//! in 3-D from a box around the target recorded in the same march (see [`crate::focal`]).
+
+use super::{Field, Simulation};
+use crate::error::{HasError, Result};
+use crate::focal::{focal_and_hottest, focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
+use crate::physics::propagation::{RecordSpec, Recording};
+use crate::Complex64 as C64;
+use ndarray::{Array3, ArrayD, IxDyn};
+
+/// How many times the box around the target doubles before the metrics are given up.
+const BOX_DOUBLINGS: usize = 3;
+
+impl Simulation {
+    /// The recording `spec` of the beam from `source` (the plane-0 field), with a box around the
+    /// target recorded in the same march, and the focal metrics from that box. The box reaches
+    /// max(5 mm, 2 λ) sideways and max(20 mm, 8 λ) along z (λ at the target) and doubles, with
+    /// another march, while the -6 dB region reaches one of its faces.
+    pub(crate) fn record_with_focus(&self, source: &[C64], spec: RecordSpec) -> Result<(Recording, Option<FocalMetrics>)> {
+        let g = &self.grid;
+        let Some(voxel) = g.nearest(self.focus) else {
+            return Ok((self.plan.propagate(source, &spec)?, None));
+        };
+        let [x, y, z] = self.focus;
+        let wavelength = self.medium.properties_at(x, y, z, self.frequency).sound_speed / self.frequency;
+        let mut reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
+        let along = if z > 0.0 { self.focus.map(|v| v / (x * x + y * y + z * z).sqrt()) } else { [0.0, 0.0, 1.0] };
+        for doubling in 0..=BOX_DOUBLINGS {
+            let window = focal_window(g, voxel, reach[0], reach[1]);
+            let mut rec = self.plan.propagate(source, &RecordSpec { window: Some(window.clone()), ..spec.clone() })?;
+            let magnitude = Array3::from_shape_vec(
+                (window.planes.len(), window.rows.len(), window.cols.len()),
+                rec.window.iter().map(|p| p.norm_sqr().sqrt()).collect(),
+            )
+            .map_err(|e| HasError::invalid("window", e.to_string()))?;
+            rec.window = vec![];
+            let focal = FocalBox { grid: g, window: &window, magnitude };
+            let tissue = |[x, y, z]: [f64; 3]| {
+                let p = self.medium.properties_at(x, y, z, self.frequency);
+                (p.density, p.sound_speed, self.medium.tissue_at(x, y, z))
+            };
+            match focal.metrics(self.focus, along, self.frequency, tissue) {
+                Ok(m) => return Ok((rec, Some(m))),
+                Err(Shortfall::TooSmall) if doubling < BOX_DOUBLINGS => reach = reach.map(|r| 2.0 * r),
+                Err(_) => return Ok((rec, None)),
+            }
+        }
+        unreachable!("the last doubling returns")
+    }
+}
+
+impl Field {
+    /// The focal peaks of this field for the steering target `target` (m).
+    pub fn focus(&self, target: [f64; 3]) -> FieldFocus {
+        let axis_point = if target[2] > 0.0 { [target[0] * self.z / target[2], target[1] * self.z / target[2]] } else { [0.0; 2] };
+        let magnitude = self.pressure.mapv(|p| p.norm()).into_dyn();
+        let start = [nearest(&self.y, axis_point[1]), nearest(&self.x, axis_point[0])];
+        let (peak, hot) = focal_and_hottest(&magnitude.view(), &start);
+        let at = |j: &[usize]| [self.x[j[1]], self.y[j[0]]];
+        let plane = Peak { pressure: magnitude[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (magnitude[IxDyn(&h)], at(&h))) };
+        let line = ArrayD::from_shape_vec(IxDyn(&[self.axis_pressure.len()]), self.axis_pressure.iter().map(|p| p.norm()).collect())
+            .expect("one value per axis sample");
+        let (peak, hot) = focal_and_hottest(&line.view(), &[nearest(&self.axis_z, target[2])]);
+        let at = |k: &[usize]| [self.axis_xy[k[0]][0], self.axis_xy[k[0]][1], self.axis_z[k[0]]];
+        let axis = Peak { pressure: line[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (line[IxDyn(&h)], at(&h))) };
+        FieldFocus { target, axis_point, plane, axis }
+    }
+}

@@ -1,0 +1,46 @@
+"""Safety lines (:mod:`arfi.safety`): exposures above the limits a user sets are named, with the
+place and the tissue, in ``arfi field``'s summary and JSON; within them nothing is printed."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from arfi.cli import main
+from arfi.safety import exceeded
+
+
+def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
+    focus = {"focal_peak_pa": 1.2e6, "focal_tissue": "brain", "mechanical_index": 1.2 / math.sqrt(0.5), "isppa_w_cm2": 46.0,
+             "plane_hottest_pa": 1.5e6, "plane_hottest_tissue": "skull", "axis_hottest_pa": None}
+    rows = exceeded(focus, 0.5e6, mi_limit=1.9, isppa_limit_w_cm2=190.0)
+    # The focus: MI 1.70 and 46 W/cm², within; the skull's 1.5 MPa at 0.5 MHz: MI 2.12, above 1.9.
+    assert rows == [{"where": "hottest on the plane", "tissue": "skull", "quantity": "mechanical_index",
+                     "value": pytest.approx(1.5 / math.sqrt(0.5)), "limit": 1.9}]
+    assert [r["quantity"] for r in exceeded(focus, 0.5e6, mi_limit=1.5, isppa_limit_w_cm2=40.0)] == \
+        ["mechanical_index", "isppa_w_cm2", "mechanical_index"]
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="mi_limit"):
+            exceeded(focus, 0.5e6, mi_limit=bad)
+
+
+def test_arfi_field_flags_the_default_focus_and_takes_the_users_limits(tmp_path, capsys):
+    # The paper's 70 W phantom experiment: 3.09 MPa at 550 kHz in the phantom, MI 4.16 and
+    # I_SPPA 298 W/cm², above the diagnostic guidance (1.9, 190 W/cm²).
+    js = tmp_path / "f.json"
+    assert main(["field", "--out", str(tmp_path / "f.npz"), "--json", str(js)]) == 0
+    line = [ln for ln in capsys.readouterr().out.splitlines() if "safety" in ln]
+    assert line == ["field: above the safety lines: MI 4.16 at the focal peak (phantom) > 1.9; "
+                    "I_SPPA 298.4 W/cm² at the focal peak (phantom) > 190"]
+    safety = json.loads(js.read_text())["safety"]
+    assert (safety["mechanical_index_limit"], safety["isppa_limit_w_cm2"]) == (1.9, 190.0)
+    assert [(r["where"], r["quantity"]) for r in safety["exceeded"]] == [("focal peak", "mechanical_index"), ("focal peak", "isppa_w_cm2")]
+    # Limits the user sets above the exposure: nothing printed, nothing exceeded.
+    assert main(["field", "--out", str(tmp_path / "g.npz"), "--json", str(js), "--mi-limit", "5", "--isppa-limit-w-cm2", "400"]) == 0
+    assert "safety" not in capsys.readouterr().out and json.loads(js.read_text())["safety"]["exceeded"] == []
+    # A limit that is not a positive number: one line, exit 2, nothing written.
+    assert main(["field", "--out", str(tmp_path / "h.npz"), "--mi-limit", "-1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["arfi: error: --mi-limit: must be a positive number, got -1.0"] and not (tmp_path / "h.npz").exists()
