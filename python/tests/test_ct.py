@@ -130,11 +130,12 @@ def test_cli_phantom_for_a_hemisphere_focuses_through_the_skull_at_the_centre(tm
 
 
 @pytest.mark.parametrize(("volume", "ct_keys", "message"), [
-    ("nan", "", "NaN"),
-    ("hot", "", "5000 HU"),
+    # The voxel as (i, j, k) of the NIfTI (nibabel's data[i, j, k]), not a flat index.
+    ("nan", "", "voxel (1, 1, 60) (i, j, k) is NaN"),
+    ("hot", "", "voxel (1, 1, 60) (i, j, k) is 5000 HU"),
     ("good", "conversion = \"hounsfield\"", "ct.conversion"),
     ("good", "patient_to_transducer_mm = [[1,0,0,0],[0,1,0,0],[0,0,1.5,0],[0,0,0,1]]", "rigid"),
-    ("missing", "", "no such file"),
+    ("missing", "", "no such file (the [ct] file of scenario \"vyas2014-phantom\")"),
 ])
 def test_cli_refuses_a_bad_ct_in_one_line_and_writes_nothing(tmp_path, capsys, volume, ct_keys, message):
     z = np.arange(120) * 1.0 + 10.0

@@ -14,10 +14,12 @@ pub enum HasError {
         reason: String,
     },
     /// A file could not be found.
-    #[error("{path}: no such file")]
+    #[error("{path}: no such file{}", .named_by.as_deref().map(|n| format!(" ({n})")).unwrap_or_default())]
     FileNotFound {
         /// The path as given.
         path: String,
+        /// What names the file, when that is not its reader's caller (e.g. a scenario's key).
+        named_by: Option<String>,
     },
     /// A file exists but could not be read or parsed.
     #[error("{path}: {reason}")]
@@ -64,11 +66,20 @@ impl HasError {
         }
     }
 
+    /// A missing file's error saying what names it (`named_by`, e.g. "the `[ct] file` of
+    /// scenario \"head\""); other errors unchanged.
+    pub fn named_by(self, named_by: impl Into<String>) -> Self {
+        match self {
+            HasError::FileNotFound { path, .. } => HasError::FileNotFound { path, named_by: Some(named_by.into()) },
+            e => e,
+        }
+    }
+
     /// A failed read of the file `path`: [`HasError::FileNotFound`] if it does not exist, else
     /// [`HasError::BadFile`] with the system's message.
     pub fn reading(path: &str, e: &std::io::Error) -> Self {
         match e.kind() {
-            std::io::ErrorKind::NotFound => HasError::FileNotFound { path: path.to_string() },
+            std::io::ErrorKind::NotFound => HasError::FileNotFound { path: path.to_string(), named_by: None },
             _ => HasError::BadFile { path: path.to_string(), reason: e.to_string() },
         }
     }

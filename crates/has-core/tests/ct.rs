@@ -97,18 +97,19 @@ fn a_ct_the_scenario_cannot_use_is_named_with_what_is_wrong() {
     write("good.nii", layered_ct(100, g.dz, 0.02, good));
     // Cut off inside the plate: the beam enters the CT in bone.
     write("cut.nii", layered_ct(100, g.dz, 0.031, good));
-    // Ends before the focus (85 mm).
+    // Ends before the focus (85 mm). The hot and NaN voxels start at slice k = 45 (z = 50.6 mm):
+    // errors give a voxel as (i, j, k), not as a flat index.
     write("short.nii", layered_ct(40, g.dz, 0.02, good));
     write("hot.nii", layered_ct(100, g.dz, 0.02, |z| if z > 0.05 { 4100.0 } else { 0.0 }));
     write("nan.nii", layered_ct(100, g.dz, 0.02, |z| if z > 0.05 { f64::NAN } else { 0.0 }));
     let resolve = |ct: &str| Scenario::from_toml(&format!("{BASE}[ct]\n{ct}\n"), Some(&dir)).unwrap().resolve().map(|_| ()).unwrap_err();
     let cases: [(&str, &[&str]); 8] = [
         ("file = \"good.nii\"\nconversion = \"hounsfield\"", &["ct.conversion", "aubry2003"]),
-        ("file = \"missing.nii\"", &["missing.nii", "no such file"]),
+        ("file = \"missing.nii\"", &["missing.nii", "no such file", "the [ct] file of scenario"]),
         ("file = \"cut.nii\"", &["cut.nii", "beam path", "bone"]),
         ("file = \"short.nii\"", &["short.nii", "focus"]),
-        ("file = \"hot.nii\"", &["hot.nii", "4100"]),
-        ("file = \"nan.nii\"", &["nan.nii", "NaN"]),
+        ("file = \"hot.nii\"", &["hot.nii", "4100", "voxel (0, 0, 45) (i, j, k)"]),
+        ("file = \"nan.nii\"", &["nan.nii", "NaN", "voxel (0, 0, 45) (i, j, k)"]),
         (
             "file = \"good.nii\"\npatient_to_transducer_mm = [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]",
             &["patient_to_transducer_mm", "rigid"],

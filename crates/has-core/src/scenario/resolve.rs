@@ -57,7 +57,9 @@ impl Scenario {
         let mut medium = self.medium_si()?;
         let transducer = self.transducer_si()?;
         if let Some(spec) = &self.ct {
-            let ct = spec.resolve(&self.file_path(&spec.file), &medium.materials)?;
+            let ct = spec
+                .resolve(&self.file_path(&spec.file), &medium.materials)
+                .map_err(|e| e.named_by(format!("the [ct] file of scenario \"{}\"", self.name)))?;
             ct.check_covers(&transducer.reference_points(), focus)?;
             medium.ct = Some(std::sync::Arc::new(ct));
         }

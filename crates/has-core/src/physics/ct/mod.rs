@@ -133,14 +133,18 @@ impl CtMedium {
         check_rigid("ct.patient_to_transducer_mm", &patient_to_transducer_mm)?;
         conversion.validate()?;
         let bad = |reason: String| HasError::BadFile { path: path.to_string(), reason };
-        if let Some(i) = volume.values.iter().position(|v| !v.is_finite()) {
-            return Err(bad(format!("voxel {i} is {}: a CT must hold finite Hounsfield units", volume.values[i])));
+        // Voxel (i, j, k) of a flat index (i fastest).
+        let [_, nj, ni] = volume.shape;
+        let ijk = |f: usize| format!("({}, {}, {})", f % ni, (f / ni) % nj, f / (ni * nj));
+        if let Some(f) = volume.values.iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!("voxel {} (i, j, k) is {}: a CT must hold finite Hounsfield units", ijk(f), volume.values[f])));
         }
         let (lo, hi) = HU_RANGE;
-        if let Some(i) = volume.values.iter().position(|v| !(lo..=hi).contains(&(*v as f64))) {
+        if let Some(f) = volume.values.iter().position(|v| !(lo..=hi).contains(&(*v as f64))) {
             return Err(bad(format!(
-                "voxel {i} is {} HU, outside {lo}…{hi}: not a calibrated CT in Hounsfield units (rescale it, or mask metal)",
-                volume.values[i]
+                "voxel {} (i, j, k) is {} HU, outside {lo}…{hi}: not a calibrated CT in Hounsfield units (rescale it, or mask metal)",
+                ijk(f),
+                volume.values[f]
             )));
         }
         // voxel → RAS mm → LPS mm → transducer mm → m.
