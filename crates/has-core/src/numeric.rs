@@ -41,6 +41,15 @@ pub fn parabolic_peak(samples: &[(f64, f64)]) -> (f64, f64) {
     }
 }
 
+/// `v` scaled to unit length (+z for a zero vector).
+pub fn unit(v: [f64; 3]) -> [f64; 3] {
+    let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if norm == 0.0 {
+        return [0.0, 0.0, 1.0];
+    }
+    v.map(|x| x / norm)
+}
+
 /// Pearson correlation coefficient of two equally long samples.
 pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;

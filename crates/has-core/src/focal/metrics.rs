@@ -12,6 +12,7 @@
 //! (in situ, no derating: the simulation is of the tissue itself).
 
 use super::{climb, region_6db};
+use crate::numeric::{parabola, unit};
 use crate::physics::grid::Grid;
 use crate::physics::propagation::Window;
 use ndarray::{Array3, ArrayD, IxDyn};
@@ -112,7 +113,10 @@ impl FocalBox<'_> {
         Some(v)
     }
 
-    /// The peak index refined by a parabola along each axis: the fractional index and |p| there.
+    /// The peak index refined by a parabola through it and its two neighbours along each axis
+    /// (where it opens downwards): the fractional index, and |p| there as the peak's value plus
+    /// each axis's rise to its vertex. The peak is a local maximum, so each vertex lies within
+    /// half a sample of it.
     fn refined(&self, peak: [usize; 3]) -> ([f64; 3], f64) {
         let m = &self.magnitude;
         let v0 = m[peak];
@@ -125,12 +129,9 @@ impl FocalBox<'_> {
             let (mut lo, mut hi) = (peak, peak);
             lo[k] -= 1;
             hi[k] += 1;
-            let (a, b) = (m[lo], m[hi]);
-            let curvature = a - 2.0 * v0 + b;
-            if curvature < 0.0 {
-                let delta = (0.5 * (a - b) / curvature).clamp(-0.5, 0.5);
-                f[k] += delta;
-                value -= 0.25 * (a - b) * delta;
+            if let Some(p) = parabola([(-1.0, m[lo]), (0.0, v0), (1.0, m[hi])]).filter(|p| p.curvature < 0.0) {
+                f[k] += p.vertex;
+                value += p.value - v0;
             }
         }
         (f, value)
@@ -268,10 +269,6 @@ impl FocalBox<'_> {
 /// completing a right-handed set (x and y for a beam along z).
 fn across(along: [f64; 3]) -> [[f64; 3]; 2] {
     let cross = |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-    let unit = |a: [f64; 3]| {
-        let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-        a.map(|v| v / n)
-    };
     let u = unit(cross([0.0, 1.0, 0.0], along));
     [u, cross(along, u)]
 }

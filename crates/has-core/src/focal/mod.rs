@@ -101,6 +101,15 @@ pub struct Peak<const N: usize> {
     pub hottest: Option<(f64, [f64; N])>,
 }
 
+impl<const N: usize> Peak<N> {
+    /// The focal peak of the map `values` climbing from `start`, and the hottest place outside its
+    /// -6 dB region when hotter ([`focal_and_hottest`]), each placed by `at` (index to m).
+    pub fn climbing(values: &ArrayViewD<'_, f64>, start: &[usize], at: impl Fn(&[usize]) -> [f64; N]) -> Self {
+        let (peak, hot) = focal_and_hottest(values, start);
+        Peak { pressure: values[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (values[IxDyn(&h)], at(&h))) }
+    }
+}
+
 /// The index of the sample of `coords` nearest `at` (the first of equals).
 pub(crate) fn nearest(coords: &[f64], at: f64) -> usize {
     let mut best = 0;

@@ -3,7 +3,8 @@
 
 use super::{Field, Simulation};
 use crate::error::{HasError, Result};
-use crate::focal::{focal_and_hottest, focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
+use crate::focal::{focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
+use crate::numeric::unit;
 use crate::physics::propagation::{RecordSpec, Recording};
 use crate::Complex64 as C64;
 use ndarray::{Array3, ArrayD, IxDyn};
@@ -24,7 +25,7 @@ impl Simulation {
         let [x, y, z] = self.focus;
         let wavelength = self.medium.properties_at(x, y, z, self.frequency).sound_speed / self.frequency;
         let mut reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
-        let along = if z > 0.0 { self.focus.map(|v| v / (x * x + y * y + z * z).sqrt()) } else { [0.0, 0.0, 1.0] };
+        let along = if z > 0.0 { unit(self.focus) } else { [0.0, 0.0, 1.0] };
         for doubling in 0..=BOX_DOUBLINGS {
             let window = focal_window(g, voxel, reach[0], reach[1]);
             let mut rec = self.plan.propagate(source, &RecordSpec { window: Some(window.clone()), ..spec.clone() })?;
@@ -55,14 +56,12 @@ impl Field {
         let axis_point = if target[2] > 0.0 { [target[0] * self.z / target[2], target[1] * self.z / target[2]] } else { [0.0; 2] };
         let magnitude = self.pressure.mapv(|p| p.norm()).into_dyn();
         let start = [nearest(&self.y, axis_point[1]), nearest(&self.x, axis_point[0])];
-        let (peak, hot) = focal_and_hottest(&magnitude.view(), &start);
-        let at = |j: &[usize]| [self.x[j[1]], self.y[j[0]]];
-        let plane = Peak { pressure: magnitude[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (magnitude[IxDyn(&h)], at(&h))) };
+        let plane = Peak::climbing(&magnitude.view(), &start, |j| [self.x[j[1]], self.y[j[0]]]);
         let line = ArrayD::from_shape_vec(IxDyn(&[self.axis_pressure.len()]), self.axis_pressure.iter().map(|p| p.norm()).collect())
             .expect("one value per axis sample");
-        let (peak, hot) = focal_and_hottest(&line.view(), &[nearest(&self.axis_z, target[2])]);
-        let at = |k: &[usize]| [self.axis_xy[k[0]][0], self.axis_xy[k[0]][1], self.axis_z[k[0]]];
-        let axis = Peak { pressure: line[IxDyn(&peak)], position: at(&peak), hottest: hot.map(|h| (line[IxDyn(&h)], at(&h))) };
+        let axis = Peak::climbing(&line.view(), &[nearest(&self.axis_z, target[2])], |k| {
+            [self.axis_xy[k[0]][0], self.axis_xy[k[0]][1], self.axis_z[k[0]]]
+        });
         FieldFocus { target, axis_point, plane, axis }
     }
 }

@@ -17,6 +17,7 @@
 //! is the texture's, not a wall's. The incident wave's own direction (its phase gradient) would
 //! not do: next to the wall the bone's faster phase tilts it towards the wall.
 
+use crate::numeric::unit;
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
 
@@ -56,15 +57,6 @@ fn wall_normal(g: &Grid, from: &SliceProperties, to: &SliceProperties, i: usize)
     let gradient =
         [across(1, i % g.nx, g.nx, g.dx), across(g.nx, i / g.nx, g.ny, g.dy), (1.0 / to.sound_speed[i] - 1.0 / from.sound_speed[i]) / g.dz];
     unit(gradient)
-}
-
-/// `v` scaled to unit length (+z for a zero vector).
-fn unit(v: [f64; 3]) -> [f64; 3] {
-    let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if norm == 0.0 {
-        return [0.0, 0.0, 1.0];
-    }
-    v.map(|x| x / norm)
 }
 
 #[cfg(test)]
