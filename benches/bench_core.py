@@ -8,7 +8,7 @@ Times ``arfi.Simulation()`` (resolve + grid + steering + one HAS march to build 
 peak resident memory of the process (``resource.getrusage(...).ru_maxrss``). The 16 group
 fields in one batch have no Python binding: they are timed by the Rust example
 ``crates/has-core/examples/group_fields.rs`` (run with cargo, in its own process), or read from
-the criterion results of ``cargo bench -p has-core`` with ``--group-fields criterion``.
+the criterion results of ``cargo bench -p has-bench`` with ``--group-fields criterion``.
 
 Usage::
 
@@ -81,7 +81,7 @@ def group_fields_cargo(repeats: int) -> dict[str, Any]:
 def group_fields_criterion() -> dict[str, Any]:
     f = ROOT / "target/criterion/group_fields/16_groups_sources_and_batch/new/estimates.json"
     if not f.exists():
-        raise RuntimeError(f"{f} not found: run `cargo bench -p has-core -- group_fields` first")
+        raise RuntimeError(f"{f} not found: run `cargo bench -p has-bench -- group_fields` first")
     est = json.loads(f.read_text())
     return {
         "median_s": est["median"]["point_estimate"] * 1e-9,

@@ -14,7 +14,7 @@ of seeded noise. The script times, end to end and from Python:
 
 ``Estimate.seconds`` (the search alone, measured in Rust) is reported next to the wall time. The
 cost of one evaluation has no Python binding: it is read from the criterion results of
-``cargo bench -p has-core -- estimation`` when they exist (``--criterion``, the default ``auto``).
+``cargo bench -p has-bench -- estimation`` when they exist (``--criterion``, the default ``auto``).
 
 Usage::
 
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reproduce-repeats", type=int, default=3, help="--repeats of `arfi reproduce`")
     ap.add_argument("--skip-reproduce", action="store_true", help="do not run `arfi reproduce`")
     ap.add_argument("--criterion", choices=["auto", "skip"], default="auto",
-                    help="read the per-evaluation cost from target/criterion (cargo bench -p has-core -- estimation)")
+                    help="read the per-evaluation cost from target/criterion (cargo bench -p has-bench -- estimation)")
     ap.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     ap.add_argument("--date", default=_dt.date.today().isoformat(), help="date printed in the table")
     args = ap.parse_args(argv)
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     rows.append((
         "one cost evaluation, 16 groups (criterion `estimation/cost_16_groups`: seed 1, 119 masked pixels; "
         f"this image: {nm['n_pixels']})",
-        f"{cost * 1e6:.1f} µs" if cost is not None else "not measured (run `cargo bench -p has-core -- estimation`)",
+        f"{cost * 1e6:.1f} µs" if cost is not None else "not measured (run `cargo bench -p has-bench -- estimation`)",
         "≤ 20 µs", ratio(cost, TARGET_COST_S),
     ))
     rows.append((

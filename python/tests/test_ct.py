@@ -83,7 +83,7 @@ def test_a_plate_ct_written_by_nibabel_gives_the_field_of_the_plate_as_a_region(
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in t)
         text = f"{GRID}[ct]\nfile = \"plate{int(rotate)}.nii.gz\"\npatient_to_transducer_mm = [{rows}]\n"
         f = Simulation(Scenario.from_toml(text, tmp_path)).field()
-        # Same cells, same steering rays (see tests/ct.rs); 1e-4 allows the affine's float32.
+        # Same cells, same steering rays (see tests/suite/ct.rs); 1e-4 allows the affine's float32.
         assert np.abs(f.pressure - reference.pressure).max() < 1e-4 * peak, rotate
 
 

@@ -1,4 +1,4 @@
-//! Where the time of one hybrid estimation goes (the workload of `benches/has.rs`): the default scenario, one
+//! Where the time of one hybrid estimation goes (the workload of the criterion benches, `benches/has.rs`): the default scenario, one
 //! noisy (0.02 rad) MR-ARFI image with a skull-like aberration (`SkullScreen::default()`, seed
 //! `--seed`, default 1) condensed to the 16 groups. Prints one JSON object:
 //! `cargo run --release -p has-core --example estimate_timing [repeats] [seed]`.

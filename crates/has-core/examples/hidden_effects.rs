@@ -1,5 +1,5 @@
 //! The model-discrepancy workflow on images in which effects are hidden at seeded random
-//! strengths (the ranges of `tests/diagnose.rs`), for measuring how often each is named:
+//! strengths (the ranges of `tests/suite/diagnose.rs`), for measuring how often each is named:
 //! `cargo run --release -p has-core --example hidden_effects -- SEEDS IMAGES EFFECT[+EFFECT] ...`
 //! (e.g. `4 1 broadening slice_offset broadening+registration_shift`). Each case prints what
 //! was named, the equally good explanations, the alternative path, the final gap (residual RMS

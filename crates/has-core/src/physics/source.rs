@@ -258,7 +258,7 @@ impl SourceModel {
     /// plane have spatial frequencies up to `k`, which samples λ/2 apart hold; what they can
     /// alias is the evanescent near field of the elements closest to the plane (λ/2 before it).
     /// `r = 2` at the default λ/4 spacing: a quarter of the work, and for the hemisphere of
-    /// `tests/hemisphere.rs` the same focal field to four digits as the sum at every pixel.
+    /// `tests/suite/hemisphere.rs` the same focal field to four digits as the sum at every pixel.
     fn add_rayleigh(&self, positions: &[[f64; 3]], weights: &[Vec<C64>], out: &mut [Vec<C64>]) {
         let g = &self.grid;
         let first: Vec<([f64; 3], C64)> = positions.iter().copied().zip(weights[0].iter().copied()).collect();

@@ -423,7 +423,7 @@ impl Simulation {
     /// ([`HasPlan::transposed`]) and one transposed projection onto the elements
     /// ([`SourceModel::transposed`]) give all of them, instead of one march per element; they
     /// equal what one march per element gives, to the rounding of the single-precision Rayleigh
-    /// sums (`tests/reciprocity.rs`).
+    /// sums (`tests/suite/reciprocity.rs`).
     pub fn element_responses(&self, target: [f64; 3]) -> Result<Vec<C64>> {
         self.source.transposed(&reciprocal_field(&self.plan, target, self.reflections)?)
     }

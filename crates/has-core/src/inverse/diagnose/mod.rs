@@ -184,7 +184,7 @@ impl Diagnosis {
 /// with [`HasError::Interrupted`].
 ///
 /// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm
-/// (compiled, not run here: `tests/diagnose.rs` runs this diagnosis and checks it).
+/// (compiled, not run here: `tests/suite/diagnose.rs` runs this diagnosis and checks it).
 ///
 /// ```no_run
 /// use has_core::physics::mr::add_noise;

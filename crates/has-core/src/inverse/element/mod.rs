@@ -62,7 +62,7 @@ pub const BASIS_SPACING_PIXELS: f64 = 0.75;
 /// Nyquist wavenumber 4/3 of the largest) and the force finer than the pixels it is averaged
 /// over; the steps to the window cost a third of the λ/4 grid's, and the window holds fewer
 /// samples. Its images differ from the simulation's own by about 1 % of their peak at 650 kHz,
-/// well below an MR-ARFI image's noise (`tests/element_basis.rs`); where the wavelength alone
+/// well below an MR-ARFI image's noise (`tests/suite/element_basis.rs`); where the wavelength alone
 /// would allow a spacing near the pixel's (220 kHz: 2.6 mm against 1.4 mm pixels) they differ
 /// by 20 %, hence the pixel's bound. Through reverberating bone the simulation's grid is kept.
 pub fn basis_grid(sim: &Simulation) -> Result<Option<Grid>> {
@@ -377,7 +377,7 @@ impl BasisCache {
 /// image with a known scale pays for that bias at the focus; with a fitted amplitude it does not,
 /// and the bias favours model beams that are weaker and broader (phases that defocus the beam,
 /// the scale raised to match the peak), which a smooth prior lets the estimate reach cheaply
-/// (`tests/prior.rs`). A fitted background plane needs the pixels outside the focal zone as well.
+/// (`tests/suite/prior.rs`). A fitted background plane needs the pixels outside the focal zone as well.
 /// Pixels without signal (NaN) are left out either way.
 pub fn fits_whole_box(nuisance: &Nuisance) -> bool {
     nuisance.amplitude || nuisance.background_phase

@@ -1,5 +1,4 @@
-//! Helpers shared by the integration tests (each test file is its own crate: `mod common;`).
-#![allow(dead_code)]
+//! Helpers shared by the test modules of the suite.
 
 use has_core::inverse::element::basis_grid;
 use has_core::scenario::Scenario;

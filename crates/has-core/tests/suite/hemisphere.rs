@@ -3,9 +3,7 @@
 //! faces in water, with a quadrature of its own (polar rings on each disc, not the march's
 //! square cells).
 
-mod common;
-
-use common::pearson;
+use crate::common::pearson;
 use has_core::physics::transducer::Surface;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;

@@ -59,7 +59,7 @@ fn a_bowl_in_water_has_the_focal_extents_of_oneil_and_the_rayleigh_integral() {
         z_peak * 1e3,
         m.volume_6db * 1e9
     );
-    // Along: the march's axis follows O'Neil's to about 1 % of the peak (tests/physics.rs), so the
+    // Along: the march's axis follows O'Neil's to about 1 % of the peak (tests/suite/physics.rs), so the
     // half-pressure points move by a small fraction of the 27 mm extent: within 1 % (0.04 % seen).
     assert!((m.fwhm_6db[0] / along - 1.0).abs() < 0.01, "{} vs {along}", m.fwhm_6db[0]);
     // Across: samples λ/4 = 0.68 mm apart over a 4 mm extent, the crossing between them drawn

@@ -1,8 +1,8 @@
 //! Criterion benchmarks of the HAS core on the embedded default scenario, the paper's phantom
 //! experiment (180 x 180 x 188 grid, 1024 elements in 16 groups, MR window around the focal slab).
 //!
-//! Run with `cargo bench -p has-core` (a few minutes on 2 cores); filter with
-//! `cargo bench -p has-core -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal
+//! Run with `cargo bench -p has-bench` (a few minutes on 2 cores); filter with
+//! `cargo bench -p has-bench -- group_fields`. Targets (BENCHMARKS.md): one HAS run to the focal
 //! slab ≤ 0.5 s, 16 group fields in one batch ≤ 3 s; estimation (the paper's 16 groups): one cost evaluation
 //! for 16 groups ≤ 20 µs, `build_model` + Nelder–Mead (≤ 8000 evaluations) ≤ 5 s, 20-start
 //! L-BFGS ≤ 5 s.

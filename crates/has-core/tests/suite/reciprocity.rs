@@ -171,7 +171,7 @@ fn element_responses_equal_one_march_per_element_and_add_up_to_the_array() {
     assert!(sim.propagation().reverberation.is_some(), "the plate reverberates");
     let g = &sim.grid;
     // On grid points, where the march's own field is the reference (between them the responses
-    // are interpolated: tested against direct sums in `tests/hemisphere.rs`).
+    // are interpolated: tested against direct sums in `tests/suite/hemisphere.rs`).
     let grid_point = |p: [f64; 3]| g.nearest(p).map(|[i, j, n]| [g.x(i), g.y(j), g.z(n)]).unwrap();
     for target in [grid_point(sim.focus), grid_point([sim.focus[0] + 3e-3, sim.focus[1], sim.focus[2] - 6e-3])] {
         let h = sim.element_responses(target).unwrap();

@@ -1,7 +1,7 @@
 //! Per-element estimation on the field basis (`--groups` = number of elements), on a
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
-mod common;
+use crate::common;
 use has_core::inverse::cost::{build_model, Measurement, Objective};
 use has_core::inverse::element::nuisance::Nuisance;
 use has_core::inverse::element::{build_element_model, BasisCache};

@@ -8,11 +8,9 @@
 //! plane (a direct Rayleigh integral of the bowl) and the periodic lateral grid (no absorbing
 //! layer, so the reference's periodic spectrum is the same problem).
 //!
-//! Run with `cargo test --release -p has-core --test bone -- --nocapture` to see the numbers.
+//! Run with `cargo test --release -p has-core --test suite bone:: -- --nocapture` to see the numbers.
 
-mod common;
-
-use common::{parabolic_peak, pearson};
+use crate::common::{parabolic_peak, pearson};
 use has_core::physics::grid::Grid;
 use has_core::physics::propagation::{HasOptions, HasPlan, InterfaceModel, RecordSpec};
 use has_core::physics::source::SourceModel;

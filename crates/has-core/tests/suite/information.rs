@@ -3,7 +3,7 @@
 //! images, the closed form for independent errors, and Monte Carlo draws of correlated errors.
 //! On a 256-element version of the default array to keep the marches short.
 
-mod common;
+use crate::common;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::information::{

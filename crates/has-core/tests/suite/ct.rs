@@ -1,7 +1,7 @@
 //! CT volumes in the medium: a bone plate read from a CT NIfTI against the same plate given as a
 //! region, and what a CT the scenario cannot use is told.
 //!
-//! Run with `cargo test --release -p has-core --test ct -- --nocapture` to see the numbers.
+//! Run with `cargo test --release -p has-core --test suite ct:: -- --nocapture` to see the numbers.
 
 use has_core::nifti;
 use has_core::physics::ct::HuConversion;

@@ -3,14 +3,12 @@
 //! independent Parseval reference), plane-wave absorption and transmission, Snell's-law
 //! refraction, and linearity in the source.
 //!
-//! Run with `cargo test --release -p has-core --test physics -- --nocapture` to see the measured
+//! Run with `cargo test --release -p has-core --test suite physics:: -- --nocapture` to see the measured
 //! numbers. Every tolerance is stated next to its assertion with the reason for it.
 //!
 //! Conventions: time `exp(-i·omega·t)`, a wave to +z is `exp(+i·k·z)`; SI units.
 
-mod common;
-
-use common::{parabolic_peak, pearson};
+use crate::common::{parabolic_peak, pearson};
 use has_core::physics::grid::Grid;
 use has_core::physics::medium::{Material, Medium, Region, Shape};
 use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec, Screen};

@@ -3,7 +3,7 @@
 //! thickness; the predicted phases, applied through the ordinary forward march, must restore the
 //! focus.
 //!
-//! Run with `cargo test --release -p has-core --test prediction -- --nocapture` to see the numbers.
+//! Run with `cargo test --release -p has-core --test suite prediction:: -- --nocapture` to see the numbers.
 
 use has_core::nifti;
 use has_core::prediction::{predict, predict_scenario, predict_scenario_with, PredictionOptions};
@@ -162,7 +162,7 @@ fn a_concentric_shell_costs_the_layer_transmission_and_leaves_the_focus() {
     // single transmission does not hold (with the whole shell the focus gets 0.44 of water's
     // focal pressure against |T| = 0.33). Grid 0.375 mm (λ/8) and CT voxels of 0.25 mm: at 0.75 mm
     // and 0.5 mm the cells that average bone and water grade the faces, which then reflect less
-    // (transmission 12–16 % above the exact layer's; the same as a plate in tests/ct.rs).
+    // (transmission 12–16 % above the exact layer's; the same as a plate in tests/suite/ct.rs).
     // Checked over the elements' polar angle (0 to 34°), this also tests what marching along z
     // does to an oblique layer.
     let dir = scratch("concentric");
@@ -197,7 +197,7 @@ fn a_concentric_shell_costs_the_layer_transmission_and_leaves_the_focus() {
     // phase the same for every polar angle to 0.2 rad (about 10 % of the bone's 1.9 rad against
     // soft tissue). Beyond 27° the wall is tilted against the planes by as much, and the march
     // loses transmission through a thin tilted wall (the validation's 3 mm cap too:
-    // tests/validation.rs); giving the treads the loss of the risers, which makes thicker walls
+    // tests/suite/validation.rs); giving the treads the loss of the risers, which makes thicker walls
     // right, adds to that loss here. Shear waves, which a fluid model leaves out, carry part of
     // the flux beyond about 25° anyway (docs/validation.md).
     let exact = t_bone.norm() / t_brain.norm();
