@@ -5,12 +5,14 @@ use super::effects::{focal_material, FieldState, View, SLICE_REACH_MM};
 use super::Effects;
 use crate::error::{HasError, Result};
 use crate::inverse::linear::solve_augmented;
+use crate::physics::grid::Grid;
 use crate::physics::mr::MrSampler;
 use crate::physics::propagation::{RecordSpec, Recording, Window};
 use crate::simulation::Simulation;
 use crate::Complex64 as C64;
 use ndarray::Array2;
-use std::sync::{Arc, Mutex};
+use std::borrow::Cow;
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// The sampler of a moved slice (its window is `sampler.window`).
 type Slice = Arc<MrSampler>;
@@ -34,6 +36,9 @@ pub(super) struct Forward<'a> {
     powers: Recent<FieldState, Power>,
     /// Samplers of moved slices, by offset bits.
     samplers: Recent<u64, Slice>,
+    /// The model on its grid cut after the window, made at the first rebuild (see
+    /// [`Forward::cut`]).
+    cut: OnceLock<Option<Simulation>>,
 }
 
 /// A small cache of the [`CACHED`] values used last (pure functions of their keys, so a hit
@@ -98,7 +103,8 @@ impl<'a> Forward<'a> {
             .map(|k| if k.is_empty() { Ok(vec![0.0; sim.n_elements()]) } else { sim.element_phases(k) })
             .collect::<Result<_>>()?;
         let coords = [0, 1].map(|k| (0..g.matrix[k]).map(|i| g.pixel_center(k, i) * 1e3).collect());
-        Ok(Forward { sim, knowns, material, window, in_material, coords, powers: Recent::new(), samplers: Recent::new() })
+        let (powers, samplers, cut) = (Recent::new(), Recent::new(), OnceLock::new());
+        Ok(Forward { sim, knowns, material, window, in_material, coords, powers, samplers, cut })
     }
 
     /// `|p|²` (times the force coefficient relative to the model's) on the extended window for
@@ -151,25 +157,45 @@ impl<'a> Forward<'a> {
 
     /// The simulation in the medium of `state`, and the ratio of its force coefficient
     /// `alpha/(rho·c²)` in the focal material to the model's (the samplers keep the model's).
-    pub(super) fn in_medium(&self, state: &FieldState) -> Result<(std::borrow::Cow<'a, Simulation>, f64)> {
+    pub(super) fn in_medium(&self, state: &FieldState) -> Result<(Cow<'_, Simulation>, f64)> {
         self.rebuilt(state, None).map(|(sim, ratio, _)| (sim, ratio))
     }
 
     /// [`Forward::in_medium`], and when the medium is rebuilt with `spec` given, the new plan's
     /// recording `spec` of the steered beam (the build's own march).
-    fn rebuilt(&self, state: &FieldState, spec: Option<&RecordSpec>) -> Result<(std::borrow::Cow<'a, Simulation>, f64, Option<Recording>)> {
+    /// The rebuilt simulation lies on [`Forward::cut`]'s grid.
+    fn rebuilt(&self, state: &FieldState, spec: Option<&RecordSpec>) -> Result<(Cow<'_, Simulation>, f64, Option<Recording>)> {
         let model = &self.sim.medium.materials[self.material];
         if state.sound_speed == model.sound_speed && state.attenuation_db_cm_mhz == model.attenuation_db_cm_mhz {
-            return Ok((std::borrow::Cow::Borrowed(self.sim), 1.0, None));
+            return Ok((Cow::Borrowed(self.sim), 1.0, None));
         }
         let (c, a) = (state.sound_speed, state.attenuation_db_cm_mhz);
+        let base = self.cut();
         let (sim, steered) = match spec {
-            Some(spec) => self.sim.with_material_recording(self.material, c, a, spec).map(|(sim, rec)| (sim, Some(rec)))?,
-            None => (self.sim.with_material(self.material, c, a)?, None),
+            Some(spec) => base.with_material_recording(self.material, c, a, spec).map(|(sim, rec)| (sim, Some(rec)))?,
+            None => (base.with_material(self.material, c, a)?, None),
         };
         let coef = |m: &crate::physics::medium::Material| m.properties(self.sim.frequency).force_coefficient();
         let ratio = coef(&sim.medium.materials[self.material]) / coef(model);
-        Ok((std::borrow::Cow::Owned(sim), ratio, steered))
+        Ok((Cow::Owned(sim), ratio, steered))
+    }
+
+    /// The model on its grid cut after the last plane of the extended window, where that drops
+    /// planes and nothing beyond them reaches the window (no reflections sent back, no
+    /// reverberation between interfaces): the planes up to the cut are the model's, marched by
+    /// the same operators, so a rebuild there records the window bit for bit as one on the whole
+    /// grid, without the screens and steps beyond it. Else (or if the cut grid cannot be built)
+    /// the model itself.
+    fn cut(&self) -> &Simulation {
+        let s = self.sim;
+        let planes = self.window.planes.end.max(2);
+        let cut = || {
+            if s.reflections || s.plan.reverberation().is_some() || planes >= s.grid.nz {
+                return None;
+            }
+            s.on_grid(Grid { nz: planes, ..s.grid.clone() }).ok()
+        };
+        self.cut.get_or_init(cut).as_ref().unwrap_or(s)
     }
 
     /// The sampler of the slice moved `dz_mm` along its normal, and its window.
@@ -293,4 +319,27 @@ fn extended_window(sim: &Simulation, sampler: &MrSampler) -> Window {
     let extra = ((SLICE_REACH_MM * 1e-3 + sampler.geometry.slice_thickness) / step).ceil() as usize + 1;
     *range = range.start.saturating_sub(extra)..(range.end + extra).min(n);
     w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    /// A rebuild for another focal medium on the grid cut after the window records the window
+    /// bit for bit as the rebuild on the whole grid (the planes up to the cut are marched by the
+    /// same operators), and the cut drops planes on the default scenario (its MR slice lies well
+    /// before the grid's end).
+    #[test]
+    fn a_rebuild_on_the_cut_grid_records_the_window_as_on_the_whole_grid() {
+        let sim = Simulation::new(&Scenario::default()).unwrap();
+        let forward = Forward::new(&sim, &[vec![]]).unwrap();
+        assert!(forward.cut().grid.nz < sim.grid.nz, "{} planes of {}", forward.cut().grid.nz, sim.grid.nz);
+        let spec = RecordSpec { window: Some(forward.window.clone()), reflections: sim.reflections, ..Default::default() };
+        let material = focal_material(&sim);
+        let (_, whole) = sim.with_material_recording(material, 1560.0, 0.6, &spec).unwrap();
+        let state = FieldState { group_phases: vec![], dead_groups: vec![], sound_speed: 1560.0, attenuation_db_cm_mhz: 0.6 };
+        let (_, _, cut) = forward.rebuilt(&state, Some(&spec)).unwrap();
+        assert!(whole.window == cut.unwrap().window);
+    }
 }
