@@ -16,14 +16,18 @@ IMAGE_SPACE = ["amplitude", "broadening", "broadening_anisotropic", "registratio
 
 def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
     # The paper's story: a model without broadening (W = 0, calibration file) meets an image
-    # with W = 2.7 mm; the workflow names `broadening` with W within 0.2 mm and stops.
+    # with W = 2.7 mm; the workflow names `broadening` with W within 0.2 mm and stops. The CLI
+    # (files, flags, JSON keys, report) with the image-space effects: naming among the whole
+    # library is tests/suite/diagnose.rs's `the_papers_story_...`, and the tutorial's `arfi diagnose`
+    # (test_docs.py) runs the CLI on the whole library.
     image = tmp_path / "m.nii.gz"
     assert main(["simulate", "--noise-rad", "0.02", "--seed", "5", "--out", str(image)]) == 0
     cal = tmp_path / "cal.json"
     cal.write_text(json.dumps({"broadening_width_mm": 0.0, "amplitude": sim.amplitude}))
     js = tmp_path / "d.json"
     report = tmp_path / "report"
-    assert main(["diagnose", "--image", str(image), "--calibration", str(cal), "--json", str(js), "--report", str(report)]) == 0
+    assert main(["diagnose", "--image", str(image), "--calibration", str(cal), "--effects", ",".join(IMAGE_SPACE),
+                 "--json", str(js), "--report", str(report)]) == 0
     d = json.loads(js.read_text())
     for key in ("effects", "cost_initial", "cost_final", "noise_floor"):
         assert key in d
@@ -39,8 +43,10 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
 
 
 def test_diagnose_on_noise_only_names_nothing_and_rejects_bad_input(sim):
-    d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=11))
-    assert d.names == [] and len(d.rejected) == len(arfi.diagnose.EFFECTS)
+    # Every candidate tried is reported rejected (the whole library on noise alone is
+    # tests/suite/diagnose.rs's `noise_only_names_nothing`).
+    d = sim.diagnose(sim.arfi_image(noise_rad=0.02, seed=11), effects=IMAGE_SPACE)
+    assert d.names == [] and sorted(c.name for c in d.rejected) == sorted(IMAGE_SPACE)
     with pytest.raises(ValueError, match="image"):
         sim.diagnose(sim.arfi_image()[:10])
     assert sim.diagnose(sim.arfi_image()).names == []  # noise-free and the exact model: nothing to add
@@ -62,7 +68,7 @@ def test_several_images_at_once_and_effect_images(sim):
     images = [m + np.random.default_rng(k).normal(0.0, 0.02, m.shape)
               for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))]
     # The image-space effects only: naming among the whole library is tested in Rust
-    # (tests/diagnose.rs); here the bindings carry several images and their known phases.
+    # (tests/suite/diagnose.rs); here the bindings carry several images and their known phases.
     d = sim.diagnose(images, [None, known], effects=IMAGE_SPACE)
     assert d.names == ["registration_shift"]
     assert d.effects[0].params["dx_mm"] == pytest.approx(0.9, abs=0.3)
@@ -124,7 +130,7 @@ def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
 @pytest.mark.parametrize("effect, hidden", [
     # One effect per kind of value: numbers (the anisotropic widths, a pair effect_images takes by name),
     # group indices and one phase per group. Every effect's round trip is tested in Rust
-    # (tests/diagnose.rs); this is the path through the bindings' dict.
+    # (tests/suite/diagnose.rs); this is the path through the bindings' dict.
     ("broadening_anisotropic", {"broadening_width_u_mm": 2.0, "broadening_width_v_mm": 3.6}),
     ("element_dropout", {"dead_groups": [5]}),
     ("phase_aberration", {"group_phases_rad": list(1.2 * np.sin(0.7 * np.arange(16)))}),
