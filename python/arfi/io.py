@@ -79,6 +79,34 @@ def arfi_image_path(path: str | os.PathLike[str]) -> Path:
     return p
 
 
+def volume_path(path: str | os.PathLike[str], name: str = "volume") -> Path:
+    """``path`` if it names a NIfTI volume (``.nii`` or ``.nii.gz``) in a folder that exists; else
+    ``ValueError`` naming ``name``. Checked before the volume is computed."""
+    p = Path(path)
+    if not p.name.endswith((".nii", ".nii.gz")):
+        raise ValueError(f"{name}: {p}: a volume must be written as .nii or .nii.gz")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"{name}: {p}: folder {folder} does not exist")
+    return p
+
+
+def write_volume(path: str | os.PathLike[str], values: ArrayLike, affine_mm: ArrayLike, description: str) -> None:
+    """Writes a 3-D volume given as (z, y, x) as NIfTI-1 (x fastest, as NIfTI orders voxels,
+    float32) with its 4 x 4 affine (mm) as qform and sform, atomically."""
+    import nibabel as nib
+
+    p = volume_path(path)
+    data = np.asarray(values, dtype=np.float32).transpose(2, 1, 0)
+    img = nib.Nifti1Image(data, np.asarray(affine_mm, dtype=np.float64))
+    img.set_qform(img.affine, code=1)
+    img.set_sform(img.affine, code=1)
+    img.header.set_xyzt_units(xyz="mm")
+    img.header["descrip"] = description.encode()[:79]
+    with atomic_path(p) as tmp:
+        nib.save(img, str(tmp))
+
+
 def npz_path(path: str | os.PathLike[str]) -> Path:
     """``path`` if it names a field archive (``.npz``); else ``ValueError``."""
     p = Path(path)

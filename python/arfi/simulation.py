@@ -14,6 +14,7 @@ from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
+from arfi.volume import PressureVolume
 from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
 
 
@@ -201,6 +202,19 @@ class Simulation:
     def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
         return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
+
+    def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None) -> PressureVolume:
+        """``|p|`` (Pa) of the beam in 3-D from one march, on the whole grid or on the box
+        ``box_mm`` (x0, x1, y0, y1, z0, z1 in mm, transducer frame): a :class:`PressureVolume`
+        (``to_nifti(path)`` writes it). ``phases`` as for :meth:`field`."""
+        box = None
+        if box_mm is not None:
+            b = real_array(box_mm, "box_mm")
+            if b.shape != (6,):
+                raise ValueError(f"box_mm: must be six numbers (x0, x1, y0, y1, z0, z1 in mm), got {box_mm!r}")
+            box = [float(v) for v in b]
+        pressure, affine = self._core.pressure_volume(as_phases(phases), box)
+        return PressureVolume(pressure_pa=pressure, affine_mm=affine)
 
     def tissue_at(self, points_mm: ArrayLike) -> list[str]:
         """The tissue at each point (mm, transducer frame, shape (n, 3) or (3,)): ``"bone"`` or

@@ -19,13 +19,17 @@ use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateRe
 use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
-use has_core::simulation::Simulation;
+use has_core::simulation::{window_of_box, Simulation};
+use ndarray::{Array2, Array3};
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+
+/// A pressure volume as NumPy arrays: `|p|` (z, y, x) and its affine (mm).
+type VolumeArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f64>>);
 
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
 #[pyclass(module = "arfi._core", frozen)]
@@ -161,6 +165,34 @@ impl CoreSimulation {
         let phases = phases_vec(phases);
         let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
         Ok(CoreField::new(py, f, self.inner.focus))
+    }
+
+    /// `|p|` (Pa, float32, shape (nz, ny, nx): z, y, x) of the beam on the box `box_mm` (x0, x1,
+    /// y0, y1, z0, z1 in mm, transducer frame; default the whole grid), and the 4 x 4 affine (mm)
+    /// from voxel (i, j, k) = (x, y, z index) to the transducer frame.
+    #[pyo3(signature = (phases=None, box_mm=None))]
+    fn pressure_volume<'py>(
+        &self,
+        py: Python<'py>,
+        phases: Option<PyReadonlyArray1<'_, f64>>,
+        box_mm: Option<[f64; 6]>,
+    ) -> PyResult<VolumeArrays<'py>> {
+        let phases = phases_vec(phases);
+        let g = &self.inner.grid;
+        let window = match box_mm {
+            Some(b) => Some(window_of_box(g, [b[0], b[2], b[4]].map(|v| v * 1e-3), [b[1], b[3], b[5]].map(|v| v * 1e-3)).map_err(to_py)?),
+            None => None,
+        };
+        let v = py.detach(|| self.inner.pressure_volume(&phases, window)).map_err(to_py)?;
+        let shape = (v.window.planes.len(), v.window.rows.len(), v.window.cols.len());
+        let pressure = Array3::from_shape_vec(shape, v.pressure).map_err(|e| invalid("pressure_volume", e.to_string()))?;
+        let mut affine = Array2::<f64>::eye(4);
+        for (r, row) in v.affine.iter().enumerate() {
+            for (c, x) in row.iter().enumerate() {
+                affine[[r, c]] = x * 1e3;
+            }
+        }
+        Ok((pressure.into_pyarray(py), affine.into_pyarray(py)))
     }
 
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
-from arfi.io import npz_path, write_npz
+from arfi.io import npz_path, volume_path, write_npz
 from arfi.focal import describe_tissue
 from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
@@ -22,7 +22,7 @@ def register(sub: Any) -> None:
                        "plane z = Z and along the beam's axis (the line from the array's centre through the target). "
                        "Prints the focal peak near the target on the plane, along the axis and in 3-D (its -6 dB extents "
                        "and volume, I_SPPA and mechanical index there), and names any hotter place (skull, scalp, water) "
-                       "as such.",
+                       "as such. --volume writes |p| in 3-D as NIfTI for overlay.",
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
@@ -34,6 +34,10 @@ def register(sub: Any) -> None:
                    help=f"mechanical index flagged when exceeded at the focal peak or a hotter place (default {MI_LIMIT:g})")
     p.add_argument("--isppa-limit-w-cm2", type=float, default=ISPPA_LIMIT_W_CM2, metavar="I",
                    help=f"I_SPPA (W/cm²) flagged when exceeded at the focal peak (default {ISPPA_LIMIT_W_CM2:g})")
+    p.add_argument("--volume", metavar="F.nii.gz", help="also write |p| (Pa) in 3-D as NIfTI (.nii or .nii.gz) on the "
+                   "simulation grid, its affine in the transducer frame (mm): one more march")
+    p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
+                   dest="volume_box_mm", help="write the --volume on this box only (mm, transducer frame), for large grids")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
                   "through the plane's peak over the sound speed: one more march)")
     p.set_defaults(run=run)
@@ -75,6 +79,10 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
 
 def run(args: argparse.Namespace) -> int:
     npz_path(args.out)  # before the simulation
+    if args.volume_box_mm is not None and args.volume is None:
+        raise ValueError("--volume-box-mm: crops the --volume, which is not asked for")
+    if args.volume is not None:
+        volume_path(args.volume, "--volume")
     limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
@@ -84,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
         added = sim.element_phases(phases, "--phases") if phases is not None else np.zeros(sim.n_elements)
         phases = added - sim.element_phases(correction, "--correction")
     f = sim.field(phases, args.z_mm)
+    # The volume before anything is written: a box outside the grid leaves no file behind.
+    volume = None if args.volume is None else sim.pressure_volume(phases, args.volume_box_mm)
     write_npz(
         args.out,
         {
@@ -100,6 +110,13 @@ def run(args: argparse.Namespace) -> int:
     )
     focus = f.focus()
     lines = focus_lines(sim, f, focus, args.out)
+    volume_json = None
+    if volume is not None:
+        volume.to_nifti(args.volume)
+        nz, ny, nx = volume.pressure_pa.shape
+        lines.insert(-1, f"field: |p| in 3-D (Pa) on {nx} x {ny} x {nz} voxels, transducer frame -> {args.volume}")
+        volume_json = {"path": args.volume, "shape_xyz": [nx, ny, nz], "box_mm": args.volume_box_mm,
+                       "max_pa": float(volume.pressure_pa.max())}
     rows = exceeded(focus, sim.frequency_hz, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
@@ -110,6 +127,6 @@ def run(args: argparse.Namespace) -> int:
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
         field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
-    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
+    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus, "volume": volume_json,
                    "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0

@@ -23,8 +23,10 @@ mod build;
 mod focus;
 mod grid;
 mod regrid;
+mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
+pub use volume::{window_of_box, PressureVolume};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).

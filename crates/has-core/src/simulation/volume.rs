@@ -1,0 +1,118 @@
+//! The 3-D pressure amplitude of a beam on a box of the grid: what a volume file holds (NIfTI,
+//! to lay over the patient's images).
+
+use super::Simulation;
+use crate::error::{HasError, Result};
+use crate::memory;
+use crate::physics::grid::Grid;
+use crate::physics::propagation::{RecordSpec, Window};
+
+/// `|p|` on a box of the grid, with the map from its voxels to the transducer frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PressureVolume {
+    /// The box: plane, row and column index ranges of the grid.
+    pub window: Window,
+    /// `|p|` (Pa) in single precision, row-major (plane, row, column): x fastest, then y, then z.
+    pub pressure: Vec<f32>,
+    /// Position (m, transducer frame) of voxel `(i, j, k)` (column, row, plane within the box):
+    /// `affine · (i, j, k, 1)`.
+    pub affine: [[f64; 4]; 3],
+}
+
+/// Bytes a voxel takes while a volume is made: the march records the box in complex double
+/// precision (16) before the magnitude is taken in single precision (4).
+const BYTES_PER_VOXEL: u64 = 20;
+
+impl Simulation {
+    /// `|p|` of the beam driven with `added` (phases added to the steering, per element or per
+    /// group; empty: the steering alone) on `window` (`None`: the whole grid), from one march.
+    /// Refused before the march when it would not fit in memory.
+    pub fn pressure_volume(&self, added: &[f64], window: Option<Window>) -> Result<PressureVolume> {
+        let g = &self.grid;
+        let window = window.unwrap_or(Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx });
+        if window.is_empty() || window.planes.end > g.nz || window.rows.end > g.ny || window.cols.end > g.nx {
+            return Err(HasError::invalid("window", "must be a box of the grid holding at least one sample"));
+        }
+        let shape = [window.cols.len(), window.rows.len(), window.planes.len()];
+        memory::check(
+            || format!("a pressure volume of {} x {} x {} voxels", shape[0], shape[1], shape[2]),
+            window.len() as u64 * BYTES_PER_VOXEL,
+            "crop it to a box around the focus (--volume-box-mm, or box_mm in Python)",
+        )?;
+        let spec = RecordSpec { window: Some(window.clone()), reflections: self.reflections, ..RecordSpec::default() };
+        let rec = self.plan.propagate(&self.source_field(added)?, &spec)?;
+        let pressure = rec.window.iter().map(|p| p.norm() as f32).collect();
+        let origin = [g.x(window.cols.start), g.y(window.rows.start), g.z(window.planes.start)];
+        let affine = [[g.dx, 0.0, 0.0, origin[0]], [0.0, g.dy, 0.0, origin[1]], [0.0, 0.0, g.dz, origin[2]]];
+        Ok(PressureVolume { window, pressure, affine })
+    }
+}
+
+/// The box of `grid` holding the samples within `[lo, hi]` (m, per axis x, y, z), or why there
+/// is none.
+pub fn window_of_box(grid: &Grid, lo: [f64; 3], hi: [f64; 3]) -> Result<Window> {
+    if (0..3).any(|k| !(lo[k].is_finite() && hi[k].is_finite() && lo[k] < hi[k])) {
+        return Err(HasError::invalid("box_mm", "needs finite bounds, each lower than its upper"));
+    }
+    let inside = |n: usize, at: &dyn Fn(usize) -> f64, k: usize| {
+        let first = (0..n).find(|&i| at(i) >= lo[k] && at(i) <= hi[k])?;
+        let last = (first..n).take_while(|&i| at(i) <= hi[k]).last()?;
+        Some(first..last + 1)
+    };
+    let ranges = (inside(grid.nx, &|i| grid.x(i), 0), inside(grid.ny, &|j| grid.y(j), 1), inside(grid.nz, &|n| grid.z(n), 2));
+    match ranges {
+        (Some(cols), Some(rows), Some(planes)) => Ok(Window { planes, rows, cols }),
+        _ => {
+            let span = |a: f64, b: f64| format!("{:.1} to {:.1}", a * 1e3, b * 1e3);
+            Err(HasError::invalid(
+                "box_mm",
+                format!(
+                    "x {}, y {}, z {} mm holds no sample of the grid (x {}, y {}, z {} mm)",
+                    span(lo[0], hi[0]),
+                    span(lo[1], hi[1]),
+                    span(lo[2], hi[2]),
+                    span(grid.x(0), grid.x(grid.nx - 1)),
+                    span(grid.y(0), grid.y(grid.ny - 1)),
+                    span(grid.z(0), grid.z(grid.nz - 1))
+                ),
+            ))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    /// The volume is `|p|` of the planes a plain recording keeps (the same march: equal in single
+    /// precision), on the box asked for; its affine puts voxel (0, 0, 0) on the box's first
+    /// sample and steps by the grid's spacing.
+    #[test]
+    fn the_volume_is_the_magnitude_of_the_recorded_planes() {
+        let sim = Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 4\n", None).unwrap()).unwrap();
+        let g = &sim.grid;
+        let lo = [-3e-3, -2e-3, sim.focus[2] - 2e-3];
+        let hi = [3e-3, 2e-3, sim.focus[2] + 2e-3];
+        let window = window_of_box(g, lo, hi).unwrap();
+        assert!(g.x(window.cols.start) >= lo[0] && g.x(window.cols.start - 1) < lo[0]);
+        assert!(g.z(window.planes.end - 1) <= hi[2] && g.z(window.planes.end) > hi[2]);
+        let added: Vec<f64> = (0..sim.n_elements()).map(|e| 0.3 * ((e * 5) % 7) as f64 - 0.9).collect();
+        let v = sim.pressure_volume(&added, Some(window.clone())).unwrap();
+        let planes: Vec<usize> = window.planes.clone().collect();
+        let spec = RecordSpec { planes: planes.clone(), reflections: sim.reflections, ..RecordSpec::default() };
+        let rec = sim.plan.propagate(&sim.source_field(&added).unwrap(), &spec).unwrap();
+        let mut expected = Vec::new();
+        for plane in &rec.planes {
+            for r in window.rows.clone() {
+                expected.extend(window.cols.clone().map(|c| plane[r * g.nx + c].norm() as f32));
+            }
+        }
+        assert_eq!(v.pressure, expected);
+        assert_eq!(v.affine[0], [g.dx, 0.0, 0.0, g.x(window.cols.start)]);
+        assert_eq!(v.affine[2], [0.0, 0.0, g.dz, g.z(window.planes.start)]);
+        let outside = window_of_box(g, [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]).unwrap_err().to_string();
+        assert!(outside.contains("holds no sample of the grid"), "{outside}");
+        assert!(window_of_box(g, hi, lo).is_err());
+    }
+}
