@@ -92,7 +92,7 @@ def volume_path(path: str | os.PathLike[str], name: str = "volume") -> Path:
 
 
 def write_volume(path: str | os.PathLike[str], values: ArrayLike, affine_mm: ArrayLike, description: str) -> None:
-    """Writes a 3-D volume given as (z, y, x) as NIfTI-1 (x fastest, as NIfTI orders voxels,
+    """Writes a 3-D volume given as [k, j, i] as NIfTI-1 (i fastest, as NIfTI orders voxels,
     float32) with its 4 x 4 affine (mm) as qform and sform, atomically."""
     import nibabel as nib
 

@@ -162,6 +162,11 @@ class Simulation:
         inside layers are added, and the round trips added)."""
         return dict(self._core.propagation)
 
+    @property
+    def has_ct(self) -> bool:
+        """Whether the medium holds a CT (a ``[ct]`` scenario): what ``pressure_volume(in_ct=True)`` needs."""
+        return self._core.has_ct
+
     def propagation_summary(self) -> str:
         """:attr:`propagation` in one sentence, for reports."""
         p = self.propagation
@@ -203,10 +208,18 @@ class Simulation:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
         return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
 
-    def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None) -> PressureVolume:
+    def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None,
+                        in_ct: bool = False) -> PressureVolume:
         """``|p|`` (Pa) of the beam in 3-D from one march, on the whole grid or on the box
         ``box_mm`` (x0, x1, y0, y1, z0, z1 in mm, transducer frame): a :class:`PressureVolume`
-        (``to_nifti(path)`` writes it). ``phases`` as for :meth:`field`."""
+        (``to_nifti(path)`` writes it). With ``in_ct`` (a ``[ct]`` scenario), resampled into the
+        CT's voxel grid with the CT's own RAS affine, to open on top of the CT. ``phases`` as for
+        :meth:`field`."""
+        if in_ct:
+            if box_mm is not None:
+                raise ValueError("box_mm: crops the volume on the simulation grid; in_ct takes the CT's own voxel grid")
+            pressure, affine = self._core.pressure_volume_in_ct(as_phases(phases))
+            return PressureVolume(pressure_pa=pressure, affine_mm=affine, frame="ct")
         box = None
         if box_mm is not None:
             b = real_array(box_mm, "box_mm")

@@ -28,6 +28,17 @@ use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+/// The 4 x 4 homogeneous matrix of an affine map's 3 x 4 rows, times `scale` (e.g. m -> mm).
+fn affine_4x4(rows: &[[f64; 4]; 3], scale: f64) -> Array2<f64> {
+    let mut a = Array2::<f64>::eye(4);
+    for (r, row) in rows.iter().enumerate() {
+        for (c, x) in row.iter().enumerate() {
+            a[[r, c]] = x * scale;
+        }
+    }
+    a
+}
+
 /// A pressure volume as NumPy arrays: `|p|` (z, y, x) and its affine (mm).
 type VolumeArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f64>>);
 
@@ -186,13 +197,24 @@ impl CoreSimulation {
         let v = py.detach(|| self.inner.pressure_volume(&phases, window)).map_err(to_py)?;
         let shape = (v.window.planes.len(), v.window.rows.len(), v.window.cols.len());
         let pressure = Array3::from_shape_vec(shape, v.pressure).map_err(|e| invalid("pressure_volume", e.to_string()))?;
-        let mut affine = Array2::<f64>::eye(4);
-        for (r, row) in v.affine.iter().enumerate() {
-            for (c, x) in row.iter().enumerate() {
-                affine[[r, c]] = x * 1e3;
-            }
-        }
-        Ok((pressure.into_pyarray(py), affine.into_pyarray(py)))
+        Ok((pressure.into_pyarray(py), affine_4x4(&v.affine, 1e3).into_pyarray(py)))
+    }
+
+    /// Whether the medium holds a CT (a `[ct]` scenario).
+    #[getter]
+    fn has_ct(&self) -> bool {
+        self.inner.medium.ct.is_some()
+    }
+
+    /// `|p|` (Pa, float32, shape (nk, nj, ni): the CT's voxels, k slowest) of the beam resampled
+    /// into the voxel grid of the scenario's CT, and the CT's 4 x 4 affine to RAS+ mm.
+    #[pyo3(signature = (phases=None))]
+    fn pressure_volume_in_ct<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<VolumeArrays<'py>> {
+        let phases = phases_vec(phases);
+        let v = py.detach(|| self.inner.pressure_volume_in_ct(&phases)).map_err(to_py)?;
+        let pressure = Array3::from_shape_vec((v.shape[0], v.shape[1], v.shape[2]), v.pressure)
+            .map_err(|e| invalid("pressure_volume", e.to_string()))?;
+        Ok((pressure.into_pyarray(py), affine_4x4(&v.ras_affine, 1.0).into_pyarray(py)))
     }
 
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the

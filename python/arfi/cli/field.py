@@ -36,6 +36,8 @@ def register(sub: Any) -> None:
                    help=f"I_SPPA (W/cm²) flagged when exceeded at the focal peak (default {ISPPA_LIMIT_W_CM2:g})")
     p.add_argument("--volume", metavar="F.nii.gz", help="also write |p| (Pa) in 3-D as NIfTI (.nii or .nii.gz) on the "
                    "simulation grid, its affine in the transducer frame (mm): one more march")
+    p.add_argument("--volume-ct", metavar="F.nii.gz", dest="volume_ct", help="also write |p| (Pa) resampled into the "
+                   "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
                    dest="volume_box_mm", help="write the --volume on this box only (mm, transducer frame), for large grids")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
@@ -83,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--volume-box-mm: crops the --volume, which is not asked for")
     if args.volume is not None:
         volume_path(args.volume, "--volume")
+    if args.volume_ct is not None:
+        volume_path(args.volume_ct, "--volume-ct")
     limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
@@ -94,6 +98,11 @@ def run(args: argparse.Namespace) -> int:
     f = sim.field(phases, args.z_mm)
     # The volume before anything is written: a box outside the grid leaves no file behind.
     volume = None if args.volume is None else sim.pressure_volume(phases, args.volume_box_mm)
+    in_ct = None
+    if args.volume_ct is not None:
+        if not sim.has_ct:
+            raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
+        in_ct = sim.pressure_volume(phases, in_ct=True)
     write_npz(
         args.out,
         {
@@ -110,13 +119,17 @@ def run(args: argparse.Namespace) -> int:
     )
     focus = f.focus()
     lines = focus_lines(sim, f, focus, args.out)
-    volume_json = None
+    written = {}
+    for key, path, v in (("volume", args.volume, volume), ("volume_ct", args.volume_ct, in_ct)):
+        if v is None:
+            continue
+        v.to_nifti(path)
+        nk, nj, ni = v.pressure_pa.shape
+        frame = "the CT's voxels and affine" if v.frame == "ct" else "transducer frame"
+        lines.insert(-1, f"field: |p| in 3-D (Pa) on {ni} x {nj} x {nk} voxels, {frame} -> {path}")
+        written[key] = {"path": path, "shape_ijk": [ni, nj, nk], "max_pa": float(v.pressure_pa.max())}
     if volume is not None:
-        volume.to_nifti(args.volume)
-        nz, ny, nx = volume.pressure_pa.shape
-        lines.insert(-1, f"field: |p| in 3-D (Pa) on {nx} x {ny} x {nz} voxels, transducer frame -> {args.volume}")
-        volume_json = {"path": args.volume, "shape_xyz": [nx, ny, nz], "box_mm": args.volume_box_mm,
-                       "max_pa": float(volume.pressure_pa.max())}
+        written["volume"]["box_mm"] = args.volume_box_mm
     rows = exceeded(focus, sim.frequency_hz, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
@@ -127,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
         field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
-    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus, "volume": volume_json,
+    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus, "volume": written.get("volume"),
+                   "volume_ct": written.get("volume_ct"),
                    "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0

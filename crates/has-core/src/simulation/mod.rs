@@ -26,7 +26,7 @@ mod regrid;
 mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
-pub use volume::{window_of_box, PressureVolume};
+pub use volume::{window_of_box, CtPressureVolume, PressureVolume};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).

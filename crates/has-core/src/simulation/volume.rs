@@ -6,6 +6,7 @@ use crate::error::{HasError, Result};
 use crate::memory;
 use crate::physics::grid::Grid;
 use crate::physics::propagation::{RecordSpec, Window};
+use rayon::prelude::*;
 
 /// `|p|` on a box of the grid, with the map from its voxels to the transducer frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -17,6 +18,18 @@ pub struct PressureVolume {
     /// Position (m, transducer frame) of voxel `(i, j, k)` (column, row, plane within the box):
     /// `affine · (i, j, k, 1)`.
     pub affine: [[f64; 4]; 3],
+}
+
+/// `|p|` resampled into the voxel grid of the scenario's CT, to open on top of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CtPressureVolume {
+    /// The CT's shape `(nk, nj, ni)`.
+    pub shape: [usize; 3],
+    /// `|p|` (Pa) in single precision, row-major `(k, j, i)` as the CT's voxels: zero outside the
+    /// simulation grid.
+    pub pressure: Vec<f32>,
+    /// The CT file's affine from voxel (i, j, k) to RAS+ mm.
+    pub ras_affine: [[f64; 4]; 3],
 }
 
 /// Bytes a voxel takes while a volume is made: the march records the box in complex double
@@ -46,6 +59,57 @@ impl Simulation {
         let affine = [[g.dx, 0.0, 0.0, origin[0]], [0.0, g.dy, 0.0, origin[1]], [0.0, 0.0, g.dz, origin[2]]];
         Ok(PressureVolume { window, pressure, affine })
     }
+}
+
+impl Simulation {
+    /// `|p|` of the beam driven with `added` resampled into the voxel grid of the scenario's CT
+    /// (trilinear between the simulation's samples; zero where a voxel lies outside the grid),
+    /// with the CT's own affine: a viewer lays it on the CT without a transform. Needs a `[ct]`
+    /// scenario; refused before the march when the two volumes would not fit in memory.
+    pub fn pressure_volume_in_ct(&self, added: &[f64]) -> Result<CtPressureVolume> {
+        let Some(ct) = self.medium.ct.as_ref() else {
+            return Err(HasError::invalid("volume_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
+        };
+        let (shape, ras_affine, to_frame) = ct.voxel_grid();
+        let g = &self.grid;
+        let voxels = shape.iter().product::<usize>() as u64;
+        memory::check(
+            || format!("a pressure volume on the CT's {} x {} x {} voxels", shape[2], shape[1], shape[0]),
+            voxels * 4 + (g.nx * g.ny * g.nz) as u64 * BYTES_PER_VOXEL,
+            "crop the CT, or use a coarser grid",
+        )?;
+        let v = self.pressure_volume(added, None)?;
+        let [_, nj, ni] = shape;
+        let mut pressure = vec![0.0f32; voxels as usize];
+        pressure.par_chunks_mut(ni * nj).enumerate().for_each(|(k, plane)| {
+            for (f, out) in plane.iter_mut().enumerate() {
+                let ijk = [(f % ni) as f64, (f / ni) as f64, k as f64];
+                let p: [f64; 3] = std::array::from_fn(|r| (0..3).map(|c| to_frame[r][c] * ijk[c]).sum::<f64>() + to_frame[r][3]);
+                *out = trilinear(g, &v.pressure, p);
+            }
+        });
+        Ok(CtPressureVolume { shape, pressure, ras_affine })
+    }
+}
+
+/// `values` (one per grid sample, row-major (plane, row, column)) at the point `p` (m), trilinear
+/// between the eight samples around it; zero outside the grid.
+fn trilinear(g: &Grid, values: &[f32], p: [f64; 3]) -> f32 {
+    let at = [p[0] / g.dx + (g.nx / 2) as f64, p[1] / g.dy + (g.ny / 2) as f64, (p[2] - g.z0) / g.dz];
+    let n = [g.nx, g.ny, g.nz];
+    if (0..3).any(|a| !(at[a] >= 0.0 && at[a] <= (n[a] - 1) as f64)) {
+        return 0.0;
+    }
+    let base: [usize; 3] = std::array::from_fn(|a| (at[a].floor() as usize).min(n[a] - 2));
+    let w: [f64; 3] = std::array::from_fn(|a| at[a] - base[a] as f64);
+    let mut sum = 0.0;
+    for corner in 0..8 {
+        let pick = |a: usize| corner >> a & 1;
+        let weight: f64 = (0..3).map(|a| if pick(a) == 1 { w[a] } else { 1.0 - w[a] }).product();
+        let (i, j, k) = (base[0] + pick(0), base[1] + pick(1), base[2] + pick(2));
+        sum += weight * values[(k * g.ny + j) * g.nx + i] as f64;
+    }
+    sum as f32
 }
 
 /// The box of `grid` holding the samples within `[lo, hi]` (m, per axis x, y, z), or why there
@@ -114,5 +178,27 @@ mod tests {
         let outside = window_of_box(g, [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]).unwrap_err().to_string();
         assert!(outside.contains("holds no sample of the grid"), "{outside}");
         assert!(window_of_box(g, hi, lo).is_err());
+    }
+
+    /// Trilinear interpolation gives a field linear in x, y and z exactly (to float32) at the
+    /// samples and between them, and zero outside the grid.
+    #[test]
+    fn trilinear_is_exact_on_a_linear_field() {
+        let g = Grid::new(6, 5, 1e-3, 2e-3, 4, 0.5e-3, 10e-3).unwrap();
+        let f = |p: [f64; 3]| 10.0 + 2e3 * p[0] + 3e3 * p[1] + 4e3 * (p[2] - g.z0);
+        let mut values = Vec::new();
+        for k in 0..g.nz {
+            for j in 0..g.ny {
+                for i in 0..g.nx {
+                    values.push(f([g.x(i), g.y(j), g.z(k)]) as f32);
+                }
+            }
+        }
+        for p in [[g.x(1), g.y(2), g.z(1)], [0.3e-3, -1.7e-3, 11.2e-3], [g.x(5), g.y(4), g.z(3)]] {
+            let (got, want) = (trilinear(&g, &values, p) as f64, f(p));
+            assert!((got - want).abs() < 1e-5 * want.abs(), "{p:?}: {got} vs {want}");
+        }
+        assert_eq!(trilinear(&g, &values, [0.0, 0.0, 9e-3]), 0.0);
+        assert_eq!(trilinear(&g, &values, [g.x(5) + 1e-4, 0.0, 11e-3]), 0.0);
     }
 }

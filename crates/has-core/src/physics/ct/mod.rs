@@ -50,6 +50,10 @@ pub struct CtMedium {
     hu: Arc<Vec<f32>>,
     /// Transducer frame (m) to continuous voxel index (i, j, k).
     frame_to_voxel: [[f64; 4]; 3],
+    /// Voxel index (i, j, k) to the transducer frame (m).
+    voxel_to_frame: [[f64; 4]; 3],
+    /// Voxel index (i, j, k) to RAS+ mm: the file's affine, as read.
+    ras_affine: [[f64; 4]; 3],
     /// Smallest voxel edge, m.
     finest_voxel: f64,
     /// Lowest and highest corner of the box the volume spans, transducer frame, m.
@@ -181,6 +185,8 @@ impl CtMedium {
             shape: volume.shape,
             hu: Arc::new(volume.values),
             frame_to_voxel,
+            voxel_to_frame,
+            ras_affine: volume.affine,
             finest_voxel,
             bounds,
             conversion,
@@ -191,6 +197,12 @@ impl CtMedium {
     /// voxels are shared, not copied.
     pub fn without_bone(&self) -> CtMedium {
         CtMedium { conversion: self.conversion.without_bone(), ..self.clone() }
+    }
+
+    /// The CT's voxel grid: its shape `(nk, nj, ni)`, the file's affine from voxel (i, j, k) to
+    /// RAS+ mm, and the map from voxel (i, j, k) to the transducer frame (m).
+    pub fn voxel_grid(&self) -> ([usize; 3], [[f64; 4]; 3], [[f64; 4]; 3]) {
+        (self.shape, self.ras_affine, self.voxel_to_frame)
     }
 
     /// Lowest and highest corner of the box the CT spans in the transducer frame, m.
