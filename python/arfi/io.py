@@ -94,16 +94,20 @@ def volume_path(path: str | os.PathLike[str], name: str = "volume") -> Path:
 def write_volume(path: str | os.PathLike[str], values: ArrayLike, affine_mm: ArrayLike, description: str) -> None:
     """Writes a 3-D volume given as [k, j, i] as NIfTI-1 (i fastest, as NIfTI orders voxels,
     float32) with its 4 x 4 affine (mm) as qform and sform, atomically."""
+    save_nifti(volume_path(path), np.asarray(values, dtype=np.float32).transpose(2, 1, 0), affine_mm, description)
+
+
+def save_nifti(path: Path, data: NDArray[np.float32], affine_mm: ArrayLike, description: str) -> None:
+    """Writes ``data`` (indexed [i, j, k]) as NIfTI-1 with the 4 x 4 ``affine_mm`` as qform and
+    sform, units mm and ``description`` in the header, atomically."""
     import nibabel as nib
 
-    p = volume_path(path)
-    data = np.asarray(values, dtype=np.float32).transpose(2, 1, 0)
     img = nib.Nifti1Image(data, np.asarray(affine_mm, dtype=np.float64))
     img.set_qform(img.affine, code=1)
     img.set_sform(img.affine, code=1)
     img.header.set_xyzt_units(xyz="mm")
     img.header["descrip"] = description.encode()[:79]
-    with atomic_path(p) as tmp:
+    with atomic_path(path) as tmp:
         nib.save(img, str(tmp))
 
 
@@ -124,17 +128,8 @@ def write_arfi_image(
 ) -> None:
     """Writes an MR-ARFI phase image (rad) as NIfTI with its affine (mm, transducer frame), and
     the sidecar JSON when given; pixels without MR signal are NaN."""
-    import nibabel as nib
-
     p = arfi_image_path(path)
-    data = np.asarray(image, dtype=np.float32).reshape(volume_shape)
-    img = nib.Nifti1Image(data, np.asarray(affine_mm, dtype=np.float64))
-    img.set_qform(img.affine, code=1)
-    img.set_sform(img.affine, code=1)
-    img.header.set_xyzt_units(xyz="mm")
-    img.header["descrip"] = b"arfi: MR-ARFI displacement phase (rad)"
-    with atomic_path(p) as tmp:
-        nib.save(img, str(tmp))
+    save_nifti(p, np.asarray(image, dtype=np.float32).reshape(volume_shape), affine_mm, "arfi: MR-ARFI displacement phase (rad)")
     if sidecar is not None:
         write_json(sidecar_path(p), sidecar)
 

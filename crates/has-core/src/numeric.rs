@@ -50,6 +50,12 @@ pub fn unit(v: [f64; 3]) -> [f64; 3] {
     v.map(|x| x / norm)
 }
 
+/// The affine map given by its 3 x 4 rows applied to the point `p`: `m · (p, 1)`.
+pub fn affine_apply(m: &[[f64; 4]; 3], p: [f64; 3]) -> [f64; 3] {
+    let row = |r: &[f64; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
+    [row(&m[0]), row(&m[1]), row(&m[2])]
+}
+
 /// Pearson correlation coefficient of two equally long samples.
 pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;

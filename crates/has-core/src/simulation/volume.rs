@@ -4,6 +4,7 @@
 use super::Simulation;
 use crate::error::{HasError, Result};
 use crate::memory;
+use crate::numeric::affine_apply;
 use crate::physics::grid::Grid;
 use crate::physics::propagation::{RecordSpec, Window};
 use rayon::prelude::*;
@@ -83,8 +84,7 @@ impl Simulation {
         let mut pressure = vec![0.0f32; voxels as usize];
         pressure.par_chunks_mut(ni * nj).enumerate().for_each(|(k, plane)| {
             for (f, out) in plane.iter_mut().enumerate() {
-                let ijk = [(f % ni) as f64, (f / ni) as f64, k as f64];
-                let p: [f64; 3] = std::array::from_fn(|r| (0..3).map(|c| to_frame[r][c] * ijk[c]).sum::<f64>() + to_frame[r][3]);
+                let p = affine_apply(&to_frame, [(f % ni) as f64, (f / ni) as f64, k as f64]);
                 *out = trilinear(g, &v.pressure, p);
             }
         });

@@ -28,6 +28,7 @@ pub use conversion::{BoneModel, HuConversion, Porosity, HU_RANGE};
 
 use crate::error::{HasError, Result};
 use crate::nifti::Volume;
+use crate::numeric::affine_apply;
 use crate::physics::grid::Grid;
 use crate::physics::material::Properties;
 use crate::physics::tissue::MrResponse;
@@ -124,11 +125,6 @@ fn invert(m: &[[f64; 4]; 3]) -> Option<[[f64; 4]; 3]> {
     Some(inv)
 }
 
-fn apply(m: &[[f64; 4]; 3], p: [f64; 3]) -> [f64; 3] {
-    let row = |r: &[f64; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
-    [row(&m[0]), row(&m[1]), row(&m[2])]
-}
-
 impl CtMedium {
     /// Places `volume` (HU, affine to RAS+ mm) in the transducer frame by `patient_to_transducer_mm`
     /// (rigid, DICOM LPS mm → transducer mm) and checks every value: finite, within
@@ -169,7 +165,7 @@ impl CtMedium {
         let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
         for corner in 0..8 {
             let pick = |bit: usize, n: usize| if corner >> bit & 1 == 1 { n as f64 - 0.5 } else { -0.5 };
-            let p = apply(&voxel_to_frame, [pick(0, ni), pick(1, nj), pick(2, nk)]);
+            let p = affine_apply(&voxel_to_frame, [pick(0, ni), pick(1, nj), pick(2, nk)]);
             for a in 0..3 {
                 bounds[0][a] = bounds[0][a].min(p[a]);
                 bounds[1][a] = bounds[1][a].max(p[a]);
@@ -218,7 +214,7 @@ impl CtMedium {
     /// HU at a point of the transducer frame (m): that of the voxel containing it (voxels are
     /// boxes of one material, as the scanner reports them); `None` outside the volume.
     pub fn hu_at(&self, p: [f64; 3]) -> Option<f64> {
-        let q = apply(&self.frame_to_voxel, p);
+        let q = affine_apply(&self.frame_to_voxel, p);
         let [nk, nj, ni] = self.shape;
         let index = |v: f64, n: usize| {
             let i = v.round();
