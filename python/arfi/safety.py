@@ -1,5 +1,5 @@
-"""Safety lines a user sets: exposure limits checked at the focal peak and at the hotter places
-``arfi field`` names.
+"""Safety lines a user sets: exposure limits checked at the focal peak and at the hottest place of
+each tissue class (skull, scalp, brain, water …) over the whole grid.
 
 The defaults are the common guidance for diagnostic ultrasound (FDA, Track 3): a mechanical index
 of 1.9 and a spatial-peak pulse-average intensity of 190 W/cm². Therapy and MR-ARFI pulses may be
@@ -26,28 +26,27 @@ def check_limit(value: float, name: str) -> float:
     return float(value)
 
 
-def exceeded(focus: dict[str, Any], frequency_hz: float, mi_limit: float = MI_LIMIT,
+def exceeded(focus: dict[str, Any], mi_limit: float = MI_LIMIT,
              isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2) -> list[dict[str, Any]]:
     """The exposures above the limits, one entry each (``where``, ``tissue``, ``quantity``,
-    ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak, and the mechanical
-    index at the hottest place on the plane and on the axis when those are hotter than the focus.
-    ``focus`` is ``Field.focus()`` with the hottest places' ``*_hottest_tissue`` added."""
+    ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak, and at the hottest
+    place of each tissue class (``focus["hottest"]``) unless that place is the focal peak's own
+    tissue no hotter than the peak (the focus itself). ``focus`` is ``Field.focus()``."""
     mi_limit = check_limit(mi_limit, "mi_limit")
     isppa_limit_w_cm2 = check_limit(isppa_limit_w_cm2, "isppa_limit_w_cm2")
     rows: list[dict[str, Any]] = []
 
-    def flag(where: str, tissue: str | None, quantity: str, value: float, limit: float) -> None:
-        if value > limit:
-            rows.append({"where": where, "tissue": tissue, "quantity": quantity, "value": value, "limit": limit})
+    def flag(where: str, tissue: str | None, exposure: dict[str, Any]) -> None:
+        for quantity, limit in (("mechanical_index", mi_limit), ("isppa_w_cm2", isppa_limit_w_cm2)):
+            if exposure[quantity] > limit:
+                rows.append({"where": where, "tissue": tissue, "quantity": quantity, "value": exposure[quantity], "limit": limit})
 
-    if focus.get("focal_peak_pa") is not None:
-        flag("focal peak", focus["focal_tissue"], "mechanical_index", focus["mechanical_index"], mi_limit)
-        flag("focal peak", focus["focal_tissue"], "isppa_w_cm2", focus["isppa_w_cm2"], isppa_limit_w_cm2)
-    for key in ("plane", "axis"):
-        pa = focus.get(f"{key}_hottest_pa")
-        if pa is not None:
-            mi = pa / 1e6 / math.sqrt(frequency_hz / 1e6)
-            flag(f"hottest on the {key}", focus.get(f"{key}_hottest_tissue"), "mechanical_index", mi, mi_limit)
+    peak = focus.get("focal_peak_pa")
+    if peak is not None:
+        flag("focal peak", focus["focal_tissue"], focus)
+    for tissue, h in focus.get("hottest", {}).items():
+        if not (peak is not None and tissue == focus["focal_tissue"] and h["pressure_pa"] <= peak):
+            flag("hottest place", tissue, h)
     return rows
 
 

@@ -131,10 +131,14 @@ def test_field_through_a_head_reports_the_focus_at_the_target(tmp_path, capsys):
     # samples allow (the refined peak is at most a few % above them).
     assert r["peak_to_target_mm"] < 7.0 and r["focal_tissue"] != "bone", r
     assert max(r["plane_peak_pa"], r["axis_peak_pa"]) <= r["focal_peak_pa"] < 1.1 * max(r["plane_peak_pa"], r["axis_peak_pa"])
-    hottest = [ln for ln in out.splitlines() if "hottest" in ln]
+    hottest = [ln for ln in out.splitlines() if "hottest on the" in ln]
     for line in hottest:
         assert line.split("hottest on the ")[1].split(":")[1].split(",")[0].strip() in {"skull", "scalp", "water"}, line
     for key in ("plane", "axis"):
         assert (r[f"{key}_hottest_pa"] is None) == (f"{key}_hottest_tissue" not in r)
+    # Each tissue's hottest place over the grid: the skull's and the scalp's are named, and the
+    # brain's is a sample of the focal lobe (the peak, refined between samples, a few % above it as above).
+    assert {"skull", "scalp", "brain"} <= set(r["hottest"]), r["hottest"]
+    assert r["hottest"]["brain"]["pressure_pa"] <= r["focal_peak_pa"] < 1.1 * r["hottest"]["brain"]["pressure_pa"]
     data = np.load(tmp_path / "f.npz")
     assert np.allclose(data["axis_x_mm"], data["axis_z_mm"] * 10.0 / 140.0)

@@ -1,6 +1,6 @@
 """Nuisance parameters fitted jointly with per-element phases (``fit_nuisance``): on a small
 array (256 elements) so that each estimate takes seconds. The physics claims (data from a
-finer-grid simulation, 1024 elements, seeds 1-5) are in crates/has-core/tests/nuisance.rs."""
+finer-grid simulation, 1024 elements, seeds 1-5) are in crates/has-core/tests/suite/nuisance.rs."""
 
 from __future__ import annotations
 

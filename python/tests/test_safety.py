@@ -13,17 +13,25 @@ from arfi.safety import exceeded
 
 
 def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
+    def place(pa: float, rho_c: float) -> dict:
+        return {"pressure_pa": pa, "position_mm": [0.0, 0.0, 0.0], "mechanical_index": pa / 1e6 / math.sqrt(0.5),
+                "isppa_w_cm2": pa ** 2 / (2 * rho_c) * 1e-4}
+
     focus = {"focal_peak_pa": 1.2e6, "focal_tissue": "brain", "mechanical_index": 1.2 / math.sqrt(0.5), "isppa_w_cm2": 46.0,
-             "plane_hottest_pa": 1.5e6, "plane_hottest_tissue": "skull", "axis_hottest_pa": None}
-    rows = exceeded(focus, 0.5e6, mi_limit=1.9, isppa_limit_w_cm2=190.0)
-    # The focus: MI 1.70 and 46 W/cm², within; the skull's 1.5 MPa at 0.5 MHz: MI 2.12, above 1.9.
-    assert rows == [{"where": "hottest on the plane", "tissue": "skull", "quantity": "mechanical_index",
+             "hottest": {"skull": place(1.5e6, 3.1e6 * 1.9), "brain": place(1.19e6, 1.6e6), "water": place(0.5e6, 1.5e6)}}
+    rows = exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)
+    # The focus: MI 1.70 and 46 W/cm², within; the skull's 1.5 MPa at 0.5 MHz: MI 2.12, above 1.9
+    # (its 19 W/cm² within); the brain's hottest sample is the focus itself, not flagged again.
+    assert rows == [{"where": "hottest place", "tissue": "skull", "quantity": "mechanical_index",
                      "value": pytest.approx(1.5 / math.sqrt(0.5)), "limit": 1.9}]
-    assert [r["quantity"] for r in exceeded(focus, 0.5e6, mi_limit=1.5, isppa_limit_w_cm2=40.0)] == \
-        ["mechanical_index", "isppa_w_cm2", "mechanical_index"]
+    assert [(r["where"], r["quantity"]) for r in exceeded(focus, mi_limit=1.5, isppa_limit_w_cm2=40.0)] == \
+        [("focal peak", "mechanical_index"), ("focal peak", "isppa_w_cm2"), ("hottest place", "mechanical_index")]
+    # A place in the focal peak's tissue hotter than the peak (a side lobe) is flagged.
+    focus["hottest"]["brain"] = place(1.4e6, 1.6e6)
+    assert [r["tissue"] for r in exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)] == ["skull", "brain"]
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="mi_limit"):
-            exceeded(focus, 0.5e6, mi_limit=bad)
+            exceeded(focus, mi_limit=bad)
 
 
 def test_arfi_field_flags_the_default_focus_and_takes_the_users_limits(tmp_path, capsys):

@@ -64,7 +64,7 @@ def test_field_on_the_focal_plane(sim):
                "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index", "focal_tissue"]
     assert list(focus) == ["target_mm", *metrics, "plane_peak_pa", "plane_peak_x_mm", "plane_peak_y_mm", "plane_peak_to_axis_mm",
                            "plane_hottest_pa", "plane_hottest_mm", "axis_peak_pa", "axis_peak_z_mm", "axis_peak_mm",
-                           "axis_hottest_pa", "axis_hottest_mm"]
+                           "axis_hottest_pa", "axis_hottest_mm", "hottest"]
     # Each metric is also the Field's attribute of the same name; the phantom's focus lies within a
     # few mm of the target (the peak sits short of the geometric focus) and above the samples.
     assert all(focus[k] == getattr(f, k) for k in metrics)

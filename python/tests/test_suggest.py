@@ -1,7 +1,7 @@
 """The next acquisition of a per-element estimate (``suggest=True`` / ``arfi estimate --suggest``),
 on a small array (256 elements) so that each estimate takes seconds. The information
 arithmetic itself (Jacobian, expected focus) is checked against finite differences, a closed form
-and Monte Carlo in crates/has-core/tests/information.rs."""
+and Monte Carlo in crates/has-core/tests/suite/information.rs."""
 
 from __future__ import annotations
 

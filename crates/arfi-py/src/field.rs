@@ -207,6 +207,24 @@ impl CoreField {
         self.field.metrics.as_ref().map(|m| m.tissue.clone())
     }
 
+    /// The hottest grid sample of each tissue class over the whole grid, hottest first: `skull`
+    /// (bone), `scalp` (the target's soft tissue whose straight path to the target crosses bone),
+    /// else the tissue's name (`brain`, `water` …). Each: `pressure_pa`, `position_mm`,
+    /// `isppa_w_cm2`, `mechanical_index`.
+    #[getter]
+    fn hottest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for h in &self.field.hottest {
+            let e = PyDict::new(py);
+            e.set_item("pressure_pa", h.pressure)?;
+            e.set_item("position_mm", point_mm(h.position).to_vec())?;
+            e.set_item("isppa_w_cm2", h.isppa * 1e-4)?;
+            e.set_item("mechanical_index", h.mechanical_index)?;
+            d.set_item(&h.tissue, e)?;
+        }
+        Ok(d)
+    }
+
     /// What the field says at its target, in the JSON keys of `arfi field`: the focal metrics in
     /// 3-D (`focal_peak_mm`, `focal_peak_pa`, `peak_to_target_mm`, `fwhm_6db_mm`,
     /// `fwhm_6db_across_mm`, `fwhm_3db_mm`, `focal_volume_6db_mm3`, `isppa_w_cm2`,
@@ -214,7 +232,7 @@ impl CoreField {
     /// the plane (`plane_peak_*`: the lobe around the axis's point there, and the peak's distance
     /// from that point, `plane_peak_to_axis_mm`) and along the axis (`axis_peak_*`), and any hotter
     /// place than the peak on each (`plane_hottest_*`, `axis_hottest_*`: None when the peak is the
-    /// hottest). Pa and mm.
+    /// hottest), and the hottest place of each tissue class (`hottest`). Pa and mm.
     fn focus<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
         let py = slf.py();
         let d = PyDict::new(py);
@@ -234,6 +252,7 @@ impl CoreField {
         d.set_item("axis_peak_z_mm", axis[2])?;
         d.set_item("axis_peak_mm", axis.to_vec())?;
         hottest_items(&d, "axis", &f.axis)?;
+        d.set_item("hottest", slf.get().hottest(py)?)?;
         Ok(d)
     }
 

@@ -376,14 +376,35 @@ impl Medium {
     /// The name of the tissue at a point: the CT's class where it holds tissue (`"bone"` or its
     /// soft tissue's material name), `"voxel map"` inside a voxel map, else the material's name.
     pub fn tissue_at(&self, x: f64, y: f64, z: f64) -> String {
-        let ct = self.ct.as_ref().and_then(|ct| Some(ct.conversion.tissue_name(ct.hu_at([x, y, z])?)?.to_string()));
-        if let Some(name) = ct {
+        self.tissue_name_at(x, y, z).to_string()
+    }
+
+    /// Every name [`Medium::tissue_at`] may give, each once: the materials', then `"voxel map"`
+    /// with a voxel map, then a CT's soft tissue and `"bone"`.
+    pub fn tissue_names(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = self.materials.iter().map(|m| m.name.as_str()).collect();
+        names.extend(self.voxels.as_ref().map(|_| "voxel map"));
+        if let Some(ct) = &self.ct {
+            names.extend([ct.conversion.soft_tissue.name.as_str(), "bone"]);
+        }
+        let mut unique = Vec::with_capacity(names.len());
+        for n in names {
+            if !unique.contains(&n) {
+                unique.push(n);
+            }
+        }
+        unique
+    }
+
+    /// [`Medium::tissue_at`] without a copy of the name.
+    pub fn tissue_name_at(&self, x: f64, y: f64, z: f64) -> &str {
+        if let Some(name) = self.ct.as_ref().and_then(|ct| ct.conversion.tissue_name(ct.hu_at([x, y, z])?)) {
             return name;
         }
         if self.voxels.as_ref().is_some_and(|v| v.index(x, y, z).is_some()) {
-            return "voxel map".into();
+            return "voxel map";
         }
-        self.materials[self.material_at(x, y, z)].name.clone()
+        &self.materials[self.material_at(x, y, z)].name
     }
 
     /// Lowest sound speed anywhere in the medium (sets the shortest wavelength).

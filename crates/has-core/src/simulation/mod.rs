@@ -6,6 +6,7 @@
 
 use crate::error::{HasError, Result};
 use crate::focal::FocalMetrics;
+use crate::memory;
 use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Material, Medium};
@@ -22,10 +23,12 @@ use std::sync::Arc;
 mod build;
 mod focus;
 mod grid;
+mod hottest;
 mod regrid;
 mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
+pub use hottest::TissueHottest;
 pub use volume::{window_of_box, CtPressureVolume, PressureVolume};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
@@ -119,6 +122,9 @@ pub struct Field {
     /// The focal region's metrics in 3-D ([`FocalMetrics`]); `None` when the target lies outside
     /// the grid or the -6 dB region around it reaches the grid's edge.
     pub metrics: Option<FocalMetrics>,
+    /// The hottest place of each tissue class over the whole grid, hottest first
+    /// ([`Simulation::hottest_by_tissue`]).
+    pub hottest: Vec<TissueHottest>,
 }
 
 impl Simulation {
@@ -391,9 +397,22 @@ impl Simulation {
         }
         let plane = g.plane_index(z);
         let slope = self.axis_slope();
-        let spec =
-            RecordSpec { planes: vec![plane], axis: true, axis_slope: slope, reflections: self.reflections, ..RecordSpec::default() };
+        let whole = Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx };
+        memory::check(
+            || format!("|p| on the whole {} x {} x {} grid (for the hottest place of each tissue)", g.nx, g.ny, g.nz),
+            whole.len() as u64 * volume::BYTES_PER_VOXEL,
+            "use a coarser grid ([grid] spacing_mm)",
+        )?;
+        let spec = RecordSpec {
+            planes: vec![plane],
+            axis: true,
+            axis_slope: slope,
+            magnitude: Some(whole),
+            reflections: self.reflections,
+            ..RecordSpec::default()
+        };
         let (mut rec, metrics) = self.record_with_focus(&self.source_field(added)?, spec)?;
+        let hottest = self.hottest_by_tissue(&std::mem::take(&mut rec.magnitude));
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
             pressure,
@@ -405,6 +424,7 @@ impl Simulation {
             axis_pressure: rec.axis,
             surface_pressure: self.source.face_pressure,
             metrics,
+            hottest,
         })
     }
 

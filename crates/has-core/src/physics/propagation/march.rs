@@ -99,6 +99,9 @@ pub struct RecordSpec {
     pub axis_slope: [f64; 2],
     /// Keep a box of samples: planes × rows × columns.
     pub window: Option<Window>,
+    /// Keep `|p|` on a box in single precision ([`Recording::magnitude`]): 8 bytes a sample
+    /// while marching (the complex sum), 4 after, where `window` takes 16.
+    pub magnitude: Option<Window>,
     /// Keep the power `∫ |p|² / (2·Z) dA` (W) of the forward wave through every plane (inside a
     /// reverberating layer: of its first pass).
     pub power: bool,
@@ -153,6 +156,8 @@ pub struct Recording {
     pub axis: Vec<C64>,
     /// Window complex pressure (Pa), row-major (plane, row, column).
     pub window: Vec<C64>,
+    /// `|p|` (Pa) on the `magnitude` box, row-major (plane, row, column), single precision.
+    pub magnitude: Vec<f32>,
     /// Power of the forward wave (W), one per plane from 0 to the last one marched.
     pub power: Vec<f64>,
 }
@@ -160,12 +165,12 @@ pub struct Recording {
 impl RecordSpec {
     /// Whether nothing is to be kept (a march for it would be wasted).
     pub fn records_nothing(&self) -> bool {
-        self.planes.is_empty() && !self.axis && self.window.is_none() && !self.power
+        self.planes.is_empty() && !self.axis && self.window.is_none() && self.magnitude.is_none() && !self.power
     }
 
     pub(super) fn last_plane(&self, nz: usize) -> usize {
         let mut last = self.planes.iter().copied().max().unwrap_or(0);
-        if let Some(w) = &self.window {
+        for w in self.window.iter().chain(&self.magnitude) {
             last = last.max(w.planes.end.saturating_sub(1));
         }
         if self.axis || self.power || self.reflections {
@@ -209,6 +214,9 @@ pub(super) struct Recorder<'a> {
     planes: Vec<usize>,
     last: usize,
     rec: Recording,
+    /// The complex pressure on the `magnitude` box as (re, im) pairs in single precision,
+    /// made `|p|` in place by [`Recorder::finish`].
+    magnitude: Vec<f32>,
 }
 
 impl<'a> Recorder<'a> {
@@ -221,13 +229,25 @@ impl<'a> Recorder<'a> {
             planes: vec![vec![zero; grid.lateral_len()]; planes.len()],
             axis: if spec.axis { vec![zero; last + 1] } else { Vec::new() },
             window: vec![zero; spec.window.as_ref().map_or(0, Window::len)],
+            magnitude: Vec::new(),
             power: if spec.power { vec![0.0; last + 1] } else { Vec::new() },
         };
-        Recorder { grid, spec, planes, last, rec }
+        let magnitude = vec![0.0; 2 * spec.magnitude.as_ref().map_or(0, Window::len)];
+        Recorder { grid, spec, planes, last, rec, magnitude }
     }
 
-    /// What was recorded.
-    pub(super) fn finish(self) -> Recording {
+    /// What was recorded: the magnitude box's pairs (re, im) become `|p|` in place, sample `i`
+    /// written over pair `i/2`'s half (at or before the pair it reads, so never over an unread
+    /// one), and the second half is released.
+    pub(super) fn finish(mut self) -> Recording {
+        let mut m = std::mem::take(&mut self.magnitude);
+        let n = m.len() / 2;
+        for i in 0..n {
+            m[i] = m[2 * i].hypot(m[2 * i + 1]);
+        }
+        m.truncate(n);
+        m.shrink_to_fit();
+        self.rec.magnitude = m;
         self.rec
     }
 
@@ -264,6 +284,19 @@ impl<'a> Recorder<'a> {
                     .for_each(|(a, i)| *a += pressure(i));
             }
         }
+        if let Some(w) = self.spec.magnitude.as_ref().filter(|w| w.planes.contains(&n)) {
+            let (nr, nc) = (w.rows.len(), w.cols.len());
+            for (k, r) in w.rows.clone().enumerate() {
+                let base = 2 * ((n - w.planes.start) * nr + k) * nc;
+                self.magnitude[base..base + 2 * nc].chunks_exact_mut(2).zip(r * g.nx + w.cols.start..r * g.nx + w.cols.end).for_each(
+                    |(a, i)| {
+                        let p = pressure(i);
+                        a[0] += p.re as f32;
+                        a[1] += p.im as f32;
+                    },
+                );
+            }
+        }
     }
 
     /// Adds what `other` (a recorder of the same spec) recorded.
@@ -272,6 +305,7 @@ impl<'a> Recorder<'a> {
         rec.planes.iter_mut().zip(&more.planes).for_each(|(a, b)| a.iter_mut().zip(b).for_each(|(a, b)| *a += b));
         rec.axis.iter_mut().zip(&more.axis).for_each(|(a, b)| *a += b);
         rec.window.iter_mut().zip(&more.window).for_each(|(a, b)| *a += b);
+        self.magnitude.iter_mut().zip(&other.magnitude).for_each(|(a, b)| *a += b);
         rec.power.iter_mut().zip(&more.power).for_each(|(a, b)| *a += b);
     }
 

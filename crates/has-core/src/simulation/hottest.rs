@@ -1,0 +1,250 @@
+//! The hottest place of each tissue class over the whole grid: the safety line of the skull, the
+//! scalp and the brain (and of the water in front of a head) beside the focal peak.
+//!
+//! A grid sample is named as a user names a place: `skull` where the medium is bone, `scalp`
+//! where it is the target's own soft tissue but the straight path from it to the target crosses
+//! bone (the soft tissue outside the skull), else the medium's name for it (`brain`, `water`, a
+//! `[[material]]`'s name). The path test runs on the grid: a sample *sees* the target when it is
+//! not bone and either lies within one sample of the target along every axis, or the sample one
+//! step nearer along the line to the target sees it (the step: one sample along the axis of the
+//! largest index difference, the others rounded). Each sample's answer is kept, so the test costs
+//! one step per sample at most.
+
+use super::Simulation;
+use crate::physics::grid::Grid;
+use rayon::prelude::*;
+
+/// What the medium calls bone (a CT's class, or a `[[material]]` named so).
+const BONE: &str = "bone";
+
+/// The hottest grid sample of one tissue class, with the exposure there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TissueHottest {
+    /// The class: `skull`, `scalp`, or the medium's name of the tissue (`brain`, `water` …).
+    pub tissue: String,
+    /// `|p|` there (Pa).
+    pub pressure: f64,
+    /// The sample's position (m, transducer frame).
+    pub position: [f64; 3],
+    /// Spatial-peak pulse-average intensity there, `p² / (2·ρ·c)` (W/m²).
+    pub isppa: f64,
+    /// Mechanical index there, `p[MPa] / √f[MHz]` (in situ).
+    pub mechanical_index: f64,
+}
+
+/// Per grid sample: the index of its tissue's name in a list of names.
+struct TissueMap {
+    names: Vec<String>,
+    index: Vec<u8>,
+}
+
+impl Simulation {
+    /// The hottest sample of each tissue class (see the module docs) of `magnitude`, `|p|` (Pa)
+    /// on every grid sample (row-major plane, row, column), hottest class first. Classes with no
+    /// sample in the grid are left out; the first sample in row-major order wins a tie.
+    pub fn hottest_by_tissue(&self, magnitude: &[f32]) -> Vec<TissueHottest> {
+        let g = &self.grid;
+        assert_eq!(magnitude.len(), g.lateral_len() * g.nz, "one |p| per grid sample");
+        let mut out: Vec<TissueHottest> = hottest_samples(g, self.focus, &self.tissue_map(), magnitude)
+            .into_iter()
+            .map(|(tissue, p, s)| self.exposure(tissue, p as f64, sample_position(g, s)))
+            .collect();
+        out.sort_by(|a, b| b.pressure.total_cmp(&a.pressure));
+        out
+    }
+
+    /// The tissue of every grid sample (its centre), by name.
+    fn tissue_map(&self) -> TissueMap {
+        let g = &self.grid;
+        let names = self.medium.tissue_names();
+        assert!(names.len() < 256, "fewer than 256 tissue names");
+        let mut index = vec![0u8; g.lateral_len() * g.nz];
+        index.par_chunks_mut(g.lateral_len()).enumerate().for_each(|(k, plane)| {
+            for (s, out) in plane.iter_mut().enumerate() {
+                let name = self.medium.tissue_name_at(g.x(s % g.nx), g.y(s / g.nx), g.z(k));
+                *out = names.iter().position(|&n| n == name).expect("a name of tissue_names") as u8;
+            }
+        });
+        TissueMap { names: names.into_iter().map(String::from).collect(), index }
+    }
+
+    /// [`TissueHottest`] of `tissue` with `|p|` = `pressure` at `position`.
+    fn exposure(&self, tissue: String, pressure: f64, position: [f64; 3]) -> TissueHottest {
+        let [x, y, z] = position;
+        let p = self.medium.properties_at(x, y, z, self.frequency);
+        TissueHottest {
+            tissue,
+            pressure,
+            position,
+            isppa: pressure * pressure / (2.0 * p.density * p.sound_speed),
+            mechanical_index: pressure * 1e-6 / (self.frequency * 1e-6).sqrt(),
+        }
+    }
+}
+
+/// The hottest sample of each class of `map` (see the module docs) for the target `focus` (m):
+/// its class, `|p|` and index, in the order of the classes (the map's names, `bone` named
+/// `skull`, then `scalp`).
+fn hottest_samples(g: &Grid, focus: [f64; 3], map: &TissueMap, magnitude: &[f32]) -> Vec<(String, f32, usize)> {
+    let bone = map.names.iter().position(|n| n == BONE);
+    let target = g.nearest(focus).map(|[i, j, k]| (k * g.ny + j) * g.nx + i);
+    // The target's soft tissue splits into what sees the target and the scalp.
+    let split = target.map(|t| map.index[t] as usize).filter(|&t| bone.is_some() && Some(t) != bone);
+    let mut names: Vec<String> = map.names.iter().map(|n| if n == BONE { "skull".to_string() } else { n.clone() }).collect();
+    let scalp = names.len();
+    names.push("scalp".into());
+    let mut best: Vec<Option<(f32, usize)>> = vec![None; names.len()];
+    let mut sees = Sees::new(g, focus, &map.index, bone);
+    for (s, &p) in magnitude.iter().enumerate() {
+        let id = map.index[s] as usize;
+        // A sample cooler than the best of every class it may fall in changes nothing.
+        let may = |c: usize| best[c].map_or(true, |b| p > b.0);
+        if !(may(id) || (Some(id) == split && may(scalp))) {
+            continue;
+        }
+        let c = if Some(id) == split && !sees.sees(s) { scalp } else { id };
+        if may(c) {
+            best[c] = Some((p, s));
+        }
+    }
+    best.into_iter().zip(names).filter_map(|(b, tissue)| b.map(|(p, s)| (tissue, p, s))).collect()
+}
+
+/// Position (m) of grid sample `s` (row-major plane, row, column).
+fn sample_position(g: &Grid, s: usize) -> [f64; 3] {
+    let (k, r) = (s / g.lateral_len(), s % g.lateral_len());
+    [g.x(r % g.nx), g.y(r / g.nx), g.z(k)]
+}
+
+/// Whether grid samples see the target (see the module docs), each answer kept once found.
+struct Sees<'a> {
+    shape: [usize; 3],
+    /// The target in fractional sample indices (column, row, plane).
+    target: [f64; 3],
+    tissue: &'a [u8],
+    bone: Option<u8>,
+    /// 0: not known yet, 1: sees, 2: does not.
+    known: Vec<u8>,
+}
+
+impl<'a> Sees<'a> {
+    fn new(g: &Grid, focus: [f64; 3], tissue: &'a [u8], bone: Option<usize>) -> Self {
+        let target = [focus[0] / g.dx + (g.nx / 2) as f64, focus[1] / g.dy + (g.ny / 2) as f64, (focus[2] - g.z0) / g.dz];
+        let known = if bone.is_some() { vec![0; tissue.len()] } else { Vec::new() };
+        Sees { shape: [g.nx, g.ny, g.nz], target, tissue, bone: bone.map(|b| b as u8), known }
+    }
+
+    /// Whether sample `s` sees the target: follows the steps towards it until a sample with a
+    /// known answer, then gives every sample on the way that answer.
+    fn sees(&mut self, s: usize) -> bool {
+        let Some(bone) = self.bone else { return true };
+        let mut path = Vec::new();
+        let mut at = s;
+        let answer = loop {
+            match self.known[at] {
+                1 => break true,
+                2 => break false,
+                _ => {}
+            }
+            path.push(at);
+            if self.tissue[at] == bone {
+                break false;
+            }
+            match self.nearer(at) {
+                Some(next) => at = next,
+                None => break true,
+            }
+        };
+        for p in path {
+            // A sample beyond bone does not see the target; the bone itself does not either.
+            self.known[p] = if answer { 1 } else { 2 };
+        }
+        answer
+    }
+
+    /// The sample one step nearer the target than `s`, `None` when `s` lies within one sample of
+    /// it along every axis.
+    fn nearer(&self, s: usize) -> Option<usize> {
+        let [nx, ny, nz] = self.shape;
+        let v = [s % nx, s / nx % ny, s / (nx * ny)];
+        let d: [f64; 3] = std::array::from_fn(|a| self.target[a] - v[a] as f64);
+        let m = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        if m <= 1.0 {
+            return None;
+        }
+        let n = [nx, ny, nz];
+        let q: [usize; 3] = std::array::from_fn(|a| (v[a] as f64 + d[a] / m).round().clamp(0.0, (n[a] - 1) as f64) as usize);
+        Some((q[2] * ny + q[1]) * nx + q[0])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 41³ grid (0.5 mm) around a target at its centre sample: brain within 5 mm of it, a bone
+    /// shell to 7 mm (4 samples thick: a step of the path test moves at most √3 samples, so it
+    /// cannot pass over it), brain again to 9 mm (the scalp), water beyond. `|p|` is a fixed
+    /// pseudo-random value per sample.
+    fn shell() -> (Grid, [f64; 3], TissueMap, Vec<f32>, Vec<&'static str>) {
+        let g = Grid::new(41, 41, 0.5e-3, 0.5e-3, 41, 0.5e-3, 10e-3).unwrap();
+        let focus = [0.0, 0.0, g.z(20)];
+        let (mut index, mut truth) = (Vec::new(), Vec::new());
+        for s in 0..g.lateral_len() * g.nz {
+            let p = sample_position(&g, s);
+            let r = (p[0].powi(2) + p[1].powi(2) + (p[2] - focus[2]).powi(2)).sqrt() * 1e3;
+            let (id, class) = match r {
+                r if r < 5.0 => (1, "brain"),
+                r if r < 7.0 => (2, "skull"),
+                r if r < 9.0 => (1, "scalp"),
+                _ => (0, "water"),
+            };
+            index.push(id);
+            truth.push(class);
+        }
+        let magnitude = (0..index.len()).map(|s| ((s as f64 * 12.9898).sin() * 43758.5453).fract().abs() as f32).collect();
+        let names = ["water", "brain", "bone"].map(String::from).to_vec();
+        (g, focus, TissueMap { names, index }, magnitude, truth)
+    }
+
+    /// The hottest sample of each class by brute force over `truth` (a class per sample).
+    fn brute_force(magnitude: &[f32], truth: &[&str]) -> Vec<(String, f32, usize)> {
+        let mut best: Vec<(String, f32, usize)> = Vec::new();
+        for (s, (&p, &c)) in magnitude.iter().zip(truth).enumerate() {
+            match best.iter_mut().find(|b| b.0 == c) {
+                Some(b) if p > b.1 => *b = (c.to_string(), p, s),
+                Some(_) => {}
+                None => best.push((c.to_string(), p, s)),
+            }
+        }
+        best.sort_by(|a, b| a.0.cmp(&b.0));
+        best
+    }
+
+    fn sorted(mut v: Vec<(String, f32, usize)>) -> Vec<(String, f32, usize)> {
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    }
+
+    /// Through a closed bone shell, the target's tissue outside it is the scalp and inside it the
+    /// brain: the same samples, exactly, as the classes by radius.
+    #[test]
+    fn a_bone_shell_splits_the_targets_tissue_into_brain_and_scalp() {
+        let (g, focus, map, magnitude, truth) = shell();
+        assert_eq!(sorted(hottest_samples(&g, focus, &map, &magnitude)), brute_force(&magnitude, &truth));
+    }
+
+    /// Without bone nothing is the scalp; a target outside the grid splits nothing either.
+    #[test]
+    fn without_bone_or_target_there_is_no_scalp() {
+        let (g, focus, mut map, magnitude, _) = shell();
+        fn by_name(map: &TissueMap) -> Vec<&str> {
+            map.index.iter().map(|&i| if map.names[i as usize] == BONE { "skull" } else { map.names[i as usize].as_str() }).collect()
+        }
+        let far = [0.0, 0.0, 1.0];
+        assert_eq!(sorted(hottest_samples(&g, far, &map, &magnitude)), brute_force(&magnitude, &by_name(&map)));
+        map.index.iter_mut().filter(|i| **i == 2).for_each(|i| *i = 1);
+        map.names.pop();
+        assert_eq!(sorted(hottest_samples(&g, focus, &map, &magnitude)), brute_force(&magnitude, &by_name(&map)));
+    }
+}
