@@ -100,6 +100,27 @@ def test_a_crop_box_holds_the_same_voxels_as_the_whole_grid(sim):
     assert np.allclose(box.position_mm((nz - 1, ny - 1, nx - 1)), [5.0, 4.0, 95.0], atol=0.69)
 
 
+def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
+    # Field.pressure_volume takes no march: the field's march kept |p| on every sample, summed as
+    # a volume's march sums it (float32 pairs), so the two are equal to the bit; its crop is the
+    # whole grid's box, and to_nifti writes what it returns.
+    phases = sim.condense(sim.skull_phases(seed=3))
+    f = sim.field(phases)
+    whole, own = sim.pressure_volume(phases), f.pressure_volume()
+    assert np.array_equal(own.pressure_pa, whole.pressure_pa) and np.array_equal(own.affine_mm, whole.affine_mm)
+    assert own.frame == "transducer"
+    box = f.pressure_volume([-5, 5, -4, 4, 75, 95])
+    assert np.array_equal(box.pressure_pa, sim.pressure_volume(phases, box_mm=[-5, 5, -4, 4, 75, 95]).pressure_pa)
+    f.to_nifti(tmp_path / "f.nii.gz", box_mm=[-5, 5, -4, 4, 75, 95])
+    img = nib.load(str(tmp_path / "f.nii.gz"))
+    assert np.array_equal(np.asarray(img.dataobj).transpose(2, 1, 0), box.pressure_pa)
+    assert np.allclose(img.affine, box.affine_mm)
+    with pytest.raises(ValueError, match="in_ct"):
+        f.pressure_volume(in_ct=True)  # no [ct] here
+    with pytest.raises(ValueError, match="box_mm"):
+        f.pressure_volume([500, 600, -4, 4, 75, 95])
+
+
 def test_python_bad_boxes_name_box_mm(sim):
     with pytest.raises(ValueError, match="box_mm"):
         sim.pressure_volume(box_mm=[1.0, 2.0, 3.0])
@@ -110,7 +131,7 @@ def test_python_bad_boxes_name_box_mm(sim):
 
 
 def test_a_volume_too_large_for_memory_is_refused_before_the_march(sim, monkeypatch):
-    monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.01")  # 10 MiB: the whole grid needs 122 MB
+    monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.01")  # 10 MiB: the whole grid needs 49 MB
     with pytest.raises(ValueError, match="volume-box-mm"):
         sim.pressure_volume()
 

@@ -2,13 +2,18 @@
 //! several ([`CoreSection`]), their arrays made NumPy arrays once (an attribute returns the same
 //! array each time) with lengths in mm.
 
+use crate::error::{invalid, to_py};
+use crate::volume::{crop, ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, Peak};
-use has_core::{Field, Section};
+use has_core::physics::ct::CtMedium;
+use has_core::physics::grid::Grid;
+use has_core::simulation::{check_ct_volume, resample_into_ct};
+use has_core::{Field, Section, Simulation};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, ToPyArray};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 /// The focal metrics' attributes, in the order `focus()` writes them.
 const METRICS: [&str; 10] = [
@@ -40,15 +45,19 @@ pub(crate) struct CoreField {
     axis_x_mm: Py<PyArray1<f64>>,
     axis_y_mm: Py<PyArray1<f64>>,
     axis_z_mm: Py<PyArray1<f64>>,
-    /// The core's field (its arrays copied into the NumPy ones above, which a user may change).
+    /// The core's field (its arrays copied into the NumPy ones above, which a user may change;
+    /// its `magnitude`, the volume, kept here alone).
     field: Field,
     target: [f64; 3],
     focus: OnceLock<FieldFocus>,
+    /// The grid the volume lies on, and the CT it may be laid on.
+    grid: Grid,
+    ct: Option<Arc<CtMedium>>,
 }
 
 impl CoreField {
-    /// The field `f` of a beam steered to `target` (m).
-    pub(crate) fn new(py: Python<'_>, f: Field, target: [f64; 3]) -> Self {
+    /// The field `f` of a beam of `sim` (steered to its focus).
+    pub(crate) fn new(py: Python<'_>, f: Field, sim: &Simulation) -> Self {
         let axis = |k: usize| f.axis_xy.iter().map(|p| p[k] * 1e3).collect::<Vec<f64>>().into_pyarray(py).unbind();
         CoreField {
             x_mm: mm(&f.x).into_pyarray(py).unbind(),
@@ -58,9 +67,11 @@ impl CoreField {
             axis_z_mm: mm(&f.axis_z).into_pyarray(py).unbind(),
             pressure: f.pressure.to_pyarray(py).unbind(),
             axis_pressure: f.axis_pressure.to_pyarray(py).unbind(),
-            target,
+            target: sim.focus,
             focus: OnceLock::new(),
             field: f,
+            grid: sim.grid.clone(),
+            ct: sim.medium.ct.clone(),
         }
     }
 
@@ -254,6 +265,37 @@ impl CoreField {
         hottest_items(&d, "axis", &f.axis)?;
         d.set_item("hottest", slf.get().hottest(py)?)?;
         Ok(d)
+    }
+
+    /// `|p|` (Pa) of this beam in 3-D, from the march that made the field, as an
+    /// `arfi.PressureVolume`: on the simulation grid (transducer frame), cropped to `box_mm` (x0,
+    /// x1, y0, y1, z0, z1 in mm) if given; with `in_ct` (a `[ct]` scenario) resampled into the
+    /// CT's voxel grid with the CT's own RAS affine.
+    #[pyo3(signature = (box_mm=None, in_ct=false))]
+    fn pressure_volume<'py>(&self, py: Python<'py>, box_mm: Option<[f64; 6]>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
+        let magnitude = &self.field.magnitude;
+        let ((pressure, affine), frame) = if in_ct {
+            if box_mm.is_some() {
+                return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));
+            }
+            let Some(ct) = self.ct.as_ref() else {
+                return Err(invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
+            };
+            check_ct_volume(ct, 0).map_err(to_py)?;
+            (ct_arrays(py, py.detach(|| resample_into_ct(&self.grid, magnitude, ct))), "ct")
+        } else {
+            let window = window_of_box_mm(&self.grid, box_mm)?;
+            (grid_arrays(py, crop(&self.grid, magnitude, window)), "transducer")
+        };
+        py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
+    }
+
+    /// Writes [`pressure_volume`](Self::pressure_volume)`(box_mm, in_ct)` as NIfTI (`.nii` or
+    /// `.nii.gz`) at `path`, atomically.
+    #[pyo3(signature = (path, box_mm=None, in_ct=false))]
+    fn to_nifti(&self, py: Python<'_>, path: Bound<'_, PyAny>, box_mm: Option<[f64; 6]>, in_ct: bool) -> PyResult<()> {
+        self.pressure_volume(py, box_mm, in_ct)?.call_method1("to_nifti", (path,))?;
+        Ok(())
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

@@ -13,6 +13,7 @@ mod results;
 mod scenario;
 mod simulation;
 mod validation;
+mod volume;
 
 use has_core::inverse::estimate::workflow::Method;
 use pyo3::prelude::*;

@@ -9,6 +9,7 @@ use crate::interrupt::run_interruptible;
 use crate::mode_fit::CoreModeFit;
 use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
+use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm, VolumeArrays};
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
@@ -19,28 +20,13 @@ use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateRe
 use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
-use has_core::simulation::{window_of_box, Simulation};
-use ndarray::{Array2, Array3};
+use has_core::simulation::Simulation;
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-
-/// The 4 x 4 homogeneous matrix of an affine map's 3 x 4 rows, times `scale` (e.g. m -> mm).
-fn affine_4x4(rows: &[[f64; 4]; 3], scale: f64) -> Array2<f64> {
-    let mut a = Array2::<f64>::eye(4);
-    for (r, row) in rows.iter().enumerate() {
-        for (c, x) in row.iter().enumerate() {
-            a[[r, c]] = x * scale;
-        }
-    }
-    a
-}
-
-/// A pressure volume as NumPy arrays: `|p|` (z, y, x) and its affine (mm).
-type VolumeArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f64>>);
 
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
 #[pyclass(module = "arfi._core", frozen)]
@@ -175,7 +161,7 @@ impl CoreSimulation {
     fn field(&self, py: Python<'_>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>) -> PyResult<CoreField> {
         let phases = phases_vec(phases);
         let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
-        Ok(CoreField::new(py, f, self.inner.focus))
+        Ok(CoreField::new(py, f, &self.inner))
     }
 
     /// `|p|` (Pa, float32, shape (nz, ny, nx): z, y, x) of the beam on the box `box_mm` (x0, x1,
@@ -189,15 +175,9 @@ impl CoreSimulation {
         box_mm: Option<[f64; 6]>,
     ) -> PyResult<VolumeArrays<'py>> {
         let phases = phases_vec(phases);
-        let g = &self.inner.grid;
-        let window = match box_mm {
-            Some(b) => Some(window_of_box(g, [b[0], b[2], b[4]].map(|v| v * 1e-3), [b[1], b[3], b[5]].map(|v| v * 1e-3)).map_err(to_py)?),
-            None => None,
-        };
+        let window = window_of_box_mm(&self.inner.grid, box_mm)?;
         let v = py.detach(|| self.inner.pressure_volume(&phases, window)).map_err(to_py)?;
-        let shape = (v.window.planes.len(), v.window.rows.len(), v.window.cols.len());
-        let pressure = Array3::from_shape_vec(shape, v.pressure).map_err(|e| invalid("pressure_volume", e.to_string()))?;
-        Ok((pressure.into_pyarray(py), affine_4x4(&v.affine, 1e3).into_pyarray(py)))
+        Ok(grid_arrays(py, v))
     }
 
     /// Whether the medium holds a CT (a `[ct]` scenario).
@@ -212,9 +192,7 @@ impl CoreSimulation {
     fn pressure_volume_in_ct<'py>(&self, py: Python<'py>, phases: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<VolumeArrays<'py>> {
         let phases = phases_vec(phases);
         let v = py.detach(|| self.inner.pressure_volume_in_ct(&phases)).map_err(to_py)?;
-        let pressure = Array3::from_shape_vec((v.shape[0], v.shape[1], v.shape[2]), v.pressure)
-            .map_err(|e| invalid("pressure_volume", e.to_string()))?;
-        Ok((pressure.into_pyarray(py), affine_4x4(&v.ras_affine, 1.0).into_pyarray(py)))
+        Ok(ct_arrays(py, v))
     }
 
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the

@@ -37,7 +37,7 @@ def register(sub: Any) -> None:
                    help=f"I_SPPA (W/cm²) flagged when exceeded at the focal peak or at the hottest place of a tissue "
                    f"(default {ISPPA_LIMIT_W_CM2:g})")
     p.add_argument("--volume", metavar="F.nii.gz", help="also write |p| (Pa) in 3-D as NIfTI (.nii or .nii.gz) on the "
-                   "simulation grid, its affine in the transducer frame (mm): one more march")
+                   "simulation grid, its affine in the transducer frame (mm)")
     p.add_argument("--volume-ct", metavar="F.nii.gz", dest="volume_ct", help="also write |p| (Pa) resampled into the "
                    "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
@@ -105,14 +105,13 @@ def run(args: argparse.Namespace) -> int:
     if correction is not None:
         added = sim.element_phases(phases, "--phases") if phases is not None else np.zeros(sim.n_elements)
         phases = added - sim.element_phases(correction, "--correction")
+    if args.volume_ct is not None and not sim.has_ct:
+        raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
     f = sim.field(phases, args.z_mm)
-    # The volume before anything is written: a box outside the grid leaves no file behind.
-    volume = None if args.volume is None else sim.pressure_volume(phases, args.volume_box_mm)
-    in_ct = None
-    if args.volume_ct is not None:
-        if not sim.has_ct:
-            raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
-        in_ct = sim.pressure_volume(phases, in_ct=True)
+    # The volumes (from the field's own march) before anything is written: a box outside the
+    # grid leaves no file behind.
+    volume = None if args.volume is None else f.pressure_volume(args.volume_box_mm)
+    in_ct = None if args.volume_ct is None else f.pressure_volume(in_ct=True)
     write_npz(
         args.out,
         {

@@ -29,7 +29,7 @@ mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
 pub use hottest::TissueHottest;
-pub use volume::{window_of_box, CtPressureVolume, PressureVolume};
+pub use volume::{check_ct_volume, resample_into_ct, window_affine, window_of_box, CtPressureVolume, PressureVolume};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).
@@ -125,6 +125,10 @@ pub struct Field {
     /// The hottest place of each tissue class over the whole grid, hottest first
     /// ([`Simulation::hottest_by_tissue`]).
     pub hottest: Vec<TissueHottest>,
+    /// `|p|` (Pa) on every grid sample, row-major (plane, row, column), single precision: the
+    /// volume `arfi field --volume` writes ([`window_affine`] places a box of it,
+    /// [`resample_into_ct`] lays it on a CT).
+    pub magnitude: Vec<f32>,
 }
 
 impl Simulation {
@@ -412,7 +416,8 @@ impl Simulation {
             ..RecordSpec::default()
         };
         let (mut rec, metrics) = self.record_with_focus(&self.source_field(added)?, spec)?;
-        let hottest = self.hottest_by_tissue(&std::mem::take(&mut rec.magnitude));
+        let magnitude = std::mem::take(&mut rec.magnitude);
+        let hottest = self.hottest_by_tissue(&magnitude);
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
             pressure,
@@ -425,6 +430,7 @@ impl Simulation {
             surface_pressure: self.source.face_pressure,
             metrics,
             hottest,
+            magnitude,
         })
     }
 

@@ -5,6 +5,7 @@ use super::Simulation;
 use crate::error::{HasError, Result};
 use crate::memory;
 use crate::numeric::affine_apply;
+use crate::physics::ct::CtMedium;
 use crate::physics::grid::Grid;
 use crate::physics::propagation::{RecordSpec, Window};
 use rayon::prelude::*;
@@ -55,10 +56,16 @@ impl Simulation {
         )?;
         let spec = RecordSpec { magnitude: Some(window.clone()), reflections: self.reflections, ..RecordSpec::default() };
         let pressure = self.plan.propagate(&self.source_field(added)?, &spec)?.magnitude;
-        let origin = [g.x(window.cols.start), g.y(window.rows.start), g.z(window.planes.start)];
-        let affine = [[g.dx, 0.0, 0.0, origin[0]], [0.0, g.dy, 0.0, origin[1]], [0.0, 0.0, g.dz, origin[2]]];
+        let affine = window_affine(g, &window);
         Ok(PressureVolume { window, pressure, affine })
     }
+}
+
+/// The affine from voxel `(i, j, k)` of `window` (column, row, plane within it) to the
+/// transducer frame (m).
+pub fn window_affine(g: &Grid, window: &Window) -> [[f64; 4]; 3] {
+    let origin = [g.x(window.cols.start), g.y(window.rows.start), g.z(window.planes.start)];
+    [[g.dx, 0.0, 0.0, origin[0]], [0.0, g.dy, 0.0, origin[1]], [0.0, 0.0, g.dz, origin[2]]]
 }
 
 impl Simulation {
@@ -70,25 +77,36 @@ impl Simulation {
         let Some(ct) = self.medium.ct.as_ref() else {
             return Err(HasError::invalid("volume_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
         };
-        let (shape, ras_affine, to_frame) = ct.voxel_grid();
         let g = &self.grid;
-        let voxels = shape.iter().product::<usize>() as u64;
-        memory::check(
-            || format!("a pressure volume on the CT's {} x {} x {} voxels", shape[2], shape[1], shape[0]),
-            voxels * 4 + (g.nx * g.ny * g.nz) as u64 * BYTES_PER_VOXEL,
-            "crop the CT, or use a coarser grid",
-        )?;
-        let v = self.pressure_volume(added, None)?;
-        let [_, nj, ni] = shape;
-        let mut pressure = vec![0.0f32; voxels as usize];
-        pressure.par_chunks_mut(ni * nj).enumerate().for_each(|(k, plane)| {
-            for (f, out) in plane.iter_mut().enumerate() {
-                let p = affine_apply(&to_frame, [(f % ni) as f64, (f / ni) as f64, k as f64]);
-                *out = trilinear(g, &v.pressure, p);
-            }
-        });
-        Ok(CtPressureVolume { shape, pressure, ras_affine })
+        check_ct_volume(ct, (g.nx * g.ny * g.nz) as u64 * BYTES_PER_VOXEL)?;
+        Ok(resample_into_ct(g, &self.pressure_volume(added, None)?.pressure, ct))
     }
+}
+
+/// Refuses a volume on the CT's voxels when it and `grid_bytes` would not fit in memory.
+pub fn check_ct_volume(ct: &CtMedium, grid_bytes: u64) -> Result<()> {
+    let (shape, _, _) = ct.voxel_grid();
+    memory::check(
+        || format!("a pressure volume on the CT's {} x {} x {} voxels", shape[2], shape[1], shape[0]),
+        shape.iter().product::<usize>() as u64 * 4 + grid_bytes,
+        "crop the CT, or use a coarser grid",
+    )
+}
+
+/// `magnitude` (`|p|` on every sample of `grid`, row-major plane, row, column) resampled into the
+/// voxel grid of `ct` (trilinear between the grid's samples; zero where a voxel lies outside the
+/// grid), with the CT file's own affine.
+pub fn resample_into_ct(grid: &Grid, magnitude: &[f32], ct: &CtMedium) -> CtPressureVolume {
+    let (shape, ras_affine, to_frame) = ct.voxel_grid();
+    let [nk, nj, ni] = shape;
+    let mut pressure = vec![0.0f32; nk * nj * ni];
+    pressure.par_chunks_mut(ni * nj).enumerate().for_each(|(k, plane)| {
+        for (f, out) in plane.iter_mut().enumerate() {
+            let p = affine_apply(&to_frame, [(f % ni) as f64, (f / ni) as f64, k as f64]);
+            *out = trilinear(grid, magnitude, p);
+        }
+    });
+    CtPressureVolume { shape, pressure, ras_affine }
 }
 
 /// `values` (one per grid sample, row-major (plane, row, column)) at the point `p` (m), trilinear
