@@ -191,12 +191,66 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
     return _verb_page(out, verb, values, [("simulated image", save_figure(fig, out / f"{verb}.png"))])
 
 
+def lobe(above: NDArray[np.bool_], start: tuple[int, ...]) -> NDArray[np.bool_]:
+    """The samples of ``above`` connected to ``start`` through edges (empty if ``start`` is not
+    in it)."""
+    inside = np.pad(above, 1)  # a border of False: growing never wraps around
+    region = np.zeros_like(inside)
+    region[tuple(i + 1 for i in start)] = inside[tuple(i + 1 for i in start)]
+    while True:
+        grown = region.copy()
+        for axis in range(region.ndim):
+            grown |= np.roll(region, 1, axis) | np.roll(region, -1, axis)
+        grown &= inside
+        if np.array_equal(grown, region):
+            return region[tuple(slice(1, -1) for _ in range(region.ndim))]
+        region = grown
+
+
+def orthogonal_sections(sim: Any, field: Any) -> Any:
+    """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
+    in mm), from the field's own march: over the CT in HU (grey) with a ``[ct]``, else over the
+    sound speed; the colour scale set by the focal peak (hotter places, a scalp or a skull,
+    saturate), shown where above 10 % of it, with its -6 dB contour (cyan) and the target (+)."""
+    plt = pyplot()
+    volume = field.pressure_volume()
+    p, a = volume.pressure_pa / 1e6, volume.affine_mm
+    axes = [a[n, 3] + a[n, n] * np.arange(p.shape[2 - n]) for n in range(3)]  # x, y, z (mm)
+    t = field.target_mm
+    i, j, k = (int(np.argmin(np.abs(axes[n] - t[n]))) for n in range(3))
+    peak = (field.focal_peak_pa or float(volume.pressure_pa.max())) / 1e6
+    sections = [("x", "z", p[:, j, :], (axes[0], axes[1][j], axes[2])), ("y", "z", p[:, :, i], (axes[0][i], axes[1], axes[2])),
+                ("x", "y", p[k], (axes[0], axes[1], axes[2][k]))]
+    fig, ax = plt.subplots(1, 3, figsize=(17, 5.2), layout="constrained")
+    background = "hu" if sim.has_ct else "sound_speed_m_s"
+    for n, (u, w, plane, (xs, ys, zs)) in enumerate(sections):
+        grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1)  # one axis of length 1
+        medium = sim.properties_at(grid.reshape(-1, 3))[background].reshape(grid.shape[:3]).squeeze().T  # (w, u) as plane
+        hu, uu, ww = background == "hu", axes["xyz".index(u)], axes["xyz".index(w)]
+        du, dw = uu[1] - uu[0], ww[1] - ww[0]
+        extent = [uu[0] - du / 2, uu[-1] + du / 2, ww[0] - dw / 2, ww[-1] + dw / 2]
+        bg = ax[n].imshow(np.nan_to_num(medium, nan=-1000.0) if hu else medium, origin="lower", extent=extent, cmap="gray",
+                          vmin=-200.0 if hu else 1300.0, vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))))
+        im = ax[n].imshow(np.ma.masked_less(plane, 0.1 * peak), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
+                          vmax=peak, alpha=0.85)
+        start = tuple(int(np.argmin(np.abs(axis - t["xyz".index(c)]))) for axis, c in ((ww, w), (uu, u)))
+        ax[n].contour(uu, ww, np.where(lobe(plane >= peak / 2, start), plane, 0.0), levels=[peak / 2], colors="c",
+                      linewidths=0.8)
+        ax[n].plot(t["xyz".index(u)], t["xyz".index(w)], "c+", ms=10)
+        at = next(c for c in "xyz" if c not in (u, w))
+        ax[n].set(title=f"{u}–{w} plane through the target ({at} = {t['xyz'.index(at)]:.1f} mm)", xlabel=f"{u} (mm)",
+                  ylabel=f"{w} (mm)", aspect="equal")
+    fig.colorbar(im, ax=ax.tolist(), label="pressure amplitude (MPa)", shrink=0.8, extend="max")
+    fig.colorbar(bg, ax=ax.tolist(), label="CT (HU)" if background == "hu" else "sound speed (m/s)", shrink=0.8)
+    return fig
+
+
 def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
     """Report of a simulated field: |p| (MPa) on the plane, axes in mm, its colour scale set by
     the focal peak near the target (hotter places saturate); |p| along the beam's axis (the line
     from the array's centre through the target) with the target's depth marked; with ``phases``,
-    the element map of the phases added to the steering; the beam on the x–z section through the
-    target over the sound speed (one more march)."""
+    the element map of the phases added to the steering; the beam on the three planes through the
+    target over the CT or the sound speed (:func:`orthogonal_sections`)."""
     plt = pyplot()
     out = _report_dir(out)
     focus = field.focus()
@@ -216,10 +270,8 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     if phases is not None:
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
-    section = sim.section(phases, y_mm=field.target_mm[1])
-    fig = section_figure(section, [f"|p| on the section y = {section.y_mm:.1f} mm"], field.target_mm)
-    figures.append(("the beam on the x–z section through the target, over the sound speed",
-                    save_figure(fig, out / "field_section.png")))
+    figures.append(("the beam on the three planes through the target (cyan: -6 dB of the focal peak)",
+                    save_figure(orthogonal_sections(sim, field), out / "field_sections.png")))
     return _verb_page(out, "field", values, figures)
 
 

@@ -235,6 +235,13 @@ class Simulation:
         p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
         return self._core.tissue_at(np.ascontiguousarray(p))
 
+    def properties_at(self, points_mm: ArrayLike) -> dict[str, NDArray[np.float64]]:
+        """The medium at each point (mm, transducer frame, shape (n, 3) or (3,)): arrays
+        ``sound_speed_m_s`` and ``density_kg_m3`` (the CT's conversion where a CT holds tissue)
+        and ``hu`` (the CT's value, NaN outside the CT or without one)."""
+        p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
+        return self._core.properties_at(np.ascontiguousarray(p))
+
     def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None) -> Section:
         """Pressure on the x–z plane nearest ``y_mm`` (default: the focus's) with the sound speed
         there. ``phases``: one drive (phases added to the steering, per element or per group;

@@ -228,7 +228,7 @@ def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
     assert main(["estimate", "--image", str(image), "--method", "lbfgs", "--report", str(tmp_path / "est")]) == 0
     assert main(["field", "--phases", str(phases), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "field")]) == 0
     expected = {"sim": ["simulate.png"], "cal": ["calibrate_images.png"], "est": ["estimate_images.png", "estimate_elements.png"],
-                "field": ["field.png", "field_section.png"]}
+                "field": ["field.png", "field_sections.png"]}
     for folder, pngs in expected.items():
         page = (tmp_path / folder / "report.html").read_text()
         # Self-contained: every figure embedded, none linked.

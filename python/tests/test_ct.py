@@ -82,9 +82,19 @@ def test_a_plate_ct_written_by_nibabel_gives_the_field_of_the_plate_as_a_region(
         t = _plate_ct(tmp_path / f"plate{int(rotate)}.nii.gz", water, rotate)
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in t)
         text = f"{GRID}[ct]\nfile = \"plate{int(rotate)}.nii.gz\"\npatient_to_transducer_mm = [{rows}]\n"
-        f = Simulation(Scenario.from_toml(text, tmp_path)).field()
+        sim = Simulation(Scenario.from_toml(text, tmp_path))
+        f = sim.field()
         # Same cells, same steering rays (see tests/suite/ct.rs); 1e-4 allows the affine's float32.
         assert np.abs(f.pressure - reference.pressure).max() < 1e-4 * peak, rotate
+        # The medium where a report draws it: in the plate its HU (stored through a uint8 slope:
+        # within one step of 8.63 HU) and the conversion's c and rho by hand; far outside the CT, NaN
+        # HU and the scenario's water.
+        inside = g["z0_mm"] + (a + 2) * g["dz_mm"]
+        m = sim.properties_at([[0.0, 0.0, inside], [0.0, 0.0, 1e4]])
+        assert abs(m["hu"][0] - PLATE_HU) < 8.7 and np.isnan(m["hu"][1])
+        c, rho, _ = _plate_properties()
+        assert np.allclose([m["sound_speed_m_s"][0], m["density_kg_m3"][0]], [c, rho], rtol=0.01)
+        assert m["sound_speed_m_s"][1] == 1500.0 and m["density_kg_m3"][1] == 1000.0
 
 
 def _plate_properties() -> tuple[float, float, float]:

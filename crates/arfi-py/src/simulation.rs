@@ -28,6 +28,15 @@ use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+/// Points (mm, shape (n, 3), finite) in metres.
+fn points_m(points_mm: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
+    let p = points_mm.as_array();
+    if p.ncols() != 3 || p.iter().any(|v| !v.is_finite()) {
+        return Err(invalid("points_mm", format!("must be finite points of shape (n, 3), got shape {:?}", p.shape())));
+    }
+    Ok(p.rows().into_iter().map(|r| [r[0] * 1e-3, r[1] * 1e-3, r[2] * 1e-3]).collect())
+}
+
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
 #[pyclass(module = "arfi._core", frozen)]
 pub(crate) struct CoreSimulation {
@@ -198,11 +207,22 @@ impl CoreSimulation {
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the
     /// soft tissue's material where a CT holds tissue, else the material's name.
     fn tissue_at(&self, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
-        let p = points_mm.as_array();
-        if p.ncols() != 3 || p.iter().any(|v| !v.is_finite()) {
-            return Err(invalid("points_mm", format!("must be finite points of shape (n, 3), got shape {:?}", p.shape())));
-        }
-        Ok(p.rows().into_iter().map(|r| self.inner.medium.tissue_at(r[0] * 1e-3, r[1] * 1e-3, r[2] * 1e-3)).collect())
+        Ok(points_m(&points_mm)?.into_iter().map(|[x, y, z]| self.inner.medium.tissue_at(x, y, z)).collect())
+    }
+
+    /// The medium at each point (mm, transducer frame, shape (n, 3)): `sound_speed_m_s` and
+    /// `density_kg_m3` at the point (the CT's conversion of its voxel where a CT holds tissue),
+    /// and `hu`, the CT's value there (NaN outside the CT or without one).
+    fn properties_at<'py>(&self, py: Python<'py>, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Bound<'py, PyDict>> {
+        let points = points_m(&points_mm)?;
+        let m = &self.inner.medium;
+        let props: Vec<_> = points.iter().map(|&[x, y, z]| m.properties_at(x, y, z, self.inner.frequency)).collect();
+        let hu: Vec<f64> = points.iter().map(|&p| m.ct.as_ref().and_then(|ct| ct.hu_at(p)).unwrap_or(f64::NAN)).collect();
+        let d = PyDict::new(py);
+        d.set_item("sound_speed_m_s", props.iter().map(|p| p.sound_speed).collect::<Vec<_>>().into_pyarray(py))?;
+        d.set_item("density_kg_m3", props.iter().map(|p| p.density).collect::<Vec<_>>().into_pyarray(py))?;
+        d.set_item("hu", hu.into_pyarray(py))?;
+        Ok(d)
     }
 
     /// Pressure on the x–z section nearest `y_mm` (default: the focus's) for each drive in

@@ -42,8 +42,8 @@ def register(sub: Any) -> None:
                    "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
                    dest="volume_box_mm", help="write the --volume on this box only (mm, transducer frame), for large grids")
-    add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the x-z section "
-                  "through the plane's peak over the sound speed: one more march)")
+    add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the three planes "
+                  "through the target over the CT in HU or the sound speed, with the focal -6 dB contour)")
     p.set_defaults(run=run)
 
 
