@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,12 +31,25 @@ PARAMETERS: dict[str, tuple[str, str]] = {name: (effect, meaning) for name, effe
 Diagnosis = _core.Diagnosis
 
 
+def evidence_bars(ax: Any, candidates: Sequence[Any], title: str) -> None:
+    """The candidates' evidence as horizontal bars (green: would be added), each named with its
+    value, on a symmetric log axis (linear within ±10)."""
+    ev = np.array([np.nan if c.evidence is None else c.evidence for c in candidates], dtype=np.float64)
+    names = [f"{c.name} ({'n/a' if np.isnan(v) else f'{v:.3g}'})" for c, v in zip(candidates, ev)]
+    shown = np.nan_to_num(ev)
+    ax.barh(names, shown, color=["C2" if v > 0 else "0.6" for v in shown])
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_xscale("symlog", linthresh=10.0)
+    ax.invert_yaxis()
+    ax.set(xlabel="evidence: BIC gain / σ² (added when > 0)", title=title)
+
+
 def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.float64]], out: str | Path) -> Path:
     """Writes one PNG per step of ``diagnosis`` (measured image, model, residual, the candidates'
     evidence) and the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
     self-contained ``report.html``; returns the HTML path."""
     from arfi.io import atomic_write_text
-    from arfi.report import axis_labels, figure_html, image_extent_mm, pyplot, save_figure
+    from arfi.report import axis_labels, figure_html, focal_box_mm, image_extent_mm, pyplot, save_figure
 
     plt = pyplot()
 
@@ -49,23 +62,21 @@ def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.
         stages.append((f"after adding {e.name}", e.models, nxt))
     ext = image_extent_mm(sim, images[0])
     lim = max(float(np.max(np.abs(images[0]))), 1e-12)
+    u0, u1, v0, v1 = focal_box_mm(sim, images[:1])
     for k, (title, models, candidates) in enumerate(stages):
         residual = images[0] - models[0]
-        fig, ax = plt.subplots(1, 4, figsize=(17, 3.8))
+        fig = plt.figure(figsize=(15, 8.5), layout="constrained")
+        top, bottom = fig.subfigures(2, 1, height_ratios=[1.15, 1.0])
+        ax = top.subplots(1, 3)
         for a, img, name, vmax in ((ax[0], images[0], "measured", lim), (ax[1], models[0], "model", lim),
                                    (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12))):
             im = a.imshow(img.T, origin="lower", extent=ext, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
-            a.set(title=name, **axis_labels(sim))
-            fig.colorbar(im, ax=a, label="ARFI phase (rad)")
+            a.set(title=name, xlim=(u0, u1), ylim=(v0, v1), **axis_labels(sim))
+            top.colorbar(im, ax=a, label="ARFI phase (rad)", shrink=0.9)
         rms = float(np.sqrt(np.mean(residual ** 2)))
-        ax[2].set_title(f"residual (RMS {rms:.4f} rad, noise {diagnosis.noise_floor:.4f} rad)")
-        names = [c.name for c in candidates]
-        ev = [np.nan if c.evidence is None else c.evidence for c in candidates]
-        ax[3].barh(names, np.nan_to_num(ev), color=["C2" if v > 0 else "0.6" for v in np.nan_to_num(ev)])
-        ax[3].axvline(0, color="k", lw=0.8)
-        ax[3].set(xlabel="evidence (BIC gain / sigma²)", title="next candidates" if k < len(stages) - 1 else "rejected")
-        ax[3].set_xscale("symlog")
-        fig.suptitle(f"step {k}: {title}")
+        ax[2].set_title(f"residual: RMS {rms:.4f} rad\n(noise {diagnosis.noise_floor:.4f} rad)")
+        top.suptitle(f"step {k}: {title}", fontsize="x-large")
+        evidence_bars(bottom.subplots(), candidates, "next candidates" if k < len(stages) - 1 else "rejected candidates")
         figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
     fig, ax = plt.subplots(figsize=(6, 3.8))
     gap = [diagnosis.residual_rms_initial] + [e.residual_rms_after for e in diagnosis.effects]

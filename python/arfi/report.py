@@ -54,14 +54,42 @@ def axis_labels(sim: Any) -> dict[str, str]:
     return {"xlabel": f"{sim.mr_plane[0]} (mm)", "ylabel": f"{sim.mr_plane[1]} (mm)"}
 
 
-def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: str, signed: bool = False) -> None:
+def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: str, signed: bool = False,
+               limits: tuple[float, float] | None = None) -> None:
     """An MR-ARFI phase image (rad) on its plane, axes in mm, with a colour bar in rad;
-    ``signed`` centres the colour map on zero (residuals)."""
+    ``signed`` centres the colour map on zero (residuals); ``limits`` (rad) shares one colour
+    scale between images."""
     lim = max(float(np.max(np.abs(image))), 1e-12)
-    kw = {"cmap": "RdBu_r", "vmin": -lim, "vmax": lim} if signed else {"cmap": "viridis"}
-    im = ax.imshow(image.T, origin="lower", extent=image_extent_mm(sim, image), **kw)
+    vmin, vmax = (-lim, lim) if signed else (None, None)
+    if limits is not None:
+        vmin, vmax = limits
+    im = ax.imshow(image.T, origin="lower", extent=image_extent_mm(sim, image), cmap="RdBu_r" if signed else "viridis",
+                   vmin=vmin, vmax=vmax)
     ax.set(title=title, **axis_labels(sim))
     fig.colorbar(im, ax=ax, label="ARFI phase (rad)")
+
+
+def focal_box_mm(sim: Any, images: Sequence[NDArray[np.float64]], margin_mm: float = 5.0,
+                 least_mm: float = 20.0) -> list[float]:
+    """``[u0, u1, v0, v1]`` (mm) around the focal spot of ``images`` (on the scenario's MR plane):
+    the pixels above 10 % of the largest |value| and 5 noise deviations (the median absolute
+    deviation of each image: its background), with ``margin_mm`` around them, at least
+    ``least_mm`` wide, within the image."""
+    extent = image_extent_mm(sim, images[0])
+    nu, nv = images[0].shape
+    du, dv = (extent[1] - extent[0]) / nu, (extent[3] - extent[2]) / nv
+    hot = np.zeros((nu, nv), dtype=bool)
+    peak = max(float(np.max(np.abs(im))) for im in images)
+    for im in images:
+        noise = 1.4826 * float(np.median(np.abs(im - np.median(im))))
+        hot |= np.abs(im) > max(0.1 * peak, 5.0 * noise)
+    iu, iv = np.nonzero(hot) if hot.any() else (np.array([nu // 2]), np.array([nv // 2]))
+    box = []
+    for lo, d, idx, (a, b) in ((extent[0], du, iu, extent[:2]), (extent[2], dv, iv, extent[2:])):
+        c0, c1 = lo + idx.min() * d - margin_mm, lo + (idx.max() + 1) * d + margin_mm
+        grow = max(0.0, least_mm - (c1 - c0)) / 2
+        box += [max(a, c0 - grow), min(b, c1 + grow)]
+    return box
 
 
 def element_map(fig: Any, ax: Any, sim: Any, phases: ArrayLike, title: str) -> None:
@@ -159,24 +187,36 @@ def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[t
 
 
 def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
-               values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
-    """Report of a fit (``calibrate``, ``estimate``, ``simulate``): the measured image, the model,
-    their residual and, with ``phases`` (rad, the estimated aberration), the element maps of the
-    aberration and of its correction (paper Fig. 4c/4d). ``values`` go in a table."""
+               values: dict[str, Any], phases: ArrayLike | None = None, warning: str | None = None) -> Path:
+    """Report of a fit (``calibrate``, ``estimate``, ``simulate``): the measured image, the model
+    (one colour scale) and their residual, cropped to the focal spot (:func:`focal_box_mm`), and,
+    with ``phases`` (rad, the estimated aberration), the element maps of the aberration and of its
+    correction (paper Fig. 4c/4d). ``values`` go in a table; ``warning`` (e.g. an ambiguous or
+    mismatched estimate) is written in red over the images and at the top of the page."""
     plt = pyplot()
     out = _report_dir(out)
-    fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
-    show_image(fig, ax[0], sim, measured, "measured")
-    show_image(fig, ax[1], sim, model, "model")
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.8), layout="constrained")
+    lo = min(float(measured.min()), float(model.min()), 0.0)
+    hi = max(float(measured.max()), float(model.max()), 1e-12)
+    show_image(fig, ax[0], sim, measured, "measured", limits=(lo, hi))
+    show_image(fig, ax[1], sim, model, "model", limits=(lo, hi))
     residual = measured - model
     show_image(fig, ax[2], sim, residual, f"residual (RMS {float(np.sqrt(np.mean(residual ** 2))):.4f} rad)", signed=True)
-    figures = [("measured, model and residual MR-ARFI images", save_figure(fig, out / f"{verb}_images.png"))]
+    u0, u1, v0, v1 = focal_box_mm(sim, [measured, model])
+    for a in ax:
+        a.set(xlim=(u0, u1), ylim=(v0, v1))
+    if warning:
+        fig.suptitle(warning, color="red")
+    figures = [("measured, model and residual MR-ARFI images around the focal spot", save_figure(fig, out / f"{verb}_images.png"))]
     if phases is not None:
         fig, ax = plt.subplots(1, 2, figsize=(11, 4.6))
         element_map(fig, ax[0], sim, phases, "estimated aberration")
         element_map(fig, ax[1], sim, -np.asarray(phases), "correction (subtracted)")
+        if warning:
+            fig.suptitle(warning, color="red")
         figures.append(("element maps coloured by phase", save_figure(fig, out / f"{verb}_elements.png")))
-    return _verb_page(out, verb, values, figures)
+    body = (f"<p style='color:red'><b>{html.escape(warning)}</b></p>" if warning else "") + table_html(values)
+    return write_html(out / "report.html", f"arfi {verb}", body + figure_html(out, figures))
 
 
 def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],

@@ -237,6 +237,26 @@ def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
             assert (tmp_path / folder / png).read_bytes()[:4] == b"\x89PNG"
 
 
+def test_fit_figures_crop_to_the_focal_spot_and_carry_a_warning(tmp_path):
+    # The default image (180 x 135 mm field of view, a ~5 mm spot, noise 0.02 rad): the figures'
+    # box holds the spot and is far smaller than the field of view; a flagged estimate's warning
+    # heads its page.
+    import arfi
+    from arfi.report import fit_report, focal_box_mm, image_extent_mm
+
+    sim = arfi.Simulation()
+    image = sim.arfi_image(noise_rad=0.02, seed=1)
+    u0, u1, v0, v1 = focal_box_mm(sim, [image])
+    full = image_extent_mm(sim, image)
+    assert 20.0 <= u1 - u0 <= 40.0 and 20.0 <= v1 - v0 <= 40.0 and (full[1] - full[0]) > 150.0
+    peak = np.unravel_index(np.argmax(image), image.shape)
+    du, dv = (full[1] - full[0]) / image.shape[0], (full[3] - full[2]) / image.shape[1]
+    assert u0 < full[0] + (peak[0] + 0.5) * du < u1 and v0 < full[2] + (peak[1] + 0.5) * dv < v1
+    fit_report(tmp_path, sim, "estimate", image, image, {"misfit": 4.8}, np.zeros(16), warning="AMBIGUOUS: see the summary")
+    page = (tmp_path / "report.html").read_text()
+    assert "<p style='color:red'><b>AMBIGUOUS: see the summary</b></p>" in page
+
+
 def test_image_axes_follow_the_mr_plane():
     from types import SimpleNamespace
 

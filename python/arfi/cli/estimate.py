@@ -172,8 +172,12 @@ def run(args: argparse.Namespace) -> int:
 
         image, known = pairs[0]
         model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
+        flags = [name for name, on in (("KEPT THE PREDICTION", e.kept_prediction), ("AMBIGUOUS", e.ambiguous or e.underdetermined),
+                                        (f"MODEL MISMATCH (misfit {e.misfit:.2f} x the noise)", e.model_mismatch)) if on]
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
-                   "ambiguous": e.ambiguous, "misfit": e.misfit, "noise_floor_rad": e.noise_floor}, e.phases_rad)
+                   "ambiguous": e.ambiguous, "model_mismatch": e.model_mismatch, "misfit": e.misfit,
+                   "noise_floor_rad": e.noise_floor}, e.phases_rad,
+                   warning=("; ".join(flags) + ": see the printed summary before applying this estimate") if flags else None)
     prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
     if bone_speed is not None:
         prior_settings["prior_bone_speed_std_percent"] = bone_speed["std_percent_prior"]
