@@ -249,7 +249,7 @@ def lobe(above: NDArray[np.bool_], start: tuple[int, ...]) -> NDArray[np.bool_]:
 
 def orthogonal_sections(sim: Any, field: Any) -> Any:
     """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
-    in mm), from the field's own march: over the CT in HU (grey) with a ``[ct]``, else over the
+    in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU (grey) with a ``[ct]``, else over the
     sound speed; the colour scale set by the focal peak (hotter places, a scalp or a skull,
     saturate), shown where above 10 % of it, with its -6 dB contour (cyan) and the target (+)."""
     plt = pyplot()

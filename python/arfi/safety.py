@@ -44,7 +44,7 @@ def exceeded(focus: dict[str, Any], mi_limit: float = MI_LIMIT,
     peak = focus.get("focal_peak_pa")
     if peak is not None:
         flag("focal peak", focus["focal_tissue"], focus)
-    for tissue, h in focus.get("hottest", {}).items():
+    for tissue, h in (focus.get("hottest") or {}).items():
         if not (peak is not None and tissue == focus["focal_tissue"] and h["pressure_pa"] <= peak):
             flag("hottest place", tissue, h)
     return rows

@@ -204,9 +204,12 @@ class Simulation:
         a, b, c = self._core.mr_volume_shape
         return int(a), int(b), int(c)
 
-    def field(self, phases: ArrayLike | None = None, z_mm: float | None = None) -> Field:
-        """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis."""
-        return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"))
+    def field(self, phases: ArrayLike | None = None, z_mm: float | None = None, volume: bool = False) -> Field:
+        """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis, with
+        the focal metrics in 3-D. With ``volume``, the same march also keeps |p| on the whole grid
+        (4 bytes a voxel): ``Field.hottest`` (each tissue's hottest place), ``Field.pressure_volume``
+        and ``Field.to_nifti``, as ``arfi field`` reports and writes them."""
+        return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"), bool(volume))
 
     def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None,
                         in_ct: bool = False) -> PressureVolume:

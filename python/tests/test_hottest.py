@@ -78,7 +78,7 @@ def test_without_bone_the_hottest_places_cover_the_whole_grid_and_name_no_skull(
     # The paper's phantom in water: two classes, the phantom's hottest sample the focal peak's,
     # and the hottest of both the hottest voxel of the whole grid's volume.
     sim = arfi.Simulation()
-    f = sim.field()
+    f = sim.field(volume=True)
     hottest = f.hottest
     assert list(hottest) == ["phantom", "water"]
     assert 0.97 * f.focal_peak_pa <= hottest["phantom"]["pressure_pa"] <= f.focal_peak_pa

@@ -105,7 +105,7 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
     # a volume's march sums it (float32 pairs), so the two are equal to the bit; its crop is the
     # whole grid's box, and to_nifti writes what it returns.
     phases = sim.condense(sim.skull_phases(seed=3))
-    f = sim.field(phases)
+    f = sim.field(phases, volume=True)
     whole, own = sim.pressure_volume(phases), f.pressure_volume()
     assert np.array_equal(own.pressure_pa, whole.pressure_pa) and np.array_equal(own.affine_mm, whole.affine_mm)
     assert own.frame == "transducer"
@@ -119,6 +119,12 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
         f.pressure_volume(in_ct=True)  # no [ct] here
     with pytest.raises(ValueError, match="box_mm"):
         f.pressure_volume([500, 600, -4, 4, 75, 95])
+    # A field made without volume=True keeps none (the default: a lean march) and says how.
+    lean = sim.field(phases)
+    assert lean.hottest is None and lean.focus()["hottest"] is None
+    with pytest.raises(ValueError, match="volume=True"):
+        lean.to_nifti(tmp_path / "g.nii.gz")
+    assert not (tmp_path / "g.nii.gz").exists()
 
 
 def test_python_bad_boxes_name_box_mm(sim):

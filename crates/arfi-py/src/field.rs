@@ -222,10 +222,12 @@ impl CoreField {
     /// (bone), `scalp` (the target's soft tissue whose straight path to the target crosses bone),
     /// else the tissue's name (`brain`, `water` …). Each: `pressure_pa`, `position_mm`,
     /// `isppa_w_cm2`, `mechanical_index`.
+    /// None for a field made without `volume=True`.
     #[getter]
-    fn hottest<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    fn hottest<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(volume) = self.field.volume.as_ref() else { return Ok(None) };
         let d = PyDict::new(py);
-        for h in &self.field.hottest {
+        for h in &volume.hottest {
             let e = PyDict::new(py);
             e.set_item("pressure_pa", h.pressure)?;
             e.set_item("position_mm", point_mm(h.position).to_vec())?;
@@ -233,7 +235,7 @@ impl CoreField {
             e.set_item("mechanical_index", h.mechanical_index)?;
             d.set_item(&h.tissue, e)?;
         }
-        Ok(d)
+        Ok(Some(d))
     }
 
     /// What the field says at its target, in the JSON keys of `arfi field`: the focal metrics in
@@ -267,13 +269,16 @@ impl CoreField {
         Ok(d)
     }
 
-    /// `|p|` (Pa) of this beam in 3-D, from the march that made the field, as an
+    /// `|p|` (Pa) of this beam in 3-D, from the march that made the field (with `volume=True`), as an
     /// `arfi.PressureVolume`: on the simulation grid (transducer frame), cropped to `box_mm` (x0,
     /// x1, y0, y1, z0, z1 in mm) if given; with `in_ct` (a `[ct]` scenario) resampled into the
     /// CT's voxel grid with the CT's own RAS affine.
     #[pyo3(signature = (box_mm=None, in_ct=false))]
     fn pressure_volume<'py>(&self, py: Python<'py>, box_mm: Option<[f64; 6]>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
-        let magnitude = &self.field.magnitude;
+        let Some(volume) = self.field.volume.as_ref() else {
+            return Err(invalid("volume", "this field kept no volume: make it with sim.field(phases, volume=True)"));
+        };
+        let magnitude = &volume.magnitude;
         let ((pressure, affine), frame) = if in_ct {
             if box_mm.is_some() {
                 return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));

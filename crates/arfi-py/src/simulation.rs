@@ -165,11 +165,14 @@ impl CoreSimulation {
         self.inner.mr.plane.name()
     }
 
-    /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis.
-    #[pyo3(signature = (phases=None, z_mm=None))]
-    fn field(&self, py: Python<'_>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>) -> PyResult<CoreField> {
+    /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis; with
+    /// `volume`, also `|p|` on the whole grid and the hottest place of each tissue.
+    #[pyo3(signature = (phases=None, z_mm=None, volume=false))]
+    fn field(&self, py: Python<'_>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>, volume: bool) -> PyResult<CoreField> {
         let phases = phases_vec(phases);
-        let f = py.detach(|| self.inner.field(&phases, z_mm.map(|z| z * 1e-3))).map_err(to_py)?;
+        let z = z_mm.map(|z| z * 1e-3);
+        let f =
+            py.detach(|| if volume { self.inner.field_with_volume(&phases, z) } else { self.inner.field(&phases, z) }).map_err(to_py)?;
         Ok(CoreField::new(py, f, &self.inner))
     }
 

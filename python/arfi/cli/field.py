@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         phases = added - sim.element_phases(correction, "--correction")
     if args.volume_ct is not None and not sim.has_ct:
         raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
-    f = sim.field(phases, args.z_mm)
+    f = sim.field(phases, args.z_mm, volume=True)
     # The volumes (from the field's own march) before anything is written: a box outside the
     # grid leaves no file behind.
     volume = None if args.volume is None else f.pressure_volume(args.volume_box_mm)

@@ -122,13 +122,20 @@ pub struct Field {
     /// The focal region's metrics in 3-D ([`FocalMetrics`]); `None` when the target lies outside
     /// the grid or the -6 dB region around it reaches the grid's edge.
     pub metrics: Option<FocalMetrics>,
-    /// The hottest place of each tissue class over the whole grid, hottest first
-    /// ([`Simulation::hottest_by_tissue`]).
-    pub hottest: Vec<TissueHottest>,
+    /// `|p|` in 3-D and the hottest places, kept by [`Simulation::field_with_volume`].
+    pub volume: Option<FieldVolume>,
+}
+
+/// What a field made with [`Simulation::field_with_volume`] keeps of the whole grid.
+#[derive(Debug, Clone)]
+pub struct FieldVolume {
     /// `|p|` (Pa) on every grid sample, row-major (plane, row, column), single precision: the
     /// volume `arfi field --volume` writes ([`window_affine`] places a box of it,
     /// [`resample_into_ct`] lays it on a CT).
     pub magnitude: Vec<f32>,
+    /// The hottest place of each tissue class over the whole grid, hottest first
+    /// ([`Simulation::hottest_by_tissue`]).
+    pub hottest: Vec<TissueHottest>,
 }
 
 impl Simulation {
@@ -394,6 +401,17 @@ impl Simulation {
     /// # Ok::<(), has_core::HasError>(())
     /// ```
     pub fn field(&self, added: &[f64], z: Option<f64>) -> Result<Field> {
+        self.field_with(added, z, false)
+    }
+
+    /// [`Simulation::field`] with `|p|` kept on every grid sample in the same march, and the
+    /// hottest place of each tissue class found in it ([`FieldVolume`]): what `arfi field`
+    /// reports and writes. Refused before the march when the volume would not fit in memory.
+    pub fn field_with_volume(&self, added: &[f64], z: Option<f64>) -> Result<Field> {
+        self.field_with(added, z, true)
+    }
+
+    fn field_with(&self, added: &[f64], z: Option<f64>, keep_volume: bool) -> Result<Field> {
         let g = &self.grid;
         let z = z.unwrap_or(self.focus[2]);
         if !z.is_finite() || z < g.z0 || z > g.z(g.nz - 1) {
@@ -402,22 +420,26 @@ impl Simulation {
         let plane = g.plane_index(z);
         let slope = self.axis_slope();
         let whole = Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx };
-        memory::check(
-            || format!("|p| on the whole {} x {} x {} grid (for the hottest place of each tissue)", g.nx, g.ny, g.nz),
-            whole.len() as u64 * volume::BYTES_PER_VOXEL,
-            "use a coarser grid ([grid] spacing_mm)",
-        )?;
+        if keep_volume {
+            memory::check(
+                || format!("|p| on the whole {} x {} x {} grid", g.nx, g.ny, g.nz),
+                whole.len() as u64 * volume::BYTES_PER_VOXEL,
+                "use a coarser grid ([grid] spacing_mm)",
+            )?;
+        }
         let spec = RecordSpec {
             planes: vec![plane],
             axis: true,
             axis_slope: slope,
-            magnitude: Some(whole),
+            magnitude: keep_volume.then_some(whole),
             reflections: self.reflections,
             ..RecordSpec::default()
         };
         let (mut rec, metrics) = self.record_with_focus(&self.source_field(added)?, spec)?;
-        let magnitude = std::mem::take(&mut rec.magnitude);
-        let hottest = self.hottest_by_tissue(&magnitude);
+        let volume = keep_volume.then(|| {
+            let magnitude = std::mem::take(&mut rec.magnitude);
+            FieldVolume { hottest: self.hottest_by_tissue(&magnitude), magnitude }
+        });
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
         Ok(Field {
             pressure,
@@ -429,8 +451,7 @@ impl Simulation {
             axis_pressure: rec.axis,
             surface_pressure: self.source.face_pressure,
             metrics,
-            hottest,
-            magnitude,
+            volume,
         })
     }
 
