@@ -167,8 +167,9 @@ mod tests {
     use crate::scenario::Scenario;
 
     /// The volume is `|p|` of the planes a plain recording keeps (the same march, summed and taken
-    /// in single precision: within 1e-6 of the peak, a few float32 roundings), on the box asked for; its affine puts voxel (0, 0, 0) on the box's first
-    /// sample and steps by the grid's spacing.
+    /// in single precision: within 1e-6 of the peak, a few float32 roundings), on the box asked
+    /// for; its affine puts voxel (0, 0, 0) on the box's first sample and steps by the grid's
+    /// spacing.
     #[test]
     fn the_volume_is_the_magnitude_of_the_recorded_planes() {
         let sim = Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 4\n", None).unwrap()).unwrap();
