@@ -158,8 +158,10 @@ class ParallelGzip(io.RawIOBase):
         self.position += view.nbytes
         self.buffer += view
         while len(self.buffer) >= self.BLOCK:
-            self._submit(bytes(self.buffer[:self.BLOCK]))
+            with memoryview(self.buffer) as whole:
+                block = bytes(whole[:self.BLOCK])
             del self.buffer[:self.BLOCK]
+            self._submit(block)
         return view.nbytes
 
     def _submit(self, block: bytes) -> None:
@@ -168,15 +170,31 @@ class ParallelGzip(io.RawIOBase):
             self.f.write(self.pending.popleft().result())
 
     def close(self) -> None:
+        """Writes what is left, in order (a worker's error is raised here)."""
         if not self.closed:
             try:
                 if self.buffer:
                     self._submit(bytes(self.buffer))
+                    self.buffer.clear()
                 while self.pending:
                     self.f.write(self.pending.popleft().result())
             finally:
-                self.pool.shutdown()
-                super().close()
+                self.abandon()
+
+    def abandon(self) -> None:
+        """Stops without writing what is pending (the file is left incomplete: the caller's
+        atomic rename then does not happen)."""
+        for future in self.pending:
+            future.cancel()
+        self.pending.clear()
+        self.pool.shutdown(cancel_futures=True)
+        super().close()
+
+    def __exit__(self, kind: Any, value: Any, traceback: Any) -> None:
+        if kind is None:
+            self.close()
+        else:
+            self.abandon()
 
 
 def gzip_member(block: bytes) -> bytes:

@@ -73,8 +73,8 @@ def focal_box_mm(sim: Any, images: Sequence[NDArray[np.float64]], margin_mm: flo
                  least_mm: float = 20.0) -> list[float]:
     """``[u0, u1, v0, v1]`` (mm) around the focal spot of ``images`` (on the scenario's MR plane):
     the pixels above 10 % of the largest |value| and 5 noise deviations (the median absolute
-    deviation of each image: its background), with ``margin_mm`` around them, at least
-    ``least_mm`` wide, within the image."""
+    deviation of each image: its background), with ``margin_mm`` around them, widened to
+    ``least_mm`` where the image allows."""
     extent = image_extent_mm(sim, images[0])
     nu, nv = images[0].shape
     du, dv = (extent[1] - extent[0]) / nu, (extent[3] - extent[2]) / nv
@@ -181,9 +181,12 @@ def _report_dir(out: str | Path) -> Path:
     return out
 
 
-def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[tuple[str, str]]) -> Path:
-    """``out/report.html`` for a verb: its values as a table, then its figures."""
-    return write_html(out / "report.html", f"arfi {verb}", table_html(values) + figure_html(out, figures))
+def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[tuple[str, str]],
+               warning: str | None = None) -> Path:
+    """``out/report.html`` for a verb: the ``warning`` in red if any, its values as a table, then
+    its figures."""
+    head = f"<p style='color:red'><b>{html.escape(warning)}</b></p>" if warning else ""
+    return write_html(out / "report.html", f"arfi {verb}", head + table_html(values) + figure_html(out, figures))
 
 
 def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
@@ -215,8 +218,7 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
         if warning:
             fig.suptitle(warning, color="red")
         figures.append(("element maps coloured by phase", save_figure(fig, out / f"{verb}_elements.png")))
-    body = (f"<p style='color:red'><b>{html.escape(warning)}</b></p>" if warning else "") + table_html(values)
-    return write_html(out / "report.html", f"arfi {verb}", body + figure_html(out, figures))
+    return _verb_page(out, verb, values, figures, warning)
 
 
 def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],
@@ -247,50 +249,62 @@ def lobe(above: NDArray[np.bool_], start: tuple[int, ...]) -> NDArray[np.bool_]:
         region = grown
 
 
-def orthogonal_sections(sim: Any, field: Any) -> Any:
+def orthogonal_sections(sim: Any, field: Any, volume: Any = None) -> Any:
     """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
-    in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU (grey) with a ``[ct]``, else over the
-    sound speed; the colour scale set by the focal peak (hotter places, a scalp or a skull,
-    saturate), shown where above 10 % of it, with its -6 dB contour (cyan) and the target (+)."""
+    in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU
+    (grey) with a ``[ct]``, else over the sound speed; the colour scale set by the focal peak
+    (hotter places, a scalp or a skull, saturate), shown where above 10 % of it, with its -6 dB
+    lobe contoured (cyan) and the target (+). The top row shows the whole grid, the bottom row the
+    same planes around the target (at least 10 mm each way, three -6 dB widths across and 1.5
+    along the beam). ``volume``: ``field.pressure_volume()`` if made already (the whole grid)."""
     plt = pyplot()
-    volume = field.pressure_volume()
+    volume = field.pressure_volume() if volume is None else volume
     p, a = volume.pressure_pa / 1e6, volume.affine_mm
     axes = [a[n, 3] + a[n, n] * np.arange(p.shape[2 - n]) for n in range(3)]  # x, y, z (mm)
     t = field.target_mm
     i, j, k = (int(np.argmin(np.abs(axes[n] - t[n]))) for n in range(3))
     peak = (field.focal_peak_pa or float(volume.pressure_pa.max())) / 1e6
+    along, across = field.fwhm_6db_mm or (20.0, 5.0)
+    reach = {"x": max(10.0, 3.0 * across), "y": max(10.0, 3.0 * across), "z": max(10.0, 1.5 * along)}
     sections = [("x", "z", p[:, j, :], (axes[0], axes[1][j], axes[2])), ("y", "z", p[:, :, i], (axes[0][i], axes[1], axes[2])),
                 ("x", "y", p[k], (axes[0], axes[1], axes[2][k]))]
-    fig, ax = plt.subplots(1, 3, figsize=(17, 5.2), layout="constrained")
+    fig, ax = plt.subplots(2, 3, figsize=(17, 10), layout="constrained")
     background = "hu" if sim.has_ct else "sound_speed_m_s"
+    hu = background == "hu"
     for n, (u, w, plane, (xs, ys, zs)) in enumerate(sections):
         grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1)  # one axis of length 1
         medium = sim.properties_at(grid.reshape(-1, 3))[background].reshape(grid.shape[:3]).squeeze().T  # (w, u) as plane
-        hu, uu, ww = background == "hu", axes["xyz".index(u)], axes["xyz".index(w)]
+        uu, ww = axes["xyz".index(u)], axes["xyz".index(w)]
         du, dw = uu[1] - uu[0], ww[1] - ww[0]
         extent = [uu[0] - du / 2, uu[-1] + du / 2, ww[0] - dw / 2, ww[-1] + dw / 2]
-        bg = ax[n].imshow(np.nan_to_num(medium, nan=-1000.0) if hu else medium, origin="lower", extent=extent, cmap="gray",
-                          vmin=-200.0 if hu else 1300.0, vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))))
-        im = ax[n].imshow(np.ma.masked_less(plane, 0.1 * peak), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
-                          vmax=peak, alpha=0.85)
         start = tuple(int(np.argmin(np.abs(axis - t["xyz".index(c)]))) for axis, c in ((ww, w), (uu, u)))
-        ax[n].contour(uu, ww, np.where(lobe(plane >= peak / 2, start), plane, 0.0), levels=[peak / 2], colors="c",
-                      linewidths=0.8)
-        ax[n].plot(t["xyz".index(u)], t["xyz".index(w)], "c+", ms=10)
+        focal = np.where(lobe(plane >= peak / 2, start), plane, 0.0)
         at = next(c for c in "xyz" if c not in (u, w))
-        ax[n].set(title=f"{u}–{w} plane through the target ({at} = {t['xyz'.index(at)]:.1f} mm)", xlabel=f"{u} (mm)",
-                  ylabel=f"{w} (mm)", aspect="equal")
-    fig.colorbar(im, ax=ax.tolist(), label="pressure amplitude (MPa)", shrink=0.8, extend="max")
-    fig.colorbar(bg, ax=ax.tolist(), label="CT (HU)" if background == "hu" else "sound speed (m/s)", shrink=0.8)
+        for row in (0, 1):
+            axis = ax[row][n]
+            bg = axis.imshow(np.nan_to_num(medium, nan=-1000.0) if hu else medium, origin="lower", extent=extent, cmap="gray",
+                             vmin=-200.0 if hu else 1300.0, vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))))
+            im = axis.imshow(np.ma.masked_less(plane, 0.1 * peak), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
+                             vmax=peak, alpha=0.85)
+            axis.contour(uu, ww, focal, levels=[peak / 2], colors="c", linewidths=0.8)
+            axis.plot(t["xyz".index(u)], t["xyz".index(w)], "c+", ms=10)
+            axis.set(xlabel=f"{u} (mm)", ylabel=f"{w} (mm)", aspect="equal")
+        ax[0][n].set_title(f"{u}–{w} plane through the target ({at} = {t['xyz'.index(at)]:.1f} mm)")
+        ax[1][n].set(title="around the target", xlim=(t["xyz".index(u)] - reach[u], t["xyz".index(u)] + reach[u]),
+                     ylim=(t["xyz".index(w)] - reach[w], t["xyz".index(w)] + reach[w]))
+    fig.colorbar(im, ax=ax.ravel().tolist(), label="pressure amplitude (MPa)", shrink=0.6, extend="max")
+    fig.colorbar(bg, ax=ax.ravel().tolist(), label="CT (HU)" if hu else "sound speed (m/s)", shrink=0.6)
     return fig
 
 
-def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
-    """Report of a simulated field: |p| (MPa) on the plane, axes in mm, its colour scale set by
-    the focal peak near the target (hotter places saturate); |p| along the beam's axis (the line
-    from the array's centre through the target) with the target's depth marked; with ``phases``,
-    the element map of the phases added to the steering; the beam on the three planes through the
-    target over the CT or the sound speed (:func:`orthogonal_sections`)."""
+def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None,
+                 volume: Any = None) -> Path:
+    """Report of a simulated field made with ``volume=True``: |p| (MPa) on the plane, axes in
+    mm, its colour scale set by the focal peak near the target (hotter places saturate); |p| along
+    the beam's axis (the line from the array's centre through the target) with the target's depth
+    marked; with ``phases``, the element map of the phases added to the steering; the beam on the
+    three planes through the target over the CT or the sound speed (:func:`orthogonal_sections`,
+    from ``volume`` if given: the field's whole-grid volume)."""
     plt = pyplot()
     out = _report_dir(out)
     focus = field.focus()
@@ -311,7 +325,7 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
     figures.append(("the beam on the three planes through the target (cyan: -6 dB of the focal peak)",
-                    save_figure(orthogonal_sections(sim, field), out / "field_sections.png")))
+                    save_figure(orthogonal_sections(sim, field, volume), out / "field_sections.png")))
     return _verb_page(out, "field", values, figures)
 
 

@@ -139,6 +139,6 @@ def test_field_through_a_head_reports_the_focus_at_the_target(tmp_path, capsys):
     # Each tissue's hottest place over the grid: the skull's and the scalp's are named, and the
     # brain's is a sample of the focal lobe (the peak, refined between samples, a few % above it as above).
     assert {"skull", "scalp", "brain"} <= set(r["hottest"]), r["hottest"]
-    assert r["hottest"]["brain"]["pressure_pa"] <= r["focal_peak_pa"] < 1.1 * r["hottest"]["brain"]["pressure_pa"]
+    assert r["hottest"]["brain"]["pressure_pa"] <= r["focal_peak_pa"] * (1 + 1e-6) < 1.1 * r["hottest"]["brain"]["pressure_pa"]
     data = np.load(tmp_path / "f.npz")
     assert np.allclose(data["axis_x_mm"], data["axis_z_mm"] * 10.0 / 140.0)

@@ -61,7 +61,7 @@ def test_through_a_head_the_skull_the_scalp_and_the_brain_each_have_their_hottes
         assert h["pressure_pa"] == ref[tissue][0], (tissue, h, ref[tissue])
         assert np.allclose(h["position_mm"], ref[tissue][1], atol=1e-6), (tissue, h, ref[tissue])
     # The brain's hottest sample is the focal peak's (the peak refined between samples, within 3 %).
-    assert 0.97 * d["focal_peak_pa"] <= hottest["brain"]["pressure_pa"] <= d["focal_peak_pa"]
+    assert 0.97 * d["focal_peak_pa"] <= hottest["brain"]["pressure_pa"] <= d["focal_peak_pa"] * (1 + 1e-6)
     # The exposure by hand in the brain (1546 m/s, 1040 kg/m³) at 550 kHz.
     b = hottest["brain"]["pressure_pa"]
     assert math.isclose(hottest["brain"]["mechanical_index"], b / 1e6 / math.sqrt(0.55), rel_tol=1e-12)
@@ -81,7 +81,7 @@ def test_without_bone_the_hottest_places_cover_the_whole_grid_and_name_no_skull(
     f = sim.field(volume=True)
     hottest = f.hottest
     assert list(hottest) == ["phantom", "water"]
-    assert 0.97 * f.focal_peak_pa <= hottest["phantom"]["pressure_pa"] <= f.focal_peak_pa
+    assert 0.97 * f.focal_peak_pa <= hottest["phantom"]["pressure_pa"] <= f.focal_peak_pa * (1 + 1e-6)
     whole = sim.pressure_volume(None).pressure_pa
     assert hottest["phantom"]["pressure_pa"] == float(whole.max())
     assert f.focus()["hottest"] == hottest

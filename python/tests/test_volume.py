@@ -119,6 +119,8 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
         f.pressure_volume(in_ct=True)  # no [ct] here
     with pytest.raises(ValueError, match="box_mm"):
         f.pressure_volume([500, 600, -4, 4, 75, 95])
+    with pytest.raises(ValueError, match="box_mm: must be six numbers"):
+        f.pressure_volume([1.0, 2.0, 3.0])
     # A field made without volume=True keeps none (the default: a lean march) and says how.
     lean = sim.field(phases)
     assert lean.hottest is None and lean.focus()["hottest"] is None
@@ -176,3 +178,42 @@ def test_a_gzipped_volume_is_written_in_parallel_members_that_every_reader_reads
     plain = tmp_path / "v.nii"
     save_nifti(plain, data, affine, "test")
     assert gzip.decompress(raw) == plain.read_bytes()
+
+
+def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_without_it(sim, tmp_path, capsys, monkeypatch):
+    # The whole grid's |p| (8 bytes a voxel while marching: 49 MB here) against a 10 MiB budget:
+    # sim.field(volume=True) is refused before the march, naming what and how to shrink it; the
+    # lean field is not. arfi field, asked for no volume and no report, prints why the hottest
+    # places are missing and writes its field.
+    monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.01")
+    with pytest.raises(ValueError, match=r"^\|p\| on the whole 180 x 180 x 189 grid .* spacing_mm"):
+        sim.field(volume=True)
+    assert sim.field().hottest is None
+    monkeypatch.delenv("ARFI_MEMORY_LIMIT_GIB")
+    original = arfi.Simulation.field
+
+    def refused(self, phases=None, z_mm=None, volume=False):
+        if volume:
+            raise ValueError("|p| on the whole 180 x 180 x 189 grid needs 9.9 GiB, more than the 0.1 GiB this machine has")
+        return original(self, phases, z_mm)
+
+    monkeypatch.setattr(arfi.Simulation, "field", refused)
+    js = tmp_path / "f.json"
+    assert main(["field", "--out", str(tmp_path / "f.npz"), "--json", str(js)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[2].startswith("field: no hottest place per tissue: |p| on the whole") and json.loads(js.read_text())["hottest"] is None
+    # Asked for a volume, the refusal is the answer: one line, exit 2, nothing written.
+    assert main(["field", "--out", str(tmp_path / "g.npz"), "--volume", str(tmp_path / "g.nii.gz")]) == 2
+    assert "|p| on the whole" in capsys.readouterr().err and not (tmp_path / "g.npz").exists()
+
+
+def test_a_failed_gzip_leaves_no_file(tmp_path, monkeypatch):
+    import arfi.io
+
+    def broken(block: bytes) -> bytes:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(arfi.io, "gzip_member", broken)
+    with pytest.raises(OSError, match="disk full"):
+        arfi.io.save_nifti(tmp_path / "v.nii.gz", np.zeros((4, 5, 6), dtype=np.float32), np.eye(4), "test")
+    assert list(tmp_path.iterdir()) == []

@@ -274,7 +274,7 @@ impl CoreField {
     /// x1, y0, y1, z0, z1 in mm) if given; with `in_ct` (a `[ct]` scenario) resampled into the
     /// CT's voxel grid with the CT's own RAS affine.
     #[pyo3(signature = (box_mm=None, in_ct=false))]
-    fn pressure_volume<'py>(&self, py: Python<'py>, box_mm: Option<[f64; 6]>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
+    fn pressure_volume<'py>(&self, py: Python<'py>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
         let Some(volume) = self.field.volume.as_ref() else {
             return Err(invalid("volume", "this field kept no volume: make it with sim.field(phases, volume=True)"));
         };
@@ -298,7 +298,7 @@ impl CoreField {
     /// Writes [`pressure_volume`](Self::pressure_volume)`(box_mm, in_ct)` as NIfTI (`.nii` or
     /// `.nii.gz`) at `path`, atomically.
     #[pyo3(signature = (path, box_mm=None, in_ct=false))]
-    fn to_nifti(&self, py: Python<'_>, path: Bound<'_, PyAny>, box_mm: Option<[f64; 6]>, in_ct: bool) -> PyResult<()> {
+    fn to_nifti(&self, py: Python<'_>, path: Bound<'_, PyAny>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<()> {
         self.pressure_volume(py, box_mm, in_ct)?.call_method1("to_nifti", (path,))?;
         Ok(())
     }

@@ -184,7 +184,7 @@ impl CoreSimulation {
         &self,
         py: Python<'py>,
         phases: Option<PyReadonlyArray1<'_, f64>>,
-        box_mm: Option<[f64; 6]>,
+        box_mm: Option<Vec<f64>>,
     ) -> PyResult<VolumeArrays<'py>> {
         let phases = phases_vec(phases);
         let window = window_of_box_mm(&self.inner.grid, box_mm)?;

@@ -1,7 +1,7 @@
 //! Pressure volumes as NumPy arrays: `|p|` in 3-D with its 4 x 4 affine (mm), on a box of the
 //! simulation grid or on a CT's voxels.
 
-use crate::error::to_py;
+use crate::error::{invalid, to_py};
 use has_core::physics::grid::Grid;
 use has_core::physics::propagation::Window;
 use has_core::simulation::{window_affine, window_of_box, CtPressureVolume, PressureVolume};
@@ -24,8 +24,11 @@ fn affine_4x4(rows: &[[f64; 4]; 3], scale: f64) -> Array2<f64> {
 }
 
 /// The box of `g` within `box_mm` (x0, x1, y0, y1, z0, z1 in mm); `None`: none asked for.
-pub(crate) fn window_of_box_mm(g: &Grid, box_mm: Option<[f64; 6]>) -> PyResult<Option<Window>> {
+pub(crate) fn window_of_box_mm(g: &Grid, box_mm: Option<Vec<f64>>) -> PyResult<Option<Window>> {
     let Some(b) = box_mm else { return Ok(None) };
+    if b.len() != 6 {
+        return Err(invalid("box_mm", format!("must be six numbers (x0, x1, y0, y1, z0, z1 in mm), got {}", b.len())));
+    }
     window_of_box(g, [b[0], b[2], b[4]].map(|v| v * 1e-3), [b[1], b[3], b[5]].map(|v| v * 1e-3)).map(Some).map_err(to_py)
 }
 

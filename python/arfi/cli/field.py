@@ -41,7 +41,7 @@ def register(sub: Any) -> None:
     p.add_argument("--volume-ct", metavar="F.nii.gz", dest="volume_ct", help="also write |p| (Pa) resampled into the "
                    "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
-                   dest="volume_box_mm", help="write the --volume on this box only (mm, transducer frame), for large grids")
+                   dest="volume_box_mm", help="crop the --volume file to this box (mm, transducer frame)")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the three planes "
                   "through the target over the CT in HU or the sound speed, with the focal -6 dB contour)")
     p.set_defaults(run=run)
@@ -76,7 +76,8 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
              f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
              f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"]
     lines.append(metrics_line(focus))
-    lines.append(hottest_line(focus["hottest"]))
+    if focus["hottest"] is not None:
+        lines.append(hottest_line(focus["hottest"]))
     for where, key in (("on the plane", "plane"), ("on the axis", "axis")):
         if focus[f"{key}_hottest_pa"] is not None:
             p = focus[f"{key}_hottest_mm"]
@@ -107,7 +108,13 @@ def run(args: argparse.Namespace) -> int:
         phases = added - sim.element_phases(correction, "--correction")
     if args.volume_ct is not None and not sim.has_ct:
         raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
-    f = sim.field(phases, args.z_mm, volume=True)
+    skipped = None
+    try:
+        f = sim.field(phases, args.z_mm, volume=True)
+    except ValueError as e:  # the whole grid's |p| does not fit: without volume outputs, the field alone
+        if not str(e).startswith("|p| on the whole") or args.volume or args.volume_ct or args.report:
+            raise
+        f, skipped = sim.field(phases, args.z_mm), str(e)
     # The volumes (from the field's own march) before anything is written: a box outside the
     # grid leaves no file behind.
     volume = None if args.volume is None else f.pressure_volume(args.volume_box_mm)
@@ -128,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
     )
     focus = f.focus()
     lines = focus_lines(sim, f, focus, args.out)
+    if skipped:
+        lines.insert(2, f"field: no hottest place per tissue: {skipped}")
     written = {}
     for key, path, v in (("volume", args.volume, volume), ("volume_ct", args.volume_ct, in_ct)):
         if v is None:
@@ -148,7 +157,8 @@ def run(args: argparse.Namespace) -> int:
         from arfi.report import field_report
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
-        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
+        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases,
+                     volume if args.volume_box_mm is None else None)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus, "volume": written.get("volume"),
                    "volume_ct": written.get("volume_ct"),
                    "propagation": sim.propagation, "seconds": time.perf_counter() - t})

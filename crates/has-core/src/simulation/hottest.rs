@@ -84,7 +84,7 @@ impl Simulation {
 
 /// The hottest sample of each class of `map` (see the module docs) for the target `focus` (m):
 /// its class, `|p|` and index, in the order of the classes (the map's names, `bone` named
-/// `skull`, then `scalp`).
+/// `skull`, then `scalp`), one entry per name.
 fn hottest_samples(g: &Grid, focus: [f64; 3], map: &TissueMap, magnitude: &[f32]) -> Vec<(String, f32, usize)> {
     let bone = map.names.iter().position(|n| n == BONE);
     let target = g.nearest(focus).map(|[i, j, k]| (k * g.ny + j) * g.nx + i);
@@ -107,7 +107,16 @@ fn hottest_samples(g: &Grid, focus: [f64; 3], map: &TissueMap, magnitude: &[f32]
             best[c] = Some((p, s));
         }
     }
-    best.into_iter().zip(names).filter_map(|(b, tissue)| b.map(|(p, s)| (tissue, p, s))).collect()
+    // A material may bear a class's name ("scalp", "skull"): one entry per name, the hotter.
+    let mut out: Vec<(String, f32, usize)> = Vec::new();
+    for (tissue, (p, s)) in names.into_iter().zip(best).filter_map(|(t, b)| b.map(|b| (t, b))) {
+        match out.iter_mut().find(|o| o.0 == tissue) {
+            Some(o) if p > o.1 || (p == o.1 && s < o.2) => (o.1, o.2) = (p, s),
+            Some(_) => {}
+            None => out.push((tissue, p, s)),
+        }
+    }
+    out
 }
 
 /// Position (m) of grid sample `s` (row-major plane, row, column).
@@ -232,6 +241,16 @@ mod tests {
     fn a_bone_shell_splits_the_targets_tissue_into_brain_and_scalp() {
         let (g, focus, map, magnitude, truth) = shell();
         assert_eq!(sorted(hottest_samples(&g, focus, &map, &magnitude)), brute_force(&magnitude, &truth));
+    }
+
+    /// A material named like a class ("scalp" for the water here) merges with it: one entry, the
+    /// hotter of the two.
+    #[test]
+    fn a_material_named_like_a_class_gives_one_entry() {
+        let (g, focus, mut map, magnitude, truth) = shell();
+        map.names[0] = "scalp".into();
+        let merged: Vec<&str> = truth.iter().map(|&c| if c == "water" { "scalp" } else { c }).collect();
+        assert_eq!(sorted(hottest_samples(&g, focus, &map, &magnitude)), brute_force(&magnitude, &merged));
     }
 
     /// Without bone nothing is the scalp; a target outside the grid splits nothing either.

@@ -422,7 +422,7 @@ impl Simulation {
         let whole = Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx };
         if keep_volume {
             memory::check(
-                || format!("|p| on the whole {} x {} x {} grid", g.nx, g.ny, g.nz),
+                || format!("|p| on the whole {} x {} x {} grid (the hottest place of each tissue, the volume)", g.nx, g.ny, g.nz),
                 whole.len() as u64 * volume::BYTES_PER_VOXEL,
                 "use a coarser grid ([grid] spacing_mm)",
             )?;

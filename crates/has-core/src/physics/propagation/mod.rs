@@ -398,9 +398,9 @@ impl HasPlan {
         if let Some(&p) = spec.planes.iter().find(|&&p| p >= g.nz) {
             return Err(HasError::invalid("planes", format!("plane {p} is beyond the grid ({} planes)", g.nz)));
         }
-        if let Some(w) = &spec.window {
-            if w.planes.end > g.nz || w.rows.end > g.ny || w.cols.end > g.nx {
-                return Err(HasError::invalid("window", "reaches beyond the grid"));
+        for (name, w) in [("window", &spec.window), ("magnitude", &spec.magnitude)] {
+            if w.as_ref().is_some_and(|w| w.planes.end > g.nz || w.rows.end > g.ny || w.cols.end > g.nx) {
+                return Err(HasError::invalid(name, "reaches beyond the grid"));
             }
         }
         Ok(())
