@@ -3,11 +3,11 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
-use crate::volume::{crop, ct_arrays, grid_arrays, window_of_box_mm};
+use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, Peak};
 use has_core::physics::ct::CtMedium;
 use has_core::physics::grid::Grid;
-use has_core::simulation::{check_ct_volume, resample_into_ct};
+use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct};
 use has_core::{Field, Section, Simulation};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, ToPyArray};
@@ -290,7 +290,7 @@ impl CoreField {
             (ct_arrays(py, py.detach(|| resample_into_ct(&self.grid, magnitude, ct))), "ct")
         } else {
             let window = window_of_box_mm(&self.grid, box_mm)?;
-            (grid_arrays(py, crop(&self.grid, magnitude, window)), "transducer")
+            (grid_arrays(py, crop_volume(&self.grid, magnitude, window)), "transducer")
         };
         py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
     }

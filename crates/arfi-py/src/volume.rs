@@ -4,7 +4,7 @@
 use crate::error::{invalid, to_py};
 use has_core::physics::grid::Grid;
 use has_core::physics::propagation::Window;
-use has_core::simulation::{window_affine, window_of_box, CtPressureVolume, PressureVolume};
+use has_core::simulation::{window_of_box, CtPressureVolume, PressureVolume};
 use ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::prelude::*;
@@ -43,12 +43,4 @@ pub(crate) fn grid_arrays(py: Python<'_>, v: PressureVolume) -> VolumeArrays<'_>
 pub(crate) fn ct_arrays(py: Python<'_>, v: CtPressureVolume) -> VolumeArrays<'_> {
     let pressure = Array3::from_shape_vec((v.shape[0], v.shape[1], v.shape[2]), v.pressure).expect("one value per CT voxel");
     (pressure.into_pyarray(py), affine_4x4(&v.ras_affine, 1.0).into_pyarray(py))
-}
-
-/// `magnitude` (every sample of `g`) on `window` (`None`: the whole grid), as a volume.
-pub(crate) fn crop(g: &Grid, magnitude: &[f32], window: Option<Window>) -> PressureVolume {
-    let whole = Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx };
-    let window = window.unwrap_or_else(|| whole.clone());
-    let pressure = if window == whole { magnitude.to_vec() } else { whole.extract(magnitude, &window) };
-    PressureVolume { affine: window_affine(g, &window), window, pressure }
 }

@@ -67,6 +67,13 @@ pub(crate) enum Shortfall {
     NoFocus,
 }
 
+/// The exposure at a pressure amplitude `pressure` (Pa) in a medium of `density` (kg/m³) and
+/// `sound_speed` (m/s) at `frequency` (Hz): I_SPPA `p² / (2·ρ·c)` (W/m²) and the mechanical index
+/// `p[MPa] / √f[MHz]` (in situ).
+pub(crate) fn exposure(pressure: f64, density: f64, sound_speed: f64, frequency: f64) -> (f64, f64) {
+    (pressure * pressure / (2.0 * density * sound_speed), pressure * 1e-6 / (frequency * 1e-6).sqrt())
+}
+
 /// The properties the metrics need at the peak: density (kg/m³), sound speed (m/s), tissue name.
 pub(crate) type PeakTissue = (f64, f64, String);
 
@@ -189,7 +196,7 @@ impl FocalBox<'_> {
         let six = extents(0.5)?;
         let three = extents(std::f64::consts::FRAC_1_SQRT_2)?;
         let (density, sound_speed, name) = tissue(position);
-        let isppa = peak_pressure * peak_pressure / (2.0 * density * sound_speed);
+        let (isppa, mechanical_index) = exposure(peak_pressure, density, sound_speed, frequency);
         let voxels = self.region_voxels(&region, 0.5 * peak_pressure);
         Ok(FocalMetrics {
             target,
@@ -200,7 +207,7 @@ impl FocalBox<'_> {
             fwhm_3db: [three[0], 0.5 * (three[1] + three[2])],
             volume_6db: voxels * g.dx * g.dy * g.dz,
             isppa,
-            mechanical_index: peak_pressure * 1e-6 / (frequency * 1e-6).sqrt(),
+            mechanical_index,
             tissue: name,
         })
     }

@@ -10,7 +10,7 @@
 mod metrics;
 
 pub use metrics::FocalMetrics;
-pub(crate) use metrics::{focal_window, FocalBox, Shortfall};
+pub(crate) use metrics::{exposure, focal_window, FocalBox, Shortfall};
 
 use ndarray::{ArrayD, ArrayViewD, Dimension, IxDyn};
 

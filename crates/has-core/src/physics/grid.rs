@@ -52,6 +52,10 @@ impl Grid {
     pub fn z(&self, n: usize) -> f64 {
         self.z0 + n as f64 * self.dz
     }
+    /// Column, row and plane of `p` (m) as fractional indices (grid points at whole numbers).
+    pub fn fractional_index(&self, p: [f64; 3]) -> [f64; 3] {
+        [p[0] / self.dx + (self.nx / 2) as f64, p[1] / self.dy + (self.ny / 2) as f64, (p[2] - self.z0) / self.dz]
+    }
     /// Index of the plane nearest to `z` (clamped to the grid).
     pub fn plane_index(&self, z: f64) -> usize {
         let n = ((z - self.z0) / self.dz).round();

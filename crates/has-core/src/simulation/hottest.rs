@@ -11,6 +11,7 @@
 //! one step per sample at most.
 
 use super::Simulation;
+use crate::focal::exposure;
 use crate::physics::grid::Grid;
 use rayon::prelude::*;
 
@@ -72,13 +73,8 @@ impl Simulation {
     fn exposure(&self, tissue: String, pressure: f64, position: [f64; 3]) -> TissueHottest {
         let [x, y, z] = position;
         let p = self.medium.properties_at(x, y, z, self.frequency);
-        TissueHottest {
-            tissue,
-            pressure,
-            position,
-            isppa: pressure * pressure / (2.0 * p.density * p.sound_speed),
-            mechanical_index: pressure * 1e-6 / (self.frequency * 1e-6).sqrt(),
-        }
+        let (isppa, mechanical_index) = exposure(pressure, p.density, p.sound_speed, self.frequency);
+        TissueHottest { tissue, pressure, position, isppa, mechanical_index }
     }
 }
 
@@ -138,7 +134,7 @@ struct Sees<'a> {
 
 impl<'a> Sees<'a> {
     fn new(g: &Grid, focus: [f64; 3], tissue: &'a [u8], bone: Option<usize>) -> Self {
-        let target = [focus[0] / g.dx + (g.nx / 2) as f64, focus[1] / g.dy + (g.ny / 2) as f64, (focus[2] - g.z0) / g.dz];
+        let target = g.fractional_index(focus);
         let known = if bone.is_some() { vec![0; tissue.len()] } else { Vec::new() };
         Sees { shape: [g.nx, g.ny, g.nz], target, tissue, bone: bone.map(|b| b as u8), known }
     }

@@ -29,7 +29,7 @@ mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
 pub use hottest::TissueHottest;
-pub use volume::{check_ct_volume, resample_into_ct, window_affine, window_of_box, CtPressureVolume, PressureVolume};
+pub use volume::{check_ct_volume, crop_volume, resample_into_ct, window_affine, window_of_box, CtPressureVolume, PressureVolume};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).
@@ -419,7 +419,7 @@ impl Simulation {
         }
         let plane = g.plane_index(z);
         let slope = self.axis_slope();
-        let whole = Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx };
+        let whole = Window::whole(g);
         if keep_volume {
             memory::check(
                 || format!("|p| on the whole {} x {} x {} grid (the hottest place of each tissue, the volume)", g.nx, g.ny, g.nz),

@@ -44,7 +44,7 @@ impl Simulation {
     /// Refused before the march when it would not fit in memory.
     pub fn pressure_volume(&self, added: &[f64], window: Option<Window>) -> Result<PressureVolume> {
         let g = &self.grid;
-        let window = window.unwrap_or(Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx });
+        let window = window.unwrap_or_else(|| Window::whole(g));
         if window.is_empty() || window.planes.end > g.nz || window.rows.end > g.ny || window.cols.end > g.nx {
             return Err(HasError::invalid("window", "must be a box of the grid holding at least one sample"));
         }
@@ -59,6 +59,15 @@ impl Simulation {
         let affine = window_affine(g, &window);
         Ok(PressureVolume { window, pressure, affine })
     }
+}
+
+/// `magnitude` (`|p|` on every sample of `g`, as [`crate::simulation::FieldVolume`] keeps it)
+/// on `window` (`None`: the whole grid) as a volume.
+pub fn crop_volume(g: &Grid, magnitude: &[f32], window: Option<Window>) -> PressureVolume {
+    let whole = Window::whole(g);
+    let window = window.unwrap_or_else(|| whole.clone());
+    let pressure = if window == whole { magnitude.to_vec() } else { whole.extract(magnitude, &window) };
+    PressureVolume { affine: window_affine(g, &window), window, pressure }
 }
 
 /// The affine from voxel `(i, j, k)` of `window` (column, row, plane within it) to the
@@ -112,7 +121,7 @@ pub fn resample_into_ct(grid: &Grid, magnitude: &[f32], ct: &CtMedium) -> CtPres
 /// `values` (one per grid sample, row-major (plane, row, column)) at the point `p` (m), trilinear
 /// between the eight samples around it; zero outside the grid.
 fn trilinear(g: &Grid, values: &[f32], p: [f64; 3]) -> f32 {
-    let at = [p[0] / g.dx + (g.nx / 2) as f64, p[1] / g.dy + (g.ny / 2) as f64, (p[2] - g.z0) / g.dz];
+    let at = g.fractional_index(p);
     let n = [g.nx, g.ny, g.nz];
     if (0..3).any(|a| !(at[a] >= 0.0 && at[a] <= (n[a] - 1) as f64)) {
         return 0.0;

@@ -123,6 +123,10 @@ pub struct Window {
 }
 
 impl Window {
+    /// Every sample of `g`.
+    pub fn whole(g: &Grid) -> Self {
+        Window { planes: 0..g.nz, rows: 0..g.ny, cols: 0..g.nx }
+    }
     /// Number of samples in the box.
     pub fn len(&self) -> usize {
         self.planes.len() * self.rows.len() * self.cols.len()
