@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from numpy.typing import ArrayLike
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
 from arfi.scenario import Scenario
@@ -36,3 +39,29 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_s
     fields_only = scenario.to_dict()
     fields_only.setdefault("arfi", {}).setdefault("amplitude_rad_m3_per_n", 1.0)
     return prediction.with_simulation(Simulation._wrap(Scenario.from_dict(fields_only, scenario.base_dir), core))
+
+
+def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:
+    """The drives a prediction compares, as phases added to its kept simulation's steering (rad,
+    per element), named as its focal pressures are: ``uncorrected`` (the reference steering toward
+    the target, the head read without bone), ``ray_steering`` (the scenario's straight-ray CT
+    steering toward the target) and ``corrected`` (the reference steering minus the prediction).
+    Needs a prediction made with ``keep_simulation=True``."""
+    sim = prediction.simulation
+    if sim is None:
+        raise ValueError("prediction: has no simulation; predict with keep_simulation=True")
+    steering = sim.steering_phases_rad
+    return {
+        "uncorrected": prediction.reference_steering_rad - steering,
+        "ray_steering": sim.focus_shift_phases(np.subtract(prediction.target_mm, sim.focus_mm)),
+        "corrected": prediction.correction_rad(steering),
+    }
+
+
+def focal_metrics(prediction: Prediction) -> dict[str, dict[str, Any]]:
+    """The focal metrics in 3-D around the prediction's target (``Simulation.focal_metrics``: the
+    focal peak, its distance from the target, -3/-6 dB extents, -6 dB volume, I_SPPA and MI) for
+    each of :func:`compared_drives`, one march each through the kept skull."""
+    drives = compared_drives(prediction)  # refuses a prediction without its simulation
+    sim = cast(Simulation, prediction.simulation)
+    return {name: sim.focal_metrics(phases, target_mm=prediction.target_mm) for name, phases in drives.items()}

@@ -329,22 +329,19 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     return _verb_page(out, "field", values, figures)
 
 
-def predict_report(out: str | Path, prediction: Any, values: dict[str, Any]) -> Path:
+def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], drives: dict[str, NDArray[np.float64]]) -> Path:
     """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
-    skull on the x–z section through the target, driven toward the target with the reference
-    steering (uncorrected), the scenario's straight-ray steering and the reference steering minus
-    the prediction (marches of the kept skull's simulation, in one batch; with the target at the
-    focus, the straight-ray drive is the steering itself, which the simulation's build recorded
-    on that section); the element maps of the predicted phase and of the transmission."""
+    skull on the x–z section through the target for each of ``drives`` (``arfi.prediction.
+    compared_drives``: uncorrected, straight-ray CT steering, corrected; marches of the kept
+    skull's simulation, in one batch; with the target at the focus, the straight-ray drive is the
+    steering itself, which the simulation's build recorded on that section); the element maps of
+    the predicted phase and of the transmission."""
     sim = prediction.simulation
     if sim is None:
         raise ValueError("prediction: has no simulation; predict with keep_simulation=True to report it")
     plt = pyplot()
     out = _report_dir(out)
-    steering = sim.steering_phases_rad
-    ray = sim.focus_shift_phases(np.subtract(prediction.target_mm, sim.focus_mm))  # its steering toward the target
-    drives = [prediction.reference_steering_rad - steering, ray, prediction.correction_rad(steering)]
-    section = sim.section(drives, y_mm=prediction.target_mm[1])
+    section = sim.section(list(drives.values()), y_mm=prediction.target_mm[1])
     best = prediction.optimal_pa
     fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in
                                    [("uncorrected", prediction.uncorrected_pa), ("straight-ray CT steering", prediction.ray_steering_pa),

@@ -212,6 +212,18 @@ class Simulation:
         writes them."""
         return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"), bool(volume))
 
+    def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> dict[str, Any]:
+        """The focal metrics in 3-D of the beam driven with ``phases`` (as for :meth:`field`)
+        around ``target_mm`` (mm, transducer frame; default: the focus), from one march that
+        records only a box around it: ``target_mm``, ``focal_peak_mm``, ``focal_peak_pa``,
+        ``peak_to_target_mm``, ``fwhm_6db_mm`` [along, across], ``fwhm_6db_across_mm``,
+        ``fwhm_3db_mm``, ``focal_volume_6db_mm3``, ``isppa_w_cm2``, ``mechanical_index`` and
+        ``focal_tissue``, as :meth:`Field.focus` names them (each None when no closed -6 dB region
+        lies around the target). Cheaper than :meth:`field` when only the metrics are wanted, and
+        for a target other than the focus (e.g. a prediction's)."""
+        target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
+        return self._core.focal_metrics(as_phases(phases), target)
+
     def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None,
                         in_ct: bool = False) -> PressureVolume:
         """``|p|`` (Pa) of the beam in 3-D from one march, on the whole grid or on the box

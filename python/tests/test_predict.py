@@ -9,9 +9,14 @@ import numpy as np
 import pytest
 
 from arfi.cli import main
-from arfi.prediction import predict
+from arfi.prediction import compared_drives, predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
+
+
+#: The focal metrics' keys, as arfi field's JSON names them.
+FOCAL_KEYS = {"target_mm", "focal_peak_mm", "focal_peak_pa", "peak_to_target_mm", "fwhm_6db_mm", "fwhm_6db_across_mm",
+              "fwhm_3db_mm", "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index", "focal_tissue"}
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +35,8 @@ def head(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_cli_predict_writes_the_prior_and_the_focal_pressures(head, tmp_path, capsys):
     out, js = tmp_path / "prior.npy", tmp_path / "prediction.json"
     assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(out), "--json", str(js)]) == 0
-    assert "predict: 256 elements" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "predict: 256 elements" in printed
     phases = np.load(out)
     result = json.loads(js.read_text())
     assert phases.shape == (256,) and np.allclose(phases, result["phases_rad"])
@@ -44,6 +50,30 @@ def test_cli_predict_writes_the_prior_and_the_focal_pressures(head, tmp_path, ca
     assert 0.95 * p["reference_optimal"] <= p["reference"] <= p["reference_optimal"] * (1 + 1e-9), p
     t = np.array(result["transmission"])
     assert t.shape == (256,) and 0.02 < t.mean() < 1.0
+    # The focal metrics of each drive compared (on by default with --json), in arfi field's keys.
+    metrics = result["focal_metrics"]
+    assert set(metrics) == {"uncorrected", "ray_steering", "corrected"}
+    for name, m in metrics.items():
+        assert set(m) == FOCAL_KEYS and m["target_mm"] == result["target_mm"], name
+        # Two computations that share nothing but the plan: the peak of the forward march's box
+        # (sub-voxel) and the transposed march's |p| at the target (to the rounding of the
+        # single-precision projection). The peak is the local maximum, so at least the target's
+        # |p| (1e-4: the trilinear interpolation at the target against the peak's parabola); the
+        # peak lies within 1 mm of the target, across a -6 dB lobe 5 mm wide and 15 mm long, so
+        # the target keeps at least 95 % of it.
+        assert p[name] * (1 - 1e-4) <= m["focal_peak_pa"] <= p[name] / 0.95, (name, m, p)
+        assert m["peak_to_target_mm"] < 1.0 and m["focal_tissue"] == "brain", (name, m)
+        # I_SPPA and MI by hand at the peak, in brain (1546 m/s, 1040 kg/m3) at 220 kHz.
+        assert m["mechanical_index"] == pytest.approx(m["focal_peak_pa"] / 1e6 / np.sqrt(0.22), rel=1e-12)
+        assert m["isppa_w_cm2"] == pytest.approx(m["focal_peak_pa"] ** 2 / (2 * 1040.0 * 1546.0) * 1e-4, rel=1e-12)
+    # The corrected beam peaks nearest the target and highest.
+    assert metrics["corrected"]["peak_to_target_mm"] <= min(m["peak_to_target_mm"] for m in metrics.values())
+    assert metrics["corrected"]["focal_peak_pa"] >= max(m["focal_peak_pa"] for m in metrics.values())
+    for name in ["uncorrected", "straight-ray CT steering", "corrected"]:
+        assert f"predict: {name}: focus in 3-D: " in printed
+    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(out), "--json", str(js),
+                 "--no-focal-metrics", "--no-bone-speed-sensitivity"]) == 0
+    assert "focal_metrics" not in json.loads(js.read_text()) and "focus in 3-D" not in capsys.readouterr().out
 
 
 def test_predicted_phases_applied_by_the_forward_march_give_the_predicted_focus(head):
@@ -134,14 +164,12 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
     for name in ["predict_section.png", "predict_elements.png", "report.html"]:
         assert (report / name).stat().st_size > 10_000, name
     assert (report / "predict_section.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # The report marches the kept skull's simulation; without one it says how to get it.
-    from arfi.report import predict_report
-
+    # The report and the focal metrics march the kept skull's simulation; without one the drives
+    # they march say how to get it.
     p = predict(Scenario.load(head / "head.toml"))
     assert p.simulation is None
     with pytest.raises(ValueError, match="keep_simulation=True"):
-        predict_report(tmp_path / "r2", p, {})
-    assert not (tmp_path / "r2").exists()
+        compared_drives(p)
 
 
 def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head, tmp_path, capsys):

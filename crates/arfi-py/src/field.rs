@@ -4,7 +4,7 @@
 
 use crate::error::{invalid, to_py};
 use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm};
-use has_core::focal::{FieldFocus, Peak};
+use has_core::focal::{FieldFocus, FocalMetrics, Peak};
 use has_core::physics::ct::CtMedium;
 use has_core::physics::grid::Grid;
 use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct};
@@ -15,19 +15,53 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::{Arc, OnceLock};
 
-/// The focal metrics' attributes, in the order `focus()` writes them.
-const METRICS: [&str; 10] = [
-    "focal_peak_mm",
-    "focal_peak_pa",
-    "peak_to_target_mm",
-    "fwhm_6db_mm",
-    "fwhm_6db_across_mm",
-    "fwhm_3db_mm",
-    "focal_volume_6db_mm3",
-    "isppa_w_cm2",
-    "mechanical_index",
-    "focal_tissue",
-];
+/// The focal metrics in the units their names give (mm, Pa, mm³, W/cm²): the attributes of a
+/// `Field`, the keys of its `focus()` and of `Simulation.focal_metrics`, converted here once.
+pub(crate) struct MetricsMm {
+    focal_peak_mm: [f64; 3],
+    focal_peak_pa: f64,
+    peak_to_target_mm: f64,
+    fwhm_6db_mm: [f64; 2],
+    fwhm_6db_across_mm: [f64; 2],
+    fwhm_3db_mm: [f64; 2],
+    focal_volume_6db_mm3: f64,
+    isppa_w_cm2: f64,
+    mechanical_index: f64,
+    focal_tissue: String,
+}
+
+impl From<&FocalMetrics> for MetricsMm {
+    fn from(m: &FocalMetrics) -> Self {
+        MetricsMm {
+            focal_peak_mm: point_mm(m.peak),
+            focal_peak_pa: m.peak_pressure,
+            peak_to_target_mm: m.peak_to_target() * 1e3,
+            fwhm_6db_mm: m.fwhm_6db.map(|v| v * 1e3),
+            fwhm_6db_across_mm: m.across_6db.map(|v| v * 1e3),
+            fwhm_3db_mm: m.fwhm_3db.map(|v| v * 1e3),
+            focal_volume_6db_mm3: m.volume_6db * 1e9,
+            isppa_w_cm2: m.isppa * 1e-4,
+            mechanical_index: m.mechanical_index,
+            focal_tissue: m.tissue.clone(),
+        }
+    }
+}
+
+/// Sets the focal metrics' keys of `d` from `m`, each None when there are none (no closed -6 dB
+/// region around the target).
+pub(crate) fn metrics_items(d: &Bound<'_, PyDict>, m: Option<&MetricsMm>) -> PyResult<()> {
+    d.set_item("focal_peak_mm", m.map(|m| m.focal_peak_mm))?;
+    d.set_item("focal_peak_pa", m.map(|m| m.focal_peak_pa))?;
+    d.set_item("peak_to_target_mm", m.map(|m| m.peak_to_target_mm))?;
+    d.set_item("fwhm_6db_mm", m.map(|m| m.fwhm_6db_mm))?;
+    d.set_item("fwhm_6db_across_mm", m.map(|m| m.fwhm_6db_across_mm))?;
+    d.set_item("fwhm_3db_mm", m.map(|m| m.fwhm_3db_mm))?;
+    d.set_item("focal_volume_6db_mm3", m.map(|m| m.focal_volume_6db_mm3))?;
+    d.set_item("isppa_w_cm2", m.map(|m| m.isppa_w_cm2))?;
+    d.set_item("mechanical_index", m.map(|m| m.mechanical_index))?;
+    d.set_item("focal_tissue", m.map(|m| m.focal_tissue.as_str()))?;
+    Ok(())
+}
 
 /// Millimetres of lengths in metres.
 fn mm(v: &[f64]) -> Vec<f64> {
@@ -48,6 +82,8 @@ pub(crate) struct CoreField {
     /// The core's field (its arrays copied into the NumPy ones above, which a user may change;
     /// its `magnitude`, the volume, kept here alone).
     field: Field,
+    /// The field's focal metrics in the units of the attributes.
+    metrics: Option<MetricsMm>,
     target: [f64; 3],
     focus: OnceLock<FieldFocus>,
     /// The grid the volume lies on, and the CT it may be laid on.
@@ -69,6 +105,7 @@ impl CoreField {
             axis_pressure: f.axis_pressure.to_pyarray(py).unbind(),
             target: sim.focus,
             focus: OnceLock::new(),
+            metrics: f.metrics.as_ref().map(MetricsMm::from),
             field: f,
             grid: sim.grid.clone(),
             ct: sim.medium.ct.clone(),
@@ -161,61 +198,61 @@ impl CoreField {
     /// grid or its -6 dB region reaches the grid's edge).
     #[getter]
     fn focal_peak_mm(&self) -> Option<[f64; 3]> {
-        self.field.metrics.as_ref().map(|m| point_mm(m.peak))
+        self.metrics.as_ref().map(|m| m.focal_peak_mm)
     }
 
     /// |p| at the focal peak (Pa), in situ.
     #[getter]
     fn focal_peak_pa(&self) -> Option<f64> {
-        self.field.metrics.as_ref().map(|m| m.peak_pressure)
+        self.metrics.as_ref().map(|m| m.focal_peak_pa)
     }
 
     /// Distance from the target to the focal peak (mm).
     #[getter]
     fn peak_to_target_mm(&self) -> Option<f64> {
-        self.field.metrics.as_ref().map(|m| m.peak_to_target() * 1e3)
+        self.metrics.as_ref().map(|m| m.peak_to_target_mm)
     }
 
     /// The -6 dB extent along the beam and across it (the mean of two directions), mm.
     #[getter]
     fn fwhm_6db_mm(&self) -> Option<[f64; 2]> {
-        self.field.metrics.as_ref().map(|m| m.fwhm_6db.map(|v| v * 1e3))
+        self.metrics.as_ref().map(|m| m.fwhm_6db_mm)
     }
 
     /// The -6 dB extents across the beam: along the direction nearest x, then nearest y (mm).
     #[getter]
     fn fwhm_6db_across_mm(&self) -> Option<[f64; 2]> {
-        self.field.metrics.as_ref().map(|m| m.across_6db.map(|v| v * 1e3))
+        self.metrics.as_ref().map(|m| m.fwhm_6db_across_mm)
     }
 
     /// The -3 dB extent along the beam and across it (mm).
     #[getter]
     fn fwhm_3db_mm(&self) -> Option<[f64; 2]> {
-        self.field.metrics.as_ref().map(|m| m.fwhm_3db.map(|v| v * 1e3))
+        self.metrics.as_ref().map(|m| m.fwhm_3db_mm)
     }
 
     /// Volume of the -6 dB region around the focal peak (mm³).
     #[getter]
     fn focal_volume_6db_mm3(&self) -> Option<f64> {
-        self.field.metrics.as_ref().map(|m| m.volume_6db * 1e9)
+        self.metrics.as_ref().map(|m| m.focal_volume_6db_mm3)
     }
 
     /// Spatial-peak pulse-average intensity at the focal peak, p²/(2·ρ·c) (W/cm²).
     #[getter]
     fn isppa_w_cm2(&self) -> Option<f64> {
-        self.field.metrics.as_ref().map(|m| m.isppa * 1e-4)
+        self.metrics.as_ref().map(|m| m.isppa_w_cm2)
     }
 
     /// Mechanical index at the focal peak, p[MPa]/√f[MHz] (in situ).
     #[getter]
     fn mechanical_index(&self) -> Option<f64> {
-        self.field.metrics.as_ref().map(|m| m.mechanical_index)
+        self.metrics.as_ref().map(|m| m.mechanical_index)
     }
 
     /// The tissue the focal peak lies in.
     #[getter]
     fn focal_tissue(&self) -> Option<String> {
-        self.field.metrics.as_ref().map(|m| m.tissue.clone())
+        self.metrics.as_ref().map(|m| m.focal_tissue.clone())
     }
 
     /// The hottest grid sample of each tissue class over the whole grid, hottest first: `skull`
@@ -250,9 +287,7 @@ impl CoreField {
         let py = slf.py();
         let d = PyDict::new(py);
         d.set_item("target_mm", point_mm(slf.get().target).to_vec())?;
-        for key in METRICS {
-            d.set_item(key, slf.getattr(key)?)?;
-        }
+        metrics_items(&d, slf.get().metrics.as_ref())?;
         let f = slf.get().plane_and_axis();
         let plane = point_mm(f.plane.position);
         d.set_item("plane_peak_pa", f.plane.pressure)?;

@@ -10,7 +10,7 @@ import numpy as np
 
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, volume_path, write_npz
-from arfi.focal import describe_tissue
+from arfi.focal import describe_tissue, metrics_text
 from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
 
@@ -47,18 +47,6 @@ def register(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-def metrics_line(focus: dict[str, Any]) -> str:
-    """The focal region in 3-D: its peak, extents and volume, and the exposure there."""
-    if focus["focal_peak_mm"] is None:
-        return "field: no closed -6 dB focal region around the target inside the grid (no focal metrics)"
-    p = [round(v, 2) + 0.0 for v in focus["focal_peak_mm"]]  # + 0.0: no "-0.00" for a peak on the axis
-    along, across = focus["fwhm_6db_mm"]
-    return (f"field: focus in 3-D: {focus['focal_peak_pa'] / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
-            f"{focus['peak_to_target_mm']:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
-            f"across, {focus['focal_volume_6db_mm3']:.1f} mm³; in {focus['focal_tissue']}: I_SPPA "
-            f"{focus['isppa_w_cm2']:.1f} W/cm², MI {focus['mechanical_index']:.2f}")
-
-
 def hottest_line(hottest: dict[str, Any]) -> str:
     """The hottest place of each tissue class over the grid, hottest first."""
     parts = [f"{tissue} {h['pressure_pa'] / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in h['position_mm'])}) mm, "
@@ -75,7 +63,7 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
              f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm, {focus['plane_peak_to_axis_mm']:.2f} mm "
              f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
              f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"]
-    lines.append(metrics_line(focus))
+    lines.append(f"field: {metrics_text(focus)}")
     if focus["hottest"] is not None:
         lines.append(hottest_line(focus["hottest"]))
     for where, key in (("on the plane", "plane"), ("on the axis", "axis")):

@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
-from arfi.prediction import predict
+from arfi.focal import metrics_text
+from arfi.prediction import compared_drives, focal_metrics, predict
 
 
 def register(sub: Any) -> None:
@@ -21,7 +22,8 @@ def register(sub: Any) -> None:
         "its bone read as soft tissue (the reference the estimation's model assumes). Writes the predicted phase per "
         "element (rad) in the sign of arfi estimate's phases_rad: subtracting it from the reference steering corrects, "
         "and it is the --prior of arfi estimate. --json adds each element's transmission and the focal pressures "
-        "(reference, uncorrected, straight-ray CT steering, corrected, and the most any phases give).",
+        "(reference, uncorrected, straight-ray CT steering, corrected, and the most any phases give), and the focal "
+        "metrics in 3-D of the uncorrected, straight-ray and corrected beams (see --focal-metrics).",
         epilog="example: arfi predict --scenario head.toml --out prior.npy --json prediction.json")
     add_common(p)
     p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
@@ -35,6 +37,13 @@ def register(sub: Any) -> None:
                         "simulation of the skull (about half the prediction's time). Default: on with --json and the "
                         "porosity conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity "
                         "skips it")
+    p.add_argument("--focal-metrics", action=argparse.BooleanOptionalAction, default=None, dest="focal_metrics",
+                   help="also march the uncorrected, straight-ray CT steering and corrected beams through the skull "
+                        "and give each one's focal metrics in 3-D around the target: the focal peak and its distance "
+                        "from the target, the -6 dB extents and volume, I_SPPA and MI in the tissue it lies in "
+                        "(printed, and in the --json as focal_metrics with the keys of arfi field's JSON). Three marches "
+                        "of the skull's simulation, kept until they are done. Default: on with --json or --report; "
+                        "--no-focal-metrics skips them")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
                   "phase and transmission; two more marches of the prediction's own simulation of the skull, kept for the report)")
@@ -50,11 +59,17 @@ def run(args: argparse.Namespace) -> int:
     sensitivity = args.bone_speed_sensitivity
     if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
         sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
+    metrics_wanted = args.focal_metrics
+    if metrics_wanted is None:
+        metrics_wanted = args.json is not None or bool(args.report)
     t = time.perf_counter()
-    # The report draws the beam through the skull: the prediction keeps the skull's simulation for it.
+    # The focal metrics and the report march the beams through the skull: the prediction keeps the
+    # skull's simulation for them.
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
-                keep_simulation=bool(args.report))
+                keep_simulation=bool(args.report) or metrics_wanted)
     seconds = time.perf_counter() - t
+    metrics = focal_metrics(p) if metrics_wanted else None
+    metrics_seconds = time.perf_counter() - t - seconds
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm
     print(
@@ -69,12 +84,20 @@ def run(args: argparse.Namespace) -> int:
         g = p.bone_speed_sensitivity_rad_per_percent
         print(f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
               f"({np.abs(g).max():.3f} at most)")
+    names = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
+    for name, m in (metrics or {}).items():
+        print(f"predict: {names[name]}: {metrics_text(m)}")
     result = p.to_dict()
+    if metrics is not None:
+        result["focal_metrics"] = metrics
+        result["focal_metrics_seconds"] = metrics_seconds
     if args.report:
         from arfi.report import predict_report
 
         predict_report(args.report, p, {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad),
                                         "seconds": seconds,
-                                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()}})
+                                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()},
+                                        **{f"{names[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()}},
+                       compared_drives(p))
     finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

@@ -13,19 +13,36 @@ use ndarray::{Array3, ArrayD, IxDyn};
 const BOX_DOUBLINGS: usize = 3;
 
 impl Simulation {
+    /// The focal metrics in 3-D of the beam driven with `added` phases (rad, per element or per
+    /// group, on top of the steering) around `target` (m, transducer frame; e.g. a prediction's
+    /// target when it is not the focus): one march that records the box around `target` alone
+    /// (see [`Simulation::record_with_focus`]). `None` when no closed -6 dB region lies around it.
+    pub fn focal_metrics(&self, added: &[f64], target: [f64; 3]) -> Result<Option<FocalMetrics>> {
+        if !target.iter().all(|v| v.is_finite()) || self.grid.nearest(target).is_none() {
+            return Err(HasError::invalid("target_mm", "must lie within the grid"));
+        }
+        let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
+        Ok(self.record_around(&self.source_field(added)?, spec, target)?.1)
+    }
+
     /// The recording `spec` of the beam from `source` (the plane-0 field), with a box around the
     /// target recorded in the same march, and the focal metrics from that box. The box reaches
     /// max(5 mm, 2 λ) sideways and max(20 mm, 8 λ) along z (λ at the target) and doubles, with
     /// another march, while the -6 dB region reaches one of its faces.
     pub(crate) fn record_with_focus(&self, source: &[C64], spec: RecordSpec) -> Result<(Recording, Option<FocalMetrics>)> {
+        self.record_around(source, spec, self.focus)
+    }
+
+    /// [`Simulation::record_with_focus`] around `target` (m) in place of the focus.
+    fn record_around(&self, source: &[C64], spec: RecordSpec, target: [f64; 3]) -> Result<(Recording, Option<FocalMetrics>)> {
         let g = &self.grid;
-        let Some(voxel) = g.nearest(self.focus) else {
+        let Some(voxel) = g.nearest(target) else {
             return Ok((self.plan.propagate(source, &spec)?, None));
         };
-        let [x, y, z] = self.focus;
+        let [x, y, z] = target;
         let wavelength = self.medium.properties_at(x, y, z, self.frequency).sound_speed / self.frequency;
         let mut reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
-        let along = if z > 0.0 { unit(self.focus) } else { [0.0, 0.0, 1.0] };
+        let along = if z > 0.0 { unit(target) } else { [0.0, 0.0, 1.0] };
         for doubling in 0..=BOX_DOUBLINGS {
             let window = focal_window(g, voxel, reach[0], reach[1]);
             let mut rec = self.plan.propagate(source, &RecordSpec { window: Some(window.clone()), ..spec.clone() })?;
@@ -40,7 +57,7 @@ impl Simulation {
                 let p = self.medium.properties_at(x, y, z, self.frequency);
                 (p.density, p.sound_speed, self.medium.tissue_at(x, y, z))
             };
-            match focal.metrics(self.focus, along, self.frequency, tissue) {
+            match focal.metrics(target, along, self.frequency, tissue) {
                 Ok(m) => return Ok((rec, Some(m))),
                 Err(Shortfall::TooSmall) if doubling < BOX_DOUBLINGS => reach = reach.map(|r| 2.0 * r),
                 Err(_) => return Ok((rec, None)),

@@ -93,6 +93,10 @@ fn the_default_focus_reports_its_exposure_as_worked_out_by_hand() {
     let plane = f.pressure.iter().map(|v| v.norm()).fold(0.0, f64::max);
     let axis = f.axis_pressure.iter().map(|v| v.norm()).fold(0.0, f64::max);
     assert!(p >= plane.max(axis) && p < 1.02 * plane.max(axis), "{p} vs plane {plane}, axis {axis}");
+    // The metrics alone (one march that records the box and stops there) are the field's, bit for
+    // bit: the planes up to the box are marched by the same operators.
+    assert_eq!(sim.focal_metrics(&[], sim.focus).unwrap().as_ref(), Some(&m));
+    assert!(sim.focal_metrics(&[], [0.0, 0.0, 1.0]).is_err(), "a target beyond the grid is refused");
     println!(
         "default: peak {:.3} MPa at {:?} mm, I_SPPA {:.1} W/cm², MI {:.2}, -6 dB {:.2} x {:.2} mm, {:.1} mm³",
         p / 1e6,
