@@ -174,6 +174,7 @@ fn a_hidden_slice_offset_is_named_and_measured() {
 }
 
 #[test]
+#[ignore = "long: run by CI (cargo test -- --ignored) and the full mode (-- --include-ignored), docs/testing.md"]
 fn hidden_amplitude_broadening_and_anisotropy_over_seeds() {
     let s = sim();
     for seed in seeds(1, 2) {
@@ -202,6 +203,7 @@ fn hidden_amplitude_broadening_and_anisotropy_over_seeds() {
 }
 
 #[test]
+#[ignore = "long: run by CI (cargo test -- --ignored) and the full mode (-- --include-ignored), docs/testing.md"]
 fn hidden_background_slice_offset_and_dropout_over_seeds() {
     let s = sim();
     for seed in seeds(1, 2) {
@@ -234,6 +236,7 @@ fn hidden_background_slice_offset_and_dropout_over_seeds() {
 }
 
 #[test]
+#[ignore = "long: run by CI (cargo test -- --ignored) and the full mode (-- --include-ignored), docs/testing.md"]
 fn an_image_through_the_beam_axis_names_attenuation_sound_speed_and_dropout() {
     // In an xz image the focal material's attenuation tilts the force along the beam
     // (exp(-2·alpha·z)), its sound speed moves the focus along z, and a dead group reshapes the
@@ -314,6 +317,7 @@ fn hidden_attenuation_and_sound_speed_are_identified_up_to_what_the_image_can_te
 }
 
 #[test]
+#[ignore = "long: run by CI (cargo test -- --ignored) and the full mode (-- --include-ignored), docs/testing.md"]
 fn a_hidden_phase_aberration_is_named_from_diversity_images() {
     // One in-focus image of a 16-group aberration is explained as well by a shift, a slice
     // offset or an anisotropic blur (low-order aberrations are exactly those): the workflow

@@ -126,6 +126,12 @@ proptest! {
             prop_assert!(d.cost_final.is_finite() && d.cost_final <= d.cost_initial);
         }
     }
+}
+
+proptest! {
+    // Each case with a finite sound speed or attenuation rebuilds the HAS plan (about half a
+    // second): 24 cases by default, 64 in the full mode.
+    #![proptest_config(config(if std::env::var_os("ARFI_FULL_SWEEPS").is_some() { 64 } else { 24 }))]
 
     #[test]
     fn any_effect_parameters_give_images_or_an_error(view in proptest::collection::vec(nasty(), 9), speed in nasty(),

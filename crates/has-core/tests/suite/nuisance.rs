@@ -141,6 +141,7 @@ fn estimate(c: &Case, nuisance: Nuisance, seed: u64) -> EstimateReport {
 /// the noise per pixel; thousands of pixels determine it). Without them the model is flagged as
 /// mismatched (misfit above 1.3) and recovers less.
 #[test]
+#[ignore = "long: run by CI (cargo test -- --ignored) and the full mode (-- --include-ignored), docs/testing.md"]
 fn per_element_fits_nuisance_on_data_from_another_simulation() {
     let nuisance = Nuisance::parse(&["amplitude", "broadening", "background_phase"]).unwrap();
     for seed in seeds() {

@@ -171,10 +171,10 @@ impl<'a> Forward<'a> {
         }
         let (c, a) = (state.sound_speed, state.attenuation_db_cm_mhz);
         let base = self.cut();
-        let (sim, steered) = match spec {
-            Some(spec) => base.with_material_recording(self.material, c, a, spec).map(|(sim, rec)| (sim, Some(rec)))?,
-            None => (base.with_material(self.material, c, a)?, None),
-        };
+        // The plan alone: the samplers are the model's, the ratio below scales their coefficient.
+        let nothing = RecordSpec { reflections: base.reflections, ..RecordSpec::default() };
+        let (sim, recording) = base.with_material_plan(self.material, c, a, spec.unwrap_or(&nothing))?;
+        let steered = spec.is_some().then_some(recording);
         let coef = |m: &crate::physics::medium::Material| m.properties(self.sim.frequency).force_coefficient();
         let ratio = coef(&sim.medium.materials[self.material]) / coef(model);
         Ok((Cow::Owned(sim), ratio, steered))
