@@ -109,6 +109,15 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
     whole, own = sim.pressure_volume(phases), f.pressure_volume()
     assert np.array_equal(own.pressure_pa, whole.pressure_pa) and np.array_equal(own.affine_mm, whole.affine_mm)
     assert own.frame == "transducer"
+    # The whole grid's volume is the field's own memory, not a second copy of the grid: each call
+    # gives a read-only view of the same buffer, which keeps the field alive.
+    again = f.pressure_volume()
+    assert np.shares_memory(own.pressure_pa, again.pressure_pa) and not own.pressure_pa.flags.writeable
+    assert own.pressure_pa.base is f
+    with pytest.raises(ValueError, match="read-only"):
+        own.pressure_pa[0, 0, 0] = 1.0
+    f.to_nifti(tmp_path / "whole.nii")
+    assert np.array_equal(np.asarray(nib.load(str(tmp_path / "whole.nii")).dataobj).transpose(2, 1, 0), whole.pressure_pa)
     box = f.pressure_volume([-5, 5, -4, 4, 75, 95])
     assert np.array_equal(box.pressure_pa, sim.pressure_volume(phases, box_mm=[-5, 5, -4, 4, 75, 95]).pressure_pa)
     f.to_nifti(tmp_path / "f.nii.gz", box_mm=[-5, 5, -4, 4, 75, 95])

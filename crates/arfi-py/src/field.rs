@@ -3,10 +3,11 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
-use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm};
+use crate::volume::{borrowed_grid_arrays, ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, FocalMetrics, Peak};
 use has_core::physics::ct::CtMedium;
 use has_core::physics::grid::Grid;
+use has_core::physics::propagation::Window;
 use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct};
 use has_core::{Field, Section, Simulation};
 use num_complex::Complex64 as C64;
@@ -307,10 +308,12 @@ impl CoreField {
     /// `|p|` (Pa) of this beam in 3-D, from the march that made the field (with `volume=True`), as an
     /// `arfi.PressureVolume`: on the simulation grid (transducer frame), cropped to `box_mm` (x0,
     /// x1, y0, y1, z0, z1 in mm) if given; with `in_ct` (a `[ct]` scenario) resampled into the
-    /// CT's voxel grid with the CT's own RAS affine.
+    /// CT's voxel grid with the CT's own RAS affine. The whole grid's is a read-only view of the
+    /// field's own memory (no second copy of the grid).
     #[pyo3(signature = (box_mm=None, in_ct=false))]
-    fn pressure_volume<'py>(&self, py: Python<'py>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
-        let Some(volume) = self.field.volume.as_ref() else {
+    fn pressure_volume<'py>(slf: &Bound<'py, Self>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
+        let (py, this) = (slf.py(), slf.get());
+        let Some(volume) = this.field.volume.as_ref() else {
             return Err(invalid("volume", "this field kept no volume: make it with sim.field(phases, volume=True)"));
         };
         let magnitude = &volume.magnitude;
@@ -318,14 +321,20 @@ impl CoreField {
             if box_mm.is_some() {
                 return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));
             }
-            let Some(ct) = self.ct.as_ref() else {
+            let Some(ct) = this.ct.as_ref() else {
                 return Err(invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
             };
             check_ct_volume(ct, 0).map_err(to_py)?;
-            (ct_arrays(py, py.detach(|| resample_into_ct(&self.grid, magnitude, ct))), "ct")
+            (ct_arrays(py, py.detach(|| resample_into_ct(&this.grid, magnitude, ct))), "ct")
         } else {
-            let window = window_of_box_mm(&self.grid, box_mm)?;
-            (grid_arrays(py, crop_volume(&self.grid, magnitude, window)), "transducer")
+            match window_of_box_mm(&this.grid, box_mm)? {
+                Some(window) if window != Window::whole(&this.grid) => {
+                    (grid_arrays(py, crop_volume(&this.grid, magnitude, Some(window))), "transducer")
+                }
+                // SAFETY: the volume lives in this frozen field, which nothing changes or moves
+                // while it lives, and the field is the array's base object.
+                _ => (unsafe { borrowed_grid_arrays(&this.grid, magnitude, slf.clone().into_any()) }?, "transducer"),
+            }
         };
         py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
     }
@@ -333,8 +342,8 @@ impl CoreField {
     /// Writes [`pressure_volume`](Self::pressure_volume)`(box_mm, in_ct)` as NIfTI (`.nii` or
     /// `.nii.gz`) at `path`, atomically.
     #[pyo3(signature = (path, box_mm=None, in_ct=false))]
-    fn to_nifti(&self, py: Python<'_>, path: Bound<'_, PyAny>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<()> {
-        self.pressure_volume(py, box_mm, in_ct)?.call_method1("to_nifti", (path,))?;
+    fn to_nifti(slf: &Bound<'_, Self>, path: Bound<'_, PyAny>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<()> {
+        Self::pressure_volume(slf, box_mm, in_ct)?.call_method1("to_nifti", (path,))?;
         Ok(())
     }
 

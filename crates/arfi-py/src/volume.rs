@@ -4,9 +4,9 @@
 use crate::error::{invalid, to_py};
 use has_core::physics::grid::Grid;
 use has_core::physics::propagation::Window;
-use has_core::simulation::{window_of_box, CtPressureVolume, PressureVolume};
-use ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray2, PyArray3};
+use has_core::simulation::{window_affine, window_of_box, CtPressureVolume, PressureVolume};
+use ndarray::{Array2, Array3, ArrayView3};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyArrayMethods};
 use pyo3::prelude::*;
 
 /// A pressure volume as NumPy arrays: `|p|` (z, y, x or the CT's k, j, i) and its affine (mm).
@@ -37,6 +37,22 @@ pub(crate) fn grid_arrays(py: Python<'_>, v: PressureVolume) -> VolumeArrays<'_>
     let shape = (v.window.planes.len(), v.window.rows.len(), v.window.cols.len());
     let pressure = Array3::from_shape_vec(shape, v.pressure).expect("one value per voxel of the box");
     (pressure.into_pyarray(py), affine_4x4(&v.affine, 1e3).into_pyarray(py))
+}
+
+/// `magnitude`, `|p|` on the whole grid `g` (plane, row, column), as a read-only NumPy array that
+/// borrows it (no copy: a whole hemisphere's volume is hundreds of megabytes) with `owner` as its
+/// base object, and its affine in the transducer frame (mm).
+///
+/// # Safety
+/// `magnitude` must stay where it is and unchanged for as long as `owner` lives.
+pub(crate) unsafe fn borrowed_grid_arrays<'py>(g: &Grid, magnitude: &[f32], owner: Bound<'py, PyAny>) -> PyResult<VolumeArrays<'py>> {
+    let py = owner.py();
+    let view = ArrayView3::from_shape((g.nz, g.ny, g.nx), magnitude).map_err(|e| invalid("volume", e.to_string()))?;
+    // SAFETY: the caller keeps `magnitude` in place and unchanged while `owner`, the array's base
+    // object, lives; the array is made read-only before Python sees it.
+    let array = unsafe { PyArray3::borrow_from_array(&view, owner) };
+    let readonly = array.readwrite().make_nonwriteable();
+    Ok(((*readonly).clone(), affine_4x4(&window_affine(g, &Window::whole(g)), 1e3).into_pyarray(py)))
 }
 
 /// A volume on a CT's voxels as NumPy arrays (the CT's RAS affine, mm).

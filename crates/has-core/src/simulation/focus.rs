@@ -15,8 +15,9 @@ const BOX_DOUBLINGS: usize = 3;
 impl Simulation {
     /// The focal metrics in 3-D of the beam driven with `added` phases (rad, per element or per
     /// group, on top of the steering) around `target` (m, transducer frame; e.g. a prediction's
-    /// target when it is not the focus): one march that records the box around `target` alone
-    /// (see [`Simulation::record_with_focus`]). `None` when no closed -6 dB region lies around it.
+    /// target when it is not the focus): one march that records a box around `target` alone and
+    /// stops there (the box of [`Simulation::field`]'s metrics, doubled while the -6 dB region
+    /// reaches its faces). `None` when no closed -6 dB region lies around it.
     pub fn focal_metrics(&self, added: &[f64], target: [f64; 3]) -> Result<Option<FocalMetrics>> {
         if !target.iter().all(|v| v.is_finite()) || self.grid.nearest(target).is_none() {
             return Err(HasError::invalid("target_mm", "must lie within the grid"));
