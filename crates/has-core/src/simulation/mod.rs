@@ -255,8 +255,8 @@ impl Simulation {
 
     /// [`Simulation::with_material_recording`] with the HAS plan alone rebuilt: the sampler stays
     /// this simulation's (the force coefficients of the old medium), for a caller that maps the
-    /// recorded `|p|²` itself (the discrepancy workflow scales it by the coefficients' ratio). It
-    /// spares the sampler's build, about a tenth of a rebuild on the default grid.
+    /// recorded `|p|²` itself (the discrepancy workflow scales it by the coefficients' ratio), and
+    /// spares the sampler's build (its slab map over the MR window).
     pub(crate) fn with_material_plan(
         &self,
         material: usize,
