@@ -249,16 +249,16 @@ def lobe(above: NDArray[np.bool_], start: tuple[int, ...]) -> NDArray[np.bool_]:
         region = grown
 
 
-def orthogonal_sections(sim: Any, field: Any, volume: Any = None) -> Any:
+def orthogonal_sections(sim: Any, field: Any) -> Any:
     """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
     in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU
     (grey) with a ``[ct]``, else over the sound speed; the colour scale set by the focal peak
     (hotter places, a scalp or a skull, saturate), shown where above 10 % of it, with its -6 dB
     lobe contoured (cyan) and the target (+). The top row shows the whole grid, the bottom row the
     same planes around the target (at least 10 mm each way, three -6 dB widths across and 1.5
-    along the beam). ``volume``: ``field.pressure_volume()`` if made already (the whole grid)."""
+    along the beam). The whole grid's |p| is a view of the field's own memory (no copy)."""
     plt = pyplot()
-    volume = field.pressure_volume() if volume is None else volume
+    volume = field.pressure_volume()
     p, a = volume.pressure_pa / 1e6, volume.affine_mm
     axes = [a[n, 3] + a[n, n] * np.arange(p.shape[2 - n]) for n in range(3)]  # x, y, z (mm)
     t = field.target_mm
@@ -297,14 +297,12 @@ def orthogonal_sections(sim: Any, field: Any, volume: Any = None) -> Any:
     return fig
 
 
-def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None,
-                 volume: Any = None) -> Path:
+def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
     """Report of a simulated field made with ``volume=True``: |p| (MPa) on the plane, axes in
     mm, its colour scale set by the focal peak near the target (hotter places saturate); |p| along
     the beam's axis (the line from the array's centre through the target) with the target's depth
     marked; with ``phases``, the element map of the phases added to the steering; the beam on the
-    three planes through the target over the CT or the sound speed (:func:`orthogonal_sections`,
-    from ``volume`` if given: the field's whole-grid volume)."""
+    three planes through the target over the CT or the sound speed (:func:`orthogonal_sections`)."""
     plt = pyplot()
     out = _report_dir(out)
     focus = field.focus()
@@ -325,7 +323,7 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
     figures.append(("the beam on the three planes through the target (cyan: -6 dB of the focal peak)",
-                    save_figure(orthogonal_sections(sim, field, volume), out / "field_sections.png")))
+                    save_figure(orthogonal_sections(sim, field), out / "field_sections.png")))
     return _verb_page(out, "field", values, figures)
 
 

@@ -208,8 +208,8 @@ class Simulation:
         """Pressure on the plane nearest ``z_mm`` (default: the focus) and along the axis, with
         the focal metrics in 3-D. With ``volume``, the same march also keeps |p| on the whole grid
         (8 bytes a voxel while marching, 4 kept): ``Field.hottest`` (each tissue's hottest
-        place), ``Field.pressure_volume`` and ``Field.to_nifti``, as ``arfi field`` reports and
-        writes them."""
+        place), ``Field.pressure_volume``, ``Field.intensity_volume`` and ``Field.to_nifti``, as
+        ``arfi field`` reports and writes them."""
         return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"), bool(volume))
 
     def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> dict[str, Any]:

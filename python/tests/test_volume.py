@@ -1,7 +1,8 @@
-"""The 3-D pressure amplitude as a NIfTI volume (``arfi field --volume``,
-``Simulation.pressure_volume``): read back with nibabel as a viewer reads it, its hottest voxel is
-the focal peak ``arfi field`` reports, a crop box holds the same voxels, and bad input writes
-nothing."""
+"""The 3-D pressure amplitude and intensity as NIfTI volumes (``arfi field --volume``,
+``--intensity-volume``, ``Simulation.pressure_volume``, ``Field.intensity_volume``): read back with
+nibabel as a viewer reads them, the hottest voxel is the focal peak ``arfi field`` reports, the
+intensity is p²/(2ρc) of each voxel's medium, a crop box holds the same voxels, and bad input
+writes nothing."""
 
 from __future__ import annotations
 
@@ -39,6 +40,35 @@ def test_arfi_field_volume_opens_with_its_focus_where_the_json_puts_it(tmp_path,
     assert any(line.startswith("field: |p| in 3-D (Pa) on 180 x 180 x 189 voxels") for line in capsys.readouterr().out.splitlines())
 
 
+def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedance(tmp_path, capsys, sim):
+    # I_SPPA = p²/(2ρc) by hand from the |p| volume and the medium's ρ and c at each voxel of a box
+    # through the focus and the gel's front face (Simulation.properties_at, not the code that
+    # made the volume), to float32 (1e-6 relative). Its hottest voxel holds the focal I_SPPA the
+    # JSON reports to within 6 % (the peak's |p| to 3 %, refined between samples, squared).
+    out, vol, iv, js = tmp_path / "f.npz", tmp_path / "p.nii", tmp_path / "i.nii.gz", tmp_path / "f.json"
+    box = ["-4", "4", "-3", "3", "20", "95"]
+    assert main(["field", "--out", str(out), "--volume", str(vol), "--intensity-volume", str(iv), "--volume-box-mm", *box,
+                 "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    p_img, i_img = nib.load(str(vol)), nib.load(str(iv))
+    p, intensity = np.asarray(p_img.dataobj, dtype=np.float64), np.asarray(i_img.dataobj)
+    assert intensity.shape == p.shape and intensity.dtype == np.float32 and np.allclose(i_img.affine, p_img.affine)
+    assert i_img.header["descrip"].tobytes().startswith(b"arfi: I_SPPA (W/cm2)")
+    ijk = np.indices(p.shape).reshape(3, -1)
+    points = (p_img.affine @ np.vstack([ijk, np.ones(ijk.shape[1])]))[:3].T
+    m = sim.properties_at(points)
+    rho_c = (m["density_kg_m3"] * m["sound_speed_m_s"]).reshape(p.shape)
+    assert len(np.unique(rho_c)) >= 2  # water in front of the gel, the gel behind its face
+    expected = p ** 2 / (2 * rho_c) * 1e-4
+    assert np.abs(intensity - expected).max() <= 1e-6 * expected.max()
+    assert 0.94 * d["isppa_w_cm2"] <= intensity.max() <= d["isppa_w_cm2"] * (1 + 1e-5)
+    v = d["intensity_volume"]
+    assert v["path"] == str(iv) and v["shape_ijk"] == list(p.shape) and v["box_mm"] == [float(b) for b in box]
+    assert v["max_w_cm2"] == pytest.approx(float(intensity.max()), rel=1e-6)
+    assert any(line.startswith(f"field: I_SPPA in 3-D (W/cm²) on {p.shape[0]} x {p.shape[1]} x {p.shape[2]} voxels")
+               for line in capsys.readouterr().out.splitlines())
+
+
 def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_it(tmp_path):
     # The head phantom (2 mm voxels): the volume on the CT's grid carries the CT's shape and
     # affine, and each voxel holds the transducer-frame volume at that voxel's place, found here
@@ -50,8 +80,9 @@ def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_i
     ct, toml = tmp_path / "head.nii.gz", tmp_path / "head.toml"
     assert main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "2", "--seed", "2"]) == 0
     vol, on_ct, js = tmp_path / "v.nii.gz", tmp_path / "v_ct.nii.gz", tmp_path / "f.json"
+    intensity_ct = tmp_path / "i_ct.nii.gz"
     assert main(["field", "--scenario", str(toml), "--out", str(tmp_path / "f.npz"), "--volume", str(vol),
-                 "--volume-ct", str(on_ct), "--json", str(js)]) == 0
+                 "--volume-ct", str(on_ct), "--intensity-volume-ct", str(intensity_ct), "--json", str(js)]) == 0
     d = json.loads(js.read_text())
     head, grid, img = nib.load(str(ct)), nib.load(str(vol)), nib.load(str(on_ct))
     assert img.shape == head.shape and np.allclose(img.affine, head.affine)
@@ -74,6 +105,18 @@ def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_i
     assert np.linalg.norm(frame[:3, best] - np.array(d["focal_peak_mm"])) < 3.5
     assert 0.7 * peak < data.ravel()[best] <= peak and np.asarray(head.dataobj).ravel()[best] < 300.0
     assert d["focal_tissue"] == "brain"
+    # The intensity on the CT's voxels is p²/(2ρc) of the |p| laid on the CT and the medium at each
+    # voxel's place (its own HU's conversion): bone voxels take bone's impedance, not the brain's.
+    intensity = np.asarray(nib.load(str(intensity_ct)).dataobj, dtype=np.float64).ravel()
+    hot = np.flatnonzero(data.ravel() > 0)
+    m = arfi.Simulation(arfi.Scenario.load(toml)).properties_at(frame[:3, hot].T)
+    rho_c = m["density_kg_m3"] * m["sound_speed_m_s"]
+    expected = data.ravel()[hot].astype(np.float64) ** 2 / (2 * rho_c) * 1e-4
+    assert np.abs(intensity[hot] - expected).max() <= 1e-6 * expected.max() and np.all(intensity[data.ravel() == 0] == 0)
+    hu = np.asarray(head.dataobj).ravel()[hot]
+    bone, soft = hu > 1000.0, hu < 100.0
+    assert bone.any() and rho_c[bone].min() > 1.5 * rho_c[soft].max()
+    assert d["intensity_volume_ct"]["shape_ijk"] == list(head.shape)
 
 
 def test_volume_ct_without_a_ct_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, sim):
@@ -148,9 +191,15 @@ def test_python_bad_boxes_name_box_mm(sim):
 
 
 def test_a_volume_too_large_for_memory_is_refused_before_the_march(sim, monkeypatch):
+    f = sim.field(volume=True)
     monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.01")  # 10 MiB: the whole grid needs 49 MB
-    with pytest.raises(ValueError, match="volume-box-mm"):
+    with pytest.raises(arfi.MemoryLimitError, match="volume-box-mm"):
         sim.pressure_volume()
+    # The intensity of the whole grid (4 bytes a voxel beside the field's |p|: 24 MB) likewise;
+    # of a box around the focus it fits.
+    with pytest.raises(arfi.MemoryLimitError, match="an intensity volume of 180 x 180 x 189 voxels"):
+        f.intensity_volume()
+    assert f.intensity_volume([-5, 5, -5, 5, 80, 90]).intensity_w_cm2.max() > 0
 
 
 @pytest.mark.parametrize("args, says", [
@@ -158,6 +207,10 @@ def test_a_volume_too_large_for_memory_is_refused_before_the_march(sim, monkeypa
     (["--volume", "{tmp}/v.npz"], ".nii or .nii.gz"),
     (["--volume", "{tmp}/v.nii.gz", "--volume-box-mm", "500", "600", "0", "1", "80", "90"], "holds no sample of the grid"),
     (["--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
+    (["--volume-ct", "{tmp}/v.nii.gz", "--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
+    (["--intensity-volume", "{tmp}/no/such/folder/i.nii.gz"], "does not exist"),
+    (["--intensity-volume-ct", "{tmp}/i.nii.gz"], "--intensity-volume-ct: needs a scenario with a [ct] section"),
+    (["--intensity-volume", "{tmp}/i.nii", "--volume-box-mm", "500", "600", "0", "1", "80", "90"], "holds no sample of the grid"),
 ])
 def test_cli_bad_volume_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, args, says):
     argv = ["field", "--out", str(tmp_path / "f.npz"), *[a.format(tmp=tmp_path) for a in args]]
@@ -195,15 +248,18 @@ def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_wit
     # lean field is not. arfi field, asked for no volume and no report, prints why the hottest
     # places are missing and writes its field.
     monkeypatch.setenv("ARFI_MEMORY_LIMIT_GIB", "0.01")
-    with pytest.raises(ValueError, match=r"^\|p\| on the whole 180 x 180 x 189 grid .* spacing_mm"):
+    with pytest.raises(arfi.MemoryLimitError, match=r"^\|p\| on the whole 180 x 180 x 189 grid .* spacing_mm"):
         sim.field(volume=True)
+    f = sim.field()
+    with pytest.raises(ValueError, match="volume=True"):
+        f.intensity_volume()
     assert sim.field().hottest is None
     monkeypatch.delenv("ARFI_MEMORY_LIMIT_GIB")
     original = arfi.Simulation.field
 
     def refused(self, phases=None, z_mm=None, volume=False):
         if volume:
-            raise ValueError("|p| on the whole 180 x 180 x 189 grid needs 9.9 GiB, more than the 0.1 GiB this machine has")
+            raise arfi.MemoryLimitError("|p| on the whole 180 x 180 x 189 grid needs 9.9 GiB, more than the 0.1 GiB this machine has")
         return original(self, phases, z_mm)
 
     monkeypatch.setattr(arfi.Simulation, "field", refused)

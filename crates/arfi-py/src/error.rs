@@ -5,11 +5,20 @@ use has_core::HasError;
 use pyo3::exceptions::{PyFileNotFoundError, PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::PyErr;
 
-/// `FileNotFound` → `FileNotFoundError`; `Interrupted` → `KeyboardInterrupt`; every other
-/// error → `ValueError` (its message starts with the parameter or file it concerns).
+pyo3::create_exception!(
+    arfi,
+    MemoryLimitError,
+    PyValueError,
+    "A request that would need more memory than this machine has for it (a ValueError): the message names it, what it needs and how to make it smaller."
+);
+
+/// `FileNotFound` → `FileNotFoundError`; `Interrupted` → `KeyboardInterrupt`; `TooLarge` →
+/// `MemoryLimitError` (a `ValueError`); every other error → `ValueError` (its message starts with
+/// the parameter or file it concerns).
 pub fn to_py(e: HasError) -> PyErr {
     match e {
         HasError::FileNotFound { .. } => PyFileNotFoundError::new_err(e.to_string()),
+        HasError::TooLarge { .. } => MemoryLimitError::new_err(e.to_string()),
         HasError::Interrupted => PyKeyboardInterrupt::new_err(e.to_string()),
         _ => PyValueError::new_err(e.to_string()),
     }

@@ -3,18 +3,18 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
+use crate::simulation::CoreSimulation;
 use crate::volume::{borrowed_grid_arrays, ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, FocalMetrics, Peak};
 use has_core::physics::ct::CtMedium;
-use has_core::physics::grid::Grid;
 use has_core::physics::propagation::Window;
-use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct};
+use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct, window_affine, PressureVolume};
 use has_core::{Field, Section, Simulation};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, ToPyArray};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 /// The focal metrics in the units their names give (mm, Pa, mm³, W/cm²): the attributes of a
 /// `Field`, the keys of its `focus()` and of `Simulation.focal_metrics`, converted here once.
@@ -87,14 +87,15 @@ pub(crate) struct CoreField {
     metrics: Option<MetricsMm>,
     target: [f64; 3],
     focus: OnceLock<FieldFocus>,
-    /// The grid the volume lies on, and the CT it may be laid on.
-    grid: Grid,
-    ct: Option<Arc<CtMedium>>,
+    /// The simulation that made the field: its grid (where the volume lies), medium (the
+    /// intensity's ρ and c) and CT (what the volume may be laid on).
+    simulation: Py<CoreSimulation>,
 }
 
 impl CoreField {
-    /// The field `f` of a beam of `sim` (steered to its focus).
-    pub(crate) fn new(py: Python<'_>, f: Field, sim: &Simulation) -> Self {
+    /// The field `f` of a beam of `simulation` (steered to its focus).
+    pub(crate) fn new(py: Python<'_>, f: Field, simulation: Py<CoreSimulation>) -> Self {
+        let sim = &simulation.get().inner;
         let axis = |k: usize| f.axis_xy.iter().map(|p| p[k] * 1e3).collect::<Vec<f64>>().into_pyarray(py).unbind();
         CoreField {
             x_mm: mm(&f.x).into_pyarray(py).unbind(),
@@ -108,8 +109,31 @@ impl CoreField {
             focus: OnceLock::new(),
             metrics: f.metrics.as_ref().map(MetricsMm::from),
             field: f,
-            grid: sim.grid.clone(),
-            ct: sim.medium.ct.clone(),
+            simulation,
+        }
+    }
+
+    /// The simulation that made the field.
+    fn sim(&self) -> &Simulation {
+        &self.simulation.get().inner
+    }
+
+    /// `|p|` on every grid sample, kept by a field made with `volume=True`.
+    fn magnitude(&self) -> PyResult<&[f32]> {
+        match self.field.volume.as_ref() {
+            Some(volume) => Ok(&volume.magnitude),
+            None => Err(invalid("volume", "this field kept no volume: make it with sim.field(phases, volume=True)")),
+        }
+    }
+
+    /// The CT of a `[ct]` scenario, refused for `in_ct` with `box_mm` or without a CT.
+    fn ct_for(&self, box_mm: &Option<Vec<f64>>) -> PyResult<&CtMedium> {
+        if box_mm.is_some() {
+            return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));
+        }
+        match self.sim().medium.ct.as_deref() {
+            Some(ct) => Ok(ct),
+            None => Err(invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into")),
         }
     }
 
@@ -117,6 +141,12 @@ impl CoreField {
     fn plane_and_axis(&self) -> &FieldFocus {
         self.focus.get_or_init(|| self.field.focus(self.target))
     }
+}
+
+/// Intensities in W/m² as W/cm², in place.
+fn w_cm2(mut values: Vec<f32>) -> Vec<f32> {
+    values.iter_mut().for_each(|v| *v *= 1e-4);
+    values
 }
 
 /// A position in metres as millimetres.
@@ -313,30 +343,46 @@ impl CoreField {
     #[pyo3(signature = (box_mm=None, in_ct=false))]
     fn pressure_volume<'py>(slf: &Bound<'py, Self>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
         let (py, this) = (slf.py(), slf.get());
-        let Some(volume) = this.field.volume.as_ref() else {
-            return Err(invalid("volume", "this field kept no volume: make it with sim.field(phases, volume=True)"));
-        };
-        let magnitude = &volume.magnitude;
+        let (magnitude, grid) = (this.magnitude()?, &this.sim().grid);
         let ((pressure, affine), frame) = if in_ct {
-            if box_mm.is_some() {
-                return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));
-            }
-            let Some(ct) = this.ct.as_ref() else {
-                return Err(invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
-            };
+            let ct = this.ct_for(&box_mm)?;
             check_ct_volume(ct, 0).map_err(to_py)?;
-            (ct_arrays(py, py.detach(|| resample_into_ct(&this.grid, magnitude, ct))), "ct")
+            (ct_arrays(py, py.detach(|| resample_into_ct(grid, magnitude, ct))), "ct")
         } else {
-            match window_of_box_mm(&this.grid, box_mm)? {
-                Some(window) if window != Window::whole(&this.grid) => {
-                    (grid_arrays(py, crop_volume(&this.grid, magnitude, Some(window))), "transducer")
+            match window_of_box_mm(grid, box_mm)? {
+                Some(window) if window != Window::whole(grid) => {
+                    (grid_arrays(py, crop_volume(grid, magnitude, Some(window))), "transducer")
                 }
                 // SAFETY: the volume lives in this frozen field, which nothing changes or moves
                 // while it lives, and the field is the array's base object.
-                _ => (unsafe { borrowed_grid_arrays(&this.grid, magnitude, slf.clone().into_any()) }?, "transducer"),
+                _ => (unsafe { borrowed_grid_arrays(grid, magnitude, slf.clone().into_any()) }?, "transducer"),
             }
         };
         py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
+    }
+
+    /// I_SPPA = |p|² / (2·ρ·c) (W/cm²) of this beam in 3-D, ρ and c the medium's at each voxel
+    /// (the CT's conversion where it holds tissue), as an `arfi.IntensityVolume`: on the
+    /// simulation grid (transducer frame), cropped to `box_mm` (x0, x1, y0, y1, z0, z1 in mm) if
+    /// given; with `in_ct` (a `[ct]` scenario) on the CT's voxel grid with its own RAS affine, from
+    /// |p| resampled there (as `pressure_volume(in_ct=True)`) and ρ, c at each CT voxel.
+    #[pyo3(signature = (box_mm=None, in_ct=false))]
+    fn intensity_volume<'py>(slf: &Bound<'py, Self>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
+        let (py, this) = (slf.py(), slf.get());
+        let (magnitude, sim) = (this.magnitude()?, this.sim());
+        let ((intensity, affine), frame) = if in_ct {
+            let ct = this.ct_for(&box_mm)?;
+            check_ct_volume(ct, 4 * ct.voxel_grid().0.iter().product::<usize>() as u64).map_err(to_py)?;
+            let mut v = py.detach(|| resample_into_ct(&sim.grid, magnitude, ct));
+            v.pressure = w_cm2(py.detach(|| sim.intensity_in_ct(&v)).map_err(to_py)?);
+            (ct_arrays(py, v), "ct")
+        } else {
+            let window = window_of_box_mm(&sim.grid, box_mm)?.unwrap_or_else(|| Window::whole(&sim.grid));
+            let values = w_cm2(py.detach(|| sim.intensity_on_window(magnitude, &window)).map_err(to_py)?);
+            let affine = window_affine(&sim.grid, &window);
+            (grid_arrays(py, PressureVolume { window, pressure: values, affine }), "transducer")
+        };
+        py.import("arfi.volume")?.getattr("IntensityVolume")?.call1((intensity, affine, frame))
     }
 
     /// Writes [`pressure_volume`](Self::pressure_volume)`(box_mm, in_ct)` as NIfTI (`.nii` or

@@ -29,6 +29,7 @@ fn release_freed() {
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("MemoryLimitError", m.py().get_type::<error::MemoryLimitError>())?;
     m.add_class::<simulation::CoreSimulation>()?;
     m.add_class::<cost::CoreCostModel>()?;
     m.add_class::<mode_fit::CoreModeFit>()?;

@@ -4,15 +4,19 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from arfi._core import MemoryLimitError
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, volume_path, write_npz
 from arfi.focal import describe_tissue, metrics_text
 from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
+from arfi.volume import IntensityVolume, PressureVolume
 
 
 def register(sub: Any) -> None:
@@ -22,7 +26,8 @@ def register(sub: Any) -> None:
                        "plane z = Z and along the beam's axis (the line from the array's centre through the target). "
                        "Prints the focal peak near the target on the plane, along the axis and in 3-D (its -6 dB extents "
                        "and volume, I_SPPA and mechanical index there), the hottest place of each tissue (skull, scalp, "
-                       "brain, water) over the whole grid, and names any place on the plane or axis hotter than the focus. --volume writes |p| in 3-D as NIfTI for overlay.",
+                       "brain, water) over the whole grid, and names any place on the plane or axis hotter than the focus. --volume "
+                       "writes |p| in 3-D as NIfTI for overlay, --intensity-volume I_SPPA.",
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
@@ -40,11 +45,49 @@ def register(sub: Any) -> None:
                    "simulation grid, its affine in the transducer frame (mm)")
     p.add_argument("--volume-ct", metavar="F.nii.gz", dest="volume_ct", help="also write |p| (Pa) resampled into the "
                    "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
+    p.add_argument("--intensity-volume", metavar="F.nii.gz", dest="intensity_volume", help="also write I_SPPA = "
+                   "|p|²/(2ρc) (W/cm², ρ and c the medium's at each voxel) in 3-D as NIfTI on the simulation grid")
+    p.add_argument("--intensity-volume-ct", metavar="F.nii.gz", dest="intensity_volume_ct", help="also write I_SPPA "
+                   "(W/cm²) on the voxel grid of the scenario's [ct] (|p| resampled there, ρ and c of each CT voxel)")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
-                   dest="volume_box_mm", help="crop the --volume file to this box (mm, transducer frame)")
+                   dest="volume_box_mm", help="crop the --volume and --intensity-volume files to this box (mm, "
+                   "transducer frame)")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the three planes "
                   "through the target over the CT in HU or the sound speed, with the focal -6 dB contour)")
     p.set_defaults(run=run)
+
+
+@dataclass(frozen=True)
+class VolumeOutput:
+    """One volume file ``arfi field`` can write: its argument (``key``, ``flag``), what it holds
+    (``quantity`` as printed, ``max_key`` its maximum in the JSON) and where (``in_ct``: the CT's
+    voxels, else the simulation grid cropped to ``--volume-box-mm``)."""
+
+    key: str
+    flag: str
+    quantity: str
+    max_key: str
+    in_ct: bool
+
+    def make(self, f: Field, box_mm: list[float] | None) -> PressureVolume | IntensityVolume:
+        """The volume of the field ``f``."""
+        box = None if self.in_ct else box_mm
+        if self.max_key == "max_pa":
+            return f.pressure_volume(box, in_ct=self.in_ct)
+        return f.intensity_volume(box, in_ct=self.in_ct)
+
+    @staticmethod
+    def values(v: PressureVolume | IntensityVolume) -> NDArray[np.float32]:
+        """The volume's array."""
+        return v.pressure_pa if isinstance(v, PressureVolume) else v.intensity_w_cm2
+
+
+VOLUMES = (
+    VolumeOutput("volume", "--volume", "|p| in 3-D (Pa)", "max_pa", False),
+    VolumeOutput("volume_ct", "--volume-ct", "|p| in 3-D (Pa)", "max_pa", True),
+    VolumeOutput("intensity_volume", "--intensity-volume", "I_SPPA in 3-D (W/cm²)", "max_w_cm2", False),
+    VolumeOutput("intensity_volume_ct", "--intensity-volume-ct", "I_SPPA in 3-D (W/cm²)", "max_w_cm2", True),
+)
 
 
 def hottest_line(hottest: dict[str, Any]) -> str:
@@ -80,12 +123,11 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
 
 def run(args: argparse.Namespace) -> int:
     npz_path(args.out)  # before the simulation
-    if args.volume_box_mm is not None and args.volume is None:
-        raise ValueError("--volume-box-mm: crops the --volume, which is not asked for")
-    if args.volume is not None:
-        volume_path(args.volume, "--volume")
-    if args.volume_ct is not None:
-        volume_path(args.volume_ct, "--volume-ct")
+    asked = [v for v in VOLUMES if getattr(args, v.key) is not None]
+    if args.volume_box_mm is not None and not any(not v.in_ct for v in asked):
+        raise ValueError("--volume-box-mm: crops the --volume or --intensity-volume, neither of which is asked for")
+    for v in asked:
+        volume_path(getattr(args, v.key), v.flag)
     limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
@@ -94,19 +136,19 @@ def run(args: argparse.Namespace) -> int:
     if correction is not None:
         added = sim.element_phases(phases, "--phases") if phases is not None else np.zeros(sim.n_elements)
         phases = added - sim.element_phases(correction, "--correction")
-    if args.volume_ct is not None and not sim.has_ct:
-        raise ValueError("--volume-ct: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
+    for v in asked:
+        if v.in_ct and not sim.has_ct:
+            raise ValueError(f"{v.flag}: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
     skipped = None
     try:
         f = sim.field(phases, args.z_mm, volume=True)
-    except ValueError as e:  # the whole grid's |p| does not fit: without volume outputs, the field alone
-        if not str(e).startswith("|p| on the whole") or args.volume or args.volume_ct or args.report:
+    except MemoryLimitError as e:  # the whole grid's |p| does not fit: without volume outputs, the field alone
+        if asked or args.report:
             raise
         f, skipped = sim.field(phases, args.z_mm), str(e)
     # The volumes (from the field's own march) before anything is written: a box outside the
     # grid leaves no file behind.
-    volume = None if args.volume is None else f.pressure_volume(args.volume_box_mm)
-    in_ct = None if args.volume_ct is None else f.pressure_volume(in_ct=True)
+    volumes = [(v, v.make(f, args.volume_box_mm)) for v in asked]
     write_npz(
         args.out,
         {
@@ -126,16 +168,16 @@ def run(args: argparse.Namespace) -> int:
     if skipped:
         lines.insert(2, f"field: no hottest place per tissue: {skipped}")
     written = {}
-    for key, path, v in (("volume", args.volume, volume), ("volume_ct", args.volume_ct, in_ct)):
-        if v is None:
-            continue
-        v.to_nifti(path)
-        nk, nj, ni = v.pressure_pa.shape
-        frame = "the CT's voxels and affine" if v.frame == "ct" else "transducer frame"
-        lines.insert(-1, f"field: |p| in 3-D (Pa) on {ni} x {nj} x {nk} voxels, {frame} -> {path}")
-        written[key] = {"path": path, "shape_ijk": [ni, nj, nk], "max_pa": float(v.pressure_pa.max())}
-    if volume is not None:
-        written["volume"]["box_mm"] = args.volume_box_mm
+    for v, made in volumes:
+        path = getattr(args, v.key)
+        made.to_nifti(path)
+        values = v.values(made)
+        nk, nj, ni = values.shape
+        frame = "the CT's voxels and affine" if v.in_ct else "transducer frame"
+        lines.insert(-1, f"field: {v.quantity} on {ni} x {nj} x {nk} voxels, {frame} -> {path}")
+        written[v.key] = {"path": path, "shape_ijk": [ni, nj, nk], v.max_key: float(values.max())}
+        if not v.in_ct:
+            written[v.key]["box_mm"] = args.volume_box_mm
     rows = exceeded(focus, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
@@ -145,9 +187,7 @@ def run(args: argparse.Namespace) -> int:
         from arfi.report import field_report
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
-        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases,
-                     volume if args.volume_box_mm is None else None)
-    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus, "volume": written.get("volume"),
-                   "volume_ct": written.get("volume_ct"),
-                   "propagation": sim.propagation, "seconds": time.perf_counter() - t})
+        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
+    finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
+                  **{v.key: written.get(v.key) for v in VOLUMES}, "propagation": sim.propagation, "seconds": time.perf_counter() - t})
     return 0
