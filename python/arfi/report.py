@@ -12,6 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from arfi._core import connected_region, image_noise_rad
 from arfi.io import atomic_path, atomic_write_text
 
 STYLE = ("body{font-family:sans-serif;max-width:1300px;margin:auto}table{border-collapse:collapse}"
@@ -72,17 +73,16 @@ def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: s
 def focal_box_mm(sim: Any, images: Sequence[NDArray[np.float64]], margin_mm: float = 5.0,
                  least_mm: float = 20.0) -> list[float]:
     """``[u0, u1, v0, v1]`` (mm) around the focal spot of ``images`` (on the scenario's MR plane):
-    the pixels above 10 % of the largest |value| and 5 noise deviations (the median absolute
-    deviation of each image: its background), with ``margin_mm`` around them, widened to
-    ``least_mm`` where the image allows."""
+    the pixels above 10 % of the largest |value| and 5 noise deviations (each image's noise from
+    its background, :func:`arfi._core.image_noise_rad`), with ``margin_mm`` around them, widened
+    to ``least_mm`` where the image allows."""
     extent = image_extent_mm(sim, images[0])
     nu, nv = images[0].shape
     du, dv = (extent[1] - extent[0]) / nu, (extent[3] - extent[2]) / nv
     hot = np.zeros((nu, nv), dtype=bool)
-    peak = max(float(np.max(np.abs(im))) for im in images)
+    peak = max(float(np.nanmax(np.abs(im))) for im in images)
     for im in images:
-        noise = 1.4826 * float(np.median(np.abs(im - np.median(im))))
-        hot |= np.abs(im) > max(0.1 * peak, 5.0 * noise)
+        hot |= np.abs(im) > max(0.1 * peak, 5.0 * image_noise_rad(np.ascontiguousarray(im, dtype=np.float64)))
     iu, iv = np.nonzero(hot) if hot.any() else (np.array([nu // 2]), np.array([nv // 2]))
     box = []
     for lo, d, idx, (a, b) in ((extent[0], du, iu, extent[:2]), (extent[2], dv, iv, extent[2:])):
@@ -233,22 +233,6 @@ def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64
     return _verb_page(out, verb, values, [("simulated image", save_figure(fig, out / f"{verb}.png"))])
 
 
-def lobe(above: NDArray[np.bool_], start: tuple[int, ...]) -> NDArray[np.bool_]:
-    """The samples of ``above`` connected to ``start`` through edges (empty if ``start`` is not
-    in it)."""
-    inside = np.pad(above, 1)  # a border of False: growing never wraps around
-    region = np.zeros_like(inside)
-    region[tuple(i + 1 for i in start)] = inside[tuple(i + 1 for i in start)]
-    while True:
-        grown = region.copy()
-        for axis in range(region.ndim):
-            grown |= np.roll(region, 1, axis) | np.roll(region, -1, axis)
-        grown &= inside
-        if np.array_equal(grown, region):
-            return region[tuple(slice(1, -1) for _ in range(region.ndim))]
-        region = grown
-
-
 def orthogonal_sections(sim: Any, field: Any) -> Any:
     """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
     in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU
@@ -278,7 +262,7 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
         du, dw = uu[1] - uu[0], ww[1] - ww[0]
         extent = [uu[0] - du / 2, uu[-1] + du / 2, ww[0] - dw / 2, ww[-1] + dw / 2]
         start = tuple(int(np.argmin(np.abs(axis - t["xyz".index(c)]))) for axis, c in ((ww, w), (uu, u)))
-        focal = np.where(lobe(plane >= peak / 2, start), plane, 0.0)
+        focal = np.where(connected_region(np.ascontiguousarray(plane, dtype=np.float64), list(start), peak / 2), plane, 0.0)
         at = next(c for c in "xyz" if c not in (u, w))
         for row in (0, 1):
             axis = ax[row][n]

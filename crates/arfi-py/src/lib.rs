@@ -1,5 +1,6 @@
 //! Python bindings of has-core: NumPy in and out, errors mapped in [`error`].
 
+mod arrays;
 mod convert;
 mod cost;
 mod diagnose;
@@ -55,6 +56,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;
     m.add_function(wrap_pyfunction!(phase::wrap_phases, m)?)?;
+    m.add_function(wrap_pyfunction!(arrays::connected_region, m)?)?;
+    m.add_function(wrap_pyfunction!(arrays::image_noise_rad, m)?)?;
     m.add_function(wrap_pyfunction!(phase::phase_error, m)?)?;
     m.add("METHODS", PyTuple::new(m.py(), Method::ALL.map(|m| m.name()))?)?;
     m.add_function(wrap_pyfunction!(validation::validation_cases, m)?)?;

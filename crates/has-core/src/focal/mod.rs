@@ -53,11 +53,20 @@ fn moved(pos: &[usize], offset: &[isize], shape: &[usize]) -> Option<Vec<usize>>
 
 /// The samples at or above half of `values[peak]` connected to the peak through faces.
 pub fn region_6db(values: &ArrayViewD<'_, f64>, peak: &[usize]) -> ArrayD<bool> {
+    connected_region(values, peak, 0.5 * values[IxDyn(peak)])
+}
+
+/// The samples at or above `level` connected to `start` through faces (a flood fill; empty when
+/// `start` is below `level`).
+pub fn connected_region(values: &ArrayViewD<'_, f64>, start: &[usize], level: f64) -> ArrayD<bool> {
     let shape = values.shape();
-    let level = 0.5 * values[IxDyn(peak)];
     let mut inside = ArrayD::from_elem(IxDyn(shape), false);
-    inside[IxDyn(peak)] = true;
-    let mut stack = vec![peak.to_vec()];
+    let first = values[IxDyn(start)];
+    if first.is_nan() || first < level {
+        return inside;
+    }
+    inside[IxDyn(start)] = true;
+    let mut stack = vec![start.to_vec()];
     while let Some(p) = stack.pop() {
         for axis in 0..shape.len() {
             for step in [-1isize, 1] {
@@ -197,5 +206,23 @@ mod tests {
         // too: its 8 corners), and the hot lobe (below half of the peak between them) outside.
         assert_eq!(region.iter().filter(|&&v| v).count(), 1 + 6 + 12 + 8);
         assert!(!region[IxDyn(&[1, 1, 1])]);
+    }
+
+    #[test]
+    fn a_connected_region_holds_what_touches_its_start_through_faces() {
+        // Two blocks above the level touching only at a corner (2-D: faces are edges), and a NaN:
+        // the region from one holds its 4 samples alone; from a sample below the level or NaN,
+        // nothing.
+        let mut map = ArrayD::from_elem(IxDyn(&[5, 5]), 0.0);
+        for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1), (2, 2), (2, 3), (3, 2)] {
+            map[IxDyn(&[i, j])] = 1.0;
+        }
+        map[IxDyn(&[4, 4])] = f64::NAN;
+        let region = connected_region(&map.view(), &[1, 1], 0.5);
+        assert_eq!(region.iter().filter(|&&v| v).count(), 4);
+        assert!(region[IxDyn(&[0, 0])] && !region[IxDyn(&[2, 2])]);
+        assert_eq!(connected_region(&map.view(), &[3, 2], 0.5).iter().filter(|&&v| v).count(), 3);
+        assert!(!connected_region(&map.view(), &[4, 0], 0.5).iter().any(|&v| v));
+        assert!(!connected_region(&map.view(), &[4, 4], 0.5).iter().any(|&v| v));
     }
 }

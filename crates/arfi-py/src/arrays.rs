@@ -1,0 +1,34 @@
+//! The core's analyses of plain NumPy arrays that the reports use: the lobe around a point and an
+//! MR-ARFI image's noise.
+
+use crate::error::invalid;
+use has_core::focal::connected_region as connected_region_core;
+use has_core::physics::mr::noise_floor;
+use numpy::{IntoPyArray, PyArrayDyn, PyReadonlyArray2, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+
+/// The samples of `values` (any number of dimensions) at or above `level` connected to `start`
+/// (an index per axis) through faces: a boolean array of the same shape, empty (all False) when
+/// `start` lies below `level`.
+#[pyfunction]
+pub(crate) fn connected_region<'py>(
+    py: Python<'py>,
+    values: PyReadonlyArrayDyn<'py, f64>,
+    start: Vec<usize>,
+    level: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+    let values = values.as_array();
+    if start.len() != values.ndim() || start.iter().zip(values.shape()).any(|(&i, &n)| i >= n) {
+        return Err(invalid("start", format!("must be an index inside the array's shape {:?}, got {start:?}", values.shape())));
+    }
+    Ok(connected_region_core(&values, &start, level).into_pyarray(py))
+}
+
+/// The noise (rad) of an MR-ARFI image (n_u, n_v) from its background: the standard deviation of
+/// white Gaussian noise from the median absolute difference of neighbouring pixels along u
+/// (`1.4826 · MAD / √2`, blind to a slowly varying background phase and to the few pairs on the
+/// focus); NaN pixels (no signal) skipped.
+#[pyfunction]
+pub(crate) fn image_noise_rad(image: PyReadonlyArray2<'_, f64>) -> f64 {
+    noise_floor(&image.as_array().to_owned(), &[0..0, 0..0])
+}
