@@ -44,11 +44,10 @@ def exceeded(focus: dict[str, Any], mi_limit: float = MI_LIMIT,
     peak = focus.get("focal_peak_pa")
     if peak is not None:
         flag("focal peak", focus["focal_tissue"], focus)
-    # The focal tissue's class (bone's is "skull"); its hottest sample is the focus when no hotter
-    # than the peak refined between samples (1e-6: the sample's float32 sum).
-    focal_class = {"bone": "skull"}.get(focus.get("focal_tissue") or "", focus.get("focal_tissue"))
+    # The focal tissue's hottest sample is the focus when no hotter than the peak refined between
+    # samples (1e-6: the sample's float32 sum); both name tissues by class ("skull" for bone).
     for tissue, h in (focus.get("hottest") or {}).items():
-        if not (peak is not None and tissue == focal_class and h["pressure_pa"] <= peak * (1 + 1e-6)):
+        if not (peak is not None and tissue == focus["focal_tissue"] and h["pressure_pa"] <= peak * (1 + 1e-6)):
             flag("hottest place", tissue, h)
     return rows
 

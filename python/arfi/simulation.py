@@ -251,6 +251,15 @@ class Simulation:
         p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
         return self._core.tissue_at(np.ascontiguousarray(p))
 
+    def tissue_classes(self, points_mm: ArrayLike) -> list[str]:
+        """The tissue class of each point (mm, transducer frame, shape (n, 3) or (3,)) as the
+        hottest places (``Field.hottest``) name it: ``"skull"`` for bone, ``"scalp"`` for the
+        target's own tissue whose straight path to the target crosses bone, else the tissue's
+        name (``"brain"``, ``"water"`` …); each point by the grid sample nearest it (a point off
+        the grid: ValueError naming ``points_mm``)."""
+        p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
+        return self._core.tissue_classes(np.ascontiguousarray(p))
+
     def properties_at(self, points_mm: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """The medium at each point (mm, transducer frame, shape (n, 3) or (3,)): arrays
         ``sound_speed_m_s`` and ``density_kg_m3`` (the CT's conversion where a CT holds tissue)

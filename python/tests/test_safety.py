@@ -29,9 +29,9 @@ def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
     # A place in the focal peak's tissue hotter than the peak (a side lobe) is flagged.
     focus["hottest"]["brain"] = place(1.4e6, 1.6e6)
     assert [r["tissue"] for r in exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)] == ["skull", "brain"]
-    # A focus in bone: its class is the skull's, whose hottest sample (float32, a hair above the
-    # refined peak) is the focus itself, flagged once.
-    in_bone = {**focus, "focal_peak_pa": 1.5e6, "focal_tissue": "bone", "mechanical_index": 1.5 / math.sqrt(0.5),
+    # A focus in bone (the core names its tissue by class, "skull"): the skull's hottest sample
+    # (float32, a hair above the refined peak) is the focus itself, flagged once.
+    in_bone = {**focus, "focal_peak_pa": 1.5e6, "focal_tissue": "skull", "mechanical_index": 1.5 / math.sqrt(0.5),
                "hottest": {"skull": place(1.5e6 * (1 + 1e-7), 3.1e6 * 1.9)}}
     assert [r["where"] for r in exceeded(in_bone, mi_limit=1.9, isppa_limit_w_cm2=190.0)] == ["focal peak"]
     for bad in (0.0, -1.0, float("nan"), float("inf")):

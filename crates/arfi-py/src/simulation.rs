@@ -232,6 +232,13 @@ impl CoreSimulation {
         Ok(points_m(&points_mm)?.into_iter().map(|[x, y, z]| self.inner.medium.tissue_at(x, y, z)).collect())
     }
 
+    /// The tissue class of each point (mm, transducer frame, shape (n, 3)) as the hottest places
+    /// name it: "skull" for bone, "scalp" for the target's own tissue whose path to the target
+    /// crosses bone, else the tissue's name (of the grid sample nearest the point).
+    fn tissue_classes(&self, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
+        self.inner.tissue_classes(&points_m(&points_mm)?).map_err(to_py)
+    }
+
     /// The medium at each point (mm, transducer frame, shape (n, 3)): `sound_speed_m_s` and
     /// `density_kg_m3` at the point (the CT's conversion of its voxel where a CT holds tissue),
     /// and `hu`, the CT's value there (NaN outside the CT or without one).

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from arfi._core import MemoryLimitError
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, volume_path, write_npz
-from arfi.focal import describe_tissue, metrics_text
+from arfi.focal import metrics_text
 from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
 from arfi.volume import IntensityVolume, PressureVolume
@@ -113,7 +113,7 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
         if focus[f"{key}_hottest_pa"] is not None:
             p = focus[f"{key}_hottest_mm"]
             point = [*p, f.z_mm] if len(p) == 2 else p
-            tissue = describe_tissue(sim.tissue_at, point, t)
+            tissue = sim.tissue_classes(point)[0]
             focus[f"{key}_hottest_tissue"] = tissue
             lines.append(f"field: hottest {where}: {tissue}, {focus[f'{key}_hottest_pa'] / 1e6:.3f} MPa at "
                          f"({point[0]:.1f}, {point[1]:.1f}, {point[2]:.1f}) mm (not the focus)")

@@ -39,7 +39,7 @@ pub struct FocalMetrics {
     pub isppa: f64,
     /// Mechanical index at the peak, p/√f with p in MPa and f in MHz.
     pub mechanical_index: f64,
-    /// The tissue the peak lies in (the medium's name for it).
+    /// The tissue the peak lies in, by class: `skull` for bone, else the medium's name for it.
     pub tissue: String,
 }
 

@@ -1,6 +1,7 @@
 //! What a field says at its target: the focal peaks on its plane and axis, and the focal metrics
 //! in 3-D from a box around the target recorded in the same march (see [`crate::focal`]).
 
+use super::hottest::class_name;
 use super::{Field, Simulation};
 use crate::error::{HasError, Result};
 use crate::focal::{focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
@@ -56,7 +57,7 @@ impl Simulation {
             let focal = FocalBox { grid: g, window: &window, magnitude };
             let tissue = |[x, y, z]: [f64; 3]| {
                 let p = self.medium.properties_at(x, y, z, self.frequency);
-                (p.density, p.sound_speed, self.medium.tissue_at(x, y, z))
+                (p.density, p.sound_speed, class_name(self.medium.tissue_name_at(x, y, z)).to_string())
             };
             match focal.metrics(target, along, self.frequency, tissue) {
                 Ok(m) => return Ok((rec, Some(m))),

@@ -11,12 +11,22 @@
 //! one step per sample at most.
 
 use super::Simulation;
+use crate::error::{HasError, Result};
 use crate::focal::exposure;
 use crate::physics::grid::Grid;
 use rayon::prelude::*;
 
 /// What the medium calls bone (a CT's class, or a `[[material]]` named so).
 const BONE: &str = "bone";
+
+/// The class of the medium's tissue named `name` as a user names it: bone is the `skull`.
+pub(crate) fn class_name(name: &str) -> &str {
+    if name == BONE {
+        "skull"
+    } else {
+        name
+    }
+}
 
 /// The hottest grid sample of one tissue class, with the exposure there.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,6 +64,38 @@ impl Simulation {
         out
     }
 
+    /// The tissue class of each of `points` (m, transducer frame): the class
+    /// [`Simulation::hottest_by_tissue`] gives the grid sample nearest it (the module docs' path
+    /// test, walked from that sample alone). Refused for a point off the grid.
+    pub fn tissue_classes(&self, points: &[[f64; 3]]) -> Result<Vec<String>> {
+        let g = &self.grid;
+        let name = |s: usize| {
+            let [x, y, z] = sample_position(g, s);
+            self.medium.tissue_name_at(x, y, z)
+        };
+        let index = |[i, j, k]: [usize; 3]| (k * g.ny + j) * g.nx + i;
+        let target = g.nearest(self.focus).map(|t| name(index(t)));
+        let (shape, towards) = ([g.nx, g.ny, g.nz], g.fractional_index(self.focus));
+        let class = |p: [f64; 3]| -> Result<String> {
+            let s = g.nearest(p).map(index).ok_or_else(|| {
+                HasError::invalid("points_mm", format!("({:.1}, {:.1}, {:.1}) mm lies off the grid", p[0] * 1e3, p[1] * 1e3, p[2] * 1e3))
+            })?;
+            let own = name(s);
+            if own == BONE || Some(own) != target {
+                return Ok(class_name(own).to_string());
+            }
+            let mut at = s;
+            while let Some(next) = nearer(shape, towards, at) {
+                if name(next) == BONE {
+                    return Ok("scalp".to_string());
+                }
+                at = next;
+            }
+            Ok(own.to_string())
+        };
+        points.iter().map(|&p| class(p)).collect()
+    }
+
     /// The tissue of every grid sample (its centre), by name.
     fn tissue_map(&self) -> TissueMap {
         let g = &self.grid;
@@ -86,7 +128,7 @@ fn hottest_samples(g: &Grid, focus: [f64; 3], map: &TissueMap, magnitude: &[f32]
     let target = g.nearest(focus).map(|[i, j, k]| (k * g.ny + j) * g.nx + i);
     // The target's soft tissue splits into what sees the target and the scalp.
     let split = target.map(|t| map.index[t] as usize).filter(|&t| bone.is_some() && Some(t) != bone);
-    let mut names: Vec<String> = map.names.iter().map(|n| if n == BONE { "skull".to_string() } else { n.clone() }).collect();
+    let mut names: Vec<String> = map.names.iter().map(|n| class_name(n).to_string()).collect();
     let scalp = names.len();
     names.push("scalp".into());
     let mut best: Vec<Option<(f32, usize)>> = vec![None; names.len()];
@@ -155,7 +197,7 @@ impl<'a> Sees<'a> {
             if self.tissue[at] == bone {
                 break false;
             }
-            match self.nearer(at) {
+            match nearer(self.shape, self.target, at) {
                 Some(next) => at = next,
                 None => break true,
             }
@@ -166,26 +208,28 @@ impl<'a> Sees<'a> {
         }
         answer
     }
+}
 
-    /// The sample one step nearer the target than `s`, `None` when `s` lies within one sample of
-    /// it along every axis.
-    fn nearer(&self, s: usize) -> Option<usize> {
-        let [nx, ny, nz] = self.shape;
-        let v = [s % nx, s / nx % ny, s / (nx * ny)];
-        let d: [f64; 3] = std::array::from_fn(|a| self.target[a] - v[a] as f64);
-        let m = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        if m <= 1.0 {
-            return None;
-        }
-        let n = [nx, ny, nz];
-        let q: [usize; 3] = std::array::from_fn(|a| (v[a] as f64 + d[a] / m).round().clamp(0.0, (n[a] - 1) as f64) as usize);
-        Some((q[2] * ny + q[1]) * nx + q[0])
+/// The sample one step nearer the target (fractional indices `target`, column, row, plane) than
+/// sample `s` of a grid of `shape` (nx, ny, nz): one sample along the axis of the largest index
+/// difference, the others rounded; `None` when `s` lies within one sample of it along every axis.
+fn nearer(shape: [usize; 3], target: [f64; 3], s: usize) -> Option<usize> {
+    let [nx, ny, nz] = shape;
+    let v = [s % nx, s / nx % ny, s / (nx * ny)];
+    let d: [f64; 3] = std::array::from_fn(|a| target[a] - v[a] as f64);
+    let m = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if m <= 1.0 {
+        return None;
     }
+    let n = [nx, ny, nz];
+    let q: [usize; 3] = std::array::from_fn(|a| (v[a] as f64 + d[a] / m).round().clamp(0.0, (n[a] - 1) as f64) as usize);
+    Some((q[2] * ny + q[1]) * nx + q[0])
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::Scenario;
 
     /// A 41³ grid (0.5 mm) around a target at its centre sample: brain within 5 mm of it, a bone
     /// shell to 7 mm (4 samples thick: a step of the path test moves at most √3 samples, so it
@@ -247,6 +291,35 @@ mod tests {
         map.names[0] = "scalp".into();
         let merged: Vec<&str> = truth.iter().map(|&c| if c == "water" { "scalp" } else { c }).collect();
         assert_eq!(sorted(hottest_samples(&g, focus, &map, &magnitude)), brute_force(&magnitude, &merged));
+    }
+
+    /// A bowl focused at 50 mm through water, a soft "brain" layer from 20 mm, bone from 30 to
+    /// 35 mm and brain beyond: the brain in front of the bone is the scalp, behind it the brain;
+    /// bone is the skull; the water stays water; a point off the grid is refused. With the bone
+    /// moved onto the focus, the focal peak's tissue is the skull too.
+    #[test]
+    fn tissue_classes_name_points_as_the_hottest_places_do() {
+        let scenario = |bone: (f64, f64)| {
+            format!(
+                "frequency_hz = 500000.0\n[focus]\nposition_mm = [0.0, 0.0, 50.0]\n[transducer]\nkind = \"bowl\"\n\
+                 radius_of_curvature_mm = 50.0\naperture_diameter_mm = 40.0\nelements = 64\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\n\
+                 density_kg_m3 = 1000.0\n[[material]]\nname = \"brain\"\nsound_speed_m_s = 1540.0\n\
+                 density_kg_m3 = 1040.0\n[[material]]\nname = \"bone\"\nsound_speed_m_s = 2800.0\n\
+                 density_kg_m3 = 1850.0\nattenuation_db_cm_mhz = 10.0\n[medium]\nbackground = \"water\"\n\
+                 [[region]]\nmaterial = \"brain\"\nshape = \"slab\"\nz_min_mm = 20.0\nz_max_mm = 80.0\n\
+                 [[region]]\nmaterial = \"bone\"\nshape = \"slab\"\nz_min_mm = {}\nz_max_mm = {}\n[grid]\nspacing_mm = 0.75\n",
+                bone.0, bone.1
+            )
+        };
+        let sim = Simulation::new(&Scenario::from_toml(&scenario((30.0, 35.0)), None).unwrap()).unwrap();
+        let at = |z_mm: f64| [2e-3, -1e-3, z_mm * 1e-3];
+        let classes = sim.tissue_classes(&[at(10.0), at(25.0), at(32.5), at(45.0), at(60.0)]).unwrap();
+        assert_eq!(classes, ["water", "scalp", "skull", "brain", "brain"]);
+        let off = sim.tissue_classes(&[[0.0, 0.0, -5e-3]]).unwrap_err().to_string();
+        assert!(off.starts_with("points_mm: (0.0, 0.0, -5.0) mm lies off the grid"), "{off}");
+        let in_bone = Simulation::new(&Scenario::from_toml(&scenario((40.0, 60.0)), None).unwrap()).unwrap();
+        let m = in_bone.focal_metrics(&[], in_bone.focus).unwrap().expect("a closed -6 dB region");
+        assert_eq!(m.tissue, "skull");
     }
 
     /// Without bone nothing is the scalp; a target outside the grid splits nothing either.
