@@ -8,6 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
+#: The drives a CT-based prediction compares, by the names of its focal pressures, as a reader
+#: names them (the printed focal-metrics lines and the report's titles).
+DRIVE_LABELS = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
+
 
 def metrics_text(focus: dict[str, Any]) -> str:
     """The focal region in 3-D in words: its peak, extents and volume, and the exposure there

@@ -9,7 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
 from arfi.scenario import Scenario
-from arfi.simulation import Simulation
+from arfi.simulation import Section, Simulation
 from arfi.validate import as_point_mm
 
 
@@ -42,14 +42,12 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_s
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:
-    """The drives a prediction compares, as phases added to its kept simulation's steering (rad,
-    per element), named as its focal pressures are: ``uncorrected`` (the reference steering toward
-    the target, the head read without bone), ``ray_steering`` (the scenario's straight-ray CT
-    steering toward the target) and ``corrected`` (the reference steering minus the prediction).
-    Needs a prediction made with ``keep_simulation=True``."""
-    sim = prediction.simulation
-    if sim is None:
-        raise ValueError("prediction: has no simulation; predict with keep_simulation=True")
+    """The drives a prediction compares (:data:`arfi.focal.DRIVE_LABELS`), as phases added to its kept
+    simulation's steering (rad, per element): ``uncorrected`` (the reference steering toward the
+    target, the head read without bone), ``ray_steering`` (the scenario's straight-ray CT steering
+    toward the target) and ``corrected`` (the reference steering minus the prediction). Needs a
+    prediction made with ``keep_simulation=True``."""
+    sim = prediction.kept_simulation()
     steering = sim.steering_phases_rad
     return {
         "uncorrected": prediction.reference_steering_rad - steering,
@@ -61,7 +59,18 @@ def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:
 def focal_metrics(prediction: Prediction) -> dict[str, dict[str, Any]]:
     """The focal metrics in 3-D around the prediction's target (``Simulation.focal_metrics``: the
     focal peak, its distance from the target, -3/-6 dB extents, -6 dB volume, I_SPPA and MI) for
-    each of :func:`compared_drives`, one march each through the kept skull."""
-    drives = compared_drives(prediction)  # refuses a prediction without its simulation
-    sim = cast(Simulation, prediction.simulation)
+    each of :func:`compared_drives`, one march each through the kept skull, stopping past the
+    focal box."""
+    drives = compared_drives(prediction)
+    sim = prediction.kept_simulation()
     return {name: sim.focal_metrics(phases, target_mm=prediction.target_mm) for name, phases in drives.items()}
+
+
+def compared_section(prediction: Prediction) -> tuple[Section, dict[str, dict[str, Any]]]:
+    """Each of :func:`compared_drives` on the x–z section through the prediction's target, and
+    its focal metrics there (as :func:`focal_metrics` gives them), from one batch march of the
+    three through the kept skull (what ``arfi predict --report`` draws and prints)."""
+    drives = compared_drives(prediction)
+    section = prediction.kept_simulation().section(list(drives.values()), y_mm=prediction.target_mm[1],
+                                                  target_mm=prediction.target_mm)
+    return section, dict(zip(drives, cast(list, section.focal_metrics)))

@@ -311,23 +311,21 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     return _verb_page(out, "field", values, figures)
 
 
-def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], drives: dict[str, NDArray[np.float64]]) -> Path:
+def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], section: Any) -> Path:
     """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
-    skull on the x–z section through the target for each of ``drives`` (``arfi.prediction.
-    compared_drives``: uncorrected, straight-ray CT steering, corrected; marches of the kept
-    skull's simulation, in one batch; with the target at the focus, the straight-ray drive is the
-    steering itself, which the simulation's build recorded on that section); the element maps of
-    the predicted phase and of the transmission."""
-    sim = prediction.simulation
-    if sim is None:
-        raise ValueError("prediction: has no simulation; predict with keep_simulation=True to report it")
+    skull on the x–z section through the target for each drive it compares (``section`` from
+    ``arfi.prediction.compared_section``: uncorrected, straight-ray CT steering, corrected, in the
+    order of ``arfi.focal.DRIVE_LABELS``); the element maps of the predicted phase and of the
+    transmission."""
+    from arfi.focal import DRIVE_LABELS
+
+    sim = prediction.kept_simulation()
     plt = pyplot()
     out = _report_dir(out)
-    section = sim.section(list(drives.values()), y_mm=prediction.target_mm[1])
     best = prediction.optimal_pa
-    fig = section_figure(section, [f"{name}: {pa / best:.2f} of the best focus" for name, pa in
-                                   [("uncorrected", prediction.uncorrected_pa), ("straight-ray CT steering", prediction.ray_steering_pa),
-                                    ("predicted correction", prediction.corrected_pa)]], prediction.target_mm)
+    pressures = {"uncorrected": prediction.uncorrected_pa, "ray_steering": prediction.ray_steering_pa, "corrected": prediction.corrected_pa}
+    fig = section_figure(section, [f"{label}: {pressures[name] / best:.2f} of the best focus" for name, label in DRIVE_LABELS.items()],
+                         prediction.target_mm)
     figures = [(f"the beam through the skull on the section y = {section.y_mm:.1f} mm", save_figure(fig, out / "predict_section.png"))]
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
     element_map(fig, ax[0], sim, prediction.phases_rad, "predicted aberration (subtract to correct)")

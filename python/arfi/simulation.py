@@ -267,11 +267,14 @@ class Simulation:
         p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
         return self._core.properties_at(np.ascontiguousarray(p))
 
-    def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None) -> Section:
+    def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None,
+                target_mm: ArrayLike | None = None) -> Section:
         """Pressure on the x–z plane nearest ``y_mm`` (default: the focus's) with the sound speed
         there. ``phases``: one drive (phases added to the steering, per element or per group;
         None: the steering alone) or a sequence (None entries: the steering alone) or 2-D array of
-        drives, marched in one batch."""
+        drives, marched in one batch. With ``target_mm`` (mm, transducer frame), the same march
+        also gives each drive's focal metrics around it as :meth:`focal_metrics` does
+        (``Section.focal_metrics``, one dict per drive)."""
         none = np.zeros(0)
         if phases is None:
             drives = [none]
@@ -280,7 +283,8 @@ class Simulation:
         else:
             drives = [as_phases(cast(ArrayLike, phases))]
         y = None if y_mm is None else as_number(y_mm, "y_mm")
-        return self._core.section(drives, y)
+        target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
+        return self._core.section(drives, y, target)
 
     def arfi_image(self, phases: ArrayLike | None = None, noise_rad: float = 0.0, seed: int = 0) -> NDArray[np.float64]:
         """MR-ARFI phase image (rad), shape (n_u, n_v) (x by y for the default ``"xy"`` plane).

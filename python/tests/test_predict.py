@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from arfi.cli import main
-from arfi.prediction import compared_drives, predict
+from arfi.focal import DRIVE_LABELS
+from arfi.prediction import compared_drives, compared_section, focal_metrics, predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -158,11 +159,16 @@ def test_a_patient_steered_without_bone_is_driven_as_the_prediction_assumes(head
 
 
 def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path):
-    report = tmp_path / "report"
+    report, js = tmp_path / "report", tmp_path / "p.json"
     assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "prior.npy"),
-                 "--report", str(report)]) == 0
+                 "--report", str(report), "--json", str(js), "--no-bone-speed-sensitivity"]) == 0
     for name in ["predict_section.png", "predict_elements.png", "report.html"]:
         assert (report / name).stat().st_size > 10_000, name
+    # The report's march gives the focal metrics too: in the JSON and on the page, each drive's.
+    metrics = json.loads(js.read_text())["focal_metrics"]
+    assert set(metrics) == {"uncorrected", "ray_steering", "corrected"} and all(set(m) == FOCAL_KEYS for m in metrics.values())
+    page = (report / "report.html").read_text()
+    assert all(f"{label}: focal metrics" in page for label in ["uncorrected", "straight-ray CT steering", "corrected"])
     assert (report / "predict_section.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # The report and the focal metrics march the kept skull's simulation; without one the drives
     # they march say how to get it.
@@ -170,6 +176,28 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
     assert p.simulation is None
     with pytest.raises(ValueError, match="keep_simulation=True"):
         compared_drives(p)
+
+
+def test_one_march_draws_the_section_and_gives_each_drives_focal_metrics(head):
+    # compared_section marches the three drives once, recording the section and the focal box
+    # together: the section is sim.section's (1e-9 of its peak: the same batch march) and each
+    # drive's metrics are focal_metrics' (their own marches to the box: 1e-6, single-precision
+    # sums in another order).
+    p = predict(Scenario.load(head / "head.toml"), keep_simulation=True)
+    section, metrics = compared_section(p)
+    drives = compared_drives(p)
+    alone = p.simulation.section(list(drives.values()), y_mm=p.target_mm[1])
+    peak = np.abs(alone.pressure).max()
+    assert np.abs(section.pressure - alone.pressure).max() <= 1e-9 * peak and alone.focal_metrics is None
+    expected = focal_metrics(p)
+    assert list(metrics) == list(drives) == list(DRIVE_LABELS)
+    for name, m in metrics.items():
+        for key in ("focal_peak_pa", "peak_to_target_mm", "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index"):
+            assert m[key] == pytest.approx(expected[name][key], rel=1e-6, abs=1e-9), (name, key)
+        assert np.allclose(m["focal_peak_mm"], expected[name]["focal_peak_mm"], atol=1e-6)
+        assert m["target_mm"] == expected[name]["target_mm"] and m["focal_tissue"] == expected[name]["focal_tissue"]
+    with pytest.raises(ValueError, match="target_mm"):
+        p.simulation.section(y_mm=0.0, target_mm=(0.0, 0.0, -500.0))
 
 
 def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head, tmp_path, capsys):

@@ -408,16 +408,20 @@ pub(crate) struct CoreSection {
     x_mm: Py<PyArray1<f64>>,
     z_mm: Py<PyArray1<f64>>,
     y: f64,
+    /// Each drive's focal metrics around the target (m) they were sought around, if asked for.
+    focal_metrics: Option<([f64; 3], Vec<Option<MetricsMm>>)>,
 }
 
 impl CoreSection {
-    pub(crate) fn new(py: Python<'_>, s: Section) -> Self {
+    /// The section `s`, with each drive's focal metrics around `target` (m) if made with them.
+    pub(crate) fn new(py: Python<'_>, s: Section, focal_metrics: Option<([f64; 3], Vec<Option<FocalMetrics>>)>) -> Self {
         CoreSection {
             x_mm: mm(&s.x).into_pyarray(py).unbind(),
             z_mm: mm(&s.z).into_pyarray(py).unbind(),
             y: s.y,
             pressure: s.pressure.into_pyarray(py).unbind(),
             sound_speed_m_s: s.sound_speed.into_pyarray(py).unbind(),
+            focal_metrics: focal_metrics.map(|(t, m)| (t, m.iter().map(|m| m.as_ref().map(MetricsMm::from)).collect())),
         }
     }
 }
@@ -452,6 +456,21 @@ impl CoreSection {
     #[getter]
     fn y_mm(&self) -> f64 {
         self.y * 1e3
+    }
+
+    /// Each drive's focal metrics in 3-D around the target asked for (the keys of
+    /// `Simulation.focal_metrics`, with `target_mm`), from the section's own march; None when the
+    /// section was made without a target.
+    #[getter]
+    fn focal_metrics<'py>(&self, py: Python<'py>) -> PyResult<Option<Vec<Bound<'py, PyDict>>>> {
+        let Some((target, metrics)) = &self.focal_metrics else { return Ok(None) };
+        let dicts = metrics.iter().map(|m| {
+            let d = PyDict::new(py);
+            d.set_item("target_mm", point_mm(*target))?;
+            metrics_items(&d, m.as_ref())?;
+            Ok(d)
+        });
+        Ok(Some(dicts.collect::<PyResult<_>>()?))
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

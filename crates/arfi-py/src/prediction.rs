@@ -1,6 +1,6 @@
 //! `predict`: the CT-based prediction of each element's aberration, as a typed result.
 
-use crate::error::to_py;
+use crate::error::{invalid, to_py};
 use crate::scenario::parse_scenario;
 use crate::simulation::CoreSimulation;
 use has_core::prediction::{predict_scenario_with, Prediction, PredictionOptions};
@@ -141,6 +141,12 @@ impl CorePrediction {
     #[getter]
     fn simulation(&self, py: Python<'_>) -> Option<Py<PyAny>> {
         self.simulation.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    /// The skull's simulation the prediction marched, or a `ValueError` naming `prediction` that
+    /// says how to keep it: what its section, focal metrics and report need.
+    fn kept_simulation(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        self.simulation(py).ok_or_else(|| invalid("prediction", "has no simulation; predict with keep_simulation=True"))
     }
 
     /// The same prediction holding `simulation` (what `predict(..., keep_simulation=True)`

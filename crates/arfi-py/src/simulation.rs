@@ -255,12 +255,24 @@ impl CoreSimulation {
     }
 
     /// Pressure on the x–z section nearest `y_mm` (default: the focus's) for each drive in
-    /// `phases`, with the sound speed there.
-    #[pyo3(signature = (phases, y_mm=None))]
-    fn section(&self, py: Python<'_>, phases: Vec<PyReadonlyArray1<'_, f64>>, y_mm: Option<f64>) -> PyResult<CoreSection> {
+    /// `phases`, with the sound speed there; with `target_mm`, each drive's focal metrics around it
+    /// from the same march.
+    #[pyo3(signature = (phases, y_mm=None, target_mm=None))]
+    fn section(
+        &self,
+        py: Python<'_>,
+        phases: Vec<PyReadonlyArray1<'_, f64>>,
+        y_mm: Option<f64>,
+        target_mm: Option<[f64; 3]>,
+    ) -> PyResult<CoreSection> {
         let added: Vec<Vec<f64>> = phases.into_iter().map(|p| phases_vec(Some(p))).collect();
-        let s = py.detach(|| self.inner.section(&added, y_mm.map(|y| y * 1e-3))).map_err(to_py)?;
-        Ok(CoreSection::new(py, s))
+        let y = y_mm.map(|y| y * 1e-3);
+        let Some(target) = target_mm.map(|t| t.map(|v| v * 1e-3)) else {
+            let s = py.detach(|| self.inner.section(&added, y)).map_err(to_py)?;
+            return Ok(CoreSection::new(py, s, None));
+        };
+        let (s, metrics) = py.detach(|| self.inner.section_with_focal_metrics(&added, y, target)).map_err(to_py)?;
+        Ok(CoreSection::new(py, s, Some((target, metrics))))
     }
 
     /// MR-ARFI phase image (rad), shape (n_u, n_v); Gaussian noise of `noise_rad` if given.

@@ -3,6 +3,8 @@
 //! used there (a skull slice with the beam through it).
 
 use crate::error::{HasError, Result};
+use crate::focal::FocalMetrics;
+use crate::physics::propagation::{RecordSpec, Recording};
 use crate::simulation::{section_spec, Simulation};
 use ndarray::{Array2, Array3};
 use num_complex::Complex64 as C64;
@@ -43,9 +45,51 @@ impl Simulation {
         if added.is_empty() {
             return Err(HasError::invalid("phases", "needs at least one drive"));
         }
+        let recordings = self.plan.propagate_batch(&self.source_fields(added)?, &spec)?;
+        self.section_of(recordings, row)
+    }
+
+    /// [`Simulation::section`] and each drive's focal metrics in 3-D around `target` (m,
+    /// transducer frame) as [`Simulation::focal_metrics`] gives them, from the same batch march
+    /// (the section's row and the focal box recorded together; a drive whose -6 dB region needs a
+    /// larger box marches again alone, to that box).
+    pub fn section_with_focal_metrics(
+        &self,
+        added: &[Vec<f64>],
+        y: Option<f64>,
+        target: [f64; 3],
+    ) -> Result<(Section, Vec<Option<FocalMetrics>>)> {
+        let g = &self.grid;
+        let search = target.iter().all(|v| v.is_finite()).then(|| self.focal_search(target)).flatten();
+        let Some(search) = search else {
+            return Err(HasError::invalid("target_mm", "must lie within the grid"));
+        };
+        let (row, mut spec) = section_spec(g, y.unwrap_or(self.focus[1]), self.reflections)?;
+        if added.is_empty() {
+            return Err(HasError::invalid("phases", "needs at least one drive"));
+        }
+        spec.magnitude = Some(search.first_window(g));
         let sources = self.source_fields(added)?;
-        let recordings = self.plan.propagate_batch(&sources, &spec)?;
-        let pressure = Array3::from_shape_vec((added.len(), g.nz, g.nx), recordings.into_iter().flat_map(|rec| rec.window).collect())
+        let mut recordings = self.plan.propagate_batch(&sources, &spec)?;
+        let mut metrics = Vec::with_capacity(added.len());
+        for (rec, source) in recordings.iter_mut().zip(&sources) {
+            let mut first = Some(std::mem::take(&mut rec.magnitude));
+            metrics.push(search.metrics(self, |window| match first.take() {
+                Some(values) => Ok(values),
+                None => {
+                    let spec = RecordSpec { magnitude: Some(window.clone()), reflections: self.reflections, ..RecordSpec::default() };
+                    Ok(self.plan.propagate(source, &spec)?.magnitude)
+                }
+            })?);
+        }
+        Ok((self.section_of(recordings, row)?, metrics))
+    }
+
+    /// The section on grid row `row` from the recordings of its window, one per drive.
+    fn section_of(&self, recordings: Vec<Recording>, row: usize) -> Result<Section> {
+        let g = &self.grid;
+        let drives = recordings.len();
+        let pressure = Array3::from_shape_vec((drives, g.nz, g.nx), recordings.into_iter().flat_map(|rec| rec.window).collect())
             .map_err(|e| HasError::invalid("section", e.to_string()))?;
         let sound_speed = Array2::from_shape_fn((g.nz, g.nx), |(n, i)| self.plan.slab_properties(n).sound_speed[row * g.nx + i]);
         Ok(Section { y: g.y(row), x: (0..g.nx).map(|i| g.x(i)).collect(), z: (0..g.nz).map(|n| g.z(n)).collect(), sound_speed, pressure })
@@ -76,5 +120,30 @@ mod tests {
         assert_eq!(s.y, 0.0);
         assert!(sim.section(&[], None).is_err());
         assert!(sim.section(&[vec![]], Some(1.0)).is_err());
+    }
+
+    /// One march for the section and the focal metrics gives the section of `section` (to
+    /// rounding, 1e-9 of the peak) and each drive's metrics of `focal_metrics` (its own march:
+    /// 1e-6, float32 sums in another order). A 4 x 4 array focuses long (the -6 dB region longer
+    /// than the first box's 40 mm), so the unsteered drive needs a larger box: its second march.
+    #[test]
+    fn section_and_focal_metrics_from_one_march_agree_with_each_alone() {
+        let sim = Simulation::new(&Scenario::from_toml("[transducer]\nelements_per_side = 4\n", None).unwrap()).unwrap();
+        let drives = [vec![], (0..sim.n_elements()).map(|e| 0.4 * (e as f64).sin()).collect()];
+        let target = [1e-3, 0.0, 80e-3];
+        let (section, metrics) = sim.section_with_focal_metrics(&drives, None, target).unwrap();
+        let alone = sim.section(&drives, None).unwrap();
+        let peak = alone.pressure.iter().map(|p| p.norm()).fold(0.0, f64::max);
+        assert!(section.pressure.iter().zip(&alone.pressure).all(|(a, b)| (a - b).norm() <= 1e-9 * peak));
+        assert_eq!(section.sound_speed, alone.sound_speed);
+        for (m, added) in metrics.iter().zip(&drives) {
+            let (m, want) = (m.as_ref().unwrap(), sim.focal_metrics(added, target).unwrap().unwrap());
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1e-3);
+            assert!(close(m.peak_pressure, want.peak_pressure) && close(m.volume_6db, want.volume_6db), "{m:?} vs {want:?}");
+            assert!((0..3).all(|k| close(m.peak[k], want.peak[k])) && close(m.fwhm_6db[0], want.fwhm_6db[0]));
+        }
+        assert!(metrics[0].as_ref().unwrap().fwhm_6db[0] > 40e-3, "the long focus that needs a second box");
+        assert!(sim.section_with_focal_metrics(&drives, None, [0.0, 0.0, -1.0]).unwrap_err().to_string().starts_with("target_mm"));
+        assert!(sim.section_with_focal_metrics(&drives, None, [f64::NAN, 0.0, 0.08]).is_err());
     }
 }

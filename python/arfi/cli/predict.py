@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
-from arfi.focal import metrics_text
-from arfi.prediction import compared_drives, focal_metrics, predict
+from arfi.focal import DRIVE_LABELS, metrics_text
+from arfi.prediction import compared_section, focal_metrics, predict
 
 
 def register(sub: Any) -> None:
@@ -42,11 +42,12 @@ def register(sub: Any) -> None:
                         "and give each one's focal metrics in 3-D around the target: the focal peak and its distance "
                         "from the target, the -6 dB extents and volume, I_SPPA and MI in the tissue it lies in "
                         "(printed, and in the --json as focal_metrics with the keys of arfi field's JSON). Three marches "
-                        "of the skull's simulation, kept until they are done. Default: on with --json or --report; "
-                        "--no-focal-metrics skips them")
+                        "of the skull's simulation to the focal box, kept until they are done (with --report, the "
+                        "report's own march gives them). Default: on with --json or --report; --no-focal-metrics skips them")
     add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
                   "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
-                  "phase and transmission; two more marches of the prediction's own simulation of the skull, kept for the report)")
+                  "phase and transmission; one batch march of the three beams through the prediction's own simulation of the skull, "
+                  "kept for the report, which also gives their focal metrics)")
     p.set_defaults(run=run)
 
 
@@ -68,7 +69,10 @@ def run(args: argparse.Namespace) -> int:
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
                 keep_simulation=bool(args.report) or metrics_wanted)
     seconds = time.perf_counter() - t
-    metrics = focal_metrics(p) if metrics_wanted else None
+    # One batch march of the three drives draws the report's section and gives their focal
+    # metrics; without a report, the metrics alone march each drive only to its focal box.
+    section, metrics = compared_section(p) if args.report else (None, focal_metrics(p) if metrics_wanted else None)
+    metrics = metrics if metrics_wanted else None
     metrics_seconds = time.perf_counter() - t - seconds
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm
@@ -84,9 +88,8 @@ def run(args: argparse.Namespace) -> int:
         g = p.bone_speed_sensitivity_rad_per_percent
         print(f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
               f"({np.abs(g).max():.3f} at most)")
-    names = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
     for name, m in (metrics or {}).items():
-        print(f"predict: {names[name]}: {metrics_text(m)}")
+        print(f"predict: {DRIVE_LABELS[name]}: {metrics_text(m)}")
     result = p.to_dict()
     if metrics is not None:
         result["focal_metrics"] = metrics
@@ -97,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         predict_report(args.report, p, {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad),
                                         "seconds": seconds,
                                         **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()},
-                                        **{f"{names[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()}},
-                       compared_drives(p))
+                                        **{f"{DRIVE_LABELS[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()}},
+                       section)
     finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

@@ -6,7 +6,8 @@ use super::{Field, Simulation};
 use crate::error::{HasError, Result};
 use crate::focal::{focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
 use crate::numeric::unit;
-use crate::physics::propagation::{RecordSpec, Recording};
+use crate::physics::grid::Grid;
+use crate::physics::propagation::{RecordSpec, Recording, Window};
 use crate::Complex64 as C64;
 use ndarray::{Array3, ArrayD, IxDyn};
 
@@ -30,39 +31,80 @@ impl Simulation {
     /// The recording `spec` of the beam from `source` (the plane-0 field), with a box around the
     /// target recorded in the same march, and the focal metrics from that box. The box reaches
     /// max(5 mm, 2 λ) sideways and max(20 mm, 8 λ) along z (λ at the target) and doubles, with
-    /// another march, while the -6 dB region reaches one of its faces.
+    /// another march, while the -6 dB region reaches one of its faces. `spec.magnitude`, if set,
+    /// must be the whole grid: the boxes are then cut from it, without another march.
     pub(crate) fn record_with_focus(&self, source: &[C64], spec: RecordSpec) -> Result<(Recording, Option<FocalMetrics>)> {
         self.record_around(source, spec, self.focus)
     }
 
     /// [`Simulation::record_with_focus`] around `target` (m) in place of the focus.
     fn record_around(&self, source: &[C64], spec: RecordSpec, target: [f64; 3]) -> Result<(Recording, Option<FocalMetrics>)> {
-        let g = &self.grid;
-        let Some(voxel) = g.nearest(target) else {
+        let Some(search) = self.focal_search(target) else {
             return Ok((self.plan.propagate(source, &spec)?, None));
         };
+        if let Some(kept) = spec.magnitude.clone() {
+            assert!(kept == Window::whole(&self.grid), "a kept |p| is of the whole grid");
+            let rec = self.plan.propagate(source, &spec)?;
+            let metrics = search.metrics(self, |window| Ok(kept.extract(&rec.magnitude, window)))?;
+            return Ok((rec, metrics));
+        }
+        let mut last = None;
+        let metrics = search.metrics(self, |window| {
+            let mut rec = self.plan.propagate(source, &RecordSpec { magnitude: Some(window.clone()), ..spec.clone() })?;
+            let values = std::mem::take(&mut rec.magnitude);
+            last = Some(rec);
+            Ok(values)
+        })?;
+        Ok((last.expect("the search marches at least once"), metrics))
+    }
+
+    /// The search for the focal metrics around `target` (m): `None` off the grid.
+    pub(crate) fn focal_search(&self, target: [f64; 3]) -> Option<FocalSearch> {
+        let voxel = self.grid.nearest(target)?;
         let [x, y, z] = target;
         let wavelength = self.medium.properties_at(x, y, z, self.frequency).sound_speed / self.frequency;
-        let mut reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
+        let reach = [(5e-3f64).max(2.0 * wavelength), (20e-3f64).max(8.0 * wavelength)];
         let along = if z > 0.0 { unit(target) } else { [0.0, 0.0, 1.0] };
+        Some(FocalSearch { target, voxel, reach, along })
+    }
+}
+
+/// Where the focal metrics are sought: the target (m), its nearest grid sample, the box's first
+/// reach (m, sideways and along z) and the beam's direction.
+#[derive(Clone, Copy)]
+pub(crate) struct FocalSearch {
+    target: [f64; 3],
+    voxel: [usize; 3],
+    reach: [f64; 2],
+    along: [f64; 3],
+}
+
+impl FocalSearch {
+    /// The first box searched (the one to record in a march that records more).
+    pub(crate) fn first_window(&self, g: &Grid) -> Window {
+        focal_window(g, self.voxel, self.reach[0], self.reach[1])
+    }
+
+    /// The metrics from `|p|` on successive boxes (`magnitude(window)`, single precision,
+    /// row-major plane, row, column), the box doubling while the -6 dB region reaches one of its
+    /// faces ([`BOX_DOUBLINGS`] times at most); `None` when no closed region lies around the target.
+    pub(crate) fn metrics(&self, sim: &Simulation, mut magnitude: impl FnMut(&Window) -> Result<Vec<f32>>) -> Result<Option<FocalMetrics>> {
+        let g = &sim.grid;
+        let mut reach = self.reach;
         for doubling in 0..=BOX_DOUBLINGS {
-            let window = focal_window(g, voxel, reach[0], reach[1]);
-            let mut rec = self.plan.propagate(source, &RecordSpec { window: Some(window.clone()), ..spec.clone() })?;
-            let magnitude = Array3::from_shape_vec(
-                (window.planes.len(), window.rows.len(), window.cols.len()),
-                rec.window.iter().map(|p| p.norm_sqr().sqrt()).collect(),
-            )
-            .map_err(|e| HasError::invalid("window", e.to_string()))?;
-            rec.window = vec![];
+            let window = FocalSearch { reach, ..*self }.first_window(g);
+            let values = magnitude(&window)?.into_iter().map(f64::from).collect();
+            let magnitude = Array3::from_shape_vec((window.planes.len(), window.rows.len(), window.cols.len()), values)
+                .map_err(|e| HasError::invalid("window", e.to_string()))?;
             let focal = FocalBox { grid: g, window: &window, magnitude };
             let tissue = |[x, y, z]: [f64; 3]| {
-                let p = self.medium.properties_at(x, y, z, self.frequency);
-                (p.density, p.sound_speed, class_name(self.medium.tissue_name_at(x, y, z)).to_string())
+                let p = sim.medium.properties_at(x, y, z, sim.frequency);
+                (p.density, p.sound_speed, class_name(sim.medium.tissue_name_at(x, y, z)).to_string())
             };
-            match focal.metrics(target, along, self.frequency, tissue) {
-                Ok(m) => return Ok((rec, Some(m))),
+            match focal.metrics(self.target, self.along, sim.frequency, tissue) {
+                Ok(m) => return Ok(Some(m)),
                 Err(Shortfall::TooSmall) if doubling < BOX_DOUBLINGS => reach = reach.map(|r| 2.0 * r),
-                Err(_) => return Ok((rec, None)),
+                Err(_) => return Ok(None),
             }
         }
         unreachable!("the last doubling returns")
