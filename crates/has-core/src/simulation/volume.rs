@@ -273,17 +273,25 @@ mod tests {
         assert!(window_of_box(g, hi, lo).is_err());
     }
 
+    /// A 64-element bowl (50 mm, 40 mm wide, 500 kHz) in water (1000 kg/m³, 1500 m/s) before a
+    /// bone plate (1850 kg/m³, 2800 m/s) from z = 30 to 35 mm; `reflections` as asked.
+    fn plate(reflections: bool) -> Simulation {
+        let text = format!(
+            "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 50.0\n\
+             aperture_diameter_mm = 40.0\nelements = 64\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\n\
+             density_kg_m3 = 1000.0\n[[material]]\nname = \"bone\"\nsound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0\n\
+             attenuation_db_cm_mhz = 10.0\n[medium]\nbackground = \"water\"\n[[region]]\nmaterial = \"bone\"\n\
+             shape = \"slab\"\nz_min_mm = 30.0\nz_max_mm = 35.0\n[grid]\nreflections = {reflections}\nspacing_mm = 0.75\n"
+        );
+        Simulation::new(&Scenario::from_toml(&text, None).unwrap()).unwrap()
+    }
+
     /// Through a reverberating plate with reflections towards the source (every plane summed from
     /// several sweeps), the volume is still `|p|` of the planes recorded in double precision,
     /// within 1e-6 of the peak (float32 sums of a few terms).
     #[test]
     fn through_a_reverberating_plate_the_volume_sums_every_sweep() {
-        let text = "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 50.0\n\
-            aperture_diameter_mm = 40.0\nelements = 64\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\n\
-            density_kg_m3 = 1000.0\n[[material]]\nname = \"bone\"\nsound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0\n\
-            attenuation_db_cm_mhz = 10.0\n[medium]\nbackground = \"water\"\n[[region]]\nmaterial = \"bone\"\n\
-            shape = \"slab\"\nz_min_mm = 30.0\nz_max_mm = 35.0\n[grid]\nreflections = true\nspacing_mm = 0.75\n";
-        let sim = Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap();
+        let sim = plate(true);
         assert!(sim.propagation().reverberation.is_some() && sim.reflections);
         let g = &sim.grid;
         let window = window_of_box(g, [-5e-3, -5e-3, 20e-3], [5e-3, 5e-3, 40e-3]).unwrap();
@@ -309,12 +317,7 @@ mod tests {
     /// is not in doubt), to single precision (1e-6 relative); a box holds the whole grid's values.
     #[test]
     fn intensity_is_p_squared_over_twice_the_impedance_of_each_samples_material() {
-        let text = "frequency_hz = 500000.0\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = 50.0\n\
-            aperture_diameter_mm = 40.0\nelements = 64\n[[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\n\
-            density_kg_m3 = 1000.0\n[[material]]\nname = \"bone\"\nsound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0\n\
-            attenuation_db_cm_mhz = 10.0\n[medium]\nbackground = \"water\"\n[[region]]\nmaterial = \"bone\"\n\
-            shape = \"slab\"\nz_min_mm = 30.0\nz_max_mm = 35.0\n[grid]\nspacing_mm = 0.75\n";
-        let sim = Simulation::new(&Scenario::from_toml(text, None).unwrap()).unwrap();
+        let sim = plate(false);
         let g = &sim.grid;
         let whole = Window::whole(g);
         let magnitude = sim.pressure_volume(&[], None).unwrap().pressure;
