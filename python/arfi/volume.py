@@ -52,9 +52,9 @@ class PressureVolume(_OnVoxels):
 
 @dataclass(frozen=True)
 class IntensityVolume(_OnVoxels):
-    """Spatial-peak pulse-average intensity I_SPPA = ``|p|² / (2·ρ·c)`` (W/cm²) in 3-D, ρ and c
-    the medium's at each voxel (the CT's conversion where it holds tissue), as the focal
-    metrics' ``isppa_w_cm2`` and the hottest places take them.
+    """The pulse-average intensity I = ``|p|² / (2·ρ·c)`` (W/cm²) in 3-D, ρ and c the medium's at
+    each voxel (the CT's conversion where it holds tissue), as the focal metrics' ``isppa_w_cm2``
+    (I at the focal peak: the spatial peak, I_SPPA) and the hottest places take them.
 
     ``intensity_w_cm2``: float32, shape (nk, nj, ni), indexed [k, j, i]; ``affine_mm`` and
     ``frame`` as :class:`PressureVolume`'s."""
@@ -64,6 +64,6 @@ class IntensityVolume(_OnVoxels):
     frame: str = "transducer"
 
     def to_nifti(self, path: str | os.PathLike[str]) -> None:
-        """Writes I_SPPA (W/cm²) as NIfTI-1 (``.nii`` or ``.nii.gz``) with its affine (mm) as
+        """Writes the intensity (W/cm²) as NIfTI-1 (``.nii`` or ``.nii.gz``) with its affine (mm) as
         qform and sform, atomically (nothing is left behind on failure)."""
-        self._write(path, self.intensity_w_cm2, "I_SPPA (W/cm2)")
+        self._write(path, self.intensity_w_cm2, "I = p^2/(2 rho c) (W/cm2)")

@@ -41,7 +41,7 @@ def test_arfi_field_volume_opens_with_its_focus_where_the_json_puts_it(tmp_path,
 
 
 def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedance(tmp_path, capsys, sim):
-    # I_SPPA = p²/(2ρc) by hand from the |p| volume and the medium's ρ and c at each voxel of a box
+    # I = p²/(2ρc) by hand from the |p| volume and the medium's ρ and c at each voxel of a box
     # through the focus and the gel's front face (Simulation.properties_at, not the code that
     # made the volume), to float32 (1e-6 relative). Its hottest voxel holds the focal I_SPPA the
     # JSON reports to within 6 % (the peak's |p| to 3 %, refined between samples, squared).
@@ -53,7 +53,7 @@ def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedan
     p_img, i_img = nib.load(str(vol)), nib.load(str(iv))
     p, intensity = np.asarray(p_img.dataobj, dtype=np.float64), np.asarray(i_img.dataobj)
     assert intensity.shape == p.shape and intensity.dtype == np.float32 and np.allclose(i_img.affine, p_img.affine)
-    assert i_img.header["descrip"].tobytes().startswith(b"arfi: I_SPPA (W/cm2)")
+    assert i_img.header["descrip"].tobytes().startswith(b"arfi: I = p^2/(2 rho c) (W/cm2)")
     ijk = np.indices(p.shape).reshape(3, -1)
     points = (p_img.affine @ np.vstack([ijk, np.ones(ijk.shape[1])]))[:3].T
     m = sim.properties_at(points)
@@ -65,7 +65,7 @@ def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedan
     v = d["intensity_volume"]
     assert v["path"] == str(iv) and v["shape_ijk"] == list(p.shape) and v["box_mm"] == [float(b) for b in box]
     assert v["max_w_cm2"] == pytest.approx(float(intensity.max()), rel=1e-6)
-    assert any(line.startswith(f"field: I_SPPA in 3-D (W/cm²) on {p.shape[0]} x {p.shape[1]} x {p.shape[2]} voxels")
+    assert any(line.startswith(f"field: intensity in 3-D (W/cm²) on {p.shape[0]} x {p.shape[1]} x {p.shape[2]} voxels")
                for line in capsys.readouterr().out.splitlines())
 
 

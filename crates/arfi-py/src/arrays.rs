@@ -14,13 +14,15 @@ use pyo3::prelude::*;
 pub(crate) fn connected_region<'py>(
     py: Python<'py>,
     values: PyReadonlyArrayDyn<'py, f64>,
-    start: Vec<usize>,
+    start: Vec<i64>,
     level: f64,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
     let values = values.as_array();
-    if start.len() != values.ndim() || start.iter().zip(values.shape()).any(|(&i, &n)| i >= n) {
+    let inside = start.len() == values.ndim() && start.iter().zip(values.shape()).all(|(&i, &n)| i >= 0 && (i as u64) < n as u64);
+    if !inside {
         return Err(invalid("start", format!("must be an index inside the array's shape {:?}, got {start:?}", values.shape())));
     }
+    let start: Vec<usize> = start.iter().map(|&i| i as usize).collect();
     Ok(connected_region_core(&values, &start, level).into_pyarray(py))
 }
 

@@ -3,12 +3,15 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
-use crate::simulation::CoreSimulation;
 use crate::volume::{borrowed_grid_arrays, ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, FocalMetrics, Peak};
 use has_core::physics::ct::CtMedium;
+use has_core::physics::grid::Grid;
+use has_core::physics::medium::Medium;
 use has_core::physics::propagation::Window;
-use has_core::simulation::{check_ct_volume, crop_volume, resample_into_ct, window_affine, PressureVolume};
+use has_core::simulation::{
+    check_ct_volume, crop_volume, intensity_in_ct, intensity_on_window, resample_into_ct, window_affine, PressureVolume,
+};
 use has_core::{Field, Section, Simulation};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, ToPyArray};
@@ -87,15 +90,17 @@ pub(crate) struct CoreField {
     metrics: Option<MetricsMm>,
     target: [f64; 3],
     focus: OnceLock<FieldFocus>,
-    /// The simulation that made the field: its grid (where the volume lies), medium (the
-    /// intensity's ρ and c) and CT (what the volume may be laid on).
-    simulation: Py<CoreSimulation>,
+    /// The grid the volume lies on; the medium (the intensity's ρ and c; its CT, shared, what the
+    /// volume may be laid on) and the frequency (Hz): copies, so that a field does not keep its
+    /// simulation's plan alive.
+    grid: Grid,
+    medium: Medium,
+    frequency: f64,
 }
 
 impl CoreField {
-    /// The field `f` of a beam of `simulation` (steered to its focus).
-    pub(crate) fn new(py: Python<'_>, f: Field, simulation: Py<CoreSimulation>) -> Self {
-        let sim = &simulation.get().inner;
+    /// The field `f` of a beam of `sim` (steered to its focus).
+    pub(crate) fn new(py: Python<'_>, f: Field, sim: &Simulation) -> Self {
         let axis = |k: usize| f.axis_xy.iter().map(|p| p[k] * 1e3).collect::<Vec<f64>>().into_pyarray(py).unbind();
         CoreField {
             x_mm: mm(&f.x).into_pyarray(py).unbind(),
@@ -109,13 +114,10 @@ impl CoreField {
             focus: OnceLock::new(),
             metrics: f.metrics.as_ref().map(MetricsMm::from),
             field: f,
-            simulation,
+            grid: sim.grid.clone(),
+            medium: sim.medium.clone(),
+            frequency: sim.frequency,
         }
-    }
-
-    /// The simulation that made the field.
-    fn sim(&self) -> &Simulation {
-        &self.simulation.get().inner
     }
 
     /// `|p|` on every grid sample, kept by a field made with `volume=True`.
@@ -131,7 +133,7 @@ impl CoreField {
         if box_mm.is_some() {
             return Err(invalid("box_mm", "crops the volume on the simulation grid; in_ct takes the CT's own voxel grid"));
         }
-        match self.sim().medium.ct.as_deref() {
+        match self.medium.ct.as_deref() {
             Some(ct) => Ok(ct),
             None => Err(invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into")),
         }
@@ -343,10 +345,10 @@ impl CoreField {
     #[pyo3(signature = (box_mm=None, in_ct=false))]
     fn pressure_volume<'py>(slf: &Bound<'py, Self>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
         let (py, this) = (slf.py(), slf.get());
-        let (magnitude, grid) = (this.magnitude()?, &this.sim().grid);
+        let (magnitude, grid) = (this.magnitude()?, &this.grid);
         let ((pressure, affine), frame) = if in_ct {
             let ct = this.ct_for(&box_mm)?;
-            check_ct_volume(ct, 0).map_err(to_py)?;
+            check_ct_volume(ct, "pressure", 0).map_err(to_py)?;
             (ct_arrays(py, py.detach(|| resample_into_ct(grid, magnitude, ct))), "ct")
         } else {
             match window_of_box_mm(grid, box_mm)? {
@@ -361,25 +363,25 @@ impl CoreField {
         py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
     }
 
-    /// I_SPPA = |p|² / (2·ρ·c) (W/cm²) of this beam in 3-D, ρ and c the medium's at each voxel
-    /// (the CT's conversion where it holds tissue), as an `arfi.IntensityVolume`: on the
-    /// simulation grid (transducer frame), cropped to `box_mm` (x0, x1, y0, y1, z0, z1 in mm) if
+    /// The pulse-average intensity I = |p|² / (2·ρ·c) (W/cm²; its largest value is I_SPPA) of
+    /// this beam in 3-D, ρ and c the medium's at each voxel (the CT's conversion where it holds
+    /// tissue), as an `arfi.IntensityVolume`: on the simulation grid (transducer frame), cropped to `box_mm` (x0, x1, y0, y1, z0, z1 in mm) if
     /// given; with `in_ct` (a `[ct]` scenario) on the CT's voxel grid with its own RAS affine, from
     /// |p| resampled there (as `pressure_volume(in_ct=True)`) and ρ, c at each CT voxel.
     #[pyo3(signature = (box_mm=None, in_ct=false))]
     fn intensity_volume<'py>(slf: &Bound<'py, Self>, box_mm: Option<Vec<f64>>, in_ct: bool) -> PyResult<Bound<'py, PyAny>> {
         let (py, this) = (slf.py(), slf.get());
-        let (magnitude, sim) = (this.magnitude()?, this.sim());
+        let (magnitude, grid, medium, f) = (this.magnitude()?, &this.grid, &this.medium, this.frequency);
         let ((intensity, affine), frame) = if in_ct {
             let ct = this.ct_for(&box_mm)?;
-            check_ct_volume(ct, 4 * ct.voxel_grid().0.iter().product::<usize>() as u64).map_err(to_py)?;
-            let mut v = py.detach(|| resample_into_ct(&sim.grid, magnitude, ct));
-            v.pressure = w_cm2(py.detach(|| sim.intensity_in_ct(&v)).map_err(to_py)?);
+            check_ct_volume(ct, "intensity", 4 * ct.voxel_grid().0.iter().product::<usize>() as u64).map_err(to_py)?;
+            let mut v = py.detach(|| resample_into_ct(grid, magnitude, ct));
+            v.pressure = w_cm2(py.detach(|| intensity_in_ct(medium, f, &v)).map_err(to_py)?);
             (ct_arrays(py, v), "ct")
         } else {
-            let window = window_of_box_mm(&sim.grid, box_mm)?.unwrap_or_else(|| Window::whole(&sim.grid));
-            let values = w_cm2(py.detach(|| sim.intensity_on_window(magnitude, &window)).map_err(to_py)?);
-            let affine = window_affine(&sim.grid, &window);
+            let window = window_of_box_mm(grid, box_mm)?.unwrap_or_else(|| Window::whole(grid));
+            let values = w_cm2(py.detach(|| intensity_on_window(medium, f, grid, magnitude, &window)).map_err(to_py)?);
+            let affine = window_affine(grid, &window);
             (grid_arrays(py, PressureVolume { window, pressure: values, affine }), "transducer")
         };
         py.import("arfi.volume")?.getattr("IntensityVolume")?.call1((intensity, affine, frame))

@@ -40,7 +40,7 @@ fn points_m(points_mm: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
 #[pyclass(module = "arfi._core", frozen)]
 pub(crate) struct CoreSimulation {
-    pub(crate) inner: Simulation,
+    inner: Simulation,
     /// The element basis of the last per-element estimate, reused by the next one on the same
     /// pixel box (the object is immutable, so the simulation cannot change under it).
     basis: BasisCache,
@@ -168,12 +168,12 @@ impl CoreSimulation {
     /// Pressure on the plane nearest `z_mm` (default: the focus) and along the axis; with
     /// `volume`, also `|p|` on the whole grid and the hottest place of each tissue.
     #[pyo3(signature = (phases=None, z_mm=None, volume=false))]
-    fn field(slf: &Bound<'_, Self>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>, volume: bool) -> PyResult<CoreField> {
-        let (py, sim) = (slf.py(), &slf.get().inner);
+    fn field(&self, py: Python<'_>, phases: Option<PyReadonlyArray1<'_, f64>>, z_mm: Option<f64>, volume: bool) -> PyResult<CoreField> {
         let phases = phases_vec(phases);
         let z = z_mm.map(|z| z * 1e-3);
-        let f = py.detach(|| if volume { sim.field_with_volume(&phases, z) } else { sim.field(&phases, z) }).map_err(to_py)?;
-        Ok(CoreField::new(py, f, slf.clone().unbind()))
+        let f =
+            py.detach(|| if volume { self.inner.field_with_volume(&phases, z) } else { self.inner.field(&phases, z) }).map_err(to_py)?;
+        Ok(CoreField::new(py, f, &self.inner))
     }
 
     /// The focal metrics in 3-D of the beam driven with `phases` around `target_mm` (mm, transducer

@@ -27,7 +27,7 @@ def register(sub: Any) -> None:
                        "Prints the focal peak near the target on the plane, along the axis and in 3-D (its -6 dB extents "
                        "and volume, I_SPPA and mechanical index there), the hottest place of each tissue (skull, scalp, "
                        "brain, water) over the whole grid, and names any place on the plane or axis hotter than the focus. --volume "
-                       "writes |p| in 3-D as NIfTI for overlay, --intensity-volume I_SPPA.",
+                       "writes |p| in 3-D as NIfTI for overlay, --intensity-volume the intensity.",
                        epilog="example: arfi field --z-mm 85 --out focus.npz")
     add_common(p)
     p.add_argument("--phases", metavar="P", help="phases (rad) added to the steering: .npy or text, one per element or group")
@@ -45,10 +45,12 @@ def register(sub: Any) -> None:
                    "simulation grid, its affine in the transducer frame (mm)")
     p.add_argument("--volume-ct", metavar="F.nii.gz", dest="volume_ct", help="also write |p| (Pa) resampled into the "
                    "voxel grid of the scenario's [ct], with the CT's own affine: it opens on top of the CT")
-    p.add_argument("--intensity-volume", metavar="F.nii.gz", dest="intensity_volume", help="also write I_SPPA = "
-                   "|p|²/(2ρc) (W/cm², ρ and c the medium's at each voxel) in 3-D as NIfTI on the simulation grid")
-    p.add_argument("--intensity-volume-ct", metavar="F.nii.gz", dest="intensity_volume_ct", help="also write I_SPPA "
-                   "(W/cm²) on the voxel grid of the scenario's [ct] (|p| resampled there, ρ and c of each CT voxel)")
+    p.add_argument("--intensity-volume", metavar="F.nii.gz", dest="intensity_volume", help="also write the intensity "
+                   "I = |p|²/(2ρc) (W/cm², pulse average; ρ and c the medium's at each voxel; its maximum is I_SPPA) in 3-D "
+                   "as NIfTI on the simulation grid")
+    p.add_argument("--intensity-volume-ct", metavar="F.nii.gz", dest="intensity_volume_ct", help="also write the "
+                   "intensity I = |p|²/(2ρc) (W/cm²) on the voxel grid of the scenario's [ct] (|p| resampled there, ρ and c of "
+                   "each CT voxel)")
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
                    dest="volume_box_mm", help="crop the --volume and --intensity-volume files to this box (mm, "
                    "transducer frame)")
@@ -60,21 +62,27 @@ def register(sub: Any) -> None:
 @dataclass(frozen=True)
 class VolumeOutput:
     """One volume file ``arfi field`` can write: its argument (``key``, ``flag``), what it holds
-    (``quantity`` as printed, ``max_key`` its maximum in the JSON) and where (``in_ct``: the CT's
-    voxels, else the simulation grid cropped to ``--volume-box-mm``)."""
+    (``intensity``: I = |p|²/(2ρc), else |p|; ``quantity`` as printed, ``max_key`` its maximum in
+    the JSON) and where (``in_ct``: the CT's voxels, else the simulation grid cropped to
+    ``--volume-box-mm``)."""
 
     key: str
     flag: str
-    quantity: str
-    max_key: str
+    intensity: bool
     in_ct: bool
+
+    @property
+    def quantity(self) -> str:
+        return "intensity in 3-D (W/cm²)" if self.intensity else "|p| in 3-D (Pa)"
+
+    @property
+    def max_key(self) -> str:
+        return "max_w_cm2" if self.intensity else "max_pa"
 
     def make(self, f: Field, box_mm: list[float] | None) -> PressureVolume | IntensityVolume:
         """The volume of the field ``f``."""
         box = None if self.in_ct else box_mm
-        if self.max_key == "max_pa":
-            return f.pressure_volume(box, in_ct=self.in_ct)
-        return f.intensity_volume(box, in_ct=self.in_ct)
+        return f.intensity_volume(box, in_ct=self.in_ct) if self.intensity else f.pressure_volume(box, in_ct=self.in_ct)
 
     @staticmethod
     def values(v: PressureVolume | IntensityVolume) -> NDArray[np.float32]:
@@ -83,10 +91,10 @@ class VolumeOutput:
 
 
 VOLUMES = (
-    VolumeOutput("volume", "--volume", "|p| in 3-D (Pa)", "max_pa", False),
-    VolumeOutput("volume_ct", "--volume-ct", "|p| in 3-D (Pa)", "max_pa", True),
-    VolumeOutput("intensity_volume", "--intensity-volume", "I_SPPA in 3-D (W/cm²)", "max_w_cm2", False),
-    VolumeOutput("intensity_volume_ct", "--intensity-volume-ct", "I_SPPA in 3-D (W/cm²)", "max_w_cm2", True),
+    VolumeOutput("volume", "--volume", intensity=False, in_ct=False),
+    VolumeOutput("volume_ct", "--volume-ct", intensity=False, in_ct=True),
+    VolumeOutput("intensity_volume", "--intensity-volume", intensity=True, in_ct=False),
+    VolumeOutput("intensity_volume_ct", "--intensity-volume-ct", intensity=True, in_ct=True),
 )
 
 

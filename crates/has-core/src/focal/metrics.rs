@@ -39,7 +39,8 @@ pub struct FocalMetrics {
     pub isppa: f64,
     /// Mechanical index at the peak, p/√f with p in MPa and f in MHz.
     pub mechanical_index: f64,
-    /// The tissue the peak lies in, by class: `skull` for bone, else the medium's name for it.
+    /// The tissue the peak lies in, by class as the hottest places name them: `skull` for bone,
+    /// `scalp` for the target's tissue beyond bone, else the medium's name for it.
     pub tissue: String,
 }
 

@@ -1,7 +1,6 @@
 //! What a field says at its target: the focal peaks on its plane and axis, and the focal metrics
 //! in 3-D from a box around the target recorded in the same march (see [`crate::focal`]).
 
-use super::hottest::class_name;
 use super::{Field, Simulation};
 use crate::error::{HasError, Result};
 use crate::focal::{focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
@@ -99,7 +98,7 @@ impl FocalSearch {
             let focal = FocalBox { grid: g, window: &window, magnitude };
             let tissue = |[x, y, z]: [f64; 3]| {
                 let p = sim.medium.properties_at(x, y, z, sim.frequency);
-                (p.density, p.sound_speed, class_name(sim.medium.tissue_name_at(x, y, z)).to_string())
+                (p.density, p.sound_speed, sim.class_at([x, y, z]))
             };
             match focal.metrics(self.target, self.along, sim.frequency, tissue) {
                 Ok(m) => return Ok(Some(m)),

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 const BONE: &str = "bone";
 
 /// The class of the medium's tissue named `name` as a user names it: bone is the `skull`.
-pub(crate) fn class_name(name: &str) -> &str {
+fn class_name(name: &str) -> &str {
     if name == BONE {
         "skull"
     } else {
@@ -94,6 +94,16 @@ impl Simulation {
             Ok(own.to_string())
         };
         points.iter().map(|&p| class(p)).collect()
+    }
+
+    /// The tissue class at the point `p` (m): the medium's tissue there by class (bone the
+    /// `skull`), or `scalp` where [`Simulation::tissue_classes`] names the grid sample nearest it so.
+    pub(crate) fn class_at(&self, p: [f64; 3]) -> String {
+        let own = class_name(self.medium.tissue_name_at(p[0], p[1], p[2]));
+        match self.tissue_classes(&[p]) {
+            Ok(c) if c[0] == "scalp" => c[0].clone(),
+            _ => own.to_string(),
+        }
     }
 
     /// The tissue of every grid sample (its centre), by name.

@@ -29,7 +29,10 @@ mod volume;
 pub(crate) use build::Unbuilt;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
 pub use hottest::TissueHottest;
-pub use volume::{check_ct_volume, crop_volume, resample_into_ct, window_affine, window_of_box, CtPressureVolume, PressureVolume};
+pub use volume::{
+    check_ct_volume, crop_volume, intensity_in_ct, intensity_on_window, resample_into_ct, window_affine, window_of_box, CtPressureVolume,
+    PressureVolume,
+};
 
 /// Everything needed to simulate fields and MR-ARFI images of one scenario (cloning shares the
 /// HAS operators).

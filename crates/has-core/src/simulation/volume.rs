@@ -8,6 +8,7 @@ use crate::memory;
 use crate::numeric::affine_apply;
 use crate::physics::ct::CtMedium;
 use crate::physics::grid::Grid;
+use crate::physics::medium::Medium;
 use crate::physics::propagation::{RecordSpec, Window};
 use rayon::prelude::*;
 
@@ -88,17 +89,18 @@ impl Simulation {
             return Err(HasError::invalid("volume_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
         };
         let g = &self.grid;
-        check_ct_volume(ct, (g.nx * g.ny * g.nz) as u64 * BYTES_PER_VOXEL)?;
+        check_ct_volume(ct, "pressure", (g.nx * g.ny * g.nz) as u64 * BYTES_PER_VOXEL)?;
         Ok(resample_into_ct(g, &self.pressure_volume(added, None)?.pressure, ct))
     }
 }
 
-/// Refuses a volume on the CT's voxels when it and `grid_bytes` would not fit in memory.
-pub fn check_ct_volume(ct: &CtMedium, grid_bytes: u64) -> Result<()> {
+/// Refuses a volume of `quantity` (e.g. "pressure") on the CT's voxels when it and `other_bytes`
+/// (what its making holds beside it) would not fit in memory.
+pub fn check_ct_volume(ct: &CtMedium, quantity: &str, other_bytes: u64) -> Result<()> {
     let (shape, _, _) = ct.voxel_grid();
     memory::check(
-        || format!("a pressure volume on the CT's {} x {} x {} voxels", shape[2], shape[1], shape[0]),
-        shape.iter().product::<usize>() as u64 * 4 + grid_bytes,
+        || format!("a {quantity} volume on the CT's {} x {} x {} voxels", shape[2], shape[1], shape[0]),
+        shape.iter().product::<usize>() as u64 * 4 + other_bytes,
         "crop the CT, or use a coarser grid",
     )
 }
@@ -139,65 +141,73 @@ fn trilinear(g: &Grid, values: &[f32], p: [f64; 3]) -> f32 {
     sum as f32
 }
 
-impl Simulation {
-    /// Spatial-peak pulse-average intensity `I = |p|² / (2·ρ·c)` (W/m², single precision) on
-    /// `window` of `magnitude` (`|p|` in Pa on every grid sample, row-major plane, row, column, as
-    /// [`crate::simulation::FieldVolume`] keeps it), ρ and c the medium's at each sample (the CT's
-    /// conversion where it holds tissue), as the focal metrics and the hottest places take them.
-    /// Refused when the new volume would not fit in memory.
-    pub fn intensity_on_window(&self, magnitude: &[f32], window: &Window) -> Result<Vec<f32>> {
-        let g = &self.grid;
-        assert_eq!(magnitude.len(), g.lateral_len() * g.nz, "one |p| per grid sample");
-        let (ni, nj) = (window.cols.len(), window.rows.len());
-        memory::check(
-            || format!("an intensity volume of {} x {} x {} voxels", ni, nj, window.planes.len()),
-            window.len() as u64 * 4,
-            "crop it to a box around the focus (--volume-box-mm, or box_mm in Python)",
-        )?;
-        let mut out = vec![0.0f32; window.len()];
-        out.par_chunks_mut(ni * nj).zip(window.planes.clone()).for_each(|(plane, k)| {
-            for (f, value) in plane.iter_mut().enumerate() {
-                let (i, j) = (window.cols.start + f % ni, window.rows.start + f / ni);
-                *value = self.intensity_at(magnitude[(k * g.ny + j) * g.nx + i], [g.x(i), g.y(j), g.z(k)]);
-            }
-        });
-        Ok(out)
+/// The pulse-average intensity `I = |p|² / (2·ρ·c)` (W/m², single precision; its largest value is
+/// I_SPPA) of the continuous wave at `frequency` (Hz) in `medium` on `window` of `magnitude` (`|p|`
+/// in Pa on every sample of `grid`, row-major plane, row, column, as
+/// [`crate::simulation::FieldVolume`] keeps it), ρ and c the medium's at each sample (the CT's
+/// conversion where it holds tissue), as the focal metrics and the hottest places take them.
+/// Refused when the window is not a box of the grid or the new volume would not fit in memory.
+pub fn intensity_on_window(medium: &Medium, frequency: f64, grid: &Grid, magnitude: &[f32], window: &Window) -> Result<Vec<f32>> {
+    let g = grid;
+    if magnitude.len() != g.lateral_len() * g.nz {
+        return Err(HasError::invalid(
+            "magnitude",
+            format!("needs one |p| per grid sample ({}), got {}", g.lateral_len() * g.nz, magnitude.len()),
+        ));
     }
-
-    /// `I = |p|² / (2·ρ·c)` (W/m²) of a volume on the CT's voxels ([`resample_into_ct`]), ρ and c
-    /// the medium's at each voxel's centre (the CT's conversion of that voxel where it holds
-    /// tissue); zero where `|p|` is. Refused when the new volume would not fit in memory.
-    pub fn intensity_in_ct(&self, v: &CtPressureVolume) -> Result<Vec<f32>> {
-        let Some(ct) = self.medium.ct.as_ref() else {
-            return Err(HasError::invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
-        };
-        let (shape, _, to_frame) = ct.voxel_grid();
-        if shape != v.shape {
-            return Err(HasError::invalid("volume", "is not on this scenario's CT voxels"));
+    if window.is_empty() || window.planes.end > g.nz || window.rows.end > g.ny || window.cols.end > g.nx {
+        return Err(HasError::invalid("window", "must be a box of the grid holding at least one sample"));
+    }
+    let (ni, nj) = (window.cols.len(), window.rows.len());
+    memory::check(
+        || format!("an intensity volume of {} x {} x {} voxels", ni, nj, window.planes.len()),
+        window.len() as u64 * 4,
+        "crop it to a box around the focus (--volume-box-mm, or box_mm in Python)",
+    )?;
+    let mut out = vec![0.0f32; window.len()];
+    out.par_chunks_mut(ni * nj).zip(window.planes.clone()).for_each(|(plane, k)| {
+        for (f, value) in plane.iter_mut().enumerate() {
+            let (i, j) = (window.cols.start + f % ni, window.rows.start + f / ni);
+            *value = intensity_at(medium, frequency, magnitude[(k * g.ny + j) * g.nx + i], [g.x(i), g.y(j), g.z(k)]);
         }
-        let [_, nj, ni] = shape;
-        memory::check(
-            || format!("an intensity volume on the CT's {} x {} x {} voxels", ni, nj, shape[0]),
-            v.pressure.len() as u64 * 4,
-            "crop the CT, or use a coarser grid",
-        )?;
-        let mut out = vec![0.0f32; v.pressure.len()];
-        out.par_chunks_mut(ni * nj).zip(v.pressure.par_chunks(ni * nj)).enumerate().for_each(|(k, (plane, pressure))| {
-            for (f, (value, &p)) in plane.iter_mut().zip(pressure).enumerate() {
-                if p > 0.0 {
-                    *value = self.intensity_at(p, affine_apply(&to_frame, [(f % ni) as f64, (f / ni) as f64, k as f64]));
-                }
-            }
-        });
-        Ok(out)
-    }
+    });
+    Ok(out)
+}
 
-    /// `I = p² / (2·ρ·c)` (W/m²) of `|p|` = `pressure` (Pa) at `position` (m, transducer frame).
-    fn intensity_at(&self, pressure: f32, position: [f64; 3]) -> f32 {
-        let [x, y, z] = position;
-        let m = self.medium.properties_at(x, y, z, self.frequency);
-        exposure(pressure as f64, m.density, m.sound_speed, self.frequency).0 as f32
+/// [`intensity_on_window`] of a volume on the CT's voxels ([`resample_into_ct`]): ρ and c the
+/// medium's at each voxel's centre (the CT's conversion of that voxel where it holds tissue); zero
+/// where `|p|` is. Refused without a CT of that shape, or when the new volume would not fit in
+/// memory.
+pub fn intensity_in_ct(medium: &Medium, frequency: f64, v: &CtPressureVolume) -> Result<Vec<f32>> {
+    let Some(ct) = medium.ct.as_ref() else {
+        return Err(HasError::invalid("in_ct", "needs a scenario with a [ct] section: the CT is the grid it is resampled into"));
+    };
+    let (shape, _, to_frame) = ct.voxel_grid();
+    if shape != v.shape || v.pressure.len() != shape.iter().product::<usize>() {
+        return Err(HasError::invalid("volume", "is not on this scenario's CT voxels"));
     }
+    let [_, nj, ni] = shape;
+    memory::check(
+        || format!("an intensity volume on the CT's {} x {} x {} voxels", ni, nj, shape[0]),
+        v.pressure.len() as u64 * 4,
+        "crop the CT, or use a coarser grid",
+    )?;
+    let mut out = vec![0.0f32; v.pressure.len()];
+    out.par_chunks_mut(ni * nj).zip(v.pressure.par_chunks(ni * nj)).enumerate().for_each(|(k, (plane, pressure))| {
+        for (f, (value, &p)) in plane.iter_mut().zip(pressure).enumerate() {
+            if p > 0.0 {
+                *value = intensity_at(medium, frequency, p, affine_apply(&to_frame, [(f % ni) as f64, (f / ni) as f64, k as f64]));
+            }
+        }
+    });
+    Ok(out)
+}
+
+/// `I = p² / (2·ρ·c)` (W/m²) of `|p|` = `pressure` (Pa) at `position` (m, transducer frame).
+fn intensity_at(medium: &Medium, frequency: f64, pressure: f32, position: [f64; 3]) -> f32 {
+    let [x, y, z] = position;
+    let m = medium.properties_at(x, y, z, frequency);
+    exposure(pressure as f64, m.density, m.sound_speed, frequency).0 as f32
 }
 
 /// The box of `grid` holding the samples within `[lo, hi]` (m, per axis x, y, z), or why there
@@ -321,7 +331,7 @@ mod tests {
         let g = &sim.grid;
         let whole = Window::whole(g);
         let magnitude = sim.pressure_volume(&[], None).unwrap().pressure;
-        let intensity = sim.intensity_on_window(&magnitude, &whole).unwrap();
+        let intensity = intensity_on_window(&sim.medium, sim.frequency, g, &magnitude, &whole).unwrap();
         let (mut in_bone, mut in_water) = (0, 0);
         for (s, (&p, &i)) in magnitude.iter().zip(&intensity).enumerate() {
             let z = g.z(s / g.lateral_len());
@@ -339,7 +349,13 @@ mod tests {
         }
         assert!(in_bone > 0 && in_water > 0);
         let window = window_of_box(g, [-5e-3, -5e-3, 28e-3], [5e-3, 5e-3, 37e-3]).unwrap();
-        assert_eq!(sim.intensity_on_window(&magnitude, &window).unwrap(), whole.extract(&intensity, &window));
+        assert_eq!(intensity_on_window(&sim.medium, sim.frequency, g, &magnitude, &window).unwrap(), whole.extract(&intensity, &window));
+        let beyond = Window { planes: g.nz - 1..g.nz + 1, ..window };
+        assert!(intensity_on_window(&sim.medium, sim.frequency, g, &magnitude, &beyond).unwrap_err().to_string().starts_with("window"));
+        assert!(intensity_on_window(&sim.medium, sim.frequency, g, &magnitude[1..], &whole)
+            .unwrap_err()
+            .to_string()
+            .starts_with("magnitude"));
     }
 
     /// Trilinear interpolation gives a field linear in x, y and z exactly (to float32) at the
