@@ -77,6 +77,29 @@ impl Surface {
         }
     }
 
+    /// The element moved rigidly, `x -> R·(x - about) + about + shift` (`rotation` R a proper
+    /// rotation matrix, row-major; m): a flat element's centre and normal move with it. A whole
+    /// cap is defined about the z axis and cannot turn: refused unless `R` is the identity and
+    /// `shift` zero.
+    pub fn moved(&self, rotation: &[[f64; 3]; 3], about: [f64; 3], shift: [f64; 3]) -> Result<Surface> {
+        let turn = |v: [f64; 3]| std::array::from_fn(|i| (0..3).map(|j| rotation[i][j] * v[j]).sum::<f64>());
+        match *self {
+            Surface::Flat { center, normal, size, shape } => {
+                let arm = turn(std::array::from_fn(|k| center[k] - about[k]));
+                let center = std::array::from_fn(|k| arm[k] + about[k] + shift[k]);
+                Ok(Surface::Flat { center, normal: crate::numeric::unit(turn(normal)), size, shape })
+            }
+            Surface::Cap { .. } => {
+                let identity = (0..3).all(|i| (0..3).all(|j| rotation[i][j] == if i == j { 1.0 } else { 0.0 }));
+                if identity && shift == [0.0; 3] {
+                    Ok(self.clone())
+                } else {
+                    Err(HasError::invalid("transducer", "a single-element bowl cannot be moved: its cap is defined about the z axis"))
+                }
+            }
+        }
+    }
+
     /// Whether the element lies flat in the plane `z = z_plane` facing +z.
     pub fn is_in_plane(&self, z_plane: f64) -> bool {
         matches!(*self, Surface::Flat { center, normal, .. }
@@ -309,6 +332,11 @@ impl Transducer {
     /// Every element's reference point (m; [`Surface::reference_point`]), in element order.
     pub fn reference_points(&self) -> Vec<[f64; 3]> {
         self.elements.iter().map(Surface::reference_point).collect()
+    }
+
+    /// The array moved rigidly ([`Surface::moved`]).
+    pub fn moved(&self, rotation: &[[f64; 3]; 3], about: [f64; 3], shift: [f64; 3]) -> Result<Transducer> {
+        Ok(Transducer { elements: self.elements.iter().map(|e| e.moved(rotation, about, shift)).collect::<Result<_>>()? })
     }
 
     /// Whether every element lies flat in z = 0 facing +z (no Rayleigh projection needed).

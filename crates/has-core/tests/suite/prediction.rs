@@ -423,7 +423,7 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     // reference head's, the faster bone's, then the skull's, which it keeps): the same values to
     // the last bit, and the kept simulation is the skull's (its own march of a drive equals a
     // fresh simulation's).
-    let options = PredictionOptions { bone_speed_sensitivity: true, keep_simulation: true };
+    let options = PredictionOptions { bone_speed_sensitivity: true, keep_simulation: true, ..PredictionOptions::default() };
     let run = predict_scenario_with(&scenario, None, options).unwrap();
     assert_eq!(run.prediction, p);
     assert_eq!(predict(sim.clone(), None).unwrap(), p);
@@ -443,5 +443,93 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     let keep = PredictionOptions { keep_simulation: true, ..PredictionOptions::default() };
     let outside = predict_scenario_with(&scenario, Some([0.0, 0.0, 1.0]), keep).err().map(|e| e.to_string());
     assert!(outside.as_deref().is_some_and(|e| e.starts_with("target") && e.contains("outside the grid")), "{outside:?}");
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn a_moved_head_is_the_array_moved_the_other_way() {
+    // The uneven shell again, the head moved rigidly off its registration. Reference, not the
+    // code's shortcut (the array and target moved the other way through the registered head's
+    // own plan): each element's response through a new simulation whose CT is registered moved
+    // (its own plan, the CT resampled onto the grid anew). Moves by whole cells (0.75 mm), alone
+    // or with a turn, so that the CT's resampling onto the moved grid is the same staircase
+    // shifted (a sub-cell move of the CT resamples to another staircase; measured: a 0.05 mm
+    // move changes the phases by 0.005 rad RMS where the shortcut gives 0.04). Measured: the
+    // phase changes agree to a correlation of 0.975-0.9997 and RMS within 2 %. Tolerance:
+    // correlation at least 0.97, RMS ratio 0.9–1.1. The translation modes are these changes per
+    // cell: the same tolerance against the moved CT's.
+    use has_core::prediction::pose::{moved_head_responses, Pose};
+    use has_core::prediction::pose_sensitivity;
+    let dir = scratch("pose");
+    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
+        .unwrap();
+    let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
+    let target = [2e-3, -1e-3, 48e-3];
+    let h = sim.element_responses(target).unwrap();
+    let modes = pose_sensitivity(&sim, target, None).unwrap();
+    let t_mm = target.map(|v| v * 1e3);
+    // The CT's registration moved rigidly: x -> R·(x - target) + target + shift (mm).
+    let through_moved_ct = |pose: &Pose| {
+        let r = pose.rotation;
+        let row = |i: usize| {
+            let offset = t_mm[i] - (0..3).map(|j| r[i][j] * t_mm[j]).sum::<f64>() + pose.translation[i] * 1e3;
+            format!("[{}, {}, {}, {}]", r[i][0], r[i][1], r[i][2], offset)
+        };
+        let tail = format!("patient_to_transducer_mm = [{}, {}, {}, [0, 0, 0, 1]]\n", row(0), row(1), row(2));
+        Simulation::new(&bowl_scenario(&dir, &tail)).unwrap().element_responses(target).unwrap()
+    };
+    let change = |moved: &[has_core::Complex64]| -> Vec<f64> {
+        let c: Vec<has_core::Complex64> = moved.iter().zip(&h).map(|(m, h)| m * h.conj()).collect();
+        let common = c.iter().sum::<has_core::Complex64>().arg();
+        c.iter().map(|c| has_core::phase::wrap(c.arg() - common)).collect()
+    };
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let corr = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (rms(a) * rms(b) * a.len() as f64);
+    let g = &sim.grid;
+    let per_cell = |axis: usize, d: f64| Some(modes.translation[axis].iter().map(|v| v * d).collect::<Vec<_>>());
+    let turned = Pose { translation: [g.dx, -g.dy, 0.0], rotation: Pose::turn(0, 0.9_f64.to_radians()).rotation };
+    for (name, pose, mode) in [
+        ("a cell along x", Pose::shift(0, g.dx), per_cell(0, g.dx)),
+        ("a cell along y", Pose::shift(1, g.dy), per_cell(1, g.dy)),
+        ("a cell along z", Pose::shift(2, g.dz), per_cell(2, g.dz)),
+        ("two cells along x", Pose::shift(0, 2.0 * g.dx), None),
+        ("a cell along x and -y, turned 0.9 deg about x", turned, None),
+    ] {
+        let reference = change(&through_moved_ct(&pose));
+        let shortcut = change(&moved_head_responses(&sim, target, &pose, None).unwrap());
+        for (what, v) in [("moved array", Some(shortcut)), ("mode", mode)] {
+            let Some(v) = v else { continue };
+            let (c, ratio) = (corr(&v, &reference), rms(&v) / rms(&reference));
+            println!(
+                "{name}, {what}: phase change RMS {:.3} rad (moved CT {:.3}), ratio {ratio:.3}, correlation {c:.4}",
+                rms(&v),
+                rms(&reference)
+            );
+            assert!(c > 0.97 && (0.9..1.1).contains(&ratio), "{name}, {what}: ratio {ratio}, correlation {c}");
+        }
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn turning_a_head_about_the_centre_of_its_spherical_shell_changes_no_phase() {
+    // A shell concentric with the target (outer radius 20 mm, 4 mm thick): a turn about the
+    // target leaves every path through it as it was, so the rotation modes vanish but for the
+    // staircase of the sphere's cells along the turned paths, while a shift moves each path's
+    // crossing. Reference: symmetry. Measured: 1° (0.35 mm at the shell) changes the phases by
+    // 0.024 rad RMS, 1 mm by at least 0.128 (a turn moves each path across the staircase of
+    // 0.75 mm cells, not across the bone). Tolerance: each rotation mode's phase change for 1°
+    // at most a quarter of the smallest translation mode's for 1 mm (RMS).
+    use has_core::prediction::pose_sensitivity;
+    let dir = scratch("pose-concentric");
+    let c = [0.0, 0.0, 48e-3];
+    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, c, 20e-3, c, 16e-3, f64::INFINITY, 0.5e-3)).unwrap();
+    let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
+    let modes = pose_sensitivity(&sim, c, None).unwrap();
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let shift = modes.translation.iter().map(|m| rms(m) * 1e-3).fold(f64::INFINITY, f64::min);
+    let turn = modes.rotation.iter().map(|m| rms(m) * 1f64.to_radians()).fold(0.0, f64::max);
+    println!("concentric shell: RMS phase change for 1 mm at least {shift:.4} rad, for 1 degree at most {turn:.4} rad");
+    assert!(turn < 0.25 * shift, "turn {turn}, shift {shift}");
     std::fs::remove_dir_all(dir).ok();
 }

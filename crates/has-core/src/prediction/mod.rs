@@ -28,6 +28,9 @@ use crate::scenario::Scenario;
 use crate::simulation::{reciprocal_field, Simulation, Unbuilt};
 use num_complex::Complex64 as C64;
 
+pub mod pose;
+pub use pose::{pose_sensitivity, PoseSensitivity};
+
 /// The prediction for one target, with the focal pressures it implies (Pa, for the
 /// scenario's drive amplitude).
 #[derive(Debug, Clone, PartialEq)]
@@ -96,6 +99,9 @@ pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result
 pub struct PredictionOptions {
     /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
     pub bone_speed_sensitivity: bool,
+    /// Also the [`pose_sensitivity`]: three more transposed marches through the skull and six
+    /// transposed projections, no plan.
+    pub pose_sensitivity: bool,
     /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
     /// one), e.g. to march the predicted correction without building its plan again. Without
     /// reflections, its build records the steered beam's x–z section through the target: through
@@ -110,11 +116,14 @@ pub struct PredictionRun {
     pub prediction: Prediction,
     /// Per element, rad per percent of bone sound speed (see [`bone_speed_sensitivity`]).
     pub bone_speed_sensitivity: Option<Vec<f64>>,
+    /// The modes of the CT's registration (see [`pose_sensitivity`]).
+    pub pose_sensitivity: Option<PoseSensitivity>,
     /// The skull's simulation.
     pub simulation: Option<Simulation>,
 }
 
-/// [`predict_scenario`] with the bone speed sensitivity and the skull's simulation on request.
+/// [`predict_scenario`] with the bone speed and pose sensitivities and the skull's simulation on
+/// request.
 /// The plans are built one after another, each dropped (and its memory handed back,
 /// [`crate::memory::release_freed`]) before the next unless kept: the faster bone's, the
 /// reference head's, then the skull's; never two at once. The same values as [`predict`] and
@@ -145,6 +154,7 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     drop(steered_source);
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
     let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
+    let pose_sensitivity = options.pose_sensitivity.then(|| pose_sensitivity(&sim, target, Some(&through_skull))).transpose()?;
     let fields = [through_skull, through_reference];
     let prediction =
         from_fields(&sim.source, &sim.transducer, &reference_medium, sim.frequency, target, fields, sim.steering_toward(target)?)?;
@@ -156,7 +166,7 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         crate::memory::release_freed();
         None
     };
-    Ok(PredictionRun { prediction, bone_speed_sensitivity, simulation })
+    Ok(PredictionRun { prediction, bone_speed_sensitivity, pose_sensitivity, simulation })
 }
 
 /// `scenario` with the ARFI amplitude given (1 unless it sets one), so that its simulation is
@@ -278,12 +288,19 @@ fn faster_bone(scenario: &Scenario) -> Result<Scenario> {
 
 /// The sensitivity from the responses `moved` through the faster bone and `h` through the skull.
 fn sensitivity(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
+    Ok(phase_change(moved, h)?.into_iter().map(|d| d / (100.0 * BONE_SPEED_STEP)).collect())
+}
+
+/// Each element's phase change (rad) from responses `h` to `moved`, `wrap(arg(moved_e · conj(h_e))
+/// - c)`, with the common phase `c = arg Σ_e moved_e · conj(h_e)` removed (weighted by the
+/// responses: the images see phase differences only).
+fn phase_change(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
     if moved.len() != h.len() {
         return Err(HasError::invalid("prediction", format!("has {} elements; the scenario has {}", h.len(), moved.len())));
     }
     let change: Vec<C64> = moved.iter().zip(h).map(|(m, h)| m * h.conj()).collect();
     let common = change.iter().sum::<C64>().arg();
-    Ok(change.iter().map(|c| wrap(c.arg() - common) / (100.0 * BONE_SPEED_STEP)).collect())
+    Ok(change.iter().map(|c| wrap(c.arg() - common)).collect())
 }
 
 /// The CT conversion's bone sound speed (m/s) in `scenario`, or why it has none for

@@ -1,0 +1,173 @@
+//! How a CT prediction moves when the CT's registration is off: the pose modes.
+//!
+//! A head that lies rigidly moved from where the CT's registration puts it (translated by `t`,
+//! rotated by `R` about the target) sends each element the wave that the head as registered
+//! sends to the array moved the other way: translated by `-t` together with the target, or
+//! turned by `R⁻¹` about the target. In the water around the head both are exact statements of
+//! rigid motion, and both are cheap in the reciprocal form of [`super`]: the transposed march
+//! from the moved target through the registered head's plan (one per translation axis) and the
+//! transposed projection of the source-plane field onto the moved elements (one per axis and
+//! kind). No plan is built again, unlike a finite difference through a moved CT (a plan per
+//! coordinate).
+//!
+//! The mode of pose coordinate `q` is, per element,
+//!
+//! `g_e = wrap(arg(h'_e · conj(h_e)) - c) / δ`,
+//!
+//! `h'` the responses at the step `δ` and `c` their weighted common phase: a secant over one
+//! grid cell for the translations (the head's staircase of cells shifts by one cell, as a CT
+//! registered one cell off resamples to; finer steps would measure how the target's
+//! interpolation between planes varies rather than the head) and over half a cell at the
+//! elements' mean distance for the rotations (the array stays behind its source plane, at least
+//! half a wavelength and a step before it). The reference (the head without bone, the
+//! estimation's model) stays where the CT is registered: the images' model does not move with
+//! the patient, so only the skull's responses change, as for the bone speed mode
+//! ([`super::bone_speed_sensitivity`]). The transmissions' change is left out: a mode is a
+//! phase pattern.
+
+use super::phase_change;
+use crate::error::{HasError, Result};
+use crate::simulation::{reciprocal_field, Simulation};
+use num_complex::Complex64 as C64;
+
+/// The prediction's pose modes: per transducer-frame axis x, y, z, each element's change of
+/// predicted phase (rad) per unit of the head's translation (m) and of its rotation about the
+/// target (rad, right-handed about the axis).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseSensitivity {
+    /// Rad per metre of translation along x, y, z.
+    pub translation: [Vec<f64>; 3],
+    /// Rad per radian of rotation about the axes x, y, z through the target.
+    pub rotation: [Vec<f64>; 3],
+}
+
+impl PoseSensitivity {
+    /// The six modes in the order translation x, y, z, rotation x, y, z.
+    pub fn modes(&self) -> impl Iterator<Item = &Vec<f64>> {
+        self.translation.iter().chain(&self.rotation)
+    }
+}
+
+/// A rigid move of the head from where the CT's registration puts it: `x -> R·(x - target) +
+/// target + translation` in the transducer frame (m), `R` a rotation matrix (row-major).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// The shift (m).
+    pub translation: [f64; 3],
+    /// The rotation about the target, row-major.
+    pub rotation: [[f64; 3]; 3],
+}
+
+impl Pose {
+    /// No move.
+    pub const IDENTITY: Pose = Pose { translation: [0.0; 3], rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] };
+
+    /// A turn by `angle` (rad, right-handed) about coordinate axis `axis` (0, 1, 2: x, y, z)
+    /// through the target.
+    pub fn turn(axis: usize, angle: f64) -> Pose {
+        Pose { rotation: axis_rotation(axis, angle), ..Pose::IDENTITY }
+    }
+
+    /// A shift by `distance` (m) along coordinate axis `axis`.
+    pub fn shift(axis: usize, distance: f64) -> Pose {
+        Pose { translation: std::array::from_fn(|k| if k == axis { distance } else { 0.0 }), ..Pose::IDENTITY }
+    }
+}
+
+/// Each element's complex pressure at `target` (m, for unit drive) through `sim`'s head moved
+/// by `pose`, as the array moved the other way sees the head as registered (see the module
+/// docs): the array turned by `Rᵀ` about the target and shifted by `-Rᵀ·t`, with the target, in
+/// one transposed march from the moved target (none when `pose` only turns and `through_skull`,
+/// the transposed march from `target`, is given) and one transposed projection. Exact for the
+/// wave model wherever the head stays clear of the grid's edges and the moved array behind its
+/// source plane (refused otherwise).
+pub fn moved_head_responses(sim: &Simulation, target: [f64; 3], pose: &Pose, through_skull: Option<&[C64]>) -> Result<Vec<C64>> {
+    let r = &pose.rotation;
+    let inverse: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| r[j][i]));
+    let back: [f64; 3] = std::array::from_fn(|i| -(0..3).map(|j| inverse[i][j] * pose.translation[j]).sum::<f64>());
+    let moved = sim.transducer.moved(&inverse, target, back)?;
+    if moved.elements.iter().any(|e| e.z_max() >= sim.grid.z0) || sim.transducer.is_planar() {
+        return Err(HasError::invalid(
+            "pose",
+            "moves an element onto the source plane: moved heads need an array before its plane (a curved array), moved less than the half wavelength between them",
+        ));
+    }
+    let source = sim.source.on_grid(&moved, &sim.grid)?;
+    match through_skull {
+        Some(field) if back == [0.0; 3] => source.transposed(field),
+        _ => {
+            let moved_target = std::array::from_fn(|k| target[k] + back[k]);
+            source.transposed(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?)
+        }
+    }
+}
+
+/// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
+/// [`moved_head_responses`] for a step along each pose coordinate, three transposed marches from
+/// the moved targets and six transposed projections. `through_skull`: the transposed march from
+/// `target` itself when already made (the prediction's), else it is made here. Refused for an
+/// array in its source plane (a planar array: a turned element would leave the half-space behind
+/// the plane) and a single bowl.
+pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3], through_skull: Option<&[C64]>) -> Result<PoseSensitivity> {
+    let own;
+    let field = match through_skull {
+        Some(f) => f,
+        None => {
+            own = reciprocal_field(&sim.plan, target, sim.reflections)?;
+            &own
+        }
+    };
+    let h = sim.source.transposed(field)?;
+    if h.iter().all(|v| v.norm() == 0.0) {
+        return Err(HasError::invalid("target", "no element's wave reaches it"));
+    }
+    let g = &sim.grid;
+    let cells = [g.dx, g.dy, g.dz];
+    let points = sim.transducer.reference_points();
+    let reach = points.iter().map(|p| (0..3).map(|k| (p[k] - target[k]).powi(2)).sum::<f64>().sqrt()).sum::<f64>() / points.len() as f64;
+    let turn = 0.5 * g.dx.min(g.dy).min(g.dz) / reach;
+    let mut translation: [Vec<f64>; 3] = Default::default();
+    let mut rotation: [Vec<f64>; 3] = Default::default();
+    for axis in 0..3 {
+        let shifted = moved_head_responses(sim, target, &Pose::shift(axis, cells[axis]), Some(field))?;
+        translation[axis] = per_step(&shifted, &h, cells[axis])?;
+        let turned = moved_head_responses(sim, target, &Pose::turn(axis, turn), Some(field))?;
+        rotation[axis] = per_step(&turned, &h, turn)?;
+    }
+    Ok(PoseSensitivity { translation, rotation })
+}
+
+/// The phase change from `h` to `moved` per unit of the step `step`.
+fn per_step(moved: &[C64], h: &[C64], step: f64) -> Result<Vec<f64>> {
+    Ok(phase_change(moved, h)?.into_iter().map(|d| d / step).collect())
+}
+
+/// The right-handed rotation by `angle` (rad) about coordinate axis `axis` (0, 1, 2: x, y, z),
+/// row-major.
+pub fn axis_rotation(axis: usize, angle: f64) -> [[f64; 3]; 3] {
+    let (s, c) = angle.sin_cos();
+    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut r = [[0.0; 3]; 3];
+    r[axis][axis] = 1.0;
+    r[a][a] = c;
+    r[b][b] = c;
+    r[a][b] = -s;
+    r[b][a] = s;
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_rotations_are_right_handed() {
+        // About z, x turns into y; about x, y into z; about y, z into x.
+        let apply = |r: [[f64; 3]; 3], v: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).map(|j| r[i][j] * v[j]).sum()) };
+        let q = std::f64::consts::FRAC_PI_2;
+        let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(&b).all(|(a, b)| (a - b).abs() < 1e-12);
+        assert!(close(apply(axis_rotation(2, q), [1.0, 0.0, 0.0]), [0.0, 1.0, 0.0]));
+        assert!(close(apply(axis_rotation(0, q), [0.0, 1.0, 0.0]), [0.0, 0.0, 1.0]));
+        assert!(close(apply(axis_rotation(1, q), [0.0, 0.0, 1.0]), [1.0, 0.0, 0.0]));
+    }
+}
