@@ -20,7 +20,7 @@ Prediction = _core.Prediction
 
 
 def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_sensitivity: bool = False,
-            keep_simulation: bool = False) -> Prediction:
+            keep_simulation: bool = False, pose_sensitivity: bool = False) -> Prediction:
     """Simulates ``scenario`` (which needs a ``[ct]``) and predicts each element's aberration at
     ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs two
     plans (the head without bone, then the skull's), two transposed marches and one transposed
@@ -29,11 +29,14 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_s
     no image), which spares a march through a reverberating head. ``bone_speed_sensitivity`` also
     gives :attr:`Prediction.bone_speed_sensitivity_rad_per_percent` (needs the porosity
     conversion, ``aubry2003``), at the cost of one more simulation of the skull (built and dropped
-    before the skull's own). ``keep_simulation`` keeps the skull's simulation as
+    before the skull's own). ``pose_sensitivity`` also gives the pose modes,
+    :attr:`Prediction.pose_sensitivity_rad_per_mm` and ``_per_deg`` (how the predicted phases move
+    when the head lies shifted or turned off the CT's registration: three more transposed marches
+    through the skull, no plan; needs a curved array). ``keep_simulation`` keeps the skull's simulation as
     :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
     prediction, core = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target,
-                                     bool(bone_speed_sensitivity), bool(keep_simulation))
+                                     bool(bone_speed_sensitivity), bool(keep_simulation), bool(pose_sensitivity))
     if core is None:
         return prediction
     fields_only = scenario.to_dict()

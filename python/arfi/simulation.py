@@ -482,6 +482,23 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
 
+    def fit_modes(self, images: Images, known: Known, modes: ArrayLike) -> "_core.ModesFit":
+        """The coefficients ``c`` of several prior ``modes`` (rows: rad per element for c_m = 1;
+        each standard normal a priori) that best explain the images jointly, each taken with its
+        ``known`` phases: image ``k`` is this model's with ``sum_m c_m * modes[m] + known_k``
+        added, one image scale fitted, by Gauss-Newton with the images' exact derivatives along
+        each mode (one batch march of every image and its derivatives per iteration, a few
+        iterations). Meant for a CT prediction's pose and bone-speed modes on the head with the
+        CT's bone (:mod:`arfi.prior_modes`). Returns ``coefficients``, ``std`` and
+        ``covariance`` (posterior), ``scale``, ``misfit`` and ``misfit_at_zero`` (chi-squared per
+        pixel at the fit and with every coefficient zero), ``n_pixels``, ``noise_rad``,
+        ``iterations`` and ``converged``. Ctrl-C stops it before the next iteration."""
+        imgs, knowns = images_and_known(images, known)
+        rows = real_array(modes, "modes")
+        if rows.ndim != 2:
+            raise ValueError(f"modes: must be two-dimensional (modes x elements), got shape {rows.shape}")
+        return self._core.fit_modes(imgs, knowns, np.ascontiguousarray(rows))
+
     def diagnose(self, images: Images, known: Known = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
                  time_limit_s: float | None = None) -> Diagnosis:

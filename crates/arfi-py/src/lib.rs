@@ -34,6 +34,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulation::CoreSimulation>()?;
     m.add_class::<cost::CoreCostModel>()?;
     m.add_class::<mode_fit::CoreModeFit>()?;
+    m.add_class::<mode_fit::CoreModesFit>()?;
     m.add_class::<results::CoreCalibration>()?;
     m.add_class::<results::CoreEstimate>()?;
     m.add_class::<results::NuisanceFit>()?;

@@ -3,9 +3,9 @@
 use crate::error::{invalid, to_py};
 use crate::scenario::parse_scenario;
 use crate::simulation::CoreSimulation;
-use has_core::prediction::{predict_scenario_with, Prediction, PredictionOptions};
+use has_core::prediction::{predict_scenario_with, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -13,9 +13,12 @@ use pyo3::types::PyDict;
 /// reciprocity (see `has_core::prediction`): the prediction and, with `keep_simulation`, the
 /// skull's `CoreSimulation` (its ARFI amplitude not calibrated), else `None`. With
 /// `bone_speed_sensitivity`, the prediction also holds
-/// `bone_speed_sensitivity_rad_per_percent` (one more simulation of the skull).
+/// `bone_speed_sensitivity_rad_per_percent` (one more simulation of the skull); with
+/// `pose_sensitivity`, `pose_sensitivity_rad_per_mm` and `pose_sensitivity_rad_per_deg` (three
+/// more transposed marches through the skull, no plan).
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false))]
+#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false, pose_sensitivity=false))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn predict(
     py: Python<'_>,
     text: &str,
@@ -24,12 +27,18 @@ pub(crate) fn predict(
     target_mm: Option<[f64; 3]>,
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
+    pose_sensitivity: bool,
 ) -> PyResult<(CorePrediction, Option<CoreSimulation>)> {
     let scenario = parse_scenario(text, format, base_dir)?;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
-    let options = PredictionOptions { bone_speed_sensitivity, keep_simulation };
+    let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
     let run = py.detach(|| predict_scenario_with(&scenario, target, options)).map_err(to_py)?;
-    let prediction = CorePrediction { prediction: run.prediction, bone_speed_sensitivity: run.bone_speed_sensitivity, simulation: None };
+    let prediction = CorePrediction {
+        prediction: run.prediction,
+        bone_speed_sensitivity: run.bone_speed_sensitivity,
+        pose: run.pose_sensitivity,
+        simulation: None,
+    };
     Ok((prediction, run.simulation.map(CoreSimulation::from)))
 }
 
@@ -46,7 +55,13 @@ pub(crate) fn predict(
 pub(crate) struct CorePrediction {
     prediction: Prediction,
     bone_speed_sensitivity: Option<Vec<f64>>,
+    pose: Option<PoseSensitivity>,
     simulation: Option<Py<PyAny>>,
+}
+
+/// Rows of `modes` scaled by `factor`, as a `(rows, elements)` array.
+fn rows(modes: &[Vec<f64>; 3], factor: f64) -> Vec<Vec<f64>> {
+    modes.iter().map(|m| m.iter().map(|v| v * factor).collect()).collect()
 }
 
 #[pymethods]
@@ -135,6 +150,25 @@ impl CorePrediction {
         self.bone_speed_sensitivity.clone().map(|g| g.into_pyarray(py))
     }
 
+    /// Per element, how `phases_rad` moves (rad) per millimetre that the head lies shifted along
+    /// the transducer frame's x, y and z from where the CT is registered (`predict(...,
+    /// pose_sensitivity=True)`; else None): rows x, y, z, a column per element. The head's
+    /// responses through the moved head are the registered head's to the array and target moved
+    /// the other way, differenced over one grid cell, their weighted common phase removed.
+    #[getter]
+    fn pose_sensitivity_rad_per_mm<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        self.pose.as_ref().map(|p| PyArray2::from_vec2(py, &rows(&p.translation, 1e-3)).map_err(|e| invalid("pose", e.to_string()))).transpose()
+    }
+
+    /// Per element, how `phases_rad` moves (rad) per degree that the head lies turned about the
+    /// axes x, y and z through the target (right-handed) from where the CT is registered (as
+    /// `pose_sensitivity_rad_per_mm`; rows x, y, z).
+    #[getter]
+    fn pose_sensitivity_rad_per_deg<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let per_deg = 1f64.to_radians();
+        self.pose.as_ref().map(|p| PyArray2::from_vec2(py, &rows(&p.rotation, per_deg)).map_err(|e| invalid("pose", e.to_string()))).transpose()
+    }
+
     /// The skull's simulation the prediction marched (`predict(..., keep_simulation=True)`; else
     /// None): fields, sections and element maps of the predicted drives without building its
     /// plan again. Its ARFI amplitude is not calibrated: not for MR-ARFI images.
@@ -155,6 +189,7 @@ impl CorePrediction {
         CorePrediction {
             prediction: self.prediction.clone(),
             bone_speed_sensitivity: self.bone_speed_sensitivity.clone(),
+            pose: self.pose.clone(),
             simulation: Some(simulation),
         }
     }
@@ -202,6 +237,10 @@ impl CorePrediction {
         d.set_item("focal_pressure_pa", focal)?;
         if let Some(g) = &self.bone_speed_sensitivity {
             d.set_item("bone_speed_sensitivity_rad_per_percent", g.clone())?;
+        }
+        if let Some(pose) = &self.pose {
+            d.set_item("pose_sensitivity_rad_per_mm", rows(&pose.translation, 1e-3))?;
+            d.set_item("pose_sensitivity_rad_per_deg", rows(&pose.rotation, 1f64.to_radians()))?;
         }
         Ok(d)
     }

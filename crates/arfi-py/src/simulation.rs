@@ -6,7 +6,7 @@ use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
 use crate::field::{metrics_items, CoreField, CoreSection, MetricsMm};
 use crate::interrupt::run_interruptible;
-use crate::mode_fit::CoreModeFit;
+use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
 use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm, VolumeArrays};
@@ -18,6 +18,7 @@ use has_core::inverse::element::{known_per_element, BasisCache};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateRequest, Method};
 use has_core::inverse::prior::mode_fit::fit_mode;
+use has_core::inverse::prior::modes_fit::fit_modes;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::Simulation;
@@ -452,6 +453,23 @@ impl CoreSimulation {
         let cancel = AtomicBool::new(false);
         let fit = run_interruptible(py, &cancel, || fit_mode(&self.inner, &mode, &measurements, Some(&cancel)))?.map_err(to_py)?;
         Ok(CoreModeFit(fit))
+    }
+
+    /// The coefficients of prior `modes` (rows: rad per element for a coefficient of 1) fitted
+    /// jointly to images, each taken with its known added phases, the phases otherwise this
+    /// model's own.
+    fn fit_modes(
+        &self,
+        py: Python<'_>,
+        images: Vec<PyReadonlyArray2<'_, f64>>,
+        known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
+        modes: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<CoreModesFit> {
+        let measurements = measurements(images, known)?;
+        let modes: Vec<Vec<f64>> = modes.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
+        let cancel = AtomicBool::new(false);
+        let fit = run_interruptible(py, &cancel, || fit_modes(&self.inner, &modes, &measurements, Some(&cancel)))?.map_err(to_py)?;
+        Ok(CoreModesFit(fit))
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.

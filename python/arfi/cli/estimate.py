@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, load_scenario,
-                             npy_path, read_image, read_bone_speed_sensitivity, read_optional_phases, read_transmission, save_npy)
-from arfi.estimation import wrap
+                             npy_path, read_image, read_optional_phases, read_transmission, save_npy)
 from arfi import _core
+from arfi import prior_modes
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -20,13 +20,6 @@ TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
 fraction of the focal spot's width (2.3 mm at 650 kHz), over which each element's wave crosses
 the same bone."""
-
-BONE_SPEED_STD_PERCENT = 20.0
-"""How far the CT conversion's bone sound speed is taken to be off a priori (percent, one
-standard deviation) where the prediction gives its bone-speed mode: the porosity model's dense-
-bone speed is a population constant, and individual skulls' speeds scatter by about a tenth
-to a fifth around such constants."""
-
 
 def register(sub: Any) -> None:
     """Adds the verb to the subcommands ``sub``."""
@@ -76,15 +69,27 @@ def register(sub: Any) -> None:
     p.add_argument("--prior-bone-speed-std-percent", type=float, dest="prior_bone_speed_std_percent", metavar="P",
                    help="the CT conversion's bone sound speed may be off by about P percent (default 20 where the "
                    "--prior-transmission JSON of arfi predict holds bone_speed_sensitivity_rad_per_percent; 0: off). "
-                   "Before the per-element fit, the images fit that error's mode (the sensitivity times a coefficient, "
-                   "P percent a priori) on the head with the CT's bone, driven with the reference steering, the phases "
-                   "otherwise the prediction's (one march per image and coefficient tried, about five coefficients); "
-                   "the prior then moves along the mode by the fitted coefficient. Needs --prior, a [ct] scenario "
-                   "and one phase per element")
+                   "Fitted with the other modes of the prediction before the per-element fit (see --prior-pose-std-mm)")
+    p.add_argument("--prior-pose-std-mm", type=float, dest="prior_pose_std_mm", metavar="S",
+                   help="the head may lie shifted by about S mm along each axis from where the CT is registered (default "
+                   "1.5 where the --prior-transmission JSON of arfi predict holds pose_sensitivity_rad_per_mm; 0: off). "
+                   "Before the per-element fit, the images fit the prediction's modes jointly (the registration's three "
+                   "shifts and three turns about the target, the bone speed, --prior-modes) on the head with the CT's "
+                   "bone, driven with the reference steering, the phases otherwise the prediction's (Gauss-Newton: one "
+                   "batch march of each image and its derivatives per iteration, a few iterations); the prior then "
+                   "moves along the modes by the fitted values, printed with their uncertainty. Needs --prior, a [ct] "
+                   "scenario and one phase per element")
+    p.add_argument("--prior-pose-std-deg", type=float, dest="prior_pose_std_deg", metavar="S",
+                   help="the head may lie turned by about S degrees about each axis through the target from where the CT "
+                   "is registered (default 1.5 where the JSON holds pose_sensitivity_rad_per_deg; 0: off)")
+    p.add_argument("--prior-modes", dest="prior_modes", metavar="M.npz",
+                   help="more error modes of the prediction to fit with its own: a NumPy .npz with 'modes' (M x elements, "
+                   "rad per element for one unit of each mode), 'std' (M prior standard deviations, in those units) and "
+                   "optionally 'names' and 'units' (M strings each)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
-                   "MISMATCH (the images are not explained), the prediction itself, moved along its bone-speed mode when that "
-                   "was fitted (JSON 'recommended' says which)")
+                   "MISMATCH (the images are not explained), the prediction itself, moved along its fitted modes (registration, "
+                   "bone speed) when they were fitted (JSON 'recommended' says which)")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
                    "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
@@ -100,9 +105,10 @@ def run(args: argparse.Namespace) -> int:
     prior = read_optional_phases(args.prior, "--prior")
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     scenario = load_scenario(args)
-    bone_speed = fit_bone_speed(args, scenario, prior, transmission, predicted_at)
-    if bone_speed is not None:
-        prior = bone_speed.pop("prior")
+    modes = fit_modes(args, scenario, prior, transmission, predicted_at)
+    moved = modes is not None and modes.extra["prior_moved"]
+    if modes is not None and moved:
+        prior = modes.prior
     sim = calibrated_simulation(args, scenario)
     if transmission is not None:
         check_transmission(args, transmission, predicted_at, sim)
@@ -119,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
-             + (f", moved along the bone-speed mode by {bone_speed['percent']:+.1f} %" if bone_speed and bone_speed["prior_moved"] else "")
+             + (", moved along its fitted modes" if moved else "")
              + "), ambiguity judged on the posterior" if e.prior_used else ""))
     if e.nuisance is not None:
         n = e.nuisance
@@ -146,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
     use_prediction = e.model_mismatch and e.prior_used and prior is not None
     if use_prediction:
-        which = "the prediction (--prior" + (", moved along its bone-speed mode" if bone_speed and bone_speed["prior_moved"] else "") + ")"
+        which = "the prediction (--prior" + (", moved along its fitted modes" if moved else "") + ")"
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
               f"the model does not explain the images, so this estimate is NOT to be applied: {which} is "
               f"the safer correction"
@@ -179,9 +185,8 @@ def run(args: argparse.Namespace) -> int:
                    "noise_floor_rad": e.noise_floor}, e.phases_rad,
                    warning=("; ".join(flags) + ": see the printed summary before applying this estimate") if flags else None)
     prior_settings = {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
-    if bone_speed is not None:
-        prior_settings["prior_bone_speed_std_percent"] = bone_speed["std_percent_prior"]
-        prior_settings["bone_speed_fit"] = bone_speed
+    if modes is not None:
+        prior_settings.update(modes_json(modes))
     if transmission is not None:
         prior_settings["prior_transmission"] = args.prior_transmission
     finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total,
@@ -205,60 +210,113 @@ def check_transmission(args: argparse.Namespace, transmission: np.ndarray, predi
                          f"the focus (arfi predict --scenario of the same focus, or --target-mm)")
 
 
-def fit_bone_speed(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None,
-                   transmission: np.ndarray | None, predicted_at: np.ndarray | None) -> dict[str, Any] | None:
-    """The prediction's bone-speed mode fitted to the images on the head with the CT's bone
-    (``--prior-bone-speed-std-percent``; by default wherever the prediction's JSON holds its
-    sensitivity and the estimate is per element): the fit's numbers and the prior moved along
-    the mode (key ``prior``), or None when there is nothing to fit. The model with bone is built
-    and dropped here, its memory handed back, before the estimation's own model is built, so that
-    the two plans are never held at once."""
-    std = args.prior_bone_speed_std_percent
-    explicit = std is not None
-    if explicit and not (np.isfinite(std) and std >= 0):
-        raise UsageError(f"--prior-bone-speed-std-percent: must be a finite number >= 0, got {std:g}")
-    if std == 0:
-        return None
+def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None, transmission: np.ndarray | None,
+              predicted_at: np.ndarray | None) -> prior_modes.ModesResult | None:
+    """The prediction's error modes (pose, bone speed, ``--prior-modes``) fitted to the images on
+    the head with the CT's bone (:mod:`arfi.prior_modes`), by default wherever the prediction's
+    JSON holds them and the estimate is per element; the result's ``prior`` is the prediction
+    moved by them and ``extra["prior_moved"]`` whether it moved. None when there is nothing to
+    fit. The model with bone is built and dropped here, its memory handed back, before the
+    estimation's own model is built, so that the two plans are never held at once."""
+    stds = {"--prior-bone-speed-std-percent": args.prior_bone_speed_std_percent, "--prior-pose-std-mm": args.prior_pose_std_mm,
+            "--prior-pose-std-deg": args.prior_pose_std_deg}
+    for option, std in stds.items():
+        if std is not None and not (np.isfinite(std) and std >= 0):
+            raise UsageError(f"{option}: must be a finite number >= 0, got {std:g}")
+    explicit = [o for o, v in stds.items() if v] + (["--prior-modes"] if args.prior_modes else [])
+    first = explicit[0] if explicit else None
     if prior is None:
-        if explicit:
-            raise UsageError("--prior-bone-speed-std-percent: needs --prior (the prediction the mode belongs to)")
+        if first:
+            raise UsageError(f"{first}: needs --prior (the prediction the modes belong to)")
         return None
     if args.groups != len(prior):
-        if explicit:
-            raise UsageError(f"--prior-bone-speed-std-percent: fitted for per-element estimates only (--groups {len(prior)})")
+        if first:
+            raise UsageError(f"{first}: fitted for per-element estimates only (--groups {len(prior)})")
         return None
-    sensitivity = read_bone_speed_sensitivity(args.prior_transmission, len(prior), required=explicit)
-    if sensitivity is None:
+    path = args.prior_transmission
+    prediction = prior_modes.read_prediction_json(path) if path and path.endswith(".json") else {}
+    wanted = {"--prior-bone-speed-std-percent": "bone_speed_sensitivity_rad_per_percent",
+              "--prior-pose-std-mm": "pose_sensitivity_rad_per_mm", "--prior-pose-std-deg": "pose_sensitivity_rad_per_deg"}
+    for option, key in wanted.items():
+        if stds[option] and key not in prediction:
+            raise UsageError(f"{option}: needs --prior-transmission with the JSON of arfi predict --json holding '{key}'"
+                             + (f" ({path} has none: predict again with the current arfi)" if prediction else ""))
+    try:
+        modes = prior_modes.prediction_modes(
+            prediction, len(prior),
+            pose_std_mm=prior_modes.POSE_STD_MM if args.prior_pose_std_mm is None else args.prior_pose_std_mm,
+            pose_std_deg=prior_modes.POSE_STD_DEG if args.prior_pose_std_deg is None else args.prior_pose_std_deg,
+            bone_speed_std_percent=(prior_modes.BONE_SPEED_STD_PERCENT if args.prior_bone_speed_std_percent is None
+                                    else args.prior_bone_speed_std_percent))
+        if args.prior_modes:
+            modes += prior_modes.read_modes(args.prior_modes, len(prior))
+    except FileNotFoundError as e:
+        raise UsageError(f"--prior-modes: {e}") from None
+    except ValueError as e:
+        raise UsageError(f"{'--prior-modes' if args.prior_modes and str(args.prior_modes) in str(e) else '--prior-transmission'}: "
+                         f"{e}") from None
+    if not modes:
         return None
     if scenario.to_dict().get("ct") is None:
-        if explicit:
-            raise UsageError("--prior-bone-speed-std-percent: needs a [ct] scenario (the mode is fitted on the head with "
-                             "the CT's bone)")
+        if first:
+            raise UsageError(f"{first}: needs a [ct] scenario (the modes are fitted on the head with the CT's bone)")
         return None
     if args.prior_std_rad is None:  # checked here too: the fit takes minutes before the estimate would say so
         raise UsageError("--prior-std-rad: required with --prior (the expected error of each predicted phase, rad)")
-    t = time.perf_counter()
     skull = calibrated_simulation(args, scenario.with_ct_bone())
     if skull.n_elements != len(prior):
         raise ValueError(f"--prior: {args.prior}: has {len(prior)} values for {skull.n_elements} elements")
     if transmission is not None:
         check_transmission(args, transmission, predicted_at, skull)
-    std = std if explicit else BONE_SPEED_STD_PERCENT
     pairs = [read_image(skull, p) for p in args.image]
-    fit = skull.fit_mode([p[0] for p in pairs], [p[1] for p in pairs], std * sensitivity)
+    result = prior_modes.fit_prior_modes(skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes)
     del skull, pairs
     _core.release_freed()
-    percent, spread = fit.coefficient * std, fit.std * std
-    seconds = time.perf_counter() - t
-    found = (f"estimate: bone speed from the images on the head with the CT's bone: {percent:+.1f} +- {spread:.1f} % of "
-             f"the conversion's (prior +-{std:g} %; image scale {fit.scale:.3f}, misfit {fit.misfit:.2f} over {fit.n_pixels} "
-             f"pixels, {len(fit.tried)} coefficients tried, the model with bone built and marched in {seconds:.1f} s)")
-    if fit.bracketed:
-        print(f"{found}: the prior moves along the prediction's bone-speed mode by that much")
+    at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]
+    result.extra["prior_moved"] = result.supported and not at_edge
+    if at_edge:
+        verdict = (f": {', '.join(at_edge)} at the fit's end (four prior spreads): the prior is NOT moved; check the CT's "
+                   "conversion and registration against the images (arfi diagnose)")
+    elif not result.supported:
+        verdict = (f": the images' chi-squared falls by only {result.evidence:.1f} (the 95 % point of noise alone with "
+                   f"{len(result.modes)} modes is higher): not supported by the images, the prior is NOT moved")
     else:
-        print(f"{found}: at the search's end (three times the prior's spread): the prior is NOT moved; check the CT's "
-              f"conversion and registration against the images (arfi diagnose)")
-    moved = wrap(prior + fit.coefficient * std * sensitivity) if fit.bracketed else prior
-    return {"percent": percent, "std_percent": spread, "std_percent_prior": std, "scale": fit.scale, "misfit": fit.misfit,
-            "n_pixels": fit.n_pixels, "tried_percent": [c * std for c, _ in fit.tried], "bracketed": fit.bracketed,
-            "prior_moved": fit.bracketed, "seconds": seconds, "prior": moved}
+        verdict = f": the images' chi-squared falls by {result.evidence:.1f}; the prior moves along the modes by that much"
+    print(f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "
+          f"({result.misfit_at_zero:.2f} with the prediction as it is) over {result.n_pixels} pixels, {result.iterations} "
+          f"iterations{'' if result.converged else ' (not converged: the last step still lowered the cost)'}, the model "
+          f"with bone built and marched in {result.seconds:.1f} s{verdict}")
+    return result
+
+
+def modes_text(r: prior_modes.ModesResult) -> str:
+    """The fitted modes in words: the registration's pose, the bone speed, a user's modes."""
+    parts = []
+    pose = r.pose()
+    if pose is not None:
+        tri = lambda v: "(" + ", ".join(f"{x:+.2f}" for x in v) + ")"  # noqa: E731
+        std = {m.name: m.std for m in r.modes}
+        parts.append(f"head shifted {tri(pose['shift_mm'])} +- {tri(pose['shift_std_mm'])} mm and turned "
+                     f"{tri(pose['turn_deg'])} +- {tri(pose['turn_std_deg'])} deg off the CT's registration (prior "
+                     f"+-{std['shift_x']:g} mm, +-{std['turn_x']:g} deg)")
+    for m, v, s in zip(r.modes, r.values, r.std):
+        if m.name in prior_modes.POSE_NAMES:
+            continue
+        what = "bone speed" if m.name == "bone_speed" else m.name
+        tail = " of the conversion's" if m.name == "bone_speed" else ""
+        parts.append(f"{what} {v:+.1f} +- {s:.1f} {m.unit}{tail} (prior +-{m.std:g} {m.unit})")
+    return "prediction's modes from the images on the head with the CT's bone: " + "; ".join(parts)
+
+
+def modes_json(r: prior_modes.ModesResult) -> dict[str, Any]:
+    """The JSON keys of a modes fit: ``prior_modes_fit`` (every mode, the pose) and, where the
+    bone speed was among them, ``bone_speed_fit`` with its percent."""
+    d: dict[str, Any] = {"prior_modes_fit": {**r.to_dict(), "prior_moved": r.extra["prior_moved"]}}
+    bone = r.value("bone_speed")
+    if bone is not None:
+        std_prior = next(m.std for m in r.modes if m.name == "bone_speed")
+        d["prior_bone_speed_std_percent"] = std_prior
+        d["bone_speed_fit"] = {"percent": bone[0], "std_percent": bone[1], "std_percent_prior": std_prior, "scale": r.scale,
+                               "misfit": r.misfit, "n_pixels": r.n_pixels, "prior_moved": r.extra["prior_moved"],
+                               "seconds": r.seconds}
+    return d

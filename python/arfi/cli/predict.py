@@ -37,6 +37,14 @@ def register(sub: Any) -> None:
                         "simulation of the skull (about half the prediction's time). Default: on with --json and the "
                         "porosity conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity "
                         "skips it")
+    p.add_argument("--pose-sensitivity", action=argparse.BooleanOptionalAction, default=None, dest="pose_sensitivity",
+                   help="also give how the predicted phases move per mm that the head lies shifted along x, y, z and per "
+                        "degree that it lies turned about x, y, z through the target, off where the CT is registered (rad "
+                        "per mm or degree, per element, in the --json as pose_sensitivity_rad_per_mm and "
+                        "pose_sensitivity_rad_per_deg, rows x, y, z): the registration modes arfi estimate fits to the "
+                        "images with the bone speed before its per-element fit. The moved head is the registered one seen "
+                        "by the array moved the other way: three more transposed marches through the skull, no plan. "
+                        "Default: on with --json for a curved array; --no-pose-sensitivity skips it")
     p.add_argument("--focal-metrics", action=argparse.BooleanOptionalAction, default=None, dest="focal_metrics",
                    help="also march the uncorrected, straight-ray CT steering and corrected beams through the skull "
                         "and give each one's focal metrics in 3-D around the target: the focal peak and its distance "
@@ -60,6 +68,9 @@ def run(args: argparse.Namespace) -> int:
     sensitivity = args.bone_speed_sensitivity
     if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
         sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
+    pose = args.pose_sensitivity
+    if pose is None:  # by default for the JSON, where the array stands before its source plane
+        pose = args.json is not None and scenario.to_dict()["transducer"].get("kind") != "planar-quadrants"
     metrics_wanted = args.focal_metrics
     if metrics_wanted is None:
         metrics_wanted = args.json is not None or bool(args.report)
@@ -67,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     # The focal metrics and the report march the beams through the skull: the prediction keeps the
     # skull's simulation for them.
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
-                keep_simulation=bool(args.report) or metrics_wanted)
+                keep_simulation=bool(args.report) or metrics_wanted, pose_sensitivity=pose)
     seconds = time.perf_counter() - t
     # One batch march of the three drives draws the report's section and gives their focal
     # metrics; without a report, the metrics alone march each drive only to its focal box.
@@ -88,6 +99,10 @@ def run(args: argparse.Namespace) -> int:
         g = p.bone_speed_sensitivity_rad_per_percent
         print(f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
               f"({np.abs(g).max():.3f} at most)")
+    if p.pose_sensitivity_rad_per_mm is not None and p.pose_sensitivity_rad_per_deg is not None:
+        rms = lambda rows: ", ".join(f"{np.sqrt(np.mean(r**2)):.3f}" for r in rows)  # noqa: E731
+        print(f"predict: registration sensitivity, rad RMS per mm of the head's shift along x, y, z: {rms(p.pose_sensitivity_rad_per_mm)}; "
+              f"per degree of its turn about x, y, z through the target: {rms(p.pose_sensitivity_rad_per_deg)}")
     for name, m in (metrics or {}).items():
         print(f"predict: {DRIVE_LABELS[name]}: {metrics_text(m)}")
     result = p.to_dict()

@@ -17,6 +17,7 @@ mod hemisphere;
 mod information;
 mod layering;
 mod mode_fit;
+mod modes_fit;
 mod mr_tissue;
 mod nuisance;
 mod physics;

@@ -18,6 +18,7 @@
 //! mode fitted to images is [`mode_fit`].
 
 pub mod mode_fit;
+pub mod modes_fit;
 pub mod smooth;
 
 use crate::error::{HasError, Result};

@@ -87,31 +87,68 @@ pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement], ca
         return Err(HasError::invalid("mode", format!("has {} values for {n} elements", mode.len())));
     }
     crate::error::require_finite("mode", mode)?;
-    let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
-    let [u, v] = boxed.pixels.clone();
-    let known = measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
-    let fit = Fit {
-        sim,
-        mode,
-        measurements,
-        known,
-        sampler: sim.sampler()?.restrict(u.clone(), v.clone())?,
-        box_pixels: [u, v],
-        noise: boxed.noise.max(MIN_NOISE),
-        cancel,
-    };
+    let fit = Fit { setting: Setting::new(sim, measurements)?, mode, cancel };
     fit.run()
+}
+
+/// What a fit of modes to images holds throughout: the model, the images with their known
+/// per-element phases, the sampler on the pixel box and the noise the cost divides by.
+pub(super) struct Setting<'a> {
+    pub(super) sim: &'a Simulation,
+    pub(super) measurements: &'a [Measurement],
+    pub(super) known: Vec<Vec<f64>>,
+    pub(super) sampler: MrSampler,
+    box_pixels: [Range<usize>; 2],
+    pub(super) noise: f64,
+}
+
+impl<'a> Setting<'a> {
+    /// The estimation's pixel box ([`masks_and_box`] at the scenario's mask fraction,
+    /// [`BACKGROUND_MARGIN`] pixels around the masks) and the images' noise there.
+    pub(super) fn new(sim: &'a Simulation, measurements: &'a [Measurement]) -> Result<Self> {
+        let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
+        let [u, v] = boxed.pixels.clone();
+        let known =
+            measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
+        Ok(Setting {
+            sim,
+            measurements,
+            known,
+            sampler: sim.sampler()?.restrict(u.clone(), v.clone())?,
+            box_pixels: [u, v],
+            noise: boxed.noise.max(MIN_NOISE),
+        })
+    }
+
+    /// The values of `images` (one per measurement, on the box: model images or their
+    /// derivatives) at every pixel imaged in the measurement, image after image, with the
+    /// measured value: `(model, measured)`, NaN model values included.
+    pub(super) fn pairs(&self, images: &[&Array2<f64>]) -> Vec<(f64, f64)> {
+        let [u, v] = &self.box_pixels;
+        self.measurements
+            .iter()
+            .zip(images)
+            .flat_map(|(meas, model)| {
+                imaged_pixels(&meas.image, u.clone(), v.clone())
+                    .into_iter()
+                    .map(move |(i, j)| (model[[i - u.start, j - v.start]], meas.image[[i, j]]))
+            })
+            .collect()
+    }
+
+    /// An error when another thread asked the fit to end ([`HasError::Interrupted`]).
+    pub(super) fn cancelled(cancel: Option<&AtomicBool>) -> Result<()> {
+        if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            return Err(HasError::Interrupted);
+        }
+        Ok(())
+    }
 }
 
 /// What one fit holds while it searches.
 struct Fit<'a> {
-    sim: &'a Simulation,
+    setting: Setting<'a>,
     mode: &'a [f64],
-    measurements: &'a [Measurement],
-    known: Vec<Vec<f64>>,
-    sampler: MrSampler,
-    box_pixels: [Range<usize>; 2],
-    noise: f64,
     cancel: Option<&'a AtomicBool>,
 }
 
@@ -151,38 +188,27 @@ impl Fit<'_> {
             scale: chosen.scale,
             misfit: chosen.chi2 / chosen.pixels.max(1) as f64,
             n_pixels: chosen.pixels,
-            noise: self.noise,
+            noise: self.setting.noise,
             tried: tried.iter().map(|p| [p.c, p.j]).collect(),
         })
     }
 
     /// `J` at each coefficient in `cs`: every image of every coefficient marched in one batch.
     fn evaluate(&self, cs: &[f64]) -> Result<Vec<Point>> {
-        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-            return Err(HasError::Interrupted);
-        }
+        Setting::cancelled(self.cancel)?;
+        let s = &self.setting;
         let added: Vec<Vec<f64>> =
-            cs.iter().flat_map(|&c| self.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
-        let recordings = self.sim.record_in(&self.sampler.window, &self.sim.source_fields(&added)?)?;
-        let amplitude = self.sim.amplitude()?;
-        let images = recordings.iter().map(|r| self.sampler.arfi_image(&r.window, amplitude)).collect::<Result<Vec<_>>>()?;
-        cs.iter().zip(images.chunks(self.measurements.len())).map(|(&c, models)| self.point(c, models)).collect()
+            cs.iter().flat_map(|&c| s.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
+        let recordings = s.sim.record_in(&s.sampler.window, &s.sim.source_fields(&added)?)?;
+        let amplitude = s.sim.amplitude()?;
+        let images = recordings.iter().map(|r| s.sampler.arfi_image(&r.window, amplitude)).collect::<Result<Vec<_>>>()?;
+        cs.iter().zip(images.chunks(s.measurements.len())).map(|(&c, models)| self.point(c, models)).collect()
     }
 
     /// `J` at `c` from its model images (one per measurement, on the box).
     fn point(&self, c: f64, models: &[Array2<f64>]) -> Result<Point> {
-        let [u, v] = &self.box_pixels;
-        let pairs: Vec<(f64, f64)> = self
-            .measurements
-            .iter()
-            .zip(models)
-            .flat_map(|(meas, model)| {
-                imaged_pixels(&meas.image, u.clone(), v.clone())
-                    .into_iter()
-                    .map(move |(i, j)| (model[[i - u.start, j - v.start]], meas.image[[i, j]]))
-                    .filter(|(m, _)| m.is_finite())
-            })
-            .collect();
+        let pairs: Vec<(f64, f64)> =
+            self.setting.pairs(&models.iter().collect::<Vec<_>>()).into_iter().filter(|(m, _)| m.is_finite()).collect();
         let (md, mm) = pairs.iter().fold((0.0, 0.0), |(md, mm), (m, d)| (md + m * d, mm + m * m));
         if !(mm > 0.0) {
             return Err(HasError::invalid(
@@ -191,7 +217,7 @@ impl Fit<'_> {
             ));
         }
         let scale = (md / mm).max(0.0);
-        let chi2 = pairs.iter().map(|(m, d)| (scale * m - d).powi(2)).sum::<f64>() / self.noise.powi(2);
+        let chi2 = pairs.iter().map(|(m, d)| (scale * m - d).powi(2)).sum::<f64>() / self.setting.noise.powi(2);
         Ok(Point { c, j: chi2 + c * c, scale, chi2, pixels: pairs.len() })
     }
 }
