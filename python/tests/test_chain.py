@@ -4,10 +4,11 @@ the prediction as prior and its transmission (which first fits the prediction's 
 the images on the head with the CT's bone), and the corrected focus through the patient's skull.
 
 The patient: bone 10 % faster than the CT conversion says and the head 1.5 mm off its
-registration, imaged with the reference steering (the prediction's), three images (in focus and
-defocused by ±5 mm) at 0.02 rad noise. Scored exactly at the target by the patient's own
-prediction (``Prediction.pressure_with``: the sum of each element's response through the real
-skull), as a fraction of the most any phases give there.
+registration, driven with the clinic's reference steering (the prediction's, from the CT as
+registered: ``arfi simulate --steering-from``), three images (in focus and defocused by ±5 mm) at
+0.02 rad noise. Scored exactly at the target by the sum of each element's response through the
+real skull (the patient's own prediction's ``skull_responses``) with that steering minus the
+phases, as a fraction of the most any phases give there.
 
 Tolerances: the images' 0.02 rad noise moves a per-element estimate by a few hundredths of a
 radian around the prior; that costs a few thousandths of the focus, under 0.01, so the estimate
@@ -59,14 +60,17 @@ def run_chain(d: Path, seed: int) -> dict[str, float]:
     assert main(["predict", "--scenario", f("head.toml"), "--out", f("prior.npy"), "--json", f("prediction.json")]) == 0
     for k, shift in enumerate([None, "5", "-5"]):
         extra = [] if shift is None else ["--focus-shift-mm", "0", "0", shift]
-        assert main(["simulate", "--scenario", f("patient.toml"), *extra, "--noise-rad", "0.02", "--seed", str(k + 1),
-                     "--out", f(f"a{k}.nii.gz")]) == 0
+        assert main(["simulate", "--scenario", f("patient.toml"), *extra, "--steering-from", f("prediction.json"),
+                     "--noise-rad", "0.02", "--seed", str(k + 1), "--out", f(f"a{k}.nii.gz")]) == 0
     assert main(["estimate", "--scenario", f("model.toml"), "--groups", "256", "--image", f("a0.nii.gz"), "--image",
                  f("a1.nii.gz"), "--image", f("a2.nii.gz"), "--prior", f("prior.npy"), "--prior-std-rad", "0.15",
                  "--prior-transmission", f("prediction.json"), "--fit-nuisance", "amplitude", "--out-phases",
                  f("estimate.npy"), "--json", f("estimate.json")]) == 0
     truth = predict(Scenario.load(d / "patient.toml"))
-    fraction = lambda phases: truth.pressure_with(phases) / truth.optimal_pa  # noqa: E731
+    clinic = np.asarray(json.loads((d / "prediction.json").read_text())["reference_steering_rad"])
+    # The clinic drives its reference steering (the CT's, as registered) minus the phases.
+    fraction = lambda phases: float(np.abs(np.sum(truth.skull_responses * np.exp(1j * (clinic - phases))))  # noqa: E731
+                                    / truth.optimal_pa)
     return {"uncorrected": fraction(np.zeros(256)), "prediction": fraction(np.load(d / "prior.npy")),
             "estimate": fraction(np.load(d / "estimate.npy")), **json.loads((d / "estimate.json").read_text())}
 

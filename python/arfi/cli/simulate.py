@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from pathlib import Path
 from typing import Any
 
-from arfi.cli.common import add_common, add_report, finish, image_peak, load_scenario, read_optional_phases
+import numpy as np
+
+from arfi.cli.common import UsageError, add_common, add_report, finish, image_peak, load_scenario, read_optional_phases
 from arfi.io import arfi_image_path, write_arfi_image
 from arfi.simulation import Simulation
 
@@ -25,6 +29,11 @@ def register(sub: Any) -> None:
                    help="known diversity phases that move the focus by (DX, DY, DZ) mm, e.g. 0 0 5 for a defocused image "
                    "(more informative than random group phases for per-element estimates); added to --known-phases and "
                    "recorded with them, per element, as applied_phases_rad")
+    p.add_argument("--steering-from", dest="steering_from", metavar="PREDICTION.json",
+                   help="drive the elements with the reference steering of arfi predict's JSON (reference_steering_rad) "
+                   "instead of the scenario's own steering (not recorded in the sidecar): a patient whose head lies off "
+                   "the CT's registration, or whose bone the CT gets wrong, is driven as the clinic computes it from the "
+                   "CT, not from where the head really is. The JSON's target_mm must lie within 0.5 mm of the focus")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--out", required=True, metavar="M.nii.gz")
@@ -42,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
     if args.focus_shift_mm is not None:
         shift = sim.focus_shift_phases(args.focus_shift_mm, "--focus-shift-mm")
         known = shift if known is None else sim.element_phases(known, "--known-phases") + shift
+    if args.steering_from:
+        steering = clinic_steering(args.steering_from, sim)
+        aberration = steering if aberration is None else sim.element_phases(aberration, "--phases") + steering
     total = None
     for p in (aberration, known):
         if p is not None:
@@ -66,3 +78,24 @@ def run(args: argparse.Namespace) -> int:
     finish(args, {"out": out, "focal_arfi_rad": peak, "focal_position_mm": pos, "noise_rad": noise,
                    "seed": args.seed, "amplitude": sim.amplitude, "seconds": time.perf_counter() - t})
     return 0
+
+
+def clinic_steering(path: str, sim: Simulation) -> np.ndarray:
+    """The phases that turn ``sim``'s own steering into the reference steering of the prediction
+    JSON at ``path`` (``--steering-from``), per element."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"--steering-from: {p}: no such file")
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+        steering = np.asarray(d["reference_steering_rad"], dtype=np.float64)
+        target = np.asarray(d["target_mm"], dtype=np.float64)
+    except (ValueError, KeyError, TypeError) as e:
+        raise UsageError(f"--steering-from: {p}: not the JSON of arfi predict (no 'reference_steering_rad' and "
+                         f"'target_mm': {e})") from None
+    if steering.shape != (sim.n_elements,) or not np.all(np.isfinite(steering)):
+        raise UsageError(f"--steering-from: {p}: 'reference_steering_rad' must hold {sim.n_elements} finite numbers")
+    if target.shape != (3,) or np.linalg.norm(target - sim.focus_mm) > 0.5:
+        raise UsageError(f"--steering-from: {p}: predicted for {target.tolist()} mm, but the scenario focuses at "
+                         f"{np.round(sim.focus_mm, 1).tolist()} mm")
+    return steering - sim.steering_phases_rad
