@@ -20,11 +20,12 @@ from arfi.volume import IntensityVolume, PressureVolume
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
-from arfi.estimation import Calibration, Estimate, NextAcquisition, NuisanceFit
+from arfi.estimation import Calibration, Estimate, EstimateSupport, NextAcquisition, NuisanceFit
 from arfi._core import MemoryLimitError, ModeFit, ModesFit
 
 __all__ = ["Scenario", "Simulation", "Field", "Section", "PressureVolume", "IntensityVolume", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
-           "predict", "Prediction", "ModeFit", "ModesFit", "MemoryLimitError", "Calibration", "Estimate", "NuisanceFit", "NextAcquisition"]
+           "predict", "Prediction", "ModeFit", "ModesFit", "MemoryLimitError", "Calibration", "Estimate", "EstimateSupport",
+           "NuisanceFit", "NextAcquisition"]
 
 try:
     from importlib.metadata import version as _version

@@ -191,13 +191,22 @@ def test_estimate_per_element_on_a_small_array(tmp_path):
                  "--out", str(image)]) == 0
     js = tmp_path / "e.json"
     r = run("estimate", "--scenario", str(scen), "--image", str(image), "--groups", "256", "--max-evaluations", "40",
-            "--json", str(js))
+            "--json", str(js), "--out-phases", str(tmp_path / "out.npy"))
     assert r.returncode == 0, r.stderr
     d = json.loads(js.read_text())
     assert len(d["phases_rad"]) == 256 and len(d["group_phases_rad"]) == 16
-    assert d["evaluations"] <= 40 and d["stop"] == "evaluation limit"
+    assert d["evaluations"] <= 40 and d["stop"] == "evaluation limit" and d["converged"] is False
     assert d["n_pixels"] < 256 and d["underdetermined"] and d["ambiguous"]
-    assert "underdetermined" in r.stdout
+    assert "underdetermined" in r.stdout and "NOT CONVERGED" in r.stdout
+    # Without a prior, an estimate the images do not support (and one whose search did not
+    # converge) is not recommended: the safer phases are named, printed and written.
+    s = d["support"]
+    assert set(s) == {"determined_phases", "expected_focus", "uncorrected_focus", "groups_focus", "determined", "converged"}
+    assert 0 < s["determined_phases"] < 256 and not s["determined"] and s["expected_focus"] < s["uncorrected_focus"]
+    assert d["recommended"] in ("uncorrected", "groups") and d["supported"] is False
+    assert f"recommended: {d['recommended']}" in r.stdout and "NOT SUPPORTED" in r.stdout
+    expected = np.zeros(256) if d["recommended"] == "uncorrected" else np.asarray(d["group_phases_rad"])[sim.groups]
+    assert np.allclose(d["recommended_phases_rad"], expected) and np.allclose(np.load(tmp_path / "out.npy"), expected)
     r = run("estimate", "--scenario", str(scen), "--image", str(image), "--groups", "256", "--method", "nelder-mead")
     assert r.returncode == 2 and "method: per-element" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     # More groups than the kernels take (256), but not one per element: refused before any work.

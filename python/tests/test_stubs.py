@@ -21,7 +21,7 @@ def test_stub_lists_every_public_name_of_the_extension():
 def test_result_classes_write_every_attribute_to_json_once():
     # to_dict (the JSON) writes the attributes listed in _fields: each result's getters (but model
     # images), no more, no fewer, so an attribute and its JSON key are one name.
-    for cls in (_core.Calibration, _core.Estimate, _core.NuisanceFit, _core.NextAcquisition, _core.ShiftCandidate,
+    for cls in (_core.Calibration, _core.Estimate, _core.EstimateSupport, _core.NuisanceFit, _core.NextAcquisition, _core.ShiftCandidate,
                 _core.Diagnosis, _core.DiagnosisStep, _core.EffectCandidate, _core.AlternativeFit):
         getters = {n for n, v in vars(cls).items() if type(v).__name__ == "getset_descriptor" and not n.startswith("_")}
         images = {"models", "models_initial", "models_final"}  # model images stay out of the JSON

@@ -13,6 +13,7 @@ mod prediction;
 mod results;
 mod scenario;
 mod simulation;
+mod support;
 mod validation;
 mod volume;
 
@@ -40,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::NuisanceFit>()?;
     m.add_class::<results::NextAcquisition>()?;
     m.add_class::<results::ShiftCandidate>()?;
+    m.add_class::<support::EstimateSupport>()?;
     m.add_class::<diagnose::CoreDiagnosis>()?;
     m.add_class::<diagnose::DiagnosisStep>()?;
     m.add_class::<diagnose::EffectCandidate>()?;

@@ -2,10 +2,11 @@
 //! convert units (m to mm) in one place. `to_dict` writes the JSON from the same getters, so an
 //! attribute and its JSON key are one name.
 
+use crate::support::EstimateSupport;
 use has_core::inverse::calibrate::Calibration;
 use has_core::inverse::element::nuisance::FittedNuisance;
 use has_core::inverse::estimate::information::{Candidate, ShiftSuggestion};
-use has_core::inverse::estimate::workflow::{EstimateReport, Method};
+use has_core::inverse::estimate::workflow::{EstimateReport, Method, Recommended};
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -111,7 +112,7 @@ impl CoreEstimate {
     /// The attributes `to_dict` writes, in order.
     #[classattr]
     #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 27] = [
+    const FIELDS: [&'static str; 32] = [
         "phases_rad",
         "cost",
         "evaluations",
@@ -139,6 +140,11 @@ impl CoreEstimate {
         "posterior_cost",
         "nuisance",
         "next_acquisition",
+        "converged",
+        "support",
+        "supported",
+        "recommended",
+        "recommended_phases_rad",
     ];
 
     /// The estimated phases (rad) in (-pi, pi], zero circular mean: subtract them to correct.
@@ -284,8 +290,9 @@ impl CoreEstimate {
     }
 
     /// Per-element estimation only: the images cannot determine a phase per element (one
-    /// acquisition, or, without a prior, fewer masked pixels than phases). Then also `ambiguous`,
-    /// unless the prediction was kept.
+    /// acquisition, or, without a prior, images that determine too few combinations of phases
+    /// for the correction to be expected to beat the uncorrected beam or the group fit:
+    /// `support`). Then also `ambiguous`, unless the prediction was kept.
     #[getter]
     fn underdetermined(&self) -> bool {
         self.report.underdetermined
@@ -325,6 +332,41 @@ impl CoreEstimate {
     #[getter]
     fn next_acquisition(&self) -> Option<NextAcquisition> {
         self.report.suggestion.clone().map(NextAcquisition)
+    }
+
+    /// The search converged: False when it stopped at its evaluation or time limit (`stop`), so
+    /// that `phases_rad` is where it was stopped, not a minimum (True for a kept prediction).
+    #[getter]
+    fn converged(&self) -> bool {
+        self.report.converged()
+    }
+
+    /// Per element without a prior: what the images determine of the estimate and the focus of
+    /// the alternatives it is judged against; None otherwise.
+    #[getter]
+    fn support(&self) -> Option<EstimateSupport> {
+        self.report.support.clone().map(EstimateSupport)
+    }
+
+    /// Whether `phases_rad` is the correction to apply (`recommended == "estimate"`).
+    #[getter]
+    fn supported(&self) -> bool {
+        self.report.recommendation.kind == Recommended::Estimate
+    }
+
+    /// Which phases to apply: `"estimate"`; `"prediction"` (the prior as given) when an estimate
+    /// with a prior ends in `model_mismatch`; per element without a prior, `"uncorrected"` (zero
+    /// phases) or `"groups"` (the default-group fit on its elements) when the images do not
+    /// support the estimate or its search did not converge (see `support`).
+    #[getter]
+    fn recommended(&self) -> &'static str {
+        self.report.recommendation.kind.name()
+    }
+
+    /// The phases to apply (subtract), rad: those `recommended` names.
+    #[getter]
+    fn recommended_phases_rad<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.report.recommendation.phases.clone().into_pyarray(py)
     }
 
     /// The result as a dict of its attributes (the JSON `arfi estimate` writes).

@@ -87,9 +87,12 @@ def register(sub: Any) -> None:
                    "rad per element for one unit of each mode), 'std' (M prior standard deviations, in those units) and "
                    "optionally 'names' and 'units' (M strings each)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
-                   help="write the phases to subtract: the estimate, or, when an estimate with --prior ends in MODEL "
-                   "MISMATCH (the images are not explained), the prediction itself, moved along its fitted modes (registration, "
-                   "bone speed) when they were fitted (JSON 'recommended' says which)")
+                   help="write the phases to subtract, those JSON 'recommended' names: the estimate; when an estimate "
+                   "with --prior ends in MODEL MISMATCH (the images are not explained), the prediction itself, moved along "
+                   "its fitted modes (registration, bone speed) when they were fitted; per element without --prior, when "
+                   "the images do not support the estimate (they determine too few combinations of phases for its "
+                   "correction to beat none or the group fit) or its search did not converge, zeros (uncorrected) or the "
+                   "group fit on its elements")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
                    "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
@@ -126,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
              + (", moved along its fitted modes" if moved else "")
-             + "), ambiguity judged on the posterior" if e.prior_used else ""))
+             + "), ambiguity judged on the posterior" if e.prior_used else "")
+          + f"; recommended: {e.recommended}")
     if e.nuisance is not None:
         n = e.nuisance
         offsets = ", ".join(f"{b:+.3f}" for b in n.offset_rad)
@@ -139,18 +143,35 @@ def run(args: argparse.Namespace) -> int:
               f"other known phases, e.g. a defocus (--suggest), and estimate from both. The prediction leaves a misfit of "
               f"{e.misfit:.2f} x the noise expectation on this image"
               + (" (well above 1: the prediction, or the model, misses what the image shows)." if e.misfit > 1.2 else "."))
+    if not e.converged:
+        print(f"estimate: NOT CONVERGED: the search stopped at its {e.stop} ({e.evaluations} evaluations) before it "
+              f"converged: the phases are where it stopped, not a minimum"
+              + ("; not recommended (see below)." if e.recommended != "estimate" else
+                 " (--max-evaluations or --time-limit-s raise the limit)."))
     if e.underdetermined and not e.kept_prediction:
+        s = e.support
+        what = (f"the images determine about {s.determined_phases:.0f} combinations of phases, and the correction is "
+                f"expected to leave {s.expected_focus:.2f} of the ideal focus against {s.uncorrected_focus:.2f} uncorrected "
+                f"and {s.groups_focus:.2f} with the group fit" if s is not None else
+                "one acquisition cannot determine a phase per element")
         print(f"estimate: AMBIGUOUS: {len(e.phases_rad)} phases from {len(args.image)} image(s), {e.n_pixels} masked pixels, are "
-              f"underdetermined (one acquisition cannot determine a phase per element, nor fewer pixels than phases); add "
-              f"images taken with known diversity phases (--image with a sidecar), e.g. suggested_phases_rad.")
+              f"underdetermined ({what}); add images taken with known diversity phases (--image with a sidecar, "
+              f"preferably defocused: --suggest), or a prediction as prior (--prior).")
     elif e.ambiguous:
         where = ("the next acquisition below; " if e.next_acquisition is not None else "") + \
             f"suggested_phases_rad{' -> ' + args.suggest if args.suggest else ' in the JSON'}"
         print(f"estimate: AMBIGUOUS: {len(e.candidate_costs)} clearly different solutions fit within the noise; a "
               f"correction could leave as little as {e.worst_recovery:.2f} of the ideal focus. Acquire one more image "
               f"with the suggested known phases added ({where}).")
-    # With a prior, a fit the model cannot explain is no correction to apply: the prediction is the safer one.
-    use_prediction = e.model_mismatch and e.prior_used and prior is not None
+    # The library decides what to apply (recommended); the lines say why.
+    use_prediction = e.recommended == "prediction"
+    if e.recommended in ("uncorrected", "groups"):
+        which = ("no correction (zero phases)" if e.recommended == "uncorrected" else
+                 "the group fit (group_phases_rad on their elements)")
+        print(f"estimate: NOT SUPPORTED: this estimate is NOT to be applied: the images do not support it"
+              + (" and its search did not converge" if not e.converged else "")
+              + f"; the safer correction is {which}"
+              + (f", which is what {args.out_phases} holds" if args.out_phases else "") + ".")
     if use_prediction:
         which = "the prediction (--prior" + (", moved along its fitted modes" if moved else "") + ")"
         print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
@@ -168,9 +189,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimate: next acquisition: the focus shifted by ({x:+g}, {y:+g}, {z:+g}) mm (known phases -> {args.suggest or 'suggested_phases_rad in the JSON'}); "
               f"expected focus after the correction {nxt.expected_focus_now:.2f} of the ideal now, {nxt.expected_focus:.2f} "
               f"with that image (linearised posterior: ranks acquisitions, ignores twins)")
-    recommended = prior if use_prediction and prior is not None else e.phases_rad
     if args.out_phases:
-        save_npy(args.out_phases, recommended)
+        save_npy(args.out_phases, e.recommended_phases_rad)
     if args.suggest:
         save_npy(args.suggest, e.suggested_phases_rad)
     if args.report:
@@ -179,6 +199,8 @@ def run(args: argparse.Namespace) -> int:
         image, known = pairs[0]
         model = sim.arfi_image(e.phases_rad if known is None else sim.element_phases(e.phases_rad) + sim.element_phases(known))
         flags = [name for name, on in (("KEPT THE PREDICTION", e.kept_prediction), ("AMBIGUOUS", e.ambiguous or e.underdetermined),
+                                        ("NOT CONVERGED", not e.converged),
+                                        (f"NOT SUPPORTED (recommended: {e.recommended})", e.recommended in ("uncorrected", "groups")),
                                         (f"MODEL MISMATCH (misfit {e.misfit:.2f} x the noise)", e.model_mismatch)) if on]
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
                    "ambiguous": e.ambiguous, "model_mismatch": e.model_mismatch, "misfit": e.misfit,
@@ -189,8 +211,7 @@ def run(args: argparse.Namespace) -> int:
         prior_settings.update(modes_json(modes))
     if transmission is not None:
         prior_settings["prior_transmission"] = args.prior_transmission
-    finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total,
-                  "recommended": "prediction" if use_prediction else "estimate", "recommended_phases_rad": recommended})
+    finish(args, {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total})
     return 0
 
 

@@ -24,4 +24,5 @@ mod physics;
 mod prediction;
 mod prior;
 mod reciprocity;
+mod support;
 mod validation;

@@ -1,10 +1,12 @@
 //! The estimation workflow as one call: choose the method, estimate per group (on the per-pixel
 //! group kernels) or per element (on the element field basis, warm-started from the array's
 //! default groups), with or without a predicted aberration as prior, apply the limits, and assess
-//! the answer (ambiguity, misfit). What the CLI, the Python API and Rust users run. The group
-//! path is here, the per-element one in `per_element`.
+//! the answer (ambiguity, misfit, and the phases to apply). What the CLI, the Python API and Rust
+//! users run. The group path is here, the per-element one in `per_element`, the recommendation in
+//! `support`.
 
 mod per_element;
+mod support;
 
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
@@ -19,6 +21,7 @@ use std::sync::atomic::AtomicBool;
 
 use per_element::{element_prior, estimate_per_element};
 pub use per_element::{one_acquisition, REPEAT_TOLERANCE_RAD, VIEW_ROUNDS};
+pub use support::{converged, element_support, Recommendation, Recommended, Support, GROUPS_MARGIN};
 
 /// The optimiser.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -141,8 +144,10 @@ pub struct EstimateReport {
     /// The default-group warm start of a per-element estimate.
     pub group_phases: Option<Vec<f64>>,
     /// Per element, the images cannot determine a phase per element: one acquisition, or
-    /// (without a prior) fewer masked pixels than phases. The assessment is then marked
-    /// ambiguous, unless the prediction was kept.
+    /// (without a prior) images that determine too few combinations of phases for the
+    /// correction to be expected to beat the uncorrected beam or the group fit
+    /// ([`Support::determines`]). The assessment is then marked ambiguous, unless the prediction
+    /// was kept.
     pub underdetermined: bool,
     /// Per element with a prior from one acquisition: the estimate is the prediction itself,
     /// unsearched (see [`one_acquisition`]); `misfit` then measures the prediction against the
@@ -157,6 +162,37 @@ pub struct EstimateReport {
     pub nuisance: Option<FittedNuisance>,
     /// The next acquisition of a per-element estimate made with `suggest`.
     pub suggestion: Option<ShiftSuggestion>,
+    /// Per element without a prior: what the images determine and the focus of the
+    /// alternatives ([`element_support`]).
+    pub support: Option<Support>,
+    /// The phases to apply: the estimate; with a prior, the prediction when the model does not
+    /// explain the images (`assessment.mismatch`); per element without a prior, the uncorrected
+    /// beam or the group fit when the images do not support the estimate ([`Support`]).
+    pub recommendation: Recommendation,
+}
+
+impl EstimateReport {
+    /// Whether the search converged (it did not stop at its evaluation or time limit; a kept
+    /// prediction needs none).
+    pub fn converged(&self) -> bool {
+        converged(self.estimate.stop)
+    }
+}
+
+/// The phases to apply for an estimate `phases` (see [`EstimateReport::recommendation`]): with
+/// `prior` (as given) and a model `mismatch`, the prediction; without a prior, per element, the
+/// alternative of an unsupported estimate (`support`, with the default-group fit `groups` spread
+/// to the elements); else the estimate.
+fn recommend(phases: &[f64], prior: Option<&Prior>, mismatch: bool, support: Option<&Support>, groups: Option<&[f64]>) -> Recommendation {
+    let estimate = || Recommendation { kind: Recommended::Estimate, phases: phases.to_vec() };
+    match (prior, support) {
+        (Some(p), _) if mismatch => Recommendation { kind: Recommended::Prediction, phases: p.mean().to_vec() },
+        (None, Some(s)) if !s.supported() => match (s.alternative(), groups) {
+            (Recommended::Groups, Some(g)) => Recommendation { kind: Recommended::Groups, phases: g.to_vec() },
+            _ => Recommendation { kind: Recommended::Uncorrected, phases: vec![0.0; phases.len()] },
+        },
+        _ => estimate(),
+    }
 }
 
 /// Whether the simulation's groups are its elements, one each in order.
@@ -261,6 +297,7 @@ pub fn estimate_aberration_with(
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
     model.cost.fit_amplitude = request.fitted_nuisance().amplitude;
     let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
+    let recommendation = recommend(&estimate.phases, request.prior.as_ref(), assessment.mismatch, None, None);
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
         scale: model.cost.scale(&estimate.phases),
@@ -274,6 +311,8 @@ pub fn estimate_aberration_with(
         prior_used: prior.is_some(),
         nuisance: None,
         suggestion: None,
+        support: None,
+        recommendation,
     })
 }
 

@@ -21,7 +21,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use std::sync::atomic::AtomicBool;
 
-use super::{estimator, fit_groups, EstimateReport, EstimateRequest, Method, ELEMENT_EVALUATIONS, VIEW_ELEMENT_EVALUATIONS};
+use super::support::element_support;
+use super::{estimator, fit_groups, recommend, EstimateReport, EstimateRequest, Method, ELEMENT_EVALUATIONS, VIEW_ELEMENT_EVALUATIONS};
 
 /// The prior per element: as given, or spread from the groups (or the array's default groups)
 /// as known phases are ([`known_per_element`]).
@@ -160,7 +161,9 @@ fn merged(first: Estimate, later: Estimate) -> Estimate {
 /// ([`SmoothPosterior`]). With a prior and [`one_acquisition`] the prediction is kept,
 /// unsearched. The assessment is that of the group stage, or with a prior the element
 /// posterior's ([`element_posterior_assessment`]), which an ambiguous one completes with the next
-/// acquisition ([`suggest_focus_shift`]). `prior`: one predicted phase per element.
+/// acquisition ([`suggest_focus_shift`]). Without a prior the images' support of the estimate
+/// against the uncorrected beam and the group fit decides what to apply ([`element_support`]).
+/// `prior`: one predicted phase per element.
 pub(super) fn estimate_per_element(
     sim: &Simulation,
     measurements: &[Measurement],
@@ -221,6 +224,15 @@ pub(super) fn estimate_per_element(
         FittedNuisance { fitted: nuisance, scale: linear.scale, broadening_width_mm: w, shift_mm: shift, background: linear.background }
     });
     let n_pixels = cost.n_pixels();
+    // Without a prior: what the images determine, against the uncorrected beam and the group fit.
+    let group_elements = match &warm_start {
+        WarmStart::Groups { elements: g, .. } => Some(g.clone()),
+        WarmStart::Prediction(_) => None,
+    };
+    let support = match &group_elements {
+        Some(g) => Some(element_support(&cost, model.noise, &elements.phases, g, elements.stop)?),
+        None => None,
+    };
     let (group_phases, mut assessment) = match warm_start {
         WarmStart::Groups { groups, assessment, .. } => (Some(groups), assessment),
         WarmStart::Prediction(p) => {
@@ -228,8 +240,9 @@ pub(super) fn estimate_per_element(
         }
     };
     // One acquisition cannot determine a phase per element (a kept prediction says so on its
-    // own), nor, without a prior, can fewer masked pixels than phases.
-    let underdetermined = single_acquisition || (prior.is_none() && n_pixels < sim.n_elements());
+    // own), nor, without a prior, can images that determine too few combinations of phases for
+    // the correction to beat the alternatives (`Support`).
+    let underdetermined = single_acquisition || support.as_ref().is_some_and(|s| !s.determines());
     assessment.ambiguous |= underdetermined && !kept_prediction;
     // Misfit of the element fit itself (the group stage's cannot reach the noise on
     // element-level data).
@@ -257,6 +270,8 @@ pub(super) fn estimate_per_element(
     } else {
         None
     };
+    let recommendation =
+        recommend(&elements.phases, request.prior.as_ref(), assessment.mismatch, support.as_ref(), group_elements.as_deref());
     Ok(EstimateReport {
         image_cost,
         nuisance: fitted,
@@ -270,6 +285,8 @@ pub(super) fn estimate_per_element(
         kept_prediction,
         prior_used: prior.is_some(),
         suggestion,
+        support,
+        recommendation,
     })
 }
 
