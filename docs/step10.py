@@ -8,9 +8,10 @@ into the tutorial
 * after each command, its printed lines as ``# ...`` lines (replacing those there), and after each
   command that took a second or more its wall-clock time (``# 12 s``);
 * the rows of the table "drive through the patient's skull": the focal |p| at the target through
-  the patient's skull (``arfi.prediction.predict`` of ``patient.toml``: ``truth.pressure_with``)
-  for the reference steering minus no phases, ``prior.npy``, ``estimate.npy`` and ``truth.npy``,
-  and ``truth.optimal_pa``;
+  the patient's skull (``arfi.prediction.predict`` of ``patient.toml``: its ``skull_responses``)
+  for the clinic's drive, the prediction's reference steering minus no phases, ``prior.npy``,
+  ``estimate.npy`` and ``truth.npy`` (shifted from the patient's own reference steering to the
+  clinic's), and ``truth.optimal_pa``;
 * the figures the step embeds (``![..](figures/X.png)``), each copied from the file named in
   backquotes last before it (e.g. ``predict/predict_section.png``).
 
@@ -112,18 +113,26 @@ def shrink(codes: list[str]) -> list[str]:
 
 def focal_table(folder: Path) -> list[tuple[str, float, float]]:
     """:data:`TABLE_ROWS` measured at the target through the patient's skull (``patient.toml``)."""
+    import json
+
     import numpy as np
 
     from arfi.prediction import predict
     from arfi.scenario import Scenario
 
     truth = predict(Scenario.load(folder / "patient.toml"))
+    # The clinic drives the prediction's reference steering (the CT where it is registered) minus
+    # the phases; the patient's own prediction is relative to its own reference steering.
+    clinic = np.asarray(json.loads((folder / "prediction.json").read_text())["reference_steering_rad"])
     rows = []
     for label, phases in TABLE_ROWS:
         if phases == "optimal":
             pa = truth.optimal_pa
         else:
-            pa = truth.pressure_with(np.zeros(truth.skull_responses.size) if phases is None else np.load(folder / phases))
+            subtracted = np.zeros(clinic.size) if phases is None else np.load(folder / phases)
+            if phases == "truth.npy":
+                subtracted = subtracted + clinic - truth.reference_steering_rad
+            pa = float(np.abs(np.sum(truth.skull_responses * np.exp(1j * (clinic - subtracted)))))
         rows.append((label, pa, pa / truth.optimal_pa))
     return rows
 

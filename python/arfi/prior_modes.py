@@ -27,12 +27,11 @@ from numpy.typing import NDArray
 from arfi.estimation import wrap
 from arfi.simulation import Simulation
 
-#: Prior standard deviation of a registration's shift along each axis (mm) where the prediction
-#: gives its pose modes: head-frame and CT-to-MR registrations of stereotactic and MRgFUS
-#: workflows are typically good to 1-2 mm.
+#: A typical prior standard deviation of a registration's shift along each axis (mm): head-frame
+#: and CT-to-MR registrations of stereotactic and MRgFUS workflows are good to 1-2 mm.
 POSE_STD_MM = 1.5
 
-#: Prior standard deviation of a registration's turn about each axis (degrees): 1-2 degrees.
+#: A typical prior standard deviation of a registration's turn about each axis (degrees): 1-2.
 POSE_STD_DEG = 1.5
 
 #: Prior standard deviation (percent) of the CT conversion's bone sound speed: the porosity
@@ -115,15 +114,16 @@ class ModesResult:
         return d
 
 
-def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: float | None = POSE_STD_MM,
-                     pose_std_deg: float | None = POSE_STD_DEG,
+def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: float | None = None,
+                     pose_std_deg: float | None = None,
                      bone_speed_std_percent: float | None = BONE_SPEED_STD_PERCENT) -> list[PriorMode]:
     """The modes a prediction's JSON (``arfi predict --json``, or :meth:`Prediction.to_dict`)
     holds: its pose modes (``pose_sensitivity_rad_per_mm``/``_per_deg``) with the priors
     ``pose_std_mm`` and ``pose_std_deg``, and its bone-speed mode
     (``bone_speed_sensitivity_rad_per_percent``) with ``bone_speed_std_percent``. A std of None
-    or 0 leaves that kind out; a kind the JSON lacks is left out (:func:`require_modes` says
-    what a user asked for and is missing). Raises ValueError for malformed values."""
+    or 0 leaves that kind out (the pose by default: see ``arfi estimate --prior-pose-std-mm``;
+    :data:`POSE_STD_MM` and :data:`POSE_STD_DEG` are typical values); a kind the JSON lacks is
+    left out. Raises ValueError for malformed values."""
     modes: list[PriorMode] = []
     for key, std, names, unit in (("pose_sensitivity_rad_per_mm", pose_std_mm, POSE_NAMES[:3], "mm"),
                                   ("pose_sensitivity_rad_per_deg", pose_std_deg, POSE_NAMES[3:], "deg")):

@@ -157,7 +157,10 @@ impl CorePrediction {
     /// the other way, differenced over one grid cell, their weighted common phase removed.
     #[getter]
     fn pose_sensitivity_rad_per_mm<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        self.pose.as_ref().map(|p| PyArray2::from_vec2(py, &rows(&p.translation, 1e-3)).map_err(|e| invalid("pose", e.to_string()))).transpose()
+        self.pose
+            .as_ref()
+            .map(|p| PyArray2::from_vec2(py, &rows(&p.translation, 1e-3)).map_err(|e| invalid("pose", e.to_string())))
+            .transpose()
     }
 
     /// Per element, how `phases_rad` moves (rad) per degree that the head lies turned about the
@@ -166,7 +169,10 @@ impl CorePrediction {
     #[getter]
     fn pose_sensitivity_rad_per_deg<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
         let per_deg = 1f64.to_radians();
-        self.pose.as_ref().map(|p| PyArray2::from_vec2(py, &rows(&p.rotation, per_deg)).map_err(|e| invalid("pose", e.to_string()))).transpose()
+        self.pose
+            .as_ref()
+            .map(|p| PyArray2::from_vec2(py, &rows(&p.rotation, per_deg)).map_err(|e| invalid("pose", e.to_string())))
+            .transpose()
     }
 
     /// The skull's simulation the prediction marched (`predict(..., keep_simulation=True)`; else

@@ -69,19 +69,22 @@ def register(sub: Any) -> None:
     p.add_argument("--prior-bone-speed-std-percent", type=float, dest="prior_bone_speed_std_percent", metavar="P",
                    help="the CT conversion's bone sound speed may be off by about P percent (default 20 where the "
                    "--prior-transmission JSON of arfi predict holds bone_speed_sensitivity_rad_per_percent; 0: off). "
-                   "Fitted with the other modes of the prediction before the per-element fit (see --prior-pose-std-mm)")
+                   "Fitted before the per-element fit on the head with the CT's bone, with the other modes asked for "
+                   "(see --prior-pose-std-mm); the prior moves along the mode where the images support it")
     p.add_argument("--prior-pose-std-mm", type=float, dest="prior_pose_std_mm", metavar="S",
-                   help="the head may lie shifted by about S mm along each axis from where the CT is registered (default "
-                   "1.5 where the --prior-transmission JSON of arfi predict holds pose_sensitivity_rad_per_mm; 0: off). "
-                   "Before the per-element fit, the images fit the prediction's modes jointly (the registration's three "
-                   "shifts and three turns about the target, the bone speed, --prior-modes) on the head with the CT's "
-                   "bone, driven with the reference steering, the phases otherwise the prediction's (Gauss-Newton: one "
-                   "batch march of each image and its derivatives per iteration, a few iterations); the prior then "
-                   "moves along the modes by the fitted values, printed with their uncertainty. Needs --prior, a [ct] "
-                   "scenario and one phase per element")
-    p.add_argument("--prior-pose-std-deg", type=float, dest="prior_pose_std_deg", metavar="S",
-                   help="the head may lie turned by about S degrees about each axis through the target from where the CT "
-                   "is registered (default 1.5 where the JSON holds pose_sensitivity_rad_per_deg; 0: off)")
+                   help="also fit the registration: the head may lie shifted by about S mm along each axis from where the "
+                   "CT is registered (e.g. 1.5; needs the --prior-transmission JSON of arfi predict with "
+                   "pose_sensitivity_rad_per_mm, its default). Before the per-element fit, the images fit the prediction's "
+                   "modes jointly (the bone speed, these shifts, --prior-pose-std-deg's turns, --prior-modes) on the head "
+                   "with the CT's bone, driven with the reference steering, the phases otherwise the prediction's "
+                   "(Gauss-Newton: one batch march of each image and its derivative drives per iteration); the prior then "
+                   "moves along the modes by the fitted values, printed with their uncertainty, where the images support "
+                   "it (their chi-squared falls by more than the 95 %% point of noise alone). Off by default: on the head "
+                   "phantom three images do not determine a 1.5-2 mm registration error (docs/head.md), and each mode "
+                   "costs one march per image per iteration. Needs --prior, a [ct] scenario and one phase per element")
+    p.add_argument("--prior-pose-std-deg", type=float, dest="prior_pose_std_deg", metavar="A",
+                   help="also fit the registration's turns: the head may lie turned by about A degrees about each axis "
+                   "through the target (e.g. 1.5; needs pose_sensitivity_rad_per_deg in the JSON); see --prior-pose-std-mm")
     p.add_argument("--prior-modes", dest="prior_modes", metavar="M.npz",
                    help="more error modes of the prediction to fit with its own: a NumPy .npz with 'modes' (M x elements, "
                    "rad per element for one unit of each mode), 'std' (M prior standard deviations, in those units) and "
@@ -265,8 +268,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     try:
         modes = prior_modes.prediction_modes(
             prediction, len(prior),
-            pose_std_mm=prior_modes.POSE_STD_MM if args.prior_pose_std_mm is None else args.prior_pose_std_mm,
-            pose_std_deg=prior_modes.POSE_STD_DEG if args.prior_pose_std_deg is None else args.prior_pose_std_deg,
+            pose_std_mm=args.prior_pose_std_mm, pose_std_deg=args.prior_pose_std_deg,
             bone_speed_std_percent=(prior_modes.BONE_SPEED_STD_PERCENT if args.prior_bone_speed_std_percent is None
                                     else args.prior_bone_speed_std_percent))
         if args.prior_modes:
@@ -300,7 +302,8 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
                    "conversion and registration against the images (arfi diagnose)")
     elif not result.supported:
         verdict = (f": the images' chi-squared falls by only {result.evidence:.1f} (the 95 % point of noise alone with "
-                   f"{len(result.modes)} modes is higher): not supported by the images, the prior is NOT moved")
+                   f"{len(result.modes)} mode{'s' if len(result.modes) != 1 else ''} is higher): not supported by the images, "
+                   "the prior is NOT moved")
     else:
         verdict = f": the images' chi-squared falls by {result.evidence:.1f}; the prior moves along the modes by that much"
     print(f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "

@@ -55,7 +55,10 @@ fn the_joint_fit_finds_the_coefficients_the_images_were_made_with() {
     for (c, seed) in [(vec![0.8, -0.5, 0.3], 1), (vec![0.5, 0.4, -0.7], 2), (vec![-1.2, 0.6, 1.0], 3)] {
         let f = fit_modes(sim(), &g, &images(&g, &c, seed), None).unwrap();
         let std = f.std();
-        println!("truth {c:?}: fitted {:?} +- {std:?}, misfit {:.3} (at zero {:.2}), {} iterations", f.coefficients, f.misfit, f.misfit_at_zero, f.iterations);
+        println!(
+            "truth {c:?}: fitted {:?} +- {std:?}, misfit {:.3} (at zero {:.2}), {} iterations",
+            f.coefficients, f.misfit, f.misfit_at_zero, f.iterations
+        );
         for m in 0..3 {
             let pulled = c[m] / (1.0 + std[m] * std[m]);
             assert!((f.coefficients[m] - pulled).abs() < 3.0 * std[m] + 0.02, "mode {m}: truth {c:?}, {f:?}");

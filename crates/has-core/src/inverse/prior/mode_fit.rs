@@ -108,8 +108,7 @@ impl<'a> Setting<'a> {
     pub(super) fn new(sim: &'a Simulation, measurements: &'a [Measurement]) -> Result<Self> {
         let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
         let [u, v] = boxed.pixels.clone();
-        let known =
-            measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
+        let known = measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
         Ok(Setting {
             sim,
             measurements,

@@ -177,8 +177,7 @@ fn linearise(s: &Setting, modes: &[Vec<f64>], c: &[f64], cancel: Option<&AtomicB
     let n = sim.n_elements();
     let mut drives: Vec<Vec<C64>> = Vec::with_capacity(s.known.len() * (1 + modes.len()));
     for known in &s.known {
-        let base: Vec<C64> =
-            (0..n).map(|e| sim.drive(e, known[e] + modes.iter().zip(c).map(|(g, c)| c * g[e]).sum::<f64>())).collect();
+        let base: Vec<C64> = (0..n).map(|e| sim.drive(e, known[e] + modes.iter().zip(c).map(|(g, c)| c * g[e]).sum::<f64>())).collect();
         for g in modes {
             drives.push(base.iter().zip(g).map(|(v, g)| v * C64::new(0.0, *g)).collect());
         }
