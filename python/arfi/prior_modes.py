@@ -77,6 +77,7 @@ class ModesResult:
     #: exceeds the 95 % point of chi-squared with as many degrees of freedom as modes (the images
     #: support moving the prediction).
     evidence: float
+    threshold: float
     supported: bool
     seconds: float
     extra: dict[str, Any] = field(default_factory=dict)
@@ -106,6 +107,7 @@ class ModesResult:
                       for m, v, s in zip(self.modes, self.values, self.std)],
             "scale": self.scale, "misfit": self.misfit, "misfit_at_zero": self.misfit_at_zero, "n_pixels": self.n_pixels,
             "iterations": self.iterations, "converged": self.converged, "evidence_chi2": self.evidence,
+            "threshold_chi2": self.threshold,
             "supported": self.supported, "seconds": self.seconds,
         }
         pose = self.pose()
@@ -174,7 +176,7 @@ def _matrix(values: Any, name: str, n_elements: int) -> NDArray[np.float64]:
     if a.ndim == 1:
         a = a[None, :]
     if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] != n_elements:
-        raise ValueError(f"{name}: must hold rows of {n_elements} values (one per element), got shape {a.shape}")
+        raise ValueError(f"{name}: must hold {n_elements} finite numbers per row (one per element), got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or infinite values")
     return a
@@ -200,7 +202,7 @@ def fit_prior_modes(skull: Simulation, images: list[NDArray[np.float64]], known:
     return ModesResult(modes=modes, values=coefficients * prior_std, std=np.asarray(fit.std) * prior_std, prior=moved,
                        scale=fit.scale, misfit=fit.misfit, misfit_at_zero=fit.misfit_at_zero, n_pixels=fit.n_pixels,
                        iterations=fit.iterations, converged=fit.converged, at_bound=list(fit.at_bound),
-                       evidence=fit.evidence, supported=fit.supported,
+                       evidence=fit.evidence, threshold=fit.threshold, supported=fit.supported,
                        seconds=time.perf_counter() - t)
 
 

@@ -116,7 +116,7 @@ def test_estimate_fits_a_users_mode_with_the_predictions_own(head, tmp_path, cap
     out = capsys.readouterr().out
     line = next(ln for ln in out.splitlines() if "prediction's modes" in ln)
     print(line)
-    assert "head shifted" in line and "thickness" in line and "the prior moves along the modes" in line
+    assert "head shifted" in line and "thickness" in line and "estimate: prior moved along the modes" in out
     fit = json.loads(js.read_text())["prior_modes_fit"]
     thickness = next(m for m in fit["modes"] if m["name"] == "thickness")
     assert abs(thickness["value"] - 1.2 / (1 + thickness["std"] ** 2)) < 3 * thickness["std"], thickness
@@ -159,7 +159,7 @@ def test_bad_modes_are_one_line_and_exit_2_with_nothing_written(head, tmp_path, 
     err = capsys.readouterr().err.strip()
     print(err)
     assert code == 2 and len(err.splitlines()) == 1 and not out.exists() and not js.exists(), (code, err)
-    expected = {"wrong_length": "rows of 256", "nan": "NaN", "negative_std": "'std'", "missing": "no such file",
+    expected = {"wrong_length": "256 finite numbers per row", "nan": "NaN", "negative_std": "'std'", "missing": "no such file",
                 "no_pose": "pose_sensitivity_rad_per_mm", "negative_pose_std": ">= 0"}[case]
     assert expected in err and ("--prior-modes" in err or "--prior-pose-std-mm" in err), err
 

@@ -146,8 +146,15 @@ impl CoreModesFit {
         self.0.evidence
     }
 
-    /// Whether `evidence` exceeds the 95 % point of chi-squared with as many degrees of freedom
-    /// as modes: the images support moving the prediction along them.
+    /// The 95 % point of chi-squared with as many degrees of freedom as modes, which `evidence`
+    /// must exceed.
+    #[getter]
+    fn threshold(&self) -> f64 {
+        self.0.threshold
+    }
+
+    /// Whether `evidence` exceeds `threshold`: the images support moving the prediction along
+    /// the modes.
     #[getter]
     fn supported(&self) -> bool {
         self.0.supported

@@ -69,6 +69,13 @@ pub fn pearson(a: &[f64], b: &[f64]) -> f64 {
     sab / (saa * sbb).sqrt()
 }
 
+/// Upper 95 % point of chi² with `k` degrees of freedom (Wilson–Hilferty, within 1 % for k ≥ 3).
+pub fn chi2_95(k: usize) -> f64 {
+    let k = k.max(1) as f64;
+    let z = 1.644_853_626_951_472_2;
+    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

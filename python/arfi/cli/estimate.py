@@ -131,7 +131,6 @@ def run(args: argparse.Namespace) -> int:
           f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
-             + (", moved along its fitted modes" if moved else "")
              + "), ambiguity judged on the posterior" if e.prior_used else "")
           + f"; recommended: {e.recommended}")
     if e.nuisance is not None:
@@ -276,8 +275,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     except FileNotFoundError as e:
         raise UsageError(f"--prior-modes: {e}") from None
     except ValueError as e:
-        raise UsageError(f"{'--prior-modes' if args.prior_modes and str(args.prior_modes) in str(e) else '--prior-transmission'}: "
-                         f"{e}") from None
+        raise UsageError(f"{option_of(str(e), args, stds)}: {e}") from None
     if not modes:
         return None
     if scenario.to_dict().get("ct") is None:
@@ -297,20 +295,32 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     _core.release_freed()
     at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]
     result.extra["prior_moved"] = result.supported and not at_edge
-    if at_edge:
-        verdict = (f": {', '.join(at_edge)} at the fit's end (four prior spreads): the prior is NOT moved; check the CT's "
-                   "conversion and registration against the images (arfi diagnose)")
-    elif not result.supported:
-        verdict = (f": the images' chi-squared falls by only {result.evidence:.1f} (the 95 % point of noise alone with "
-                   f"{len(result.modes)} mode{'s' if len(result.modes) != 1 else ''} is higher): not supported by the images, "
-                   "the prior is NOT moved")
-    else:
-        verdict = f": the images' chi-squared falls by {result.evidence:.1f}; the prior moves along the modes by that much"
     print(f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "
           f"({result.misfit_at_zero:.2f} with the prediction as it is) over {result.n_pixels} pixels, {result.iterations} "
           f"iterations{'' if result.converged else ' (not converged: the last step still lowered the cost)'}, the model "
-          f"with bone built and marched in {result.seconds:.1f} s{verdict}")
+          f"with bone built and marched in {result.seconds:.1f} s; the images' chi-squared falls by {result.evidence:.1f} "
+          f"({result.threshold:.1f} needed to move the prior: the 95 % point of noise alone, as many degrees of freedom as "
+          f"modes)")
+    if at_edge:
+        print(f"estimate: PRIOR NOT MOVED: {', '.join(at_edge)} at the fit's end (four prior spreads): check the CT's "
+              "conversion and registration against the images (arfi diagnose)")
+    elif not result.supported:
+        print("estimate: PRIOR NOT MOVED: the images do not support it (the modes explain no more of them than as many "
+              "free coefficients explain of noise)")
+    else:
+        print("estimate: prior moved along the modes by the fitted values")
     return result
+
+
+def option_of(message: str, args: argparse.Namespace, stds: dict[str, float | None]) -> str:
+    """The option a malformed mode belongs to: the one that asked for it, else the file it came from."""
+    if args.prior_modes and str(args.prior_modes) in message:
+        return "--prior-modes"
+    for option, key in (("--prior-bone-speed-std-percent", "bone_speed"), ("--prior-pose-std-mm", "pose_sensitivity_rad_per_mm"),
+                        ("--prior-pose-std-deg", "pose_sensitivity_rad_per_deg")):
+        if stds[option] and message.startswith(key):
+            return option
+    return "--prior-transmission"
 
 
 def modes_text(r: prior_modes.ModesResult) -> str:

@@ -291,9 +291,9 @@ fn sensitivity(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
     Ok(phase_change(moved, h)?.into_iter().map(|d| d / (100.0 * BONE_SPEED_STEP)).collect())
 }
 
-/// Each element's phase change (rad) from responses `h` to `moved`, `wrap(arg(moved_e · conj(h_e))
-/// - c)`, with the common phase `c = arg Σ_e moved_e · conj(h_e)` removed (weighted by the
-/// responses: the images see phase differences only).
+/// Each element's phase change (rad) from responses `h` to `moved`,
+/// `wrap(arg(moved_e · conj(h_e)) − c)`, with the common phase `c = arg Σ_e moved_e · conj(h_e)`
+/// removed (weighted by the responses: the images see phase differences only).
 fn phase_change(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
     if moved.len() != h.len() {
         return Err(HasError::invalid("prediction", format!("has {} elements; the scenario has {}", h.len(), moved.len())));

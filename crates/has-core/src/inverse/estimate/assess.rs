@@ -51,12 +51,7 @@ pub struct Assessment {
     pub mismatch: bool,
 }
 
-/// Upper 95 % point of chi² with `k` degrees of freedom (Wilson–Hilferty, within 1 % for k ≥ 3).
-pub fn chi2_95(k: usize) -> f64 {
-    let k = k.max(1) as f64;
-    let z = 1.644_853_626_951_472_2;
-    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
-}
+pub use crate::numeric::chi2_95;
 
 impl Estimate {
     /// Looks for clearly different solutions that fit within the noise: the end points of every

@@ -29,8 +29,8 @@
 use super::mode_fit::Setting;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Measurement;
-use crate::inverse::estimate::chi2_95;
 use crate::inverse::linear::spd_inverse;
+use crate::numeric::chi2_95;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 use num_complex::Complex64 as C64;
@@ -71,8 +71,10 @@ pub struct ModesFit {
     pub converged: bool,
     /// The fall of the image cost `χ²` from the prediction as it is (`c = 0`) to the fit.
     pub evidence: f64,
-    /// Whether `evidence` exceeds the 95 % point of `χ²(M)`: the images support moving the
-    /// prediction along the modes (see the module docs).
+    /// The 95 % point of `χ²(M)` that `evidence` must exceed.
+    pub threshold: f64,
+    /// Whether `evidence` exceeds `threshold`: the images support moving the prediction along the
+    /// modes (see the module docs).
     pub supported: bool,
     /// Per coefficient, whether it ended at the fit's bound ([`REACH`] prior standard deviations):
     /// the images put it at least that far out, or the linearised modes do not hold there.
@@ -155,6 +157,7 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
     let evidence = chi2_at_zero - at.chi2;
     Ok(ModesFit {
         evidence,
+        threshold: chi2_95(m),
         supported: evidence > chi2_95(m),
         at_bound: at.c.iter().map(|c| c.abs() >= REACH).collect(),
         coefficients: at.c.clone(),
