@@ -177,3 +177,31 @@ def test_read_modes_names_what_is_wrong(tmp_path):
     (tmp_path / "p.npz").write_text("not numpy")
     with pytest.raises(ValueError, match="p.npz"):
         prior_modes.read_modes(tmp_path / "p.npz", 4)
+
+
+def test_simulate_steering_from_a_prediction(head, tmp_path, capsys):
+    # --steering-from drives the prediction's reference steering: the image of the head as read
+    # (with bone, steered without it) driven so equals the one its own steering gives, since that
+    # steering is the prediction's reference (to float32 rounding of the written image); a missing
+    # file, a JSON without the steering or one predicted for another target: one line, exit 2,
+    # nothing written.
+    d = json.loads((head / "prediction.json").read_text())
+    text = (head / "head.toml").read_text().replace("[ct]\n", "[ct]\nsteer_without_bone = true\n")
+    (head / "steered.toml").write_text(text)  # beside the CT it names
+    out = [tmp_path / f"{k}.nii.gz" for k in range(2)]
+    assert main(["simulate", "--scenario", str(head / "steered.toml"), "--noise-rad", "0", "--out", str(out[0])]) == 0
+    assert main(["simulate", "--scenario", str(head / "steered.toml"), "--steering-from", str(head / "prediction.json"),
+                 "--noise-rad", "0", "--out", str(out[1])]) == 0
+    from arfi.io import read_arfi_image
+
+    a, b = (read_arfi_image(p)[0] for p in out)
+    assert np.allclose(a, b, atol=1e-5, equal_nan=True)
+    capsys.readouterr()
+    (tmp_path / "other.json").write_text(json.dumps({**d, "target_mm": [0.0, 0.0, 100.0]}))
+    (tmp_path / "bare.json").write_text(json.dumps({"target_mm": d["target_mm"]}))
+    for bad, says in ((tmp_path / "none.json", "no such file"), (tmp_path / "other.json", "predicted for"),
+                      (tmp_path / "bare.json", "reference_steering_rad")):
+        target = tmp_path / "x.nii.gz"
+        assert main(["simulate", "--scenario", str(head / "head.toml"), "--steering-from", str(bad), "--out", str(target)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--steering-from" in err and says in err and not target.exists(), err
