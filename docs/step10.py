@@ -204,7 +204,8 @@ def form(line: str) -> str:
 
 #: Lines a command prints only in some cases (an estimate's warnings, a hotter place than the
 #: focus): the size may change whether they appear, so the form comparison leaves them out.
-CONDITIONAL = re.compile(r"^(estimate: (AMBIGUOUS|MODEL MISMATCH|KEPT THE PREDICTION|next acquisition|PRIOR NOT MOVED|prior moved)"
+CONDITIONAL = re.compile(r"^(estimate: (AMBIGUOUS|MODEL MISMATCH|KEPT THE PREDICTION|next acquisition|PRIOR NOT MOVED|prior moved"
+                         r"|NOT CONVERGED|NOT SUPPORTED)"
                          r"|field: hottest)")
 
 

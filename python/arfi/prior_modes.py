@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -103,8 +104,8 @@ class ModesResult:
     def to_dict(self) -> dict[str, Any]:
         """The JSON of ``arfi estimate``'s ``prior_modes_fit``."""
         d: dict[str, Any] = {
-            "modes": [{"name": m.name, "unit": m.unit, "value": float(v), "std": float(s), "prior_std": m.std}
-                      for m, v, s in zip(self.modes, self.values, self.std)],
+            "modes": [{"name": m.name, "unit": m.unit, "value": float(v), "std": float(s), "prior_std": m.std,
+                       "at_bound": bool(b)} for m, v, s, b in zip(self.modes, self.values, self.std, self.at_bound)],
             "scale": self.scale, "misfit": self.misfit, "misfit_at_zero": self.misfit_at_zero, "n_pixels": self.n_pixels,
             "iterations": self.iterations, "converged": self.converged, "evidence_chi2": self.evidence,
             "threshold_chi2": self.threshold,
@@ -129,6 +130,8 @@ def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: f
     modes: list[PriorMode] = []
     for key, std, names, unit in (("pose_sensitivity_rad_per_mm", pose_std_mm, POSE_NAMES[:3], "mm"),
                                   ("pose_sensitivity_rad_per_deg", pose_std_deg, POSE_NAMES[3:], "deg")):
+        if std is not None and not (np.isfinite(std) and std >= 0):
+            raise ValueError(f"the prior std of {key}: must be a finite number >= 0, got {std}")
         if not std or key not in prediction:
             continue
         rows = _matrix(prediction[key], key, n_elements)
@@ -136,6 +139,8 @@ def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: f
             raise ValueError(f"{key}: must hold three rows (x, y, z), got {rows.shape[0]}")
         modes += [PriorMode(n, unit, r, float(std)) for n, r in zip(names, rows)]
     key = "bone_speed_sensitivity_rad_per_percent"
+    if bone_speed_std_percent is not None and not (np.isfinite(bone_speed_std_percent) and bone_speed_std_percent >= 0):
+        raise ValueError(f"the prior std of {key}: must be a finite number >= 0, got {bone_speed_std_percent}")
     if bone_speed_std_percent and key in prediction:
         g = _matrix([prediction[key]], key, n_elements)[0]
         modes.append(PriorMode("bone_speed", "%", g, float(bone_speed_std_percent)))
@@ -151,14 +156,17 @@ def read_modes(path: str | Path, n_elements: int) -> list[PriorMode]:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such file")
     try:
-        with np.load(p, allow_pickle=False) as z:
+        loaded = np.load(p, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ValueError(f"{p}: is a single array, not a NumPy .npz of 'modes' and 'std'")
+        with loaded as z:
             if "modes" not in z or "std" not in z:
                 raise ValueError(f"{p}: needs arrays 'modes' (M x {n_elements}, rad per unit) and 'std' (M prior stds)")
             rows = _matrix(z["modes"], f"{p}: modes", n_elements)
             std = np.asarray(z["std"], dtype=np.float64).reshape(-1)
             names = [str(n) for n in z["names"]] if "names" in z else [f"mode_{m}" for m in range(len(rows))]
             units = [str(u) for u in z["units"]] if "units" in z else ["unit"] * len(rows)
-    except (OSError, ValueError, TypeError) as e:
+    except (OSError, ValueError, TypeError, zipfile.BadZipFile, EOFError) as e:
         raise ValueError(str(e) if str(p) in str(e) else f"{p}: not a NumPy .npz of modes ({e})") from None
     if std.shape != (len(rows),) or not np.all(np.isfinite(std)) or np.any(std <= 0):
         raise ValueError(f"{p}: 'std' must hold {len(rows)} finite numbers > 0 (one prior std per mode), got {std.tolist()}")

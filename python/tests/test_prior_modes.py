@@ -205,3 +205,20 @@ def test_simulate_steering_from_a_prediction(head, tmp_path, capsys):
         assert main(["simulate", "--scenario", str(head / "head.toml"), "--steering-from", str(bad), "--out", str(target)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "--steering-from" in err and says in err and not target.exists(), err
+
+
+def test_predict_leaves_the_pose_modes_out_where_the_array_cannot_move(tmp_path, capsys):
+    # The phantom in the default planar array: its elements lie in the source plane, where a
+    # turned element would cross it. By default `arfi predict --json` gives no pose modes there
+    # (and succeeds); asked for them, one line and exit 2, nothing written.
+    assert main(["phantom", "--out", str(tmp_path / "h.nii.gz"), "--scenario-out", str(tmp_path / "h.toml"), "--voxel-mm",
+                 "2", "--seed", "2"]) == 0
+    js = tmp_path / "p.json"
+    assert main(["predict", "--scenario", str(tmp_path / "h.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js),
+                 "--no-focal-metrics"]) == 0
+    assert "pose_sensitivity_rad_per_mm" not in json.loads(js.read_text())
+    capsys.readouterr()
+    assert main(["predict", "--scenario", str(tmp_path / "h.toml"), "--out", str(tmp_path / "q.npy"), "--json",
+                 str(tmp_path / "q.json"), "--no-focal-metrics", "--pose-sensitivity"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "planar array" in err and not (tmp_path / "q.npy").exists(), err

@@ -85,33 +85,6 @@ def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
     return values, target
 
 
-def read_bone_speed_sensitivity(path: str | None, n_elements: int, required: bool) -> np.ndarray | None:
-    """The per-element bone speed sensitivity (rad per percent) in the JSON of ``arfi predict``
-    given as ``--prior-transmission``, for ``--prior-bone-speed-std-percent``; None when that file
-    holds none (or not ``n_elements`` finite values) and ``required`` is false."""
-    name = "--prior-bone-speed-std-percent"
-    make = "arfi predict --bone-speed-sensitivity --json"
-    if path is None or not path.endswith(".json"):
-        if not required:
-            return None
-        raise UsageError(f"{name}: needs --prior-transmission with the JSON of {make}")
-    d = json.loads(Path(path).read_text(encoding="utf-8"))  # read_transmission has read it already
-    if "bone_speed_sensitivity_rad_per_percent" not in d:
-        if not required:
-            return None
-        raise UsageError(f"{name}: {path} holds no 'bone_speed_sensitivity_rad_per_percent': make it with {make}")
-    try:
-        values = np.asarray(d["bone_speed_sensitivity_rad_per_percent"], dtype=np.float64)
-    except (ValueError, TypeError):
-        values = np.empty(0)
-    if values.shape != (n_elements,) or not np.all(np.isfinite(values)):
-        if not required:
-            return None
-        raise UsageError(f"{name}: {path}: 'bone_speed_sensitivity_rad_per_percent' must hold {n_elements} finite numbers "
-                         f"(one per element)")
-    return values
-
-
 def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Writes ``--json`` when asked."""
     if args.json:

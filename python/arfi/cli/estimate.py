@@ -270,12 +270,13 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
             pose_std_mm=args.prior_pose_std_mm, pose_std_deg=args.prior_pose_std_deg,
             bone_speed_std_percent=(prior_modes.BONE_SPEED_STD_PERCENT if args.prior_bone_speed_std_percent is None
                                     else args.prior_bone_speed_std_percent))
-        if args.prior_modes:
-            modes += prior_modes.read_modes(args.prior_modes, len(prior))
-    except FileNotFoundError as e:
-        raise UsageError(f"--prior-modes: {e}") from None
     except ValueError as e:
-        raise UsageError(f"{option_of(str(e), args, stds)}: {e}") from None
+        raise UsageError(f"{option_of(str(e), stds)}: {e}") from None
+    if args.prior_modes:
+        try:
+            modes += prior_modes.read_modes(args.prior_modes, len(prior))
+        except (FileNotFoundError, ValueError) as e:
+            raise UsageError(f"--prior-modes: {e}") from None
     if not modes:
         return None
     if scenario.to_dict().get("ct") is None:
@@ -297,7 +298,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     result.extra["prior_moved"] = result.supported and not at_edge
     print(f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "
           f"({result.misfit_at_zero:.2f} with the prediction as it is) over {result.n_pixels} pixels, {result.iterations} "
-          f"iterations{'' if result.converged else ' (not converged: the last step still lowered the cost)'}, the model "
+          f"iterations{'' if result.converged else ' (not converged: the iterations ran out or a step failed)'}, the model "
           f"with bone built and marched in {result.seconds:.1f} s; the images' chi-squared falls by {result.evidence:.1f} "
           f"({result.threshold:.1f} needed to move the prior: the 95 % point of noise alone, as many degrees of freedom as "
           f"modes)")
@@ -312,10 +313,9 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     return result
 
 
-def option_of(message: str, args: argparse.Namespace, stds: dict[str, float | None]) -> str:
-    """The option a malformed mode belongs to: the one that asked for it, else the file it came from."""
-    if args.prior_modes and str(args.prior_modes) in message:
-        return "--prior-modes"
+def option_of(message: str, stds: dict[str, float | None]) -> str:
+    """The option a malformed mode of the prediction belongs to: the one that asked for it, else
+    the file it came from."""
     for option, key in (("--prior-bone-speed-std-percent", "bone_speed"), ("--prior-pose-std-mm", "pose_sensitivity_rad_per_mm"),
                         ("--prior-pose-std-deg", "pose_sensitivity_rad_per_deg")):
         if stds[option] and message.startswith(key):

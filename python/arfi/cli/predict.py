@@ -44,7 +44,8 @@ def register(sub: Any) -> None:
                         "pose_sensitivity_rad_per_deg, rows x, y, z): the registration modes arfi estimate fits to the "
                         "images with the bone speed before its per-element fit. The moved head is the registered one seen "
                         "by the array moved the other way: three more transposed marches through the skull, no plan. "
-                        "Default: on with --json for a curved array; --no-pose-sensitivity skips it")
+                        "Default: on with --json for a hemisphere or a bowl of elements (a planar array's elements lie in the "
+                        "source plane, a single bowl has one element); --no-pose-sensitivity skips it")
     p.add_argument("--focal-metrics", action=argparse.BooleanOptionalAction, default=None, dest="focal_metrics",
                    help="also march the uncorrected, straight-ray CT steering and corrected beams through the skull "
                         "and give each one's focal metrics in 3-D around the target: the focal peak and its distance "
@@ -69,8 +70,9 @@ def run(args: argparse.Namespace) -> int:
     if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
         sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
     pose = args.pose_sensitivity
-    if pose is None:  # by default for the JSON, where the array stands before its source plane
-        pose = args.json is not None and scenario.to_dict()["transducer"].get("kind") != "planar-quadrants"
+    if pose is None:  # by default for the JSON, for the curved arrays of elements (before their source plane)
+        t = scenario.to_dict()["transducer"]
+        pose = args.json is not None and (t.get("kind") == "hemisphere" or (t.get("kind") == "bowl" and "elements" in t))
     metrics_wanted = args.focal_metrics
     if metrics_wanted is None:
         metrics_wanted = args.json is not None or bool(args.report)

@@ -45,14 +45,15 @@ def run(args: argparse.Namespace) -> int:
     out = args.out
     arfi_image_path(out)  # before the simulation
     t = time.perf_counter()
+    steering_json = read_steering(args.steering_from) if args.steering_from else None  # before the simulation
     sim = Simulation(load_scenario(args))
     aberration = read_optional_phases(args.phases, "--phases")
     known = read_optional_phases(args.known_phases, "--known-phases")
     if args.focus_shift_mm is not None:
         shift = sim.focus_shift_phases(args.focus_shift_mm, "--focus-shift-mm")
         known = shift if known is None else sim.element_phases(known, "--known-phases") + shift
-    if args.steering_from:
-        steering = clinic_steering(args.steering_from, sim)
+    if steering_json is not None:
+        steering = clinic_steering(args.steering_from, steering_json, sim)
         aberration = steering if aberration is None else sim.element_phases(aberration, "--phases") + steering
     total = None
     for p in (aberration, known):
@@ -80,9 +81,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def clinic_steering(path: str, sim: Simulation) -> np.ndarray:
-    """The phases that turn ``sim``'s own steering into the reference steering of the prediction
-    JSON at ``path`` (``--steering-from``), per element."""
+def read_steering(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """The reference steering (rad) and target (mm) of the prediction JSON at ``path``
+    (``--steering-from``), checked to be finite numbers."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"--steering-from: {p}: no such file")
@@ -93,9 +94,18 @@ def clinic_steering(path: str, sim: Simulation) -> np.ndarray:
     except (ValueError, KeyError, TypeError) as e:
         raise UsageError(f"--steering-from: {p}: not the JSON of arfi predict (no 'reference_steering_rad' and "
                          f"'target_mm': {e})") from None
-    if steering.shape != (sim.n_elements,) or not np.all(np.isfinite(steering)):
-        raise UsageError(f"--steering-from: {p}: 'reference_steering_rad' must hold {sim.n_elements} finite numbers")
-    if target.shape != (3,) or np.linalg.norm(target - sim.focus_mm) > 0.5:
-        raise UsageError(f"--steering-from: {p}: predicted for {target.tolist()} mm, but the scenario focuses at "
+    if steering.ndim != 1 or not np.all(np.isfinite(steering)) or target.shape != (3,) or not np.all(np.isfinite(target)):
+        raise UsageError(f"--steering-from: {p}: 'reference_steering_rad' and 'target_mm' must be finite numbers")
+    return steering, target
+
+
+def clinic_steering(path: str, steering_json: tuple[np.ndarray, np.ndarray], sim: Simulation) -> np.ndarray:
+    """The phases that turn ``sim``'s own steering into the reference steering of the prediction
+    JSON at ``path`` (``--steering-from``), per element."""
+    steering, target = steering_json
+    if steering.shape != (sim.n_elements,):
+        raise UsageError(f"--steering-from: {path}: 'reference_steering_rad' must hold {sim.n_elements} values")
+    if not np.linalg.norm(target - sim.focus_mm) <= 0.5:
+        raise UsageError(f"--steering-from: {path}: predicted for {target.tolist()} mm, but the scenario focuses at "
                          f"{np.round(sim.focus_mm, 1).tolist()} mm")
     return steering - sim.steering_phases_rad

@@ -85,8 +85,14 @@ pub fn moved_head_responses(sim: &Simulation, target: [f64; 3], pose: &Pose, thr
     let r = &pose.rotation;
     let inverse: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| r[j][i]));
     let back: [f64; 3] = std::array::from_fn(|i| -(0..3).map(|j| inverse[i][j] * pose.translation[j]).sum::<f64>());
+    if sim.transducer.is_planar() {
+        return Err(HasError::invalid(
+            "transducer",
+            "a planar array's elements lie in its source plane: the pose modes need a curved array before it",
+        ));
+    }
     let moved = sim.transducer.moved(&inverse, target, back)?;
-    if moved.elements.iter().any(|e| e.z_max() >= sim.grid.z0) || sim.transducer.is_planar() {
+    if moved.elements.iter().any(|e| e.z_max() >= sim.grid.z0) {
         return Err(HasError::invalid(
             "pose",
             "moves an element onto the source plane: moved heads need an array before its plane (a curved array), moved less than the half wavelength between them",

@@ -97,9 +97,14 @@ pub const GROUPS_MARGIN: f64 = 0.2;
 
 impl Support {
     /// Whether the images determine the estimate well enough for its correction to be expected
-    /// to leave at least the focus of either alternative.
+    /// to leave at least the focus of the alternative that would be recommended instead
+    /// ([`Support::alternative`]): rejecting it for another would not apply that other.
     pub fn determines(&self) -> bool {
-        self.expected_focus >= self.uncorrected_focus.max(self.groups_focus)
+        let instead = match self.alternative() {
+            Recommended::Groups => self.groups_focus,
+            _ => self.uncorrected_focus,
+        };
+        self.expected_focus >= instead
     }
 
     /// Whether the estimate is the one to apply: determined and converged.
@@ -157,7 +162,10 @@ mod tests {
         assert!(!support(0.9, 0.5, 0.6, false).supported());
         assert!(support(0.9, 0.5, 0.6, false).determines());
         assert!(!support(0.05, 0.5, 0.3, true).supported());
-        assert!(!support(0.55, 0.5, 0.6, true).supported());
+        // Judged against the alternative it would give way to: the uncorrected beam here (the
+        // group fit is not clearly above it), which the estimate beats; the group fit there.
+        assert!(support(0.55, 0.5, 0.6, true).supported());
+        assert!(!support(0.55, 0.3, 0.6, true).supported());
     }
 
     #[test]
