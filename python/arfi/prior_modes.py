@@ -15,10 +15,9 @@ skull thickness scale) enters the same way (:func:`read_modes`).
 
 from __future__ import annotations
 
-import json
 import time
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +80,12 @@ class ModesResult:
     threshold: float
     supported: bool
     seconds: float
-    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def prior_moved(self) -> bool:
+        """Whether the prediction moves along the modes: where the images support the fit and no
+        mode ended at its bound."""
+        return self.supported and not any(self.at_bound)
 
     def value(self, name: str) -> tuple[float, float] | None:
         """The fitted value and standard deviation of the mode ``name``, if fitted."""
@@ -109,7 +113,7 @@ class ModesResult:
             "scale": self.scale, "misfit": self.misfit, "misfit_at_zero": self.misfit_at_zero, "n_pixels": self.n_pixels,
             "iterations": self.iterations, "converged": self.converged, "evidence_chi2": self.evidence,
             "threshold_chi2": self.threshold,
-            "supported": self.supported, "seconds": self.seconds,
+            "supported": self.supported, "prior_moved": self.prior_moved, "seconds": self.seconds,
         }
         pose = self.pose()
         if pose is not None:
@@ -212,14 +216,3 @@ def fit_prior_modes(skull: Simulation, images: list[NDArray[np.float64]], known:
                        iterations=fit.iterations, converged=fit.converged, at_bound=list(fit.at_bound),
                        evidence=fit.evidence, threshold=fit.threshold, supported=fit.supported,
                        seconds=time.perf_counter() - t)
-
-
-def read_prediction_json(path: str | Path) -> dict[str, Any]:
-    """The JSON of ``arfi predict`` at ``path`` as a dict (ValueError when it is not JSON)."""
-    try:
-        d = json.loads(Path(path).read_text(encoding="utf-8"))
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not JSON ({e})") from None
-    if not isinstance(d, dict):
-        raise ValueError(f"{path}: not the JSON of arfi predict")
-    return d

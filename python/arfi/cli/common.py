@@ -58,6 +58,21 @@ def read_optional_phases(path: str | None, name: str) -> np.ndarray | None:
     return None if path is None else read_phases(path, name)
 
 
+def prediction_json(path: str, option: str) -> dict[str, Any]:
+    """The JSON of ``arfi predict`` given as ``option``, as a dict: FileNotFoundError when there is
+    no such file, UsageError (naming the option) when it is not a JSON object."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{option}: {p}: no such file")
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except ValueError as e:
+        raise UsageError(f"{option}: {p}: not the JSON of arfi predict ({e})") from None
+    if not isinstance(d, dict):
+        raise UsageError(f"{option}: {p}: not the JSON of arfi predict (not an object)")
+    return d
+
+
 def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
     """Per-element amplitudes from ``--prior-transmission`` (finite and non-negative), and the
     target (mm) they were predicted for: the JSON of ``arfi predict`` (its ``transmission`` and
@@ -66,10 +81,8 @@ def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
     target = None
     if path.endswith(".json"):
         p = Path(path)
-        if not p.is_file():
-            raise FileNotFoundError(f"{name}: {p}: no such file")
+        d = prediction_json(path, name)
         try:
-            d = json.loads(p.read_text(encoding="utf-8"))
             values = np.asarray(d["transmission"], dtype=np.float64)
             target = None if d.get("target_mm") is None else np.asarray(d["target_mm"], dtype=np.float64)
         except (ValueError, KeyError, TypeError) as e:

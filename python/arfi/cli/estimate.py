@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import (UsageError, add_calibration, add_common, add_method, add_report, calibrated_simulation, finish, load_scenario,
-                             npy_path, read_image, read_optional_phases, read_transmission, save_npy)
+                             npy_path, prediction_json, read_image, read_optional_phases, read_transmission, save_npy)
 from arfi import _core
 from arfi import prior_modes
 from arfi.scenario import Scenario
@@ -20,6 +20,12 @@ TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
 fraction of the focal spot's width (2.3 mm at 650 kHz), over which each element's wave crosses
 the same bone."""
+
+#: The option that sets each of the prediction's modes' prior std, and the key of the JSON of
+#: arfi predict that holds that mode.
+MODE_KEYS = {"--prior-bone-speed-std-percent": "bone_speed_sensitivity_rad_per_percent",
+             "--prior-pose-std-mm": "pose_sensitivity_rad_per_mm", "--prior-pose-std-deg": "pose_sensitivity_rad_per_deg"}
+
 
 def register(sub: Any) -> None:
     """Adds the verb to the subcommands ``sub``."""
@@ -112,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     scenario = load_scenario(args)
     modes = fit_modes(args, scenario, prior, transmission, predicted_at)
-    moved = modes is not None and modes.extra["prior_moved"]
+    moved = modes is not None and modes.prior_moved
     if modes is not None and moved:
         prior = modes.prior
     sim = calibrated_simulation(args, scenario)
@@ -238,7 +244,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     """The prediction's error modes (pose, bone speed, ``--prior-modes``) fitted to the images on
     the head with the CT's bone (:mod:`arfi.prior_modes`), by default wherever the prediction's
     JSON holds them and the estimate is per element; the result's ``prior`` is the prediction
-    moved by them and ``extra["prior_moved"]`` whether it moved. None when there is nothing to
+    moved by them and ``prior_moved`` whether it is to be used. None when there is nothing to
     fit. The model with bone is built and dropped here, its memory handed back, before the
     estimation's own model is built, so that the two plans are never held at once."""
     stds = {"--prior-bone-speed-std-percent": args.prior_bone_speed_std_percent, "--prior-pose-std-mm": args.prior_pose_std_mm,
@@ -257,10 +263,8 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
             raise UsageError(f"{first}: fitted for per-element estimates only (--groups {len(prior)})")
         return None
     path = args.prior_transmission
-    prediction = prior_modes.read_prediction_json(path) if path and path.endswith(".json") else {}
-    wanted = {"--prior-bone-speed-std-percent": "bone_speed_sensitivity_rad_per_percent",
-              "--prior-pose-std-mm": "pose_sensitivity_rad_per_mm", "--prior-pose-std-deg": "pose_sensitivity_rad_per_deg"}
-    for option, key in wanted.items():
+    prediction = prediction_json(path, "--prior-transmission") if path and path.endswith(".json") else {}
+    for option, key in MODE_KEYS.items():
         if stds[option] and key not in prediction:
             raise UsageError(f"{option}: needs --prior-transmission with the JSON of arfi predict --json holding '{key}'"
                              + (f" ({path} has none: predict again with the current arfi)" if prediction else ""))
@@ -295,7 +299,6 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     del skull, pairs
     _core.release_freed()
     at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]
-    result.extra["prior_moved"] = result.supported and not at_edge
     print(f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "
           f"({result.misfit_at_zero:.2f} with the prediction as it is) over {result.n_pixels} pixels, {result.iterations} "
           f"iterations{'' if result.converged else ' (not converged: the iterations ran out or a step failed)'}, the model "
@@ -316,8 +319,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
 def option_of(message: str, stds: dict[str, float | None]) -> str:
     """The option a malformed mode of the prediction belongs to: the one that asked for it, else
     the file it came from."""
-    for option, key in (("--prior-bone-speed-std-percent", "bone_speed"), ("--prior-pose-std-mm", "pose_sensitivity_rad_per_mm"),
-                        ("--prior-pose-std-deg", "pose_sensitivity_rad_per_deg")):
+    for option, key in MODE_KEYS.items():
         if stds[option] and message.startswith(key):
             return option
     return "--prior-transmission"
@@ -334,7 +336,7 @@ def modes_text(r: prior_modes.ModesResult) -> str:
                      f"{tri(pose['turn_deg'])} +- {tri(pose['turn_std_deg'])} deg off the CT's registration (prior "
                      f"+-{std['shift_x']:g} mm, +-{std['turn_x']:g} deg)")
     for m, v, s in zip(r.modes, r.values, r.std):
-        if m.name in prior_modes.POSE_NAMES:
+        if pose is not None and m.name in prior_modes.POSE_NAMES:
             continue
         what = "bone speed" if m.name == "bone_speed" else m.name
         tail = " of the conversion's" if m.name == "bone_speed" else ""
@@ -345,12 +347,12 @@ def modes_text(r: prior_modes.ModesResult) -> str:
 def modes_json(r: prior_modes.ModesResult) -> dict[str, Any]:
     """The JSON keys of a modes fit: ``prior_modes_fit`` (every mode, the pose) and, where the
     bone speed was among them, ``bone_speed_fit`` with its percent."""
-    d: dict[str, Any] = {"prior_modes_fit": {**r.to_dict(), "prior_moved": r.extra["prior_moved"]}}
+    d: dict[str, Any] = {"prior_modes_fit": r.to_dict()}
     bone = r.value("bone_speed")
     if bone is not None:
         std_prior = next(m.std for m in r.modes if m.name == "bone_speed")
         d["prior_bone_speed_std_percent"] = std_prior
         d["bone_speed_fit"] = {"percent": bone[0], "std_percent": bone[1], "std_percent_prior": std_prior, "scale": r.scale,
-                               "misfit": r.misfit, "n_pixels": r.n_pixels, "prior_moved": r.extra["prior_moved"],
+                               "misfit": r.misfit, "n_pixels": r.n_pixels, "prior_moved": r.prior_moved,
                                "seconds": r.seconds}
     return d

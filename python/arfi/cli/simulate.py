@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from arfi.cli.common import UsageError, add_common, add_report, finish, image_peak, load_scenario, read_optional_phases
+from arfi.cli.common import (UsageError, add_common, add_report, finish, image_peak, load_scenario, prediction_json,
+                             read_optional_phases)
 from arfi.io import arfi_image_path, write_arfi_image
 from arfi.simulation import Simulation
 
@@ -85,10 +85,8 @@ def read_steering(path: str) -> tuple[np.ndarray, np.ndarray]:
     """The reference steering (rad) and target (mm) of the prediction JSON at ``path``
     (``--steering-from``), checked to be finite numbers."""
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"--steering-from: {p}: no such file")
+    d = prediction_json(path, "--steering-from")
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
         steering = np.asarray(d["reference_steering_rad"], dtype=np.float64)
         target = np.asarray(d["target_mm"], dtype=np.float64)
     except (ValueError, KeyError, TypeError) as e:

@@ -153,11 +153,12 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     )?;
     drop(steered_source);
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
-    let through_skull = reciprocal_field(&sim.plan, target, sim.reflections)?;
-    let pose_sensitivity = options.pose_sensitivity.then(|| pose_sensitivity(&sim, target, Some(&through_skull))).transpose()?;
-    let fields = [through_skull, through_reference];
+    let fields = [reciprocal_field(&sim.plan, target, sim.reflections)?, through_reference];
     let prediction =
-        from_fields(&sim.source, &sim.transducer, &reference_medium, sim.frequency, target, fields, sim.steering_toward(target)?)?;
+        from_fields(&sim.source, &sim.transducer, &reference_medium, sim.frequency, target, &fields, sim.steering_toward(target)?)?;
+    // The pose modes start from the skull's march and the responses the prediction projected.
+    let pose_sensitivity =
+        options.pose_sensitivity.then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses)).transpose()?;
     let bone_speed_sensitivity = moved.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
     let simulation = if options.keep_simulation {
         Some(sim)
@@ -200,7 +201,7 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     drop(plan);
     crate::memory::release_freed();
     let through_reference = reference_field(&grid, &reference_medium, frequency, &steered_source, &options, target, reflections)?;
-    from_fields(&source, &transducer, &reference_medium, frequency, target, [through_skull, through_reference], ray_steering)
+    from_fields(&source, &transducer, &reference_medium, frequency, target, &[through_skull, through_reference], ray_steering)
 }
 
 /// The transposed march from `target` through the head without bone (`medium`), its plan built
@@ -232,10 +233,10 @@ fn from_fields(
     reference_medium: &Medium,
     frequency: f64,
     target: [f64; 3],
-    [through_skull, through_reference]: [Vec<C64>; 2],
+    fields: &[Vec<C64>; 2],
     ray_steering: Vec<f64>,
 ) -> Result<Prediction> {
-    let mut responses = source.transposed_many(&[through_skull, through_reference])?;
+    let mut responses = source.transposed_many(fields)?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));
     let reference_steering = steering_phases(transducer, reference_medium, frequency, target)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();

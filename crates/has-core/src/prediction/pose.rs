@@ -41,13 +41,6 @@ pub struct PoseSensitivity {
     pub rotation: [Vec<f64>; 3],
 }
 
-impl PoseSensitivity {
-    /// The six modes in the order translation x, y, z, rotation x, y, z.
-    pub fn modes(&self) -> impl Iterator<Item = &Vec<f64>> {
-        self.translation.iter().chain(&self.rotation)
-    }
-}
-
 /// A rigid move of the head from where the CT's registration puts it: `x -> R·(x - target) +
 /// target + translation` in the transducer frame (m), `R` a rotation matrix (row-major).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -109,21 +102,21 @@ pub fn moved_head_responses(sim: &Simulation, target: [f64; 3], pose: &Pose, thr
 }
 
 /// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
-/// [`moved_head_responses`] for a step along each pose coordinate, three transposed marches from
-/// the moved targets and six transposed projections. `through_skull`: the transposed march from
-/// `target` itself when already made (the prediction's), else it is made here. Refused for an
+/// one transposed march from `target` and its projection, then a step along each pose coordinate
+/// ([`moved_head_responses`]: three transposed marches and six projections). Refused for an
 /// array in its source plane (a planar array: a turned element would leave the half-space behind
 /// the plane) and a single bowl.
-pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3], through_skull: Option<&[C64]>) -> Result<PoseSensitivity> {
-    let own;
-    let field = match through_skull {
-        Some(f) => f,
-        None => {
-            own = reciprocal_field(&sim.plan, target, sim.reflections)?;
-            &own
-        }
-    };
-    let h = sim.source.transposed(field)?;
+pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
+    let field = reciprocal_field(&sim.plan, target, sim.reflections)?;
+    let h = sim.source.transposed(&field)?;
+    pose_modes(sim, target, &field, &h)
+}
+
+/// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`)
+/// and the elements' responses `h` it gives (a prediction's `skull_responses`):
+/// [`moved_head_responses`] for a step along each pose coordinate, three transposed marches from
+/// the moved targets and six transposed projections.
+pub(super) fn pose_modes(sim: &Simulation, target: [f64; 3], through_skull: &[C64], h: &[C64]) -> Result<PoseSensitivity> {
     if h.iter().all(|v| v.norm() == 0.0) {
         return Err(HasError::invalid("target", "no element's wave reaches it"));
     }
@@ -135,10 +128,10 @@ pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3], through_skull: Optio
     let mut translation: [Vec<f64>; 3] = Default::default();
     let mut rotation: [Vec<f64>; 3] = Default::default();
     for axis in 0..3 {
-        let shifted = moved_head_responses(sim, target, &Pose::shift(axis, cells[axis]), Some(field))?;
-        translation[axis] = per_step(&shifted, &h, cells[axis])?;
-        let turned = moved_head_responses(sim, target, &Pose::turn(axis, turn), Some(field))?;
-        rotation[axis] = per_step(&turned, &h, turn)?;
+        let shifted = moved_head_responses(sim, target, &Pose::shift(axis, cells[axis]), Some(through_skull))?;
+        translation[axis] = per_step(&shifted, h, cells[axis])?;
+        let turned = moved_head_responses(sim, target, &Pose::turn(axis, turn), Some(through_skull))?;
+        rotation[axis] = per_step(&turned, h, turn)?;
     }
     Ok(PoseSensitivity { translation, rotation })
 }

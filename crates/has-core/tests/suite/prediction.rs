@@ -466,7 +466,7 @@ fn a_moved_head_is_the_array_moved_the_other_way() {
     let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
     let target = [2e-3, -1e-3, 48e-3];
     let h = sim.element_responses(target).unwrap();
-    let modes = pose_sensitivity(&sim, target, None).unwrap();
+    let modes = pose_sensitivity(&sim, target).unwrap();
     let t_mm = target.map(|v| v * 1e3);
     // The CT's registration moved rigidly: x -> R·(x - target) + target + shift (mm).
     let through_moved_ct = |pose: &Pose| {
@@ -525,7 +525,7 @@ fn turning_a_head_about_the_centre_of_its_spherical_shell_changes_no_phase() {
     let c = [0.0, 0.0, 48e-3];
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, c, 20e-3, c, 16e-3, f64::INFINITY, 0.5e-3)).unwrap();
     let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
-    let modes = pose_sensitivity(&sim, c, None).unwrap();
+    let modes = pose_sensitivity(&sim, c).unwrap();
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let shift = modes.translation.iter().map(|m| rms(m) * 1e-3).fold(f64::INFINITY, f64::min);
     let turn = modes.rotation.iter().map(|m| rms(m) * 1f64.to_radians()).fold(0.0, f64::max);

@@ -119,10 +119,14 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
     let start = linearise(&setting, modes, &vec![0.0; modes.len()], cancel)?;
     let (misfit_at_zero, chi2_at_zero) = (start.chi2 / start.rows.len().max(1) as f64, start.chi2);
     let mut at = start;
+    // The undamped curvature and the gradient at `at`: the damped steps, the spread that judges
+    // a step short and, at the end, the covariance all come from them.
+    let (mut curvature, mut gradient) = normal_equations(&at, setting.noise);
     let mut damping = 0.0;
     let (mut iterations, mut converged) = (0, false);
     while iterations < ITERATIONS {
-        let (h, gradient) = normal_equations(&at, setting.noise, damping);
+        let mut h = curvature.clone();
+        h.diag_mut().iter_mut().for_each(|d| *d *= 1.0 + damping);
         let Some(step) = solve(&h, &gradient) else { break };
         let mut dc: Vec<f64> = step[1..].iter().map(|v| -v).collect();
         let length = dc.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -136,13 +140,13 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
             converged = true;
             break;
         }
-        let spread = spd_inverse(&normal_equations(&at, setting.noise, 0.0).0)
-            .map(|cov| (0..taken.len()).map(|m| cov[[m + 1, m + 1]].max(0.0).sqrt()).collect::<Vec<_>>());
+        let spread = spd_inverse(&curvature).map(|cov| (0..taken.len()).map(|m| cov[[m + 1, m + 1]].max(0.0).sqrt()).collect::<Vec<_>>());
         let short = spread.is_some_and(|s| taken.iter().zip(&s).all(|(d, s)| d.abs() < STEP_OF_SPREAD * s.max(1e-6)));
         let next = linearise(&setting, modes, &next_c, cancel)?;
         iterations += 1;
         if next.j < at.j {
             at = next;
+            (curvature, gradient) = normal_equations(&at, setting.noise);
             damping = 0.0;
             if short {
                 converged = true;
@@ -157,9 +161,8 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
             damping = if damping == 0.0 { 1.0 } else { 10.0 * damping };
         }
     }
-    let (h, _) = normal_equations(&at, setting.noise, 0.0);
     let m = modes.len();
-    let covariance = match spd_inverse(&h) {
+    let covariance = match spd_inverse(&curvature) {
         Some(cov) => (0..m).map(|i| (0..m).map(|j| cov[[i + 1, j + 1]]).collect()).collect(),
         None => (0..m).map(|i| (0..m).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect(),
     };
@@ -175,7 +178,7 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
         coefficients: at.c.clone(),
         covariance,
         scale: at.scale,
-        misfit: at.chi2 / at.rows.len().max(1) as f64,
+        misfit,
         misfit_at_zero,
         n_pixels: at.rows.len(),
         noise: setting.noise,
@@ -230,8 +233,8 @@ fn linearise(s: &Setting, modes: &[Vec<f64>], c: &[f64], cancel: Option<&AtomicB
 }
 
 /// The Gauss–Newton curvature and gradient of `J` in `(a, c)` at `at` (the prior's identity on
-/// `c`, none on `a`), with `damping` times the diagonal added to the curvature.
-fn normal_equations(at: &Linearised, noise: f64, damping: f64) -> (Array2<f64>, Vec<f64>) {
+/// `c`, none on `a`).
+fn normal_equations(at: &Linearised, noise: f64) -> (Array2<f64>, Vec<f64>) {
     let m = at.c.len();
     let w = 1.0 / noise.powi(2);
     let mut h = Array2::<f64>::zeros((m + 1, m + 1));
@@ -253,9 +256,6 @@ fn normal_equations(at: &Linearised, noise: f64, damping: f64) -> (Array2<f64>, 
     for i in 1..=m {
         h[[i, i]] += 1.0;
         gradient[i] += at.c[i - 1];
-    }
-    for i in 0..=m {
-        h[[i, i]] *= 1.0 + damping;
     }
     (h, gradient)
 }
