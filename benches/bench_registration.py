@@ -103,7 +103,8 @@ def focus_fraction(responses: np.ndarray, clinic: np.ndarray, phases: np.ndarray
 
 def run(a: argparse.Namespace) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        d = Path(tmp)
+        d = Path(a.keep or tmp)
+        d.mkdir(parents=True, exist_ok=True)
         f = lambda name: str(d / name)  # noqa: E731
         scenarios(d, a)
         t0 = time.perf_counter()
@@ -116,27 +117,35 @@ def run(a: argparse.Namespace) -> dict:
                   "--prior-std-rad", str(a.prior_std_rad), "--prior-transmission", f("prediction.json"), "--fit-nuisance",
                   "amplitude"]
         t0 = time.perf_counter()
-        assert arfi_main([*common, "--prior-pose-std-mm", "1.5", "--prior-pose-std-deg", "1.5", "--out-phases", f("pose.npy"),
-                          "--json", f("pose.json")]) == 0
-        estimate_s = time.perf_counter() - t0
         assert arfi_main([*common, "--out-phases", f("bone.npy"), "--json", f("bone.json")]) == 0
+        estimate_s = time.perf_counter() - t0
+        if a.pose:
+            assert arfi_main([*common, "--prior-pose-std-mm", "1.5", "--prior-pose-std-deg", "1.5", "--out-phases",
+                              f("pose.npy"), "--json", f("pose.json")]) == 0
         truth = predict(Scenario.load(d / "patient.toml"))
         fraction = lambda phases: focus_fraction(truth.skull_responses, clinic, phases)  # noqa: E731
+        bone = json.loads((d / "bone.json").read_text())
+        bone_result = {"bone_speed_only": fraction(np.load(d / "bone.npy")),
+                       "bone_speed_only_estimate": fraction(np.asarray(bone["phases_rad"])),
+                       "bone_recommended": bone["recommended"], "bone_evidence": bone.get("prior_evidence"),
+                       "bone_supported": bone["prior_modes_fit"]["supported"],
+                       "bone_speed_percent": bone.get("bone_speed_fit", {}).get("percent")}
+        common_result = {"seed": a.seed, "frequency_hz": a.frequency_hz, "target_mm": a.target_mm, "shift_mm": a.shift_mm,
+                         "turn_deg": a.turn_deg, "bone_percent": a.bone_percent, "uncorrected": fraction(np.zeros(a.elements)),
+                         "prediction": fraction(np.load(d / "prior.npy")), **bone_result, "predict_s": predict_s,
+                         "estimate_s": estimate_s, "date": _dt.date.today().isoformat()}
+        if not a.pose:
+            return common_result
         pose = json.loads((d / "pose.json").read_text())
         fitted = pose["prior_modes_fit"]["pose"]
         z = [(v - s) / e for v, s, e in zip(fitted["shift_mm"] + fitted["turn_deg"], list(a.shift_mm) + list(a.turn_deg),
                                              fitted["shift_std_mm"] + fitted["turn_std_deg"])]
-        return {"seed": a.seed, "frequency_hz": a.frequency_hz, "target_mm": a.target_mm, "shift_mm": a.shift_mm,
+        return {**common_result, "seed": a.seed, "frequency_hz": a.frequency_hz, "target_mm": a.target_mm, "shift_mm": a.shift_mm,
                 "turn_deg": a.turn_deg, "bone_percent": a.bone_percent, "uncorrected": fraction(np.zeros(a.elements)),
-                "prediction": fraction(np.load(d / "prior.npy")), "bone_speed_only": fraction(np.load(d / "bone.npy")),
                 "estimate": fraction(np.load(d / "pose.npy")), "recommended": pose["recommended"],
                 "flags": {k: pose[k] for k in ("ambiguous", "model_mismatch") if k in pose},
                 "fitted_pose": fitted, "pose_error_in_std": z, "supported": pose["prior_modes_fit"]["supported"],
-                "evidence_chi2": pose["prior_modes_fit"]["evidence_chi2"],
-                "bone_supported": json.loads((d / "bone.json").read_text())["prior_modes_fit"]["supported"],
-                "bone_speed_percent": pose.get("bone_speed_fit", {}).get("percent"),
-                "predict_s": predict_s, "estimate_s": estimate_s,
-                "date": _dt.date.today().isoformat()}
+                "evidence_chi2": pose["prior_modes_fit"]["evidence_chi2"]}
 
 
 def main() -> None:
@@ -150,15 +159,24 @@ def main() -> None:
     p.add_argument("--elements", type=int, default=256)
     p.add_argument("--voxel-mm", type=float, default=1.0)
     p.add_argument("--prior-std-rad", type=float, default=0.3)
+    p.add_argument("--no-pose", dest="pose", action="store_false", help="the bone speed's fit alone (the default estimate)")
+    p.add_argument("--keep", metavar="DIR", help="write the case's files (CT, prediction, images, estimates) to DIR")
     p.add_argument("--json", help="append the result as one JSON line")
     a = p.parse_args()
     r = run(a)
-    print(f"seed {r['seed']} at {a.frequency_hz / 1e3:g} kHz, shift {a.shift_mm} mm, turn {a.turn_deg} deg, bone "
-          f"{a.bone_percent:+g} %: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, bone speed alone "
-          f"{r['bone_speed_only']:.3f}, pose and bone speed {r['estimate']:.3f} ({r['recommended']}; supported "
-          f"{r['supported']}, chi-squared falls by {r['evidence_chi2']:.1f}); fitted pose off the truth "
-          f"by {', '.join(f'{v:+.1f}' for v in r['pose_error_in_std'])} std; bone {r['bone_speed_percent']}; predict "
-          f"{r['predict_s']:.1f} s, estimate {r['estimate_s']:.1f} s")
+    ev = r["bone_evidence"] or {}
+    head = (f"seed {r['seed']} at {a.frequency_hz / 1e3:g} kHz, shift {a.shift_mm} mm, turn {a.turn_deg} deg, bone "
+            f"{a.bone_percent:+g} %: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, bone speed alone "
+            f"{r['bone_speed_only']:.3f} ({r['bone_recommended']}; its estimate {r['bone_speed_only_estimate']:.3f}, "
+            f"chi-squared fall from the prediction {ev.get('chi2_fall', float('nan')):.1f} of "
+            f"{ev.get('threshold_chi2', float('nan')):.1f} needed)")
+    if not a.pose:
+        print(f"{head}; bone {r['bone_speed_percent']}; predict {r['predict_s']:.1f} s, estimate {r['estimate_s']:.1f} s")
+    else:
+        print(f"{head}, pose and bone speed {r['estimate']:.3f} ({r['recommended']}; supported "
+              f"{r['supported']}, chi-squared falls by {r['evidence_chi2']:.1f}); fitted pose off the truth "
+              f"by {', '.join(f'{v:+.1f}' for v in r['pose_error_in_std'])} std; bone {r['bone_speed_percent']}; "
+              f"predict {r['predict_s']:.1f} s, estimate {r['estimate_s']:.1f} s")
     if a.json:
         with open(a.json, "a", encoding="utf-8") as fh:
             fh.write(json.dumps(r) + "\n")
