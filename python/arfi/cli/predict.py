@@ -43,7 +43,7 @@ def register(sub: Any) -> None:
                         "per mm or degree, per element, in the --json as pose_sensitivity_rad_per_mm and "
                         "pose_sensitivity_rad_per_deg, rows x, y, z): the registration modes arfi estimate fits to the "
                         "images with the bone speed before its per-element fit. The moved head is the registered one seen "
-                        "by the array moved the other way: three more transposed marches through the skull, no plan. "
+                        "by the array moved the other way: six more transposed marches through the skull, no plan. "
                         "Default: on with --json for a hemisphere or a bowl of elements (a planar array's elements lie in the "
                         "source plane, a single bowl has one element); --no-pose-sensitivity skips it")
     p.add_argument("--focal-metrics", action=argparse.BooleanOptionalAction, default=None, dest="focal_metrics",

@@ -10,16 +10,20 @@
 //! kind). No plan is built again, unlike a finite difference through a moved CT (a plan per
 //! coordinate).
 //!
-//! The mode of pose coordinate `q` is, per element,
+//! The mode of pose coordinate `q` is, per element, the central secant
 //!
-//! `g_e = wrap(arg(h'_e · conj(h_e)) - c) / δ`,
+//! `g_e = (wrap(arg(h⁺_e · conj(h_e)) - c⁺) - wrap(arg(h⁻_e · conj(h_e)) - c⁻)) / (2·δ)`,
 //!
-//! `h'` the responses at the step `δ` and `c` their weighted common phase: a secant over one
-//! grid cell for the translations (the head's staircase of cells shifts by one cell, as a CT
-//! registered one cell off resamples to; finer steps would measure how the target's
-//! interpolation between planes varies rather than the head) and over half a cell at the
-//! elements' mean distance for the rotations (the array stays behind its source plane, at least
-//! half a wavelength and a step before it). The reference (the head without bone, the
+//! `h^±` the responses at the steps `±δ` and `c^±` their weighted common phases: over one grid cell
+//! either way for the translations (the head's staircase of cells shifts by whole cells, as a CT
+//! registered a cell off resamples to) and half a cell at the elements' mean distance for the
+//! rotations (the array stays behind its source plane, at least half a wavelength and a step
+//! before it). Central, not one-sided: a head's phase pattern is far from linear in its shift
+//! over a cell (on the head phantom at 220 kHz the direction of the change turns by about a
+//! radian per mm: the changes for +1.7 mm and -1.7 mm correlate at -0.3, not -1), and a forward
+//! secant `(h(δ) - h(0))/δ` carries half a cell of that curvature as a bias, which predicted the
+//! change for a shift the other way worse than no mode (see `docs/head.md`); the central secant
+//! is the derivative to second order in `δ`. The reference (the head without bone, the
 //! estimation's model) stays where the CT is registered: the images' model does not move with
 //! the patient, so only the skull's responses change, as for the bone speed mode
 //! ([`super::bone_speed_sensitivity`]). The transmissions' change is left out: a mode is a
@@ -102,10 +106,11 @@ pub fn moved_head_responses(sim: &Simulation, target: [f64; 3], pose: &Pose, thr
 }
 
 /// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
-/// one transposed march from `target` and its projection, then a step along each pose coordinate
-/// ([`moved_head_responses`]: three transposed marches and six projections). Refused for an
-/// array in its source plane (a planar array: a turned element would leave the half-space behind
-/// the plane) and a single bowl.
+/// one transposed march from `target` and its projection, then a step either way along each pose
+/// coordinate ([`moved_head_responses`]: six transposed marches and twelve projections). Refused
+/// for an
+/// array in its source plane (a planar array: a turned element would leave the half-space
+/// behind the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
     let field = reciprocal_field(&sim.plan, target, sim.reflections)?;
     let h = sim.source.transposed(&field)?;
@@ -114,8 +119,9 @@ pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensit
 
 /// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`)
 /// and the elements' responses `h` it gives (a prediction's `skull_responses`):
-/// [`moved_head_responses`] for a step along each pose coordinate, three transposed marches from
-/// the moved targets and six transposed projections.
+/// [`moved_head_responses`] for a step either way along each pose coordinate, six transposed
+/// marches from the moved targets and twelve transposed projections (the turns reuse
+/// `through_skull`).
 pub(super) fn pose_modes(sim: &Simulation, target: [f64; 3], through_skull: &[C64], h: &[C64]) -> Result<PoseSensitivity> {
     if h.iter().all(|v| v.norm() == 0.0) {
         return Err(HasError::invalid("target", "no element's wave reaches it"));
@@ -127,18 +133,19 @@ pub(super) fn pose_modes(sim: &Simulation, target: [f64; 3], through_skull: &[C6
     let turn = 0.5 * g.dx.min(g.dy).min(g.dz) / reach;
     let mut translation: [Vec<f64>; 3] = Default::default();
     let mut rotation: [Vec<f64>; 3] = Default::default();
+    let central = |pose: &dyn Fn(f64) -> Pose, step: f64| -> Result<Vec<f64>> {
+        let plus = moved_head_responses(sim, target, &pose(step), Some(through_skull))?;
+        let minus = moved_head_responses(sim, target, &pose(-step), Some(through_skull))?;
+        // Each side's change from `h` wrapped on its own: a single wrap of `h⁺·conj(h⁻)` would
+        // fold any element whose phase moves by more than π over the two steps.
+        let (up, down) = (phase_change(&plus, h)?, phase_change(&minus, h)?);
+        Ok(up.iter().zip(&down).map(|(u, d)| (u - d) / (2.0 * step)).collect())
+    };
     for axis in 0..3 {
-        let shifted = moved_head_responses(sim, target, &Pose::shift(axis, cells[axis]), Some(through_skull))?;
-        translation[axis] = per_step(&shifted, h, cells[axis])?;
-        let turned = moved_head_responses(sim, target, &Pose::turn(axis, turn), Some(through_skull))?;
-        rotation[axis] = per_step(&turned, h, turn)?;
+        translation[axis] = central(&|d| Pose::shift(axis, d), cells[axis])?;
+        rotation[axis] = central(&|a| Pose::turn(axis, a), turn)?;
     }
     Ok(PoseSensitivity { translation, rotation })
-}
-
-/// The phase change from `h` to `moved` per unit of the step `step`.
-fn per_step(moved: &[C64], h: &[C64], step: f64) -> Result<Vec<f64>> {
-    Ok(phase_change(moved, h)?.into_iter().map(|d| d / step).collect())
 }
 
 /// The right-handed rotation by `angle` (rad) about coordinate axis `axis` (0, 1, 2: x, y, z),
