@@ -330,6 +330,14 @@ class Simulation:
         group phases (BENCHMARKS.md, "Ladder constants"). Errors name ``name``."""
         return self._core.focus_shift_phases(as_point_mm(shift_mm, name), name)
 
+    def element_responses(self, target_mm: ArrayLike | None = None) -> NDArray[np.complex128]:
+        """Each element's complex pressure (Pa per unit drive, without steering) at ``target_mm``
+        (mm, transducer frame; default the focus), from one reciprocal march: the pressure there
+        for added phases ``phi`` is ``sum(h * exp(1j * (steering_phases_rad + phi)))``, and
+        ``sum(abs(h))`` the most any phases give."""
+        target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
+        return self._core.element_responses(target)
+
     def element_phases(self, phases: ArrayLike, name: str = "phases") -> NDArray[np.float64]:
         """Added phases, one per element or one per group, as one per element. Errors name ``name``."""
         a = as_phases(phases, name)

@@ -6,6 +6,7 @@ and Monte Carlo in crates/has-core/tests/suite/information.rs."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -107,3 +108,67 @@ def test_cli_suggest_per_element(tmp_path, capsys) -> None:
                  "--out", str(second), "--noise-rad", "0.02", "--seed", "5"]) == 0
     assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--image", str(second), "--groups", "256",
                  "--max-evaluations", "30", "--json", str(tmp_path / "e2.json")]) == 0
+
+
+def poor_prediction(sim: arfi.Simulation, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The skull-like truth of ``seed``, a poor prediction of it (a 20 mm screen of 3 rad peak to
+    peak plus 0.5 rad independent per element, 0.9 rad RMS in all) and the focal pressure that
+    prediction leaves as a fraction of the ideal (``Simulation.element_responses``)."""
+    truth = sim.skull_phases(seed)
+    prior = truth + sim.skull_phases(1000 + seed, correlation_length_mm=20.0, peak_to_peak_rad=3.0, jitter_rad=0.5)
+    return truth, prior, focal_pressure(sim, truth, prior)
+
+
+def focal_pressure(sim: arfi.Simulation, truth: np.ndarray, applied: np.ndarray) -> float:
+    """``|Σ c·exp(i·(truth − applied))| / |Σ c|``, ``c`` each element's steered response at the focus."""
+    c = sim.element_responses() * np.exp(1j * sim.steering_phases_rad)
+    return float(abs(np.sum(c * np.exp(1j * (truth - applied)))) / abs(np.sum(c)))
+
+
+def test_a_poor_prediction_is_raised_by_a_defocused_image_with_the_amplitude_fitted(small: arfi.Simulation) -> None:
+    # A smooth prior leaves the prediction's element-level error (0.5 rad) in the model, which
+    # lowers the modelled images by about exp(-0.5²) = 0.78. With the scale held at 1 the model
+    # cannot explain the images (misfit 2.1-6.1 on seeds 21-24 of this array) and the prediction
+    # was recommended (0.63-0.70 of the ideal focal pressure); the estimate is searched again with
+    # the scale fitted, which explains them (misfit 0.93-1.05, scale 1.23-1.27) and leaves
+    # 0.87-0.89 with the in-focus and one 20 mm defocused image (the ceiling of the 0.5 rad
+    # element-level error, exp(-0.5²/2) = 0.88, give or take what the prediction's screen has of it).
+    # Tolerances: 0.85 is 0.02-0.04 under those; the scale within 10 % of exp(0.5²) = 1.28.
+    el = small.with_groups(small.n_elements)
+    truth, prior, alone = poor_prediction(small, 22)
+    shift = small.focus_shift_phases((0.0, 0.0, -20.0))
+    images = [small.arfi_image(truth, noise_rad=0.02, seed=22), small.arfi_image(truth + shift, noise_rad=0.02, seed=2200)]
+    e = el.estimate(images, [None, shift], prior=prior, prior_std_rad=0.9, prior_correlation_mm=20.0, seed=22)
+    assert e.recommended == "estimate" and not e.model_mismatch and e.misfit < 1.2, e.misfit
+    assert e.nuisance is not None and e.nuisance.fitted == ["amplitude"], e.nuisance
+    assert abs(e.nuisance.scale / np.exp(0.25) - 1.0) < 0.1, e.nuisance.scale
+    focus = focal_pressure(small, truth, e.recommended_phases_rad)
+    assert focus >= 0.85 and focus > alone + 0.1, (focus, alone)
+
+
+@pytest.mark.skipif(not os.environ.get("ARFI_FULL_SWEEPS"), reason="full mode (ARFI_FULL_SWEEPS=1): 1024 elements, four seeds")
+def test_a_poor_prediction_keeps_rising_along_the_suggested_acquisitions_on_1024_elements() -> None:
+    # The whole path of benches/bench_poor_prediction.py: 1024 elements, the poor prediction
+    # above, the in-focus image and then each acquisition the estimate suggests, four in all.
+    # Measured (BENCHMARKS.md, "A poor prediction and the suggested acquisitions"): seeds 11-14 end
+    # at 0.86-0.88 of the ideal focal pressure (mean 0.87; before the amplitude refit the
+    # prediction, 0.62-0.73, was recommended at every step, and the estimates themselves stalled
+    # at 0.79-0.85). Tolerances: the mean >= 0.85 (0.02 under the measured, a ceiling of 0.88 leaves
+    # no more room); no step below the prediction alone - 0.02 (a kept or recommended prediction
+    # is the prediction itself; 0.02 is what the issue allows for noise).
+    sim = arfi.Simulation()
+    el = sim.with_groups(sim.n_elements)
+    last = []
+    for seed in (11, 12, 13, 14):
+        truth, prior, alone = poor_prediction(sim, seed)
+        images, known = [sim.arfi_image(truth, noise_rad=0.02, seed=seed)], [None]
+        while True:
+            e = el.estimate(images, known, prior=prior, prior_std_rad=0.9, prior_correlation_mm=20.0, seed=seed, suggest=True)
+            focus = focal_pressure(sim, truth, e.recommended_phases_rad)
+            assert focus >= alone - 0.02, (seed, len(images), focus, alone)
+            if len(images) == 4:
+                break
+            images.append(sim.arfi_image(truth + e.suggested_phases_rad, noise_rad=0.02, seed=100 * seed + len(images) - 1))
+            known.append(np.asarray(e.suggested_phases_rad))
+        last.append(focus)
+    assert np.mean(last) >= 0.85, last

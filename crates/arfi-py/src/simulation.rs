@@ -347,6 +347,15 @@ impl CoreSimulation {
         Ok(phases.into_pyarray(py))
     }
 
+    /// Each element's complex pressure (Pa per unit drive, no steering) at `target_mm` (mm,
+    /// transducer frame; default the focus), by reciprocity: `p = Σ_e h_e·exp(i·phi_e)`.
+    #[pyo3(signature = (target_mm=None))]
+    fn element_responses<'py>(&self, py: Python<'py>, target_mm: Option<[f64; 3]>) -> PyResult<Bound<'py, PyArray1<C64>>> {
+        let target = target_mm.map_or(self.inner.focus, |t| t.map(|v| v * 1e-3));
+        let h = py.detach(|| self.inner.element_responses(target)).map_err(|e| invalid("target_mm", e.to_string()))?;
+        Ok(h.into_pyarray(py))
+    }
+
     /// Skull-like per-element phases (rad), seeded: a smooth random screen over the aperture plus
     /// per-element jitter.
     #[pyo3(signature = (seed, correlation_length_mm=12.0, peak_to_peak_rad=6.0, jitter_rad=0.5))]
