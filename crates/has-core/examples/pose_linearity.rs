@@ -3,16 +3,15 @@
 
 use has_core::phase::wrap;
 use has_core::prediction::pose::{moved_head_responses, Pose};
-use has_core::prediction::pose_sensitivity;
+use has_core::prediction::{phase_change, pose_sensitivity};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use has_core::Complex64 as C64;
 use std::time::Instant;
 
+/// Each element's phase change from `h` to `moved`, the common phase removed.
 fn change(moved: &[C64], h: &[C64]) -> Vec<f64> {
-    let c: Vec<C64> = moved.iter().zip(h).map(|(m, h)| m * h.conj()).collect();
-    let common = c.iter().sum::<C64>().arg();
-    c.iter().map(|c| wrap(c.arg() - common)).collect()
+    phase_change(moved, h).expect("responses of the same array")
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

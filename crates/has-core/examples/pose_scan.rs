@@ -2,15 +2,15 @@
 //! `cargo run --release -p has-core --example pose_scan scenario.toml x_mm y_mm z_mm axis step_mm n`.
 
 use has_core::phase::wrap;
+use has_core::prediction::phase_change;
 use has_core::prediction::pose::{moved_head_responses, Pose};
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use has_core::Complex64 as C64;
 
+/// Each element's phase change from `h` to `moved`, the common phase removed.
 fn change(moved: &[C64], h: &[C64]) -> Vec<f64> {
-    let c: Vec<C64> = moved.iter().zip(h).map(|(m, h)| m * h.conj()).collect();
-    let common = c.iter().sum::<C64>().arg();
-    c.iter().map(|c| wrap(c.arg() - common)).collect()
+    phase_change(moved, h).expect("responses of the same array")
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -295,7 +295,7 @@ fn sensitivity(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
 /// Each element's phase change (rad) from responses `h` to `moved`,
 /// `wrap(arg(moved_e · conj(h_e)) − c)`, with the common phase `c = arg Σ_e moved_e · conj(h_e)`
 /// removed (weighted by the responses: the images see phase differences only).
-fn phase_change(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
+pub fn phase_change(moved: &[C64], h: &[C64]) -> Result<Vec<f64>> {
     if moved.len() != h.len() {
         return Err(HasError::invalid("prediction", format!("has {} elements; the scenario has {}", h.len(), moved.len())));
     }
