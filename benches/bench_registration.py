@@ -109,7 +109,7 @@ def run(a: argparse.Namespace) -> dict:
         scenarios(d, a)
         t0 = time.perf_counter()
         assert arfi_main(["predict", "--scenario", f("head.toml"), "--out", f("prior.npy"), "--json", f("prediction.json"),
-                          "--no-focal-metrics"]) == 0
+                          "--no-focal-metrics", *(["--pose-sensitivity"] if a.pose else [])]) == 0
         predict_s = time.perf_counter() - t0
         clinic = np.asarray(json.loads((d / "prediction.json").read_text())["reference_steering_rad"])
         images = world_images(d, clinic)

@@ -270,7 +270,9 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     for option, key in MODE_KEYS.items():
         if stds[option] and key not in prediction:
             raise UsageError(f"{option}: needs --prior-transmission with the JSON of arfi predict --json holding '{key}'"
-                             + (f" ({path} has none: predict again with the current arfi)" if prediction else ""))
+                             + (f" ({path} has none: predict again"
+                                + (" with --pose-sensitivity)" if key.startswith("pose") else " with the current arfi)")
+                                if prediction else ""))
     try:
         modes = prior_modes.prediction_modes(
             prediction, len(prior),
