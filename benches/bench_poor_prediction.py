@@ -41,14 +41,8 @@ NOISE_RAD = 0.02
 
 
 def design(n) -> str:
-    """What the suggested acquisition is, for the table."""
-    if n is None:
-        return "-"
-    d = n.to_dict()
-    name = d.get("design", "focus shift")
-    if name == "focus shift" or "focus_shift_mm" in d and name == "focus shift":
-        return "shift " + ",".join(f"{v:+g}" for v in d["focus_shift_mm"])
-    return name
+    """The suggested acquisition (a focus shift, mm), for the table."""
+    return "-" if n is None else "shift " + ",".join(f"{v:+g}" for v in n.focus_shift_mm)
 
 
 def run(sim: arfi.Simulation, seed: int, n_images: int) -> dict:

@@ -82,7 +82,10 @@ def test_cli_fit_nuisance(tmp_path, capsys) -> None:
     out = tmp_path / "e.json"
     assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--groups", "256", "--max-evaluations", "30",
                  "--fit-nuisance", "background_phase", "--json", str(out)]) == 0
-    assert "fitted background_phase" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "fitted background_phase" in printed
+    # The amplitude was neither asked for nor fitted: no word of a refit with it.
+    assert "the amplitude was not asked for" not in printed, printed
     assert json.loads(out.read_text())["nuisance"]["fitted"] == ["background_phase"]
     bad = tmp_path / "bad.json"
     assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--fit-nuisance", "broadening",

@@ -15,6 +15,7 @@ from arfi import _core
 from arfi import prior_modes
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
+from arfi.validate import nuisance_names
 
 TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
@@ -141,13 +142,15 @@ def run(args: argparse.Namespace) -> int:
           + f"; recommended: {e.recommended}")
     if e.nuisance is not None:
         n = e.nuisance
+        # Fitted though not asked for: the library's refit of a smooth prior's mismatched estimate.
+        refit = "amplitude" in n.fitted and not (args.fit_amplitude
+                                                 or {"amplitude", "all"} & set(nuisance_names(args.fit_nuisance) or []))
         offsets = ", ".join(f"{b:+.3f}" for b in n.offset_rad)
         print(f"estimate: fitted {', '.join(n.fitted)}: amplitude scale {n.scale:.3f}, W {n.broadening_width_mm:.2f} mm, "
               f"shift ({n.dx_mm:+.2f}, {n.dy_mm:+.2f}) mm, background offsets {offsets} rad; misfit "
               f"{e.misfit:.2f} x the noise expectation"
-              + ("" if args.fit_amplitude or "amplitude" in (args.fit_nuisance or "") or "all" in (args.fit_nuisance or "")
-                 else " (the amplitude was not asked for: with the scale held at 1 the model could not explain the images, "
-                      "as the prediction's element-level error, which smooth corrections leave, lowers them)"))
+              + (" (the amplitude was not asked for: with the scale held at 1 the model could not explain the images, "
+                 "as the prediction's element-level error, which smooth corrections leave, lowers them)" if refit else ""))
     if e.kept_prediction:
         print("estimate: KEPT THE PREDICTION: one acquisition cannot check a per-element correction of a prediction (one "
               "that fits the image better than the truth can leave less focus than the prediction); add an image with "

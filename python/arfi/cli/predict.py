@@ -71,7 +71,6 @@ def run(args: argparse.Namespace) -> int:
     sensitivity = args.bone_speed_sensitivity
     if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
         sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
-    pose = bool(args.pose_sensitivity)
     metrics_wanted = args.focal_metrics
     if metrics_wanted is None:
         metrics_wanted = args.json is not None or bool(args.report)
@@ -79,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     # The focal metrics and the report march the beams through the skull: the prediction keeps the
     # skull's simulation for them.
     p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
-                keep_simulation=bool(args.report) or metrics_wanted, pose_sensitivity=pose)
+                keep_simulation=bool(args.report) or metrics_wanted, pose_sensitivity=args.pose_sensitivity)
     seconds = time.perf_counter() - t
     # One batch march of the three drives draws the report's section and gives their focal
     # metrics; without a report, the metrics alone march each drive only to its focal box.

@@ -108,8 +108,7 @@ pub fn moved_head_responses(sim: &Simulation, target: [f64; 3], pose: &Pose, thr
 /// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
 /// one transposed march from `target` and its projection, then a step either way along each pose
 /// coordinate ([`moved_head_responses`]: six transposed marches and twelve projections). Refused
-/// for an
-/// array in its source plane (a planar array: a turned element would leave the half-space
+/// for an array in its source plane (a planar array: a turned element would leave the half-space
 /// behind the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
     let field = reciprocal_field(&sim.plan, target, sim.reflections)?;
