@@ -9,7 +9,9 @@
 //! Pressures are relative to `p0 = rho·c·u0` of the medium the bowl radiates into. Time
 //! dependence `exp(-i·omega·t)`.
 
+pub mod elastic;
 pub mod layered;
+pub mod oblique;
 pub mod shell;
 pub mod special;
 

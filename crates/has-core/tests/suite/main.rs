@@ -24,5 +24,6 @@ mod physics;
 mod prediction;
 mod prior;
 mod reciprocity;
+mod shear;
 mod support;
 mod validation;

@@ -271,7 +271,7 @@ fn straight_rays_focus_through_a_concentric_soft_tissue_sphere() {
         p.reference_pressure / p.reference_optimal_pressure
     };
     let (oblique, vertical) = (gain("oblique"), gain("vertical"));
-    println!("straight rays through a concentric tissue sphere: {oblique:.4} of the best focus (vertical screen {vertical:.4})");
+    println!("straight rays through a concentric tissue sphere: {oblique:.6} of the best focus (vertical screen {vertical:.6})");
     assert!(oblique > 0.9995 && 1.0 - vertical > 3.0 * (1.0 - oblique), "oblique {oblique}, vertical {vertical}");
     std::fs::remove_dir_all(dir).ok();
 }
