@@ -85,13 +85,14 @@ def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho
         e4 = [eta_s, np.roll(eta_s, -1, 0)]
         e4 += [np.concatenate([m[:, 1:], m[:, -1:]], axis=1) for m in e4]
         eta_xz = np.where(np.all([m > 0 for m in e4], axis=0), 4.0 / sum(1.0 / np.where(m > 0, m, 1) for m in e4), 0.0)
-    dt = 0.6 * dx / (cp * np.sqrt(2.0))
+    dt_given = dt
+    dt_cfl = 0.5 * dx / (cp * np.sqrt(2.0))
     nu = max(eta_p.max(), 1e-30) / rho_b
-    dt_own = min(dt, 0.2 * dx**2 / nu)
+    dt_own = min(dt_cfl, 0.08 * dx**2 / nu)
     if lossy:
         # the water run shares the time step of a lossy plate run
-        dt_own = min(dt_own, 0.2 * dx**2 / (kv_moduli(rho_b, cp, pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]))[1] / rho_b))
-    dt = dt_own if dt is None else dt
+        dt_own = min(dt_own, 0.08 * dx**2 / (kv_moduli(rho_b, cp, pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]))[1] / rho_b))
+    dt = dt_own if dt_given is None else dt_given
     nt = int(np.ceil(t_record / dt))
     # sponge profile (applied as exp(-sigma dt) to all fields)
     zz = np.arange(nz)

@@ -267,6 +267,11 @@ def save(args, rows, meta):
     if args.cs != 1500.0:
         tag += f"_cs{args.cs:g}"
     path = os.path.join(RESULTS, f"plate_transmission_{tag}.json")
+    if os.path.exists(path):  # merge with earlier invocations (other angles)
+        old = json.load(open(path)).get("rows", [])
+        new_angles = {round(r["angle_deg"], 6) for r in rows}
+        rows = sorted([r for r in old if round(r["angle_deg"], 6) not in new_angles] + list(rows),
+                      key=lambda r: r["angle_deg"])
     doc = dict(meta, dx_mm=args.dx_mm, f0_hz=F0, plate_thickness_nominal_mm=pe.D_M * 1e3,
                water=dict(c_m_s=C_W, rho_kg_m3=RHO_W),
                plate=dict(cp_m_s=pe.BONE["cp"], cs_m_s=args.cs, rho_kg_m3=pe.BONE["rho"],
