@@ -148,7 +148,7 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
         X, Z = np.meshgrid(x, z, indexing="ij")
         s = X * np.sin(th) + (Z - z_top_c) * np.cos(th)
         if with_plate:
-            mat[:, :, :] = ((s >= 0) & (s < d_m))[:, None, :].astype(np.uint32)
+            mat[:, :, :] = ((s >= -1e-12) & (s < d_m - 1e-12))[:, None, :].astype(np.uint32)
         z_deep = z_top_c + half * np.tan(th) + d_m / np.cos(th)
         iz_sens = int(np.ceil((z_deep + gap_sens) / dx))
         x_src_c = 0.0
@@ -156,7 +156,7 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
     assert iz_sens < nz - npml - margin, (iz_sens, nz)
     # materials: rho, cp, cs, alpha_p (Np/m), alpha_s (Np/m)
     ap = pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]) if lossy else 0.0
-    as_ = pe.alpha_np_per_m(pe.BONE["alpha_s_db_cm"]) if lossy else 0.0
+    as_ = pe.alpha_np_per_m(pe.BONE["alpha_s_db_cm"]) if (lossy and cs > 0) else 0.0
     props = np.array([[RHO_W, C_W, 0.0, 0.0, 0.0],
                       [pe.BONE["rho"], pe.BONE["cp"], cs, ap, as_]])
     # source: plane z = iz_src, Gaussian apodization, per-column delay for the tilt
@@ -240,7 +240,8 @@ def run_babel(args):
     for ang in args.angles_deg:
         w = babel_water(ang, dx, args.geometry, args.waist_mm * 1e-3)
         p = babel_run(ang, dx, args.geometry, args.cs, not args.lossless, args.waist_mm * 1e-3, True, dt=w["dt"])
-        c = compare_spectra(p["P"], w["P"], dx, p["normal"], cs=args.cs, lossy=not args.lossless, d_m=p["d_m"])
+        c = compare_spectra(p["P"], w["P"], dx, p["normal"], cs=max(args.cs, 1.0), lossy=not args.lossless,
+                            d_m=p["d_m"], fluid=args.cs == 0)
         row = dict(angle_deg=ang, **{k: v for k, v in c.items() if not isinstance(v, complex)},
                    amp_engine_re=c["amp_engine"].real, amp_engine_im=c["amp_engine"].imag,
                    amp_exact_re=c["amp_exact"].real, amp_exact_im=c["amp_exact"].imag,
@@ -299,7 +300,10 @@ def main():
         run_babel(args)
     else:
         import fdtd2d
-        fdtd2d.run(args, compare_spectra, save)
+        if args.geometry == "tilted":
+            fdtd2d.run_tilted(args, compare_spectra, save)
+        else:
+            fdtd2d.run(args, compare_spectra, save)
     print(f"total time {time.time() - t0:.1f} s")
 
 

@@ -22,7 +22,8 @@ def main():
     variants = (("lossy (4 dB/cm P and S), cs 1500 m/s", dict(), ""),
                 ("lossless, cs 1500 m/s", dict(lossy=False), "_lossless"),
                 ("lossy, cs 1300 m/s", dict(cs=1300.0), "_cs1300"),
-                ("lossy, cs 1700 m/s", dict(cs=1700.0), "_cs1700"))
+                ("lossy, cs 1700 m/s", dict(cs=1700.0), "_cs1700"),
+                ("lossy, FLUID plate (cs 0; the 'solid' column is then the fluid plate too)", dict(fluid=True), "_cs0"))
     for variant, kw, suffix in variants:
         if suffix:
             cols = [t for t in runs if t.endswith(suffix)]
