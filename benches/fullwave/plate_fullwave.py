@@ -293,7 +293,7 @@ def main():
     ap.add_argument("--cs", type=float, default=1500.0, help="plate shear speed, m/s")
     ap.add_argument("--lossless", action="store_true", help="no attenuation in the plate")
     ap.add_argument("--record-us", type=float, default=160.0, help="record length (fdtd2d)")
-    ap.add_argument("--waist-mm", type=float, default=12.0, help="Gaussian beam waist (babel)")
+    ap.add_argument("--waist-mm", type=float, default=12.0, help="Gaussian beam waist (babel; fdtd2d --geometry tilted)")
     args = ap.parse_args()
     t0 = time.time()
     if args.engine == "babel":
