@@ -57,13 +57,9 @@ impl Solid {
         Ok(Solid { kp: C64::new(w / sound_speed, attenuation), ks: C64::new(w / shear_sound_speed, shear_attenuation), density })
     }
 
+    /// `sqrt(k² - kt²)` with `Im >= 0` for `k` either wavenumber ([`super::vertical`]).
     fn vertical(k: C64, kt: C64) -> C64 {
-        let r = (k * k - kt * kt).sqrt();
-        if r.im < 0.0 {
-            -r
-        } else {
-            r
-        }
+        super::vertical(k, kt)
     }
 }
 
@@ -128,9 +124,9 @@ fn solve6(m: &mut [[C64; 6]; 6], rhs: &mut [C64; 6]) -> [C64; 6] {
         for r in col + 1..6 {
             let f = m[r][col] / d;
             if f.norm() != 0.0 {
-                for c in col..6 {
-                    let v = m[col][c];
-                    m[r][c] -= f * v;
+                let pivot = m[col];
+                for (v, p) in m[r].iter_mut().zip(pivot).skip(col) {
+                    *v -= f * p;
                 }
                 let v = rhs[col];
                 rhs[r] -= f * v;

@@ -44,12 +44,17 @@ impl Fluid {
     /// `kz = sqrt(k² - kt²)` for the transverse wavenumber `kt` (rad/m; the root with `Im >= 0`,
     /// so evanescent waves decay along +z).
     pub fn kz(&self, kt: C64) -> C64 {
-        let r = (self.k * self.k - kt * kt).sqrt();
-        if r.im < 0.0 {
-            -r
-        } else {
-            r
-        }
+        vertical(self.k, kt)
+    }
+}
+
+/// `sqrt(k² - kt²)`, the root with `Im >= 0` (evanescent waves decay along +z).
+pub(crate) fn vertical(k: C64, kt: C64) -> C64 {
+    let r = (k * k - kt * kt).sqrt();
+    if r.im < 0.0 {
+        -r
+    } else {
+        r
     }
 }
 

@@ -194,21 +194,30 @@ fn write_shell_ct(path: &Path, c: f64, a: f64, b: f64, cap_deg: f64) -> Result<(
     // focal region (a CT must cover the focus).
     let half = b * cap_deg.to_radians().sin() + 2.0 * CT_VOXEL;
     let (z_lo, z_hi) = (c - b - 2.0 * CT_VOXEL, (c - a * cos_cap).max(ROC_MM * 1e-3 + super::WINDOW) + 2.0 * CT_VOXEL);
+    write_box_ct(path, half, z_lo, z_hi, |[x, y, z]| {
+        let z = z - c;
+        let r = (x * x + y * y + z * z).sqrt();
+        r >= a && r <= b && -z >= cos_cap * r
+    })
+}
+
+/// A CT of 0.25 mm voxels over `|x|, |y| <= half` and `z_lo..z_hi` (m, transducer frame; the
+/// first plane's centres at `z_lo`), HU [`BONE_HU`] where `bone` holds at a voxel's centre and
+/// -1000 elsewhere, written to `path`.
+fn write_box_ct(path: &Path, half: f64, z_lo: f64, z_hi: f64, bone: impl Fn([f64; 3]) -> bool) -> Result<()> {
     let n = (2.0 * half / CT_VOXEL).ceil() as usize + 1;
     let nk = ((z_hi - z_lo) / CT_VOXEL).ceil() as usize + 1;
-    let centre_of = |i: usize, n: usize| (i as f64 - 0.5 * (n - 1) as f64) * CT_VOXEL;
+    let centre_of = |i: usize| (i as f64 - 0.5 * (n - 1) as f64) * CT_VOXEL;
     let mut hu = Vec::with_capacity(n * n * nk);
     for k in 0..nk {
-        let z = z_lo + k as f64 * CT_VOXEL - c;
+        let z = z_lo + k as f64 * CT_VOXEL;
         for j in 0..n {
             for i in 0..n {
-                let (x, y) = (centre_of(i, n), centre_of(j, n));
-                let r = (x * x + y * y + z * z).sqrt();
-                hu.push(if r >= a && r <= b && -z >= cos_cap * r { BONE_HU as f32 } else { -1000.0 });
+                hu.push(if bone([centre_of(i), centre_of(j), z]) { BONE_HU as f32 } else { -1000.0 });
             }
         }
     }
-    // RAS x = -LPS x: a box symmetric about the axis maps onto itself.
+    // RAS x = -LPS x (and y): a box symmetric about the axis maps onto itself.
     let h = 0.5 * (n - 1) as f64 * CT_VOXEL * 1e3;
     let s = CT_VOXEL * 1e3;
     let affine = [[-s, 0.0, 0.0, h], [0.0, -s, 0.0, h], [0.0, 0.0, s, z_lo * 1e3]];
@@ -229,27 +238,7 @@ fn write_plate_ct(path: &Path, z1: f64, d: f64, tilt_deg: f64) -> Result<()> {
     // Voxel centres half a voxel off the first face on the axis: untilted, the plate is exactly
     // its 26 voxels.
     let z_lo = z1 - ((half * s.abs() / c) / CT_VOXEL).ceil() * CT_VOXEL - 2.5 * CT_VOXEL;
-    let z_hi = ROC_MM * 1e-3 + 2.0 * super::WINDOW;
-    let n = (2.0 * half / CT_VOXEL).ceil() as usize + 1;
-    let nk = ((z_hi - z_lo) / CT_VOXEL).ceil() as usize + 1;
-    let centre_of = |i: usize, n: usize| (i as f64 - 0.5 * (n - 1) as f64) * CT_VOXEL;
-    let mut hu = Vec::with_capacity(n * n * nk);
-    for k in 0..nk {
-        let z = z_lo + k as f64 * CT_VOXEL - z1;
-        for _ in 0..n {
-            for i in 0..n {
-                // RAS x is -LPS x, and LPS is the transducer frame here: x = -(RAS x).
-                let x = -centre_of(i, n);
-                let depth = x * s + z * c;
-                hu.push(if (0.0..d).contains(&depth) { BONE_HU as f32 } else { -1000.0 });
-            }
-        }
-    }
-    let h = 0.5 * (n - 1) as f64 * CT_VOXEL * 1e3;
-    let v = CT_VOXEL * 1e3;
-    let affine = [[v, 0.0, 0.0, -h], [0.0, v, 0.0, -h], [0.0, 0.0, v, z_lo * 1e3]];
-    std::fs::write(path, nifti::encode([nk, n, n], &hu, affine))
-        .map_err(|e| HasError::invalid("validation directory", format!("cannot write {}: {e}", path.display())))
+    write_box_ct(path, half, z_lo, ROC_MM * 1e-3 + 2.0 * super::WINDOW, |[x, _, z]| (0.0..d).contains(&(x * s + (z - z1) * c)))
 }
 
 /// The CT section of a scenario reading `file`: the porosity conversion's dense bone set to the

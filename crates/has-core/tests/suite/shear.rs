@@ -38,7 +38,9 @@ fn power(cs: f64, lossy: bool, deg: f64) -> f64 {
 /// equal to 1e-9.
 #[test]
 fn the_solid_plate_matches_a_full_wave_solution_angle_by_angle() {
-    for (name, cs, lossy) in [("plate_transmission_fdtd2d_0.125mm", 1500.0, true), ("plate_transmission_fdtd2d_0.125mm_cs1300", 1300.0, true)] {
+    for (name, cs, lossy) in
+        [("plate_transmission_fdtd2d_0.125mm", 1500.0, true), ("plate_transmission_fdtd2d_0.125mm_cs1300", 1300.0, true)]
+    {
         let (_, rows) = rows(name);
         assert!(rows.len() >= 2, "{name}: {} rows", rows.len());
         for row in rows {

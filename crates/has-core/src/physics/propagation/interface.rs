@@ -234,48 +234,6 @@ impl Interface {
     }
 }
 
-/// A face's treads take the coefficient of the reference beam's local direction where the beam
-/// is at least this fraction of its largest amplitude on the plane.
-const DIRECTED_FIELD: f64 = 0.1;
-
-/// ... and where the face's normal-incidence `|R|` is at least this: bone against water or soft
-/// tissue (cortical 0.55, trabecular 0.45). Between soft tissues (`|R|` below 0.1, sound speeds
-/// within 20 %) the coefficient hardly depends on the angle short of a critical angle beyond 55°,
-/// which only a misread direction reaches.
-const DIRECTED_CONTRAST: f64 = 0.1;
-
-impl Interface {
-    /// A pointwise interface whose walls' treads take the coefficient of the wave crossing them
-    /// (its direction the phase gradient of `incident`, the flux-normalised field arriving at
-    /// the face) instead of normal incidence's; `None` where nothing changes (a spectral
-    /// interface, or no wall). `slabs` as in [`face_phase`].
-    pub(crate) fn toward(&self, incident: &[C64], grid: &Grid, slabs: [&SliceProperties; 4], omega: f64) -> Option<Self> {
-        let Kind::Pointwise { pixels, r, phase } = &self.kind else { return None };
-        let [_, from, to, _] = slabs;
-        // Where the beam is weak its phase gradient is not a direction: those faces keep normal
-        // incidence.
-        let strong = DIRECTED_FIELD * incident.iter().map(|p| p.norm()).fold(0.0, f64::max);
-        let walls: Vec<(usize, f64)> = pixels
-            .par_iter()
-            .enumerate()
-            .filter(|&(k, &i)| incident[i as usize].norm() >= strong && r[k].abs() >= DIRECTED_CONTRAST && is_wall(slabs, i as usize))
-            .map(|(k, &i)| {
-                let i = i as usize;
-                let direction = super::risers::local_direction(incident, grid, from, i, omega / from.sound_speed[i]);
-                (k, super::risers::tread_coefficient_toward(grid, (from, to), i, direction, omega))
-            })
-            .collect();
-        if walls.is_empty() {
-            return None;
-        }
-        let mut r = r.clone();
-        for (k, v) in walls {
-            r[k] = v;
-        }
-        Some(Interface { strength: self.strength, kind: Kind::Pointwise { pixels: pixels.clone(), r, phase: phase.clone() } })
-    }
-}
-
 impl<T: FftNum> Interface<T> {
     /// What it holds, as ids of whole planes (arrays as long as the grid's plane): a pointwise
     /// coefficient map (at most a plane: its pixels and their coefficients; a second with its

@@ -229,21 +229,7 @@ impl HasPlan {
         if reference.len() != n {
             return Err(HasError::invalid("reference", format!("has {} samples, grid has {n}", reference.len())));
         }
-        let Layout { frequency, source_medium, slabs, slab_of_step, interfaces, staircases } = layout;
-        // The slab before plane n (n = 0: the source's medium), as `layout` has it.
-        let slab_before = |slabs: &[Arc<SliceProperties>], n: usize| {
-            if n == 0 {
-                source_medium.clone()
-            } else {
-                slabs[slab_of_step[(n - 1).min(slab_of_step.len() - 1)]].clone()
-            }
-        };
-        let around: Vec<Option<[Arc<SliceProperties>; 4]>> = (0..grid.nz - 1)
-            .map(|step| {
-                (staircases[step] && interfaces[step].is_some() && options.interfaces == InterfaceModel::Angular)
-                    .then(|| [step.saturating_sub(1), step, step + 1, step + 2].map(|n| slab_before(&slabs, n)))
-            })
-            .collect();
+        let Layout { frequency, source_medium, slabs, slab_of_step, interfaces } = layout;
         let omega = 2.0 * PI * frequency;
         let fft = Fft2::new(grid.nx, grid.ny);
         let sponge = sponge_map(grid, options);
@@ -270,18 +256,10 @@ impl HasPlan {
         let mut field = reference.to_vec();
         let mut ws = plan.fft.workspace(true);
         let (mut work, mut reflected) = (Vec::new(), Vec::new());
-        for (step, ((slab, interface), around)) in slab_of_step.iter().copied().zip(interfaces).zip(around).enumerate() {
+        for (step, (slab, interface)) in slab_of_step.into_iter().zip(interfaces).enumerate() {
             let before = plan.steps.last().map_or(&plan.source_medium, |s| &plan.slabs[s.slab]);
             recorder.add(step, &field, before, &plan.source_medium);
             recorder.power(step, &plan.source_medium, &field);
-            // A staircase's treads take the coefficient of the wave the reference beam sends
-            // across them (`risers.rs`).
-            let interface = match (interface, around) {
-                (Some(i), Some(slabs)) => {
-                    Some(i.toward(&field, grid, [&slabs[0], &slabs[1], &slabs[2], &slabs[3]], omega).map_or(i, Arc::new))
-                }
-                (i, _) => i,
-            };
             if let Some(i) = &interface {
                 march::cross(i, &plan.fft, &mut field, 1.0, false, (&mut reflected, &mut work), &mut ws);
             }
@@ -439,9 +417,6 @@ struct Layout {
     slabs: Vec<Arc<SliceProperties>>,
     slab_of_step: Vec<usize>,
     interfaces: Vec<Option<Arc<Interface>>>,
-    /// Per step, whether its interface's faces may lie between planes (a CT or voxel map: walls
-    /// crossing the planes as staircases).
-    staircases: Vec<bool>,
 }
 
 fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -> Layout {
@@ -478,18 +453,17 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
     // interface is built where the slab changes (the material pairs' spectral coefficients are
     // shared through `shared`). Faces of regions lie on planes; others get their positions' phases.
     let mut shared = Coefficients::default();
-    let staircases: Vec<bool> = (0..grid.nz - 1).map(|step| !(planar[step] && planar[step + 1])).collect();
     let interfaces = (0..grid.nz - 1)
         .map(|step| {
             if step > 0 && slab_of_step[step - 1] == slab_of_step[step] {
                 return None;
             }
             let (from, to) = (before(step), before(step + 1));
-            let around = staircases[step].then(|| (&**before(step.saturating_sub(1)), &**before(step + 2)));
+            let around = (!(planar[step] && planar[step + 1])).then(|| (&**before(step.saturating_sub(1)), &**before(step + 2)));
             Interface::new(grid, from, to, omega, model, around, &mut shared).map(Arc::new)
         })
         .collect();
-    Layout { frequency, source_medium, slabs, slab_of_step, interfaces, staircases }
+    Layout { frequency, source_medium, slabs, slab_of_step, interfaces }
 }
 
 /// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (sequential sums: identical with any

@@ -26,9 +26,6 @@ use crate::physics::medium::SliceProperties;
 /// tilted by more than `asin(sqrt(T))`), which no tread can make up for.
 const MIN_TREAD_TRANSMISSION: f64 = 0.25;
 
-/// The least flux a tread passes (total reflection, kept just short of `|R| = 1`).
-const MIN_TREAD_FLUX: f64 = 1e-9;
-
 /// The coefficient `R_t` of the tread at pixel `i` of the face from slab `from` into `to`, for
 /// its normal-incidence coefficient `r` (see the module doc).
 pub(super) fn tread_coefficient(r: f64, grid: &Grid, (from, to): (&SliceProperties, &SliceProperties), i: usize) -> f64 {
@@ -43,65 +40,6 @@ fn with_tread_fraction(r: f64, f: f64) -> f64 {
     let tread = if f > 0.0 { (t - (1.0 - f)) / f } else { 0.0 };
     let tread = tread.clamp(MIN_TREAD_TRANSMISSION * t, t);
     r.signum() * (1.0 - tread).sqrt()
-}
-
-/// The coefficient `R_t` of the tread at pixel `i` of the wall from slab `from` into `to` for a
-/// wave crossing it along the unit vector `u` (forward, `u_z > 0`): the wall passes the flux
-/// `T(θ) = 1 - |R(θ)|²` of the plane-wave coefficient at the local incidence `cos θ = u·n`
-/// (`R = (ρ_b·kz_a - ρ_a·kz_b)/(ρ_b·kz_a + ρ_a·kz_b)`, nothing beyond the critical angle), and
-/// the treads carry the fraction `f = u_z·n_z / (u·n)` of the flux crossing it (`n` turned
-/// towards +z). At `u = n` this is [`tread_coefficient`].
-pub(super) fn tread_coefficient_toward(
-    grid: &Grid,
-    (from, to): (&SliceProperties, &SliceProperties),
-    i: usize,
-    u: [f64; 3],
-    omega: f64,
-) -> f64 {
-    let n = wall_normal(grid, from, to, i);
-    let n = if n[2] < 0.0 { n.map(|v| -v) } else { n };
-    let (za, zb) = (from.density[i] * from.sound_speed[i], to.density[i] * to.sound_speed[i]);
-    let r = (zb - za) / (za + zb);
-    let cos = u[0] * n[0] + u[1] * n[1] + u[2] * n[2];
-    if n == [0.0; 3] || cos <= 1e-3 || u[2] <= 0.0 {
-        return r;
-    }
-    let (ka, kb) = (omega / from.sound_speed[i], omega / to.sound_speed[i]);
-    let kt2 = ka * ka * (1.0 - cos * cos).max(0.0);
-    let kza = num_complex::Complex64::new(ka * cos, 0.0);
-    let kzb = num_complex::Complex64::new(kb * kb - kt2, 0.0).sqrt();
-    let (ra, rb) = (from.density[i], to.density[i]);
-    let rt = (rb * kza - ra * kzb) / (rb * kza + ra * kzb);
-    let t = (1.0 - rt.norm_sqr()).max(0.0);
-    let f = (u[2] * n[2] / cos).max(0.0);
-    let tread = if f > 0.0 { (t - (1.0 - f)) / f } else { 0.0 };
-    let tread = tread.clamp(MIN_TREAD_TRANSMISSION * t, t);
-    let sign = if r == 0.0 { 1.0 } else { r.signum() };
-    // (|R_t| < 1: a crossing back through the face divides by `1 + R_t`.)
-    sign * (1.0 - tread.max(MIN_TREAD_FLUX)).sqrt()
-}
-
-/// The unit direction of the wave at pixel `i` of `field` (flux-normalised, in the slab `medium`
-/// of wavenumber `k` there): its phase gradient across the plane from the neighbours of the
-/// pixel's own material (central differences where both are, one-sided where one is: across a
-/// wall the other material's phase would tilt it), the rest of `k` along +z.
-pub(super) fn local_direction(field: &[num_complex::Complex64], g: &Grid, medium: &SliceProperties, i: usize, k: f64) -> [f64; 3] {
-    let same = |j: usize| medium.sound_speed[j] == medium.sound_speed[i] && medium.density[j] == medium.density[i];
-    let slope = |lo: usize, hi: usize, d: f64| (field[hi] * field[lo].conj()).arg() / d;
-    let along = |at: usize, len: usize, stride: usize, d: f64| {
-        let lo = (at > 0 && same(i - stride)).then(|| i - stride);
-        let hi = (at + 1 < len && same(i + stride)).then(|| i + stride);
-        match (lo, hi) {
-            (Some(a), Some(b)) => slope(a, b, 2.0 * d),
-            (Some(a), None) => slope(a, i, d),
-            (None, Some(b)) => slope(i, b, d),
-            (None, None) => 0.0,
-        }
-    };
-    let kx = along(i % g.nx, g.nx, 1, g.dx);
-    let ky = along(i / g.nx, g.ny, g.nx, g.dy);
-    let kz = (k * k - kx * kx - ky * ky).max(0.0).sqrt();
-    unit([kx, ky, kz])
 }
 
 /// Unit normal of the wall at pixel `i` of the face between slabs `from` and `to`: the direction
