@@ -4,7 +4,7 @@
 
 use super::{Comparison, WINDOW};
 use crate::error::{HasError, Result};
-use crate::numeric::pearson;
+use crate::numeric::{parabola, pearson};
 use crate::reference::oblique::ObliqueBowl;
 use crate::simulation::window_of_box;
 use crate::simulation::Simulation;
@@ -36,18 +36,13 @@ pub(super) fn compare_oblique(name: &str, description: &str, sim: &Simulation, e
         .max_by(|&a, &b| volume.pressure[a].total_cmp(&volume.pressure[b]))
         .ok_or_else(|| HasError::invalid("window", "holds no sample beyond the plate"))?;
     let (n, j, i) = (best / (nx * ny), (best / nx) % ny, best % nx);
-    // A parabola through the neighbours on each axis (in the box's interior).
-    let vertex = |a: f64, b: f64, c: f64| {
-        let den = a - 2.0 * b + c;
-        if den < 0.0 {
-            (0.5 * (a - c) / den).clamp(-1.0, 1.0)
-        } else {
-            0.0
-        }
-    };
+    // A parabola through the neighbours on each axis (in the box's interior), in cells.
     let offset = |lo: usize, mid: usize, len: usize, f: &dyn Fn(usize) -> f64| {
         if mid > lo && mid + 1 < lo + len {
-            vertex(f(mid - 1), f(mid), f(mid + 1))
+            match parabola([(-1.0, f(mid - 1)), (0.0, f(mid)), (1.0, f(mid + 1))]) {
+                Some(p) if p.curvature < 0.0 => p.vertex.clamp(-1.0, 1.0),
+                _ => 0.0,
+            }
         } else {
             0.0
         }
