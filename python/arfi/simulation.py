@@ -178,7 +178,20 @@ class Simulation:
         if r is not None:
             text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
                      f"({r['round_trips']} round trips)")
-        return text + (", reflections towards the source added" if p["reflections"] else "")
+        text += ", reflections towards the source added" if p["reflections"] else ""
+        if self.has_shear:
+            text += ("; compressional waves only: the shear speeds the scenario gives are not carried by the march "
+                     "(arfi field --engine fdtd carries them)")
+        return text
+
+    @property
+    def has_shear(self) -> bool:
+        """Whether the scenario gives a solid a shear wave (a material's ``shear_sound_speed_m_s``
+        or ``[ct] bone_shear_sound_speed_m_s`` above 0), which only the full-wave engine carries."""
+        d = self.scenario.to_dict()
+        ct = d.get("ct") or {}
+        return bool((ct.get("bone_shear_sound_speed_m_s") or 0) > 0
+                    or any((m.get("shear_sound_speed_m_s") or 0) > 0 for m in d.get("material") or []))
 
     @property
     def noise_rad(self) -> float:
@@ -211,6 +224,16 @@ class Simulation:
         place), ``Field.pressure_volume``, ``Field.intensity_volume`` and ``Field.to_nifti``, as
         ``arfi field`` reports and writes them."""
         return self._core.field(as_phases(phases), None if z_mm is None else as_number(z_mm, "z_mm"), bool(volume))
+
+    def field_from_volume(self, plane: ArrayLike, z_mm: float, axis: ArrayLike, magnitude: ArrayLike) -> Field:
+        """The :class:`Field` of pressure computed by another engine on this simulation's grid
+        (``arfi field --engine fdtd``): ``plane`` (complex Pa, (ny, nx)) on the grid plane nearest
+        ``z_mm``, ``axis`` (complex Pa, one per grid plane, on the beam's axis) and ``magnitude``
+        (``|p|`` in Pa, (nz, ny, nx)); its focal metrics and hottest places are found exactly as
+        for a march. Wrong sizes or values that are not finite: ValueError naming the array."""
+        return self._core.field_from_volume(np.ascontiguousarray(plane, dtype=np.complex128), float(z_mm),
+                                            np.ascontiguousarray(axis, dtype=np.complex128),
+                                            np.ascontiguousarray(magnitude, dtype=np.float32))
 
     def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> dict[str, Any]:
         """The focal metrics in 3-D of the beam driven with ``phases`` (as for :meth:`field`)
@@ -262,8 +285,10 @@ class Simulation:
 
     def properties_at(self, points_mm: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """The medium at each point (mm, transducer frame, shape (n, 3) or (3,)): arrays
-        ``sound_speed_m_s`` and ``density_kg_m3`` (the CT's conversion where a CT holds tissue)
-        and ``hu`` (the CT's value, NaN outside the CT or without one)."""
+        ``sound_speed_m_s`` and ``density_kg_m3`` (the CT's conversion where a CT holds tissue),
+        ``attenuation_np_m`` (amplitude, at the scenario's frequency), ``shear_sound_speed_m_s``
+        and ``shear_attenuation_np_m`` (0 in a fluid) and ``hu`` (the CT's value, NaN outside the
+        CT or without one)."""
         p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
         return self._core.properties_at(np.ascontiguousarray(p))
 

@@ -64,6 +64,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(phase::phase_error, m)?)?;
     m.add("METHODS", PyTuple::new(m.py(), Method::ALL.map(|m| m.name()))?)?;
     m.add_function(wrap_pyfunction!(validation::validation_cases, m)?)?;
+    m.add_function(wrap_pyfunction!(validation::tilted_plate_case, m)?)?;
     m.add_function(wrap_pyfunction!(validation::validation_tolerances, m)?)?;
     Ok(())
 }

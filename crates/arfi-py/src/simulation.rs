@@ -21,9 +21,9 @@ use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::modes_fit::fit_modes;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
-use has_core::simulation::Simulation;
+use has_core::simulation::{ExternalField, Simulation};
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
@@ -177,6 +177,28 @@ impl CoreSimulation {
         Ok(CoreField::new(py, f, &self.inner))
     }
 
+    /// The field of pressure computed by another engine on this simulation's grid: `plane`
+    /// (complex Pa, (ny, nx)) on the grid plane nearest `z_mm`, `axis` (complex Pa, one per
+    /// plane, on the beam's axis) and `magnitude` (|p| in Pa, (nz, ny, nx)); its focal metrics and
+    /// hottest places found as for a march.
+    fn field_from_volume(
+        &self,
+        py: Python<'_>,
+        plane: PyReadonlyArray2<'_, C64>,
+        z_mm: f64,
+        axis: PyReadonlyArray1<'_, C64>,
+        magnitude: PyReadonlyArray3<'_, f32>,
+    ) -> PyResult<CoreField> {
+        let external = ExternalField {
+            plane: plane.as_array().to_owned(),
+            z: z_mm * 1e-3,
+            axis: axis.as_array().to_vec(),
+            magnitude: magnitude.as_array().iter().copied().collect(),
+        };
+        let f = py.detach(|| self.inner.field_from_volume(external)).map_err(to_py)?;
+        Ok(CoreField::new(py, f, &self.inner))
+    }
+
     /// The focal metrics in 3-D of the beam driven with `phases` around `target_mm` (mm, transducer
     /// frame; default the focus), from one march that records only the box around it: the keys of
     /// `Field.focus()`'s metrics and `target_mm` (each None without a closed -6 dB region).
@@ -242,7 +264,8 @@ impl CoreSimulation {
 
     /// The medium at each point (mm, transducer frame, shape (n, 3)): `sound_speed_m_s` and
     /// `density_kg_m3` at the point (the CT's conversion of its voxel where a CT holds tissue),
-    /// and `hu`, the CT's value there (NaN outside the CT or without one).
+    /// `attenuation_np_m` (amplitude, at the scenario's frequency), `shear_sound_speed_m_s` and
+    /// `shear_attenuation_np_m` (0 in a fluid) and `hu`, the CT's value there (NaN outside the CT or without one).
     fn properties_at<'py>(&self, py: Python<'py>, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Bound<'py, PyDict>> {
         let points = points_m(&points_mm)?;
         let m = &self.inner.medium;
@@ -251,6 +274,9 @@ impl CoreSimulation {
         let d = PyDict::new(py);
         d.set_item("sound_speed_m_s", props.iter().map(|p| p.sound_speed).collect::<Vec<_>>().into_pyarray(py))?;
         d.set_item("density_kg_m3", props.iter().map(|p| p.density).collect::<Vec<_>>().into_pyarray(py))?;
+        d.set_item("attenuation_np_m", props.iter().map(|p| p.attenuation).collect::<Vec<_>>().into_pyarray(py))?;
+        d.set_item("shear_sound_speed_m_s", props.iter().map(|p| p.shear_sound_speed).collect::<Vec<_>>().into_pyarray(py))?;
+        d.set_item("shear_attenuation_np_m", props.iter().map(|p| p.shear_attenuation).collect::<Vec<_>>().into_pyarray(py))?;
         d.set_item("hu", hu.into_pyarray(py))?;
         Ok(d)
     }

@@ -3,7 +3,7 @@
 
 use crate::error::to_py;
 use crate::interrupt::run_interruptible;
-use has_core::validation::{compare, suite, Case, Comparison, Tolerances};
+use has_core::validation::{compare, suite, tilted_plate, Case, Comparison, Tolerances};
 use numpy::{IntoPyArray, PyArray2};
 use pyo3::prelude::*;
 use std::path::PathBuf;
@@ -53,6 +53,15 @@ pub(crate) fn validation_cases(dir: PathBuf) -> PyResult<Vec<CoreValidationCase>
     Ok(suite(&dir).map_err(to_py)?.into_iter().map(CoreValidationCase).collect())
 }
 
+/// The ITRUSST bowl through the 6.5 mm cortical plate 30 mm from the apex turned `tilt_deg`
+/// about y, read from a CT of 0.25 mm voxels written to `dir` (which must exist) when the case
+/// runs; its exact solution that of the fluid plate, or of a solid of shear speed `shear_m_s`.
+#[pyfunction]
+#[pyo3(signature = (dir, tilt_deg, shear_m_s=None))]
+pub(crate) fn tilted_plate_case(dir: PathBuf, tilt_deg: f64, shear_m_s: Option<f64>) -> PyResult<CoreValidationCase> {
+    Ok(CoreValidationCase(tilted_plate(&dir, tilt_deg, shear_m_s).map_err(to_py)?))
+}
+
 /// One case's comparison: `|p|/p0` simulated and exact (`p0` the element face pressure).
 #[pyclass(module = "arfi._core", name = "ValidationResult", frozen)]
 pub(crate) struct CoreComparison(Comparison);
@@ -99,6 +108,13 @@ impl CoreComparison {
     #[getter]
     fn focal_position_error_mm(&self) -> f64 {
         self.0.focal_position_error() * 1e3
+    }
+
+    /// The focal peak in 3-D (mm, transducer frame), simulated and exact.
+    #[getter]
+    fn focal_point_mm(&self) -> ([f64; 3], [f64; 3]) {
+        let [s, e] = self.0.focal_point;
+        (s.map(|v| v * 1e3), e.map(|v| v * 1e3))
     }
 
     /// Largest axial error from 10 mm before to 10 mm after the focus, relative to the exact peak.

@@ -14,6 +14,7 @@ from arfi._core import MemoryLimitError
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_optional_phases
 from arfi.io import npz_path, volume_path, write_npz
 from arfi.focal import metrics_text
+from arfi.fullwave import ENGINE_VERSION, FdtdOptions, FdtdResult
 from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.simulation import Field, Simulation
 from arfi.volume import IntensityVolume, PressureVolume
@@ -54,6 +55,16 @@ def register(sub: Any) -> None:
     p.add_argument("--volume-box-mm", type=float, nargs=6, metavar=("X0", "X1", "Y0", "Y1", "Z0", "Z1"),
                    dest="volume_box_mm", help="crop the --volume and --intensity-volume files to this box (mm, "
                    "transducer frame)")
+    p.add_argument("--engine", choices=("has", "fdtd"), default="has",
+                   help="has (default): the hybrid angular spectrum march, seconds; fdtd: the full-wave viscoelastic engine "
+                   "BabelViscoFDTD (install with pip install 'arfi[fullwave]'), minutes to hours, fed the march's own source "
+                   "plane and the same medium (with shear where the scenario gives it); its field is read as the march's is "
+                   "(same outputs and JSON keys) and printed beside the march's. The time it will take is printed before it "
+                   "starts")
+    p.add_argument("--fdtd-points-per-wavelength", type=float, default=FdtdOptions.points_per_wavelength, metavar="N",
+                   dest="fdtd_ppw", help="--engine fdtd: voxels per shortest wavelength present (default "
+                   f"{FdtdOptions.points_per_wavelength:g}; the time goes as N^4: 6 is about 3x faster and reads a cortical "
+                   "cap's focal pressure about 9 %% high)")
     add_report(p, "PNG figures (|p| in MPa on the plane in mm, the axis profile, and the beam on the three planes "
                   "through the target over the CT in HU or the sound speed, with the focal -6 dB contour)")
     p.set_defaults(run=run)
@@ -129,6 +140,28 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
     return lines
 
 
+def fdtd_line(r: FdtdResult, focus: dict[str, Any], march: dict[str, Any]) -> str:
+    """The full-wave run in one line, its focal peak beside the march's."""
+    nx, ny, nz = r.plan.shape
+    text = (f"field: computed by BabelViscoFDTD (full wave, {r.plan.h_m * 1e3:.3f} mm voxels, {nx} x {ny} x {nz}, "
+            f"{r.materials} materials) in {r.seconds:.0f} s, steady to {100 * r.steady_change:.2f} %")
+    if focus.get("focal_peak_pa") and march.get("focal_peak_pa"):
+        fp, mp = focus["focal_peak_mm"], march["focal_peak_mm"]
+        gap = sum((a - b) ** 2 for a, b in zip(fp, mp)) ** 0.5
+        text += (f"; the march: {march['focal_peak_pa'] / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in mp)}) mm, "
+                 f"{100 * (march['focal_peak_pa'] / focus['focal_peak_pa'] - 1):+.1f} % and {gap:.2f} mm from the full wave's")
+    return text
+
+
+def fdtd_json(r: FdtdResult, march: dict[str, Any]) -> dict[str, Any]:
+    """The full-wave run's JSON: its grid, time step, steadiness and the march's focal metrics."""
+    p = r.plan
+    return {"engine": "BabelViscoFDTD", "engine_version": ENGINE_VERSION,
+            "voxel_mm": p.h_m * 1e3, "shape_xyz": list(p.shape), "time_step_s": p.dt_s, "steps": p.steps,
+            "materials": r.materials, "steady_change": r.steady_change, "seconds": r.seconds,
+            "march_focal_peak_pa": march.get("focal_peak_pa"), "march_focal_peak_mm": march.get("focal_peak_mm")}
+
+
 def run(args: argparse.Namespace) -> int:
     npz_path(args.out)  # before the simulation
     asked = [v for v in VOLUMES if getattr(args, v.key) is not None]
@@ -137,6 +170,15 @@ def run(args: argparse.Namespace) -> int:
     for v in asked:
         volume_path(getattr(args, v.key), v.flag)
     limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
+    fdtd_options = None
+    if args.engine == "fdtd":
+        from arfi.fullwave import require_engine
+
+        require_engine()
+        try:
+            fdtd_options = FdtdOptions(points_per_wavelength=args.fdtd_ppw)
+        except ValueError as e:
+            raise ValueError(f"--fdtd-points-per-wavelength: {str(e).split(': ', 1)[1]}") from None
     t = time.perf_counter()
     sim = Simulation(load_scenario(args))
     phases = read_optional_phases(args.phases, "--phases")
@@ -148,12 +190,20 @@ def run(args: argparse.Namespace) -> int:
         if v.in_ct and not sim.has_ct:
             raise ValueError(f"{v.flag}: needs a scenario with a [ct] section (the CT is the grid it is resampled into)")
     skipped = None
+    fdtd: FdtdResult | None = None
+    march = None
     try:
         f = sim.field(phases, args.z_mm, volume=True)
     except MemoryLimitError as e:  # the whole grid's |p| does not fit: without volume outputs, the field alone
-        if asked or args.report:
+        if asked or args.report or fdtd_options is not None:
             raise
         f, skipped = sim.field(phases, args.z_mm), str(e)
+    if fdtd_options is not None:
+        from arfi import fullwave
+
+        march = f
+        fdtd = fullwave.run(sim, march, phases, fdtd_options, progress=lambda m: print(m, flush=True))
+        f = sim.field_from_volume(fdtd.plane, fdtd.z_mm, fdtd.axis, fdtd.magnitude)
     # The volumes (from the field's own march) before anything is written: a box outside the
     # grid leaves no file behind.
     volumes = [(v, v.make(f, args.volume_box_mm)) for v in asked]
@@ -186,6 +236,8 @@ def run(args: argparse.Namespace) -> int:
         written[v.key] = {"path": path, "shape_ijk": [ni, nj, nk], v.max_key: float(values.max())}
         if not v.in_ct:
             written[v.key]["box_mm"] = args.volume_box_mm
+    if fdtd is not None and march is not None:
+        lines.insert(-1, fdtd_line(fdtd, focus, march.focus()))
     rows = exceeded(focus, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
@@ -197,5 +249,7 @@ def run(args: argparse.Namespace) -> int:
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
         field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
-                  **{v.key: written.get(v.key) for v in VOLUMES}, "propagation": sim.propagation, "seconds": time.perf_counter() - t})
+                  **{v.key: written.get(v.key) for v in VOLUMES}, "propagation": sim.propagation, "engine": args.engine,
+                  "fdtd": None if fdtd is None or march is None else fdtd_json(fdtd, march.focus()),
+                  "seconds": time.perf_counter() - t})
     return 0

@@ -1,6 +1,6 @@
 //! Homogeneous materials and the acoustic properties at a point.
 
-use crate::error::{require_in_range, require_non_negative, require_positive, Result};
+use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
 use crate::physics::tissue::MrResponse;
 
 /// Nepers per decibel: 1 dB = ln(10)/20 Np.
@@ -37,6 +37,11 @@ pub struct Material {
     pub attenuation_db_cm_mhz: f64,
     /// Frequency exponent y of the power law (1 = linear).
     pub attenuation_power: f64,
+    /// Shear-wave speed c_s (m/s) of a solid; 0 for a fluid. The march carries compressional
+    /// waves only; a full-wave engine given the medium uses it.
+    pub shear_sound_speed: f64,
+    /// Shear-wave attenuation a0_s (dB/cm/MHz^y, the same power law as the compressional wave).
+    pub shear_attenuation_db_cm_mhz: f64,
     /// How the material shows in MR-ARFI images (default: by its sound speed,
     /// [`MrResponse::for_sound_speed`]).
     pub mr: MrResponse,
@@ -46,7 +51,16 @@ impl Material {
     /// Validates the acoustic parameters.
     pub fn new(name: &str, sound_speed: f64, density: f64, attenuation_db_cm_mhz: f64) -> Result<Self> {
         let mr = MrResponse::for_sound_speed(sound_speed);
-        let m = Material { name: name.to_string(), sound_speed, density, attenuation_db_cm_mhz, attenuation_power: 1.0, mr };
+        let m = Material {
+            name: name.to_string(),
+            sound_speed,
+            density,
+            attenuation_db_cm_mhz,
+            attenuation_power: 1.0,
+            shear_sound_speed: 0.0,
+            shear_attenuation_db_cm_mhz: 0.0,
+            mr,
+        };
         m.validate()?;
         Ok(m)
     }
@@ -58,6 +72,8 @@ impl Material {
         require_positive(&p("density_kg_m3"), self.density)?;
         require_non_negative(&p("attenuation_db_cm_mhz"), self.attenuation_db_cm_mhz)?;
         require_non_negative(&p("attenuation_power"), self.attenuation_power)?;
+        require_shear(&p("shear_sound_speed_m_s"), self.shear_sound_speed, self.sound_speed)?;
+        require_non_negative(&p("shear_attenuation_db_cm_mhz"), self.shear_attenuation_db_cm_mhz)?;
         self.mr.validate(&format!("material '{}'", self.name))
     }
 
@@ -68,8 +84,29 @@ impl Material {
 
     /// Local properties at `frequency`.
     pub fn properties(&self, frequency: f64) -> Properties {
-        Properties { sound_speed: self.sound_speed, density: self.density, attenuation: self.attenuation_np_m(frequency) }
+        Properties {
+            sound_speed: self.sound_speed,
+            density: self.density,
+            attenuation: self.attenuation_np_m(frequency),
+            shear_sound_speed: self.shear_sound_speed,
+            shear_attenuation: attenuation_np_m(self.shear_attenuation_db_cm_mhz, self.attenuation_power, frequency),
+        }
     }
+}
+
+/// Checks a shear speed `cs` (m/s) against the compressional speed `cp` of the same solid: 0 (a
+/// fluid) or positive and below `cp·√3/2`, where the bulk modulus `ρ·(cp² − 4/3·cs²)` stays
+/// positive (so also below `cp`).
+pub(crate) fn require_shear(name: &str, cs: f64, cp: f64) -> Result<()> {
+    require_non_negative(name, cs)?;
+    let limit = cp * 3f64.sqrt() / 2.0;
+    if cs >= limit {
+        return Err(HasError::invalid(
+            name,
+            format!("must lie below √3/2 of the compressional speed ({limit:.0} m/s for {cp:.0} m/s: a positive bulk modulus), got {cs}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Acoustic properties at a point, SI: c (m/s), rho (kg/m³), alpha (Np/m).
@@ -81,6 +118,10 @@ pub struct Properties {
     pub density: f64,
     /// Amplitude attenuation coefficient alpha at the frequency asked for, Np/m.
     pub attenuation: f64,
+    /// Shear-wave speed c_s, m/s (0: a fluid). Not used by the march.
+    pub shear_sound_speed: f64,
+    /// Shear-wave amplitude attenuation at the frequency asked for, Np/m.
+    pub shear_attenuation: f64,
 }
 
 impl Properties {

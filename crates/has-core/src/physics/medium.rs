@@ -352,7 +352,13 @@ impl Medium {
         if let Some(v) = &self.voxels {
             if let Some(i) = v.index(x, y, z) {
                 let a = attenuation_np_m(v.attenuation_db_cm_mhz[i], v.attenuation_power, frequency);
-                return Properties { sound_speed: v.sound_speed[i], density: v.density[i], attenuation: a };
+                return Properties {
+                    sound_speed: v.sound_speed[i],
+                    density: v.density[i],
+                    attenuation: a,
+                    shear_sound_speed: 0.0,
+                    shear_attenuation: 0.0,
+                };
             }
         }
         self.materials[self.material_at(x, y, z)].properties(frequency)

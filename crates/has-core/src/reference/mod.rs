@@ -137,7 +137,17 @@ impl Bowl {
 #[cfg(test)]
 pub(crate) fn test_fluid(c: f64, rho: f64, a0: f64) -> Fluid {
     use crate::physics::material::attenuation_np_m;
-    Fluid::new(Properties { sound_speed: c, density: rho, attenuation: attenuation_np_m(a0, 1.0, 500e3) }, 500e3).unwrap()
+    Fluid::new(
+        Properties {
+            sound_speed: c,
+            density: rho,
+            attenuation: attenuation_np_m(a0, 1.0, 500e3),
+            shear_sound_speed: 0.0,
+            shear_attenuation: 0.0,
+        },
+        500e3,
+    )
+    .unwrap()
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 
 use crate::error::{HasError, Result};
 use crate::nifti;
-use crate::physics::ct::{BoneModel, CtMedium, HuConversion, Porosity};
+use crate::physics::ct::{BoneModel, BoneShear, CtMedium, HuConversion, Porosity};
 use crate::physics::medium::Material;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -58,6 +58,14 @@ pub struct CtSpec {
     /// Porosity model: exponent β of the attenuation law (default 0.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub porosity_exponent: Option<f64>,
+    /// Shear-wave speed of dense bone, m/s (absent or 0: fluid bone, the default); a voxel of
+    /// porosity ψ gets `(1 − ψ)` of it. Cortical bone: about 1300-1750 m/s (Pichardo et al.,
+    /// Phys Med Biol 62:6938, 2017). Carried by `arfi field --engine fdtd`, not by the march.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bone_shear_sound_speed_m_s: Option<f64>,
+    /// Shear-wave attenuation of bone, dB/cm/MHz (linear in frequency; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bone_shear_attenuation_db_cm_mhz: Option<f64>,
     /// Read the bone as soft tissue (default false): the head without its skull, the model of
     /// an MR-ARFI estimate whose prior comes from `arfi predict` (that prediction's reference).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -125,6 +133,10 @@ impl CtSpec {
                 }
             }
         }
+        c.bone_shear = BoneShear {
+            sound_speed: self.bone_shear_sound_speed_m_s.unwrap_or(0.0),
+            attenuation_db_cm_mhz: self.bone_shear_attenuation_db_cm_mhz.unwrap_or(0.0),
+        };
         c.validate()?;
         Ok(if self.without_bone == Some(true) { c.without_bone() } else { c })
     }

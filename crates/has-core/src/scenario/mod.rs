@@ -158,6 +158,14 @@ pub struct MaterialSpec {
     /// Exponent y of `a0·f^y` (default 1: linear in frequency).
     #[serde(default = "d::one")]
     pub attenuation_power: f64,
+    /// A solid's shear-wave speed c_s, m/s (absent or 0: a fluid); below √3/2 of
+    /// `sound_speed_m_s`. The march carries compressional waves only (it says so when a scenario
+    /// gives shear); `arfi field --engine fdtd` carries both.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shear_sound_speed_m_s: Option<f64>,
+    /// The shear wave's attenuation a0_s in `a0_s·(f / 1 MHz)^y` dB/cm (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shear_attenuation_db_cm_mhz: Option<f64>,
     /// Whether the material gives MR signal (default: false for bone-like materials, sound speed
     /// from 1800 m/s on; true otherwise). Pixels without signal are absent (NaN) from MR-ARFI images.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -400,6 +408,8 @@ fn water() -> MaterialSpec {
         density_kg_m3: 1000.0,
         attenuation_db_cm_mhz: 0.0,
         attenuation_power: 1.0,
+        shear_sound_speed_m_s: None,
+        shear_attenuation_db_cm_mhz: None,
         mr_signal: None,
         displacement_scale: None,
     }
@@ -417,6 +427,8 @@ fn phantom_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
             density_kg_m3: 1040.0,
             attenuation_db_cm_mhz: 0.46,
             attenuation_power: 1.0,
+            shear_sound_speed_m_s: None,
+            shear_attenuation_db_cm_mhz: None,
             mr_signal: None,
             displacement_scale: None,
         },

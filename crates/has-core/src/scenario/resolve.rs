@@ -138,6 +138,8 @@ impl Scenario {
                 density: m.density_kg_m3,
                 attenuation_db_cm_mhz: m.attenuation_db_cm_mhz,
                 attenuation_power: m.attenuation_power,
+                shear_sound_speed: m.shear_sound_speed_m_s.unwrap_or(0.0),
+                shear_attenuation_db_cm_mhz: m.shear_attenuation_db_cm_mhz.unwrap_or(0.0),
                 mr: MrResponse {
                     signal: m.mr_signal.unwrap_or(default_mr.signal),
                     displacement_scale: m.displacement_scale.unwrap_or(default_mr.displacement_scale),

@@ -21,12 +21,14 @@ use num_complex::Complex64 as C64;
 use std::sync::Arc;
 
 mod build;
+mod external;
 mod focus;
 mod grid;
 mod hottest;
 mod regrid;
 mod volume;
 pub(crate) use build::Unbuilt;
+pub use external::ExternalField;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
 pub use hottest::TissueHottest;
 pub use volume::{

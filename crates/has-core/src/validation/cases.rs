@@ -35,7 +35,13 @@ impl Tissue {
     }
 
     fn fluid(&self) -> Fluid {
-        let p = Properties { sound_speed: self.1, density: self.2, attenuation: attenuation_np_m(self.db_cm_mhz(), 1.0, FREQUENCY) };
+        let p = Properties {
+            sound_speed: self.1,
+            density: self.2,
+            attenuation: attenuation_np_m(self.db_cm_mhz(), 1.0, FREQUENCY),
+            shear_sound_speed: 0.0,
+            shear_attenuation: 0.0,
+        };
         Fluid::new(p, FREQUENCY).expect("the benchmark's fluids are valid")
     }
 

@@ -13,7 +13,7 @@
 //! material's response, and coupling voxels the scenario's ([`HuConversion::mr_response`]).
 
 use crate::error::{require_in_range, require_non_negative, require_positive, HasError, Result};
-use crate::physics::material::{attenuation_np_m, Material, Properties};
+use crate::physics::material::{attenuation_np_m, require_shear, Material, Properties};
 use crate::physics::tissue::MrResponse;
 
 /// Hounsfield units a CT may hold: below −1100 or above 4000 a value is not a calibrated HU of
@@ -147,6 +147,20 @@ pub struct HuConversion {
     pub soft_tissue: Material,
     /// Attenuation law for bone where the model gives none (Schneider–Mast).
     porosity_attenuation: Porosity,
+    /// Shear in bone: the dense bone's shear speed c_s (m/s; 0: fluid bone, the default) and
+    /// shear attenuation (dB/cm/MHz, linear in frequency). A voxel of porosity ψ gets
+    /// `c_s·(1 − ψ)`: the shear modulus is carried by the solid frame, which pores filled with
+    /// water (ψ = 1) do not have.
+    pub bone_shear: BoneShear,
+}
+
+/// The dense bone's shear wave (see [`HuConversion::bone_shear`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BoneShear {
+    /// c_s of dense bone, m/s (0: fluid bone).
+    pub sound_speed: f64,
+    /// a0_s, dB/cm/MHz.
+    pub attenuation_db_cm_mhz: f64,
 }
 
 impl HuConversion {
@@ -175,6 +189,7 @@ impl HuConversion {
             bone_as_soft_tissue: false,
             soft_tissue: Material::new("brain", 1546.0, 1040.0, 0.6)?,
             porosity_attenuation: Porosity::default(),
+            bone_shear: BoneShear::default(),
         })
     }
 
@@ -197,6 +212,9 @@ impl HuConversion {
         if let BoneModel::Porosity(p) = &self.bone {
             p.validate()?;
         }
+        // Against the dense bone's compressional speed, where c_s / c_p is largest.
+        require_shear("ct.bone_shear_sound_speed_m_s", self.bone_shear.sound_speed, self.dense_bone_sound_speed())?;
+        require_non_negative("ct.bone_shear_attenuation_db_cm_mhz", self.bone_shear.attenuation_db_cm_mhz)?;
         Ok(())
     }
 
@@ -210,22 +228,41 @@ impl HuConversion {
             HuClass::Bone if self.bone_as_soft_tissue => return Some(self.soft_tissue.properties(frequency)),
             HuClass::Bone => {}
         }
-        let (sound_speed, density, a0) = match &self.bone {
+        let (sound_speed, density, a0, psi) = match &self.bone {
             BoneModel::Porosity(p) => {
                 let psi = p.porosity(hu);
                 (
                     p.water_sound_speed + (p.bone_sound_speed - p.water_sound_speed) * (1.0 - psi),
                     psi * p.water_density + (1.0 - psi) * p.bone_density,
                     p.attenuation(psi),
+                    psi,
                 )
             }
             BoneModel::SchneiderMast => {
                 let rho = schneider_density(hu);
                 let law = &self.porosity_attenuation;
-                ((1.33 * rho + 167.0).max(1500.0), rho, law.attenuation(law.porosity(hu)))
+                let psi = law.porosity(hu);
+                ((1.33 * rho + 167.0).max(1500.0), rho, law.attenuation(psi), psi)
             }
         };
-        Some(Properties { sound_speed, density, attenuation: attenuation_np_m(a0, 1.0, frequency) })
+        let shear = &self.bone_shear;
+        let solid = shear.sound_speed > 0.0;
+        Some(Properties {
+            sound_speed,
+            density,
+            attenuation: attenuation_np_m(a0, 1.0, frequency),
+            shear_sound_speed: if solid { shear.sound_speed * (1.0 - psi) } else { 0.0 },
+            shear_attenuation: if solid { attenuation_np_m(shear.attenuation_db_cm_mhz, 1.0, frequency) } else { 0.0 },
+        })
+    }
+
+    /// The compressional speed (m/s) of the densest bone the conversion distinguishes (no
+    /// porosity), where the ratio of shear to compressional speed is largest.
+    fn dense_bone_sound_speed(&self) -> f64 {
+        match &self.bone {
+            BoneModel::Porosity(p) => p.bone_sound_speed,
+            BoneModel::SchneiderMast => (1.33 * schneider_density(self.porosity_attenuation.hu_max) + 167.0).max(1500.0),
+        }
     }
 
     /// The same conversion with bone read as soft tissue: the head without its skull, the
@@ -305,6 +342,32 @@ mod tests {
         // Linear in frequency: half the Np/m at 500 kHz.
         let (a1, a05) = (c.properties(1000.0, 1e6).unwrap().attenuation, c.properties(1000.0, 5e5).unwrap().attenuation);
         assert!((a05 / a1 - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn shear_is_carried_by_the_solid_fraction_and_bounded_by_the_bulk_modulus() {
+        let mut c = HuConversion::named("aubry2003").unwrap();
+        assert_eq!(c.properties(1000.0, 1e6).unwrap().shear_sound_speed, 0.0); // fluid bone by default
+        c.bone_shear = BoneShear { sound_speed: 1500.0, attenuation_db_cm_mhz: 10.0 };
+        c.validate().unwrap();
+        // ψ = 0.5 at 1000 HU: half the dense bone's shear speed; none in soft tissue.
+        let p = c.properties(1000.0, 5e5).unwrap();
+        assert!((p.shear_sound_speed - 750.0).abs() < 1e-9 && (p.shear_attenuation - 5.0 * 100.0 * NP_PER_DB).abs() < 1e-9);
+        assert!((c.properties(3000.0, 5e5).unwrap().shear_sound_speed - 1500.0).abs() < 1e-9);
+        assert_eq!(c.properties(40.0, 5e5).unwrap().shear_sound_speed, 0.0);
+        // Dense bone at 2900 m/s: c_s must stay below 2900·√3/2 = 2511 m/s.
+        for (cs, a, name) in [
+            (2520.0, 0.0, "ct.bone_shear_sound_speed_m_s"),
+            (2900.0, 0.0, "ct.bone_shear_sound_speed_m_s"),
+            (-1.0, 0.0, "ct.bone_shear_sound_speed_m_s"),
+            (1500.0, -1.0, "ct.bone_shear_attenuation_db_cm_mhz"),
+        ] {
+            c.bone_shear = BoneShear { sound_speed: cs, attenuation_db_cm_mhz: a };
+            match c.validate() {
+                Err(HasError::InvalidParameter { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{cs} {a}: {other:?}"),
+            }
+        }
     }
 
     #[test]

@@ -24,7 +24,7 @@
 
 mod conversion;
 
-pub use conversion::{BoneModel, HuConversion, Porosity, HU_RANGE};
+pub use conversion::{BoneModel, BoneShear, HuConversion, Porosity, HU_RANGE};
 
 use crate::error::{HasError, Result};
 use crate::nifti::Volume;
@@ -258,6 +258,7 @@ impl CtMedium {
     ) -> Option<Properties> {
         let n = self.samples(size);
         let (mut slowness, mut attenuation, mut tissue) = (0.0, 0.0, false);
+        let (mut shear, mut shear_attenuation) = (0.0, 0.0);
         for k in 0..n[2] {
             for j in 0..n[1] {
                 for i in 0..n[0] {
@@ -268,6 +269,8 @@ impl CtMedium {
                     let q = q.unwrap_or(outside);
                     slowness += 1.0 / q.sound_speed;
                     attenuation += q.attenuation;
+                    shear += q.shear_sound_speed;
+                    shear_attenuation += q.shear_attenuation;
                 }
             }
         }
@@ -277,7 +280,14 @@ impl CtMedium {
             // The impedance of the medium at the centre: a face inside the cell reflects as the
             // sharp face between the materials on either side, at the nearest plane.
             let centre = self.hu_at(center).and_then(convert).unwrap_or(outside);
-            Properties { sound_speed, density: centre.impedance() / sound_speed, attenuation: attenuation / count }
+            // Shear (which the march does not carry) by its mean over the cell.
+            Properties {
+                sound_speed,
+                density: centre.impedance() / sound_speed,
+                attenuation: attenuation / count,
+                shear_sound_speed: shear / count,
+                shear_attenuation: shear_attenuation / count,
+            }
         })
     }
 
@@ -414,7 +424,7 @@ mod tests {
         let mut conv = HuConversion::named("aubry2003").unwrap();
         conv.coupling_below_hu = -1000.0;
         let ct = CtMedium::new(v, IDENTITY, conv, "half.nii").unwrap();
-        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0 };
+        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0, shear_sound_speed: 0.0, shear_attenuation: 0.0 };
         // Cell centred between voxel columns i = 1 and 2 (LPS x = -1.5 mm), 2 mm wide in x: its
         // two samples sit at voxel i = 1 (soft tissue) and i = 2 (bone) exactly.
         let p = ct.cell_properties([-1.5e-3, -1.5e-3, 1.5e-3], [2e-3, 1e-3, 1e-3], 1e6, water).unwrap();
@@ -432,7 +442,7 @@ mod tests {
     #[test]
     fn a_slice_holds_each_cells_properties_with_or_without_the_table() {
         let g = Grid::new(10, 8, 0.7e-3, 0.6e-3, 3, 0.8e-3, 0.0).unwrap();
-        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0 };
+        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0, shear_sound_speed: 0.0, shear_attenuation: 0.0 };
         let mut conv = HuConversion::named("aubry2003").unwrap();
         conv.coupling_below_hu = -1000.0;
         for offset in [0.0, 0.25] {
