@@ -63,6 +63,11 @@ def run(name: str, ppw: float) -> dict:
         f = sim.field_from_volume(r.plane, r.z_mm, r.axis, r.magnitude)
     p0 = f.surface_pressure_pa
     fm, mm = f.focus(), march.focus()
+    # |p| along z through the exact peak's column (the line the exact profile is compared on).
+    volume = f.pressure_volume().pressure_pa
+    col = int(np.argmin(np.abs(np.asarray(f.x_mm) - cmp.focal_point_mm[1][0])))
+    row = int(np.argmin(np.abs(np.asarray(f.y_mm))))
+    line = np.c_[np.asarray(f.axis_z_mm), volume[:, row, col] / p0]
     axis = np.c_[np.asarray(f.axis_z_mm), abs(np.asarray(march.axis_pressure)) / p0, abs(np.asarray(f.axis_pressure)) / p0]
     keep = (axis[:, 0] > 40) & (axis[:, 0] < 75)
     return {
@@ -77,6 +82,7 @@ def run(name: str, ppw: float) -> dict:
         "march_axis_peak_p0": mm["axis_peak_pa"] / p0, "march_axis_peak_z_mm": mm["axis_peak_z_mm"],
         "axis_z_mm_march_fdtd_p0": np.round(axis[keep], 4).tolist(),
         "axis_read": "rms",
+        "exact_line_z_mm_fdtd_p0": np.round(line[keep], 4).tolist(),
         "fdtd": {"engine": fullwave.ENGINE, "engine_version": fullwave.ENGINE_VERSION, "voxel_mm": r.plan.h_m * 1e3,
                  "shape_xyz": list(r.plan.shape), "steps": r.plan.steps, "time_step_s": r.plan.dt_s, "materials": r.materials,
                  "steady_change": r.steady_change, "seconds": round(r.seconds, 1)},
