@@ -129,7 +129,10 @@ def test_fdtd_in_water_agrees_with_the_exact_march_and_writes_the_same_outputs(t
     out, js = tmp_path / "f.npz", tmp_path / "f.json"
     assert main(["field", "--scenario", scenario, "--out", str(tmp_path / "m.npz"), "--json", str(tmp_path / "m.json")]) == 0
     assert main(["field", "--engine", "fdtd", "--fdtd-points-per-wavelength", "6", "--scenario", scenario,
-                 "--out", str(out), "--json", str(js)]) == 0
+                 "--out", str(out), "--json", str(js), "--report", str(tmp_path / "report")]) == 0
+    # The report draws the engine's field and names the engine, not the march.
+    html = (tmp_path / "report" / "report.html").read_text()
+    assert "computed by BabelViscoFDTD" in html and (tmp_path / "report" / "field_sections.png").exists()
     printed = capsys.readouterr().out
     assert "fdtd: BabelViscoFDTD" in printed and "computed by BabelViscoFDTD" in printed
     march, fdtd = json.loads((tmp_path / "m.json").read_text()), json.loads(js.read_text())

@@ -247,7 +247,8 @@ def run(args: argparse.Namespace) -> int:
         from arfi.report import field_report
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
-        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": sim.propagation_summary()}, phases)
+        engine = sim.propagation_summary() if fdtd is None or march is None else fdtd_line(fdtd, focus, march.focus())[len("field: "):]
+        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": engine}, phases)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
                   **{v.key: written.get(v.key) for v in VOLUMES}, "propagation": sim.propagation, "engine": args.engine,
                   "fdtd": None if fdtd is None or march is None else fdtd_json(fdtd, march.focus()),
