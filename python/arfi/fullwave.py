@@ -145,6 +145,10 @@ class FdtdPlan:
                 f"{self.dt_s * 1e9:.1f} ns ({self.settle_periods} periods to settle, 2 x {self.record_periods} recorded); "
                 f"about {_duration(self.seconds)}")
 
+    def fractional(self, points_m: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Points (m, (n, 3)) in node units: node (i, j, k) at (i, j, k)."""
+        return (points_m - np.array(self.origin_m)) / self.h_m
+
     def node_x(self, i: NDArray[Any] | int) -> Any:
         return self.origin_m[0] + np.asarray(i) * self.h_m
 
@@ -302,10 +306,8 @@ class _Stencils:
 
 
 def _stencils(p: FdtdPlan, points_m: NDArray[np.float64]) -> _Stencils:
-    fx = (points_m[:, 0] - p.origin_m[0]) / p.h_m
-    fy = (points_m[:, 1] - p.origin_m[1]) / p.h_m
-    fz = (points_m[:, 2] - p.origin_m[2]) / p.h_m
-    (bx, wx), (by, wy), (bz, wz) = _lagrange(fx), _lagrange(fy), _lagrange(fz)
+    f = p.fractional(points_m)
+    (bx, wx), (by, wy), (bz, wz) = _lagrange(f[:, 0]), _lagrange(f[:, 1]), _lagrange(f[:, 2])
     o = np.arange(4)
     ii = (bx[:, None, None, None] + o[None, :, None, None]) + 0 * o[None, None, :, None] + 0 * o[None, None, None, :]
     jj = 0 * o[None, :, None, None] + (by[:, None, None, None] + o[None, None, :, None]) + 0 * o[None, None, None, :]
@@ -510,8 +512,8 @@ def run(sim: Any, march: Any, phases: NDArray[np.float64] | None, options: FdtdO
 def _inside(p: FdtdPlan, pts: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Points whose four-point stencil lies on the engine's nodes (the box and the two voxels
     beyond it)."""
-    f = (pts - np.array(p.origin_m)) / p.h_m
-    inside: NDArray[np.bool_] = ((f >= 1) & (f <= np.array(p.shape) - 3)).all(axis=1)
+    f = p.fractional(pts)
+    inside: NDArray[np.bool_] = np.all((f >= 1) & (f <= np.array(p.shape) - 3), axis=1)
     return inside
 
 
@@ -532,7 +534,7 @@ def _run_child(job: dict[str, Any], p: FdtdPlan, say: Progress) -> dict[str, Any
 
 def _trilinear(p: FdtdPlan, values: NDArray[np.float32], pts: NDArray[np.float64]) -> NDArray[np.float64]:
     """``values`` on the engine's nodes (x, y, z) at points (m, (n, 3)), trilinearly."""
-    f = (pts - np.array(p.origin_m)) / p.h_m
+    f = p.fractional(pts)
     i = np.clip(np.floor(f).astype(np.int64), 0, np.array(p.shape) - 2)
     u = f - i
     out = np.zeros(len(pts))
@@ -548,21 +550,10 @@ def _magnitude_on_march(p: FdtdPlan, mag: NDArray[np.float32], x: NDArray[np.flo
     """|p| at the march's samples (nz, ny, nx), trilinear between the engine's nodes (the
     envelope is smooth on the voxel's scale); zero outside the box."""
     out = np.zeros((len(z), len(y), len(x)), np.float32)
-    e = p.pml_cells + 2
     c0, c1 = p.cols
     r0, r1 = p.rows
-
-    def axis_weights(v: NDArray[np.float64], origin: float, n: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        f = np.clip((v - origin) / p.h_m, e, n - e - 1 - 1e-9)
-        i = np.floor(f).astype(np.int64)
-        return i, f - i
-
-    ix, fx = axis_weights(x[c0:c1 + 1], p.origin_m[0], p.shape[0])
-    iy, fy = axis_weights(y[r0:r1 + 1], p.origin_m[1], p.shape[1])
-    iz, fz = axis_weights(z, p.origin_m[2], p.shape[2])
+    X, Y = np.meshgrid(x[c0:c1 + 1], y[r0:r1 + 1], indexing="xy")
     for n in range(len(z)):
-        a = (1 - fz[n]) * mag[:, :, iz[n]] + fz[n] * mag[:, :, iz[n] + 1]  # (x, y)
-        b = (1 - fx)[:, None] * a[ix, :] + fx[:, None] * a[ix + 1, :]
-        c = (1 - fy)[None, :] * b[:, iy] + fy[None, :] * b[:, iy + 1]
-        out[n, r0:r1 + 1, c0:c1 + 1] = c.T
+        pts = np.stack([X.ravel(), Y.ravel(), np.full(X.size, z[n])], -1)
+        out[n, r0:r1 + 1, c0:c1 + 1] = _trilinear(p, mag, pts).reshape(X.shape)
     return out

@@ -236,8 +236,9 @@ def run(args: argparse.Namespace) -> int:
         written[v.key] = {"path": path, "shape_ijk": [ni, nj, nk], v.max_key: float(values.max())}
         if not v.in_ct:
             written[v.key]["box_mm"] = args.volume_box_mm
-    if fdtd is not None and march is not None:
-        lines.insert(-1, fdtd_line(fdtd, focus, march.focus()))
+    engine_line = None if fdtd is None or march is None else fdtd_line(fdtd, focus, march.focus())
+    if engine_line is not None:
+        lines.insert(-1, engine_line)
     rows = exceeded(focus, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
@@ -247,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
         from arfi.report import field_report
 
         safety = summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
-        engine = sim.propagation_summary() if fdtd is None or march is None else fdtd_line(fdtd, focus, march.focus())[len("field: "):]
+        engine = sim.propagation_summary() if engine_line is None else engine_line[len("field: "):]
         field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": engine}, phases)
     finish(args, {"out": args.out, "z_mm": f.z_mm, "surface_pressure_pa": f.surface_pressure_pa, **focus,
                   **{v.key: written.get(v.key) for v in VOLUMES}, "propagation": sim.propagation, "engine": args.engine,

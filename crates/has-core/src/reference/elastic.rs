@@ -155,6 +155,33 @@ mod tests {
         Solid::new(2800.0, cs, 1850.0, a, a, F).unwrap()
     }
 
+    /// The textbook terms of a fluid on the bone solid (density 1850) at tangential `kt`: the
+    /// vertical wavenumbers α, β in the solid, the impedances `Z1 = ρ1/kz1`, `Zp = ρ/α`,
+    /// `Zs = ρ/β` and `cos 2θs`, `sin 2θs`.
+    struct Textbook {
+        z1: C64,
+        zp: C64,
+        zs: C64,
+        cos2: C64,
+        sin2: C64,
+        alpha: C64,
+        beta: C64,
+    }
+
+    fn textbook(water: &Fluid, solid: &Solid, kt: C64) -> Textbook {
+        let (alpha, beta) = (Solid::vertical(solid.kp, kt), Solid::vertical(solid.ks, kt));
+        let ks2 = solid.ks * solid.ks;
+        Textbook {
+            z1: water.density / water.kz(kt),
+            zp: 1850.0 / alpha,
+            zs: 1850.0 / beta,
+            cos2: 1.0 - 2.0 * kt * kt / ks2,
+            sin2: 2.0 * kt * beta / ks2,
+            alpha,
+            beta,
+        }
+    }
+
     fn kt_at(water: &Fluid, deg: f64) -> C64 {
         C64::new(water.k.re * deg.to_radians().sin(), 0.0)
     }
@@ -203,10 +230,7 @@ mod tests {
         for deg in [0.0, 12.0, 28.0, 31.5, 40.0, 65.0] {
             let kt = kt_at(&water, deg);
             let r = plate_response(water, solid, d, water, kt).reflection;
-            let (alpha, beta) = (Solid::vertical(solid.kp, kt), Solid::vertical(solid.ks, kt));
-            let ks2 = solid.ks * solid.ks;
-            let (z1, zp, zs) = (1000.0 / water.kz(kt), 1850.0 / alpha, 1850.0 / beta);
-            let (cos2, sin2) = (1.0 - 2.0 * kt * kt / ks2, 2.0 * kt * beta / ks2);
+            let Textbook { z1, zp, zs, cos2, sin2, .. } = textbook(&water, &solid, kt);
             let zin = zp * cos2 * cos2 + zs * sin2 * sin2;
             let half = (zin - z1) / (zin + z1);
             assert!((r - half).norm() < 1e-9, "{deg}°: {r} vs {half}");
@@ -228,10 +252,7 @@ mod tests {
             for deg in [0.0, 5.0, 17.0, 29.0, 33.0, 45.0, 62.0, 80.0] {
                 let kt = kt_at(&water, deg);
                 let t = plate_response(water, solid, d, water, kt).transmission;
-                let (alpha, beta) = (Solid::vertical(solid.kp, kt), Solid::vertical(solid.ks, kt));
-                let ks2 = solid.ks * solid.ks;
-                let (z1, zp, zs) = (1000.0 / water.kz(kt), 1850.0 / alpha, 1850.0 / beta);
-                let (cos2, sin2) = (1.0 - 2.0 * kt * kt / ks2, 2.0 * kt * beta / ks2);
+                let Textbook { z1, zp, zs, cos2, sin2, alpha, beta } = textbook(&water, &solid, kt);
                 let (p, q) = (alpha * d, beta * d);
                 let (a, b) = (zp / z1 * cos2 * cos2, zs / z1 * sin2 * sin2);
                 let m = a * p.cos() / p.sin() + b * q.cos() / q.sin();

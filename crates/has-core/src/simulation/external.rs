@@ -57,19 +57,8 @@ impl Simulation {
             Some(search) => search.metrics(self, |window| Ok(whole.extract(&magnitude, window)))?,
             None => None,
         };
-        let slope = self.axis_slope();
-        Ok(Field {
-            pressure: plane,
-            x: (0..g.nx).map(|i| g.x(i)).collect(),
-            y: (0..g.ny).map(|j| g.y(j)).collect(),
-            z: g.z(g.plane_index(z)),
-            axis_z: (0..g.nz).map(|n| g.z(n)).collect(),
-            axis_xy: (0..g.nz).map(|n| [slope[0] * g.z(n), slope[1] * g.z(n)]).collect(),
-            axis_pressure: axis,
-            surface_pressure: self.source.face_pressure,
-            metrics,
-            volume: Some(FieldVolume { hottest: self.hottest_by_tissue(&magnitude), magnitude }),
-        })
+        let volume = FieldVolume { hottest: self.hottest_by_tissue(&magnitude), magnitude };
+        Ok(self.assemble_field(plane, g.plane_index(z), axis, metrics, Some(volume)))
     }
 }
 

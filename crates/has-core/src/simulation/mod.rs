@@ -461,18 +461,34 @@ impl Simulation {
             FieldVolume { hottest: self.hottest_by_tissue(&magnitude), magnitude }
         });
         let pressure = Array2::from_shape_vec((g.ny, g.nx), rec.planes.remove(0)).map_err(|e| HasError::invalid("field", e.to_string()))?;
-        Ok(Field {
+        Ok(self.assemble_field(pressure, plane, rec.axis, metrics, volume))
+    }
+
+    /// The [`Field`] of `pressure` on grid plane `plane` and `axis` (one per plane from plane 0,
+    /// on the beam's axis), with its metrics and kept volume: the grid's coordinates filled in
+    /// whichever engine computed the pressure.
+    fn assemble_field(
+        &self,
+        pressure: Array2<C64>,
+        plane: usize,
+        axis: Vec<C64>,
+        metrics: Option<FocalMetrics>,
+        volume: Option<FieldVolume>,
+    ) -> Field {
+        let g = &self.grid;
+        let slope = self.axis_slope();
+        Field {
             pressure,
             x: (0..g.nx).map(|i| g.x(i)).collect(),
             y: (0..g.ny).map(|j| g.y(j)).collect(),
             z: g.z(plane),
-            axis_z: (0..rec.axis.len()).map(|n| g.z(n)).collect(),
-            axis_xy: (0..rec.axis.len()).map(|n| [slope[0] * g.z(n), slope[1] * g.z(n)]).collect(),
-            axis_pressure: rec.axis,
+            axis_z: (0..axis.len()).map(|n| g.z(n)).collect(),
+            axis_xy: (0..axis.len()).map(|n| [slope[0] * g.z(n), slope[1] * g.z(n)]).collect(),
+            axis_pressure: axis,
             surface_pressure: self.source.face_pressure,
             metrics,
             volume,
-        })
+        }
     }
 
     /// Lateral offset per unit depth of the beam's axis, the line from the array's centre (the
