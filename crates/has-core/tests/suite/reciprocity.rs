@@ -68,6 +68,32 @@ fn voxels() -> Medium {
     medium
 }
 
+/// Water with a bone plate 4 mm thick turned 20° about y, as a voxel map of 0.25 mm (its cells
+/// average the slowness): a planar wall oblique to the planes, whose treads take the wall's
+/// filters and reverberate.
+fn tilted() -> Medium {
+    // (nz, ny, nx)
+    let (spacing, shape) = (0.25e-3, [120, 96, 112]);
+    let n: usize = shape.iter().product();
+    let t = 20f64.to_radians();
+    let origin = [-14e-3, -12e-3, 4e-3];
+    let bone = |i: usize| {
+        let (x, z) = (origin[0] + (i % shape[2]) as f64 * spacing, origin[2] + (i / (shape[2] * shape[1])) as f64 * spacing);
+        (0.0..4e-3).contains(&(x * t.sin() + (z - 12e-3) * t.cos()))
+    };
+    let mut medium = Medium::homogeneous(Material::new("water", 1500.0, 1000.0, 0.0).unwrap());
+    medium.voxels = Some(VoxelMap {
+        origin,
+        spacing: [spacing; 3],
+        shape,
+        sound_speed: (0..n).map(|i| if bone(i) { 2800.0 } else { 1500.0 }).collect(),
+        density: (0..n).map(|i| if bone(i) { 1850.0 } else { 1000.0 }).collect(),
+        attenuation_db_cm_mhz: (0..n).map(|i| if bone(i) { 8.0 } else { 0.0 }).collect(),
+        attenuation_power: 1.0,
+    });
+    medium
+}
+
 /// A Gaussian beam converging towards (1, 0.5, 20) mm: the reference that fixes the plan.
 fn reference(g: &Grid) -> Vec<C64> {
     let k = 2.0 * std::f64::consts::PI * F / 1500.0;
@@ -128,6 +154,16 @@ fn transposed_march_passes_the_dot_product_test_with_normal_incidence_and_voxels
     assert!(trips >= 1, "no round trip through the voxels");
     dot_test("voxels, angular", &voxels(), InterfaceModel::Angular, &[14, (first + last) / 2, 40]);
     dot_test("water", &Medium::homogeneous(Material::new("water", 1500.0, 1000.0, 0.0).unwrap()), InterfaceModel::Angular, &[0, 59]);
+}
+
+#[test]
+fn transposed_march_passes_the_dot_product_test_through_an_oblique_wall() {
+    let g = grid();
+    let (plan, _) = HasPlan::build(&g, &tilted(), F, &reference(&g), &HasOptions::default(), &RecordSpec::default()).unwrap();
+    let walls = plan.oblique_walls();
+    eprintln!("tilted plate: {walls} interfaces with oblique walls, reverberation {:?}", plan.reverberation());
+    assert!(walls >= 5, "{walls} interfaces with oblique walls: the test needs them");
+    dot_test("tilted plate", &tilted(), InterfaceModel::Angular, &[10, 24, 30, 50]);
 }
 
 #[test]

@@ -92,12 +92,13 @@ fn thin_ct_shells_are_held_where_they_are() {
 }
 
 /// The ITRUSST plate turned 10, 20 and 30° about y, from a CT of 0.25 mm voxels, against the
-/// exact solution through the fluid plate (`reference::oblique`). A one-way march whose planes
-/// cut the faces obliquely does not reflect what the faces' lateral change of impedance
-/// reflects, and its treads take normal incidence's coefficient where the bowl's waves meet the
-/// plate up to 30° beyond its tilt (past the critical angle, where the plate passes nothing):
-/// +30, +54 and +61 % focal pressure, the focus 1.8-3.4 mm off. Held there (35, 60 and 70 %,
-/// 4 mm), so that a change that makes them worse fails, until the march meets the suite's
+/// exact solution through the fluid plate (`reference::oblique`). The plate's treads take the
+/// coefficients of each plane wave's incidence on the plate's face (total reflection beyond the
+/// critical angle) and the oblique screen's rays refract through it (`propagation/oblique.rs`,
+/// `operators::refract`): +3.5, +13.2 and +10.3 % focal pressure, the focus 0.65-1.55 mm off
+/// (with the treads at normal incidence and unbent rays: +30, +54 and +61 %, 1.8-3.4 mm). What
+/// is left is about what the same CT plate untilted leaves (+8 %, 2.4 mm; the plate as a region
+/// is exact). Held there (8, 18 and 16 %; 1.2, 2 and 2.5 mm) until the march meets the suite's
 /// tolerances on them (`docs/validation.md`).
 #[test]
 fn tilted_ct_plates_are_held_where_they_are() {
@@ -112,13 +113,13 @@ fn tilted_ct_plates_are_held_where_they_are() {
             c.focal_pressure[1],
             c.focal_point[1].map(|v| (v * 1e4).round() / 10.0)
         );
-        let held = match c.name.as_str() {
-            "tilt10" => 0.35,
-            "tilt20" => 0.60,
-            _ => 0.70,
+        let (pressure, position) = match c.name.as_str() {
+            "tilt10" => (0.08, 1.2e-3),
+            "tilt20" => (0.18, 2.0e-3),
+            _ => (0.16, 2.5e-3),
         };
-        assert!(c.focal_pressure_error() > 0.0 && c.focal_pressure_error() < held, "{} got worse: {c:?}", c.name);
-        assert!(c.focal_position_error().abs() < 4e-3, "{} focus moved: {c:?}", c.name);
+        assert!(c.focal_pressure_error() > 0.0 && c.focal_pressure_error() < pressure, "{} got worse: {c:?}", c.name);
+        assert!(c.focal_position_error().abs() < position, "{} focus moved: {c:?}", c.name);
     }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -38,6 +38,8 @@
 //! trips inside a curved bone wall, whose faces snap by up to half a step, add up with phases
 //! spread over ±k·dz and the wall's reverberation is lost.
 
+use super::oblique::opposite;
+use super::walls::{walls, WallFilters, WallGroup, WallKey, Walls};
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::SliceProperties;
@@ -89,7 +91,7 @@ pub const MAX_PLAN_PAIRS: usize = 64;
 
 /// Spectral coefficients shared by every interface of a plan, by material pair.
 #[derive(Default)]
-pub(crate) struct Coefficients(HashMap<(Key, Key), Arc<Vec<C64>>>);
+pub(crate) struct Coefficients(HashMap<(Key, Key), Arc<Vec<C64>>>, pub(super) HashMap<WallKey, WallFilters>);
 
 /// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one
 /// (in double precision, or single for a single-precision march).
@@ -103,7 +105,8 @@ enum Kind<T: FftNum> {
     /// `R(x, y)` applied pixel by pixel, kept on the pixels where it is not zero (in increasing
     /// order; through a head, the few percent of the plane where the slices differ), with the
     /// factor `exp(i·φ)` of each face's true position (`None`: every face on the plane).
-    Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T>, phase: Option<Vec<Complex<T>>> },
+    /// Pixels of oblique walls among them take their walls' filters instead (`oblique.rs`).
+    Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T>, phase: Option<Vec<Complex<T>>>, walls: Option<Walls<T>> },
     /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
     Spectral(Vec<Pair<T>>),
 }
@@ -117,16 +120,31 @@ struct Pair<T: FftNum> {
     coefficient: Arc<Vec<Complex<T>>>,
 }
 
+/// The slabs about an interface that its faces read: `column[face - 1]` and `column[face]` on
+/// either side of it, [`super::oblique::normal_slabs`] more on each side (repeated at the
+/// grid's ends).
+pub(crate) struct Around<'a> {
+    pub column: Vec<&'a SliceProperties>,
+    pub face: usize,
+}
+
+impl Around<'_> {
+    /// The slab before the face's `from` and the one after its `to`.
+    pub(super) fn outer(&self) -> (&SliceProperties, &SliceProperties) {
+        (self.column[self.face - 2], self.column[self.face + 1])
+    }
+}
+
 /// A pointwise interface's pixels, their coefficients `R` and their faces' factors `exp(i·φ)`.
 pub(crate) type PointwiseFaces<'a, T> = (&'a Arc<Vec<u32>>, &'a [T], Option<&'a [Complex<T>]>);
 
 /// Properties of one pixel as exact bits (equal bits: the same material).
-type Key = [u64; 3];
+pub(super) type Key = [u64; 3];
 
 /// A material pair's first pixel and all its pixels.
 type PairPixels = (usize, Vec<u32>);
 
-fn key(s: &SliceProperties, i: usize) -> Key {
+pub(super) fn key(s: &SliceProperties, i: usize) -> Key {
     [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits()]
 }
 
@@ -135,10 +153,18 @@ impl Interface {
     /// single-precision copy (shared as the originals are).
     pub(crate) fn single(&self, copy: &mut impl FnMut(&Arc<Vec<C64>>) -> Arc<Vec<C32>>) -> Interface<f32> {
         let kind = match &self.kind {
-            Kind::Pointwise { pixels, r, phase } => Kind::Pointwise {
+            Kind::Pointwise { pixels, r, phase, walls } => Kind::Pointwise {
                 pixels: pixels.clone(),
                 r: r.iter().map(|&r| r as f32).collect(),
                 phase: phase.as_ref().map(|p| p.iter().map(|&p| C32::new(p.re as f32, p.im as f32)).collect()),
+                walls: walls.as_ref().map(|w| Walls {
+                    grouped: w.grouped.clone(),
+                    groups: w
+                        .groups
+                        .iter()
+                        .map(|g| WallGroup { members: g.members.clone(), filters: g.filters.clone().map(|f| copy(&f)), normal: g.normal })
+                        .collect(),
+                }),
             },
             Kind::Spectral(pairs) => Kind::Spectral(
                 pairs.iter().map(|p| Pair { scale: p.scale, pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect(),
@@ -158,7 +184,7 @@ impl Interface {
         to: &SliceProperties,
         omega: f64,
         model: InterfaceModel,
-        around: Option<(&SliceProperties, &SliceProperties)>,
+        around: Option<&Around>,
         shared: &mut Coefficients,
     ) -> Option<Self> {
         if from == to {
@@ -173,33 +199,48 @@ impl Interface {
             })
             .collect();
         let strength = normal.par_iter().map(|r| r.abs()).reduce(|| 0.0, f64::max);
-        let pointwise = || {
+        let pointwise = |shared: &mut Coefficients| {
             let pixels: Vec<u32> = (0..n as u32).into_par_iter().filter(|&i| normal[i as usize] != 0.0).collect();
+            let slabs = around.map(|a| {
+                let (before, after) = a.outer();
+                [before, from, to, after]
+            });
             // A CT's or voxel map's walls cross the planes as staircases whose risers the angular
             // spectrum passes unreflected: their treads take that share of the wall's loss.
+            let wall: Vec<bool> = pixels
+                .par_iter()
+                .map(|&i| model == InterfaceModel::Angular && slabs.is_some_and(|slabs| is_wall(slabs, i as usize)))
+                .collect();
             let r = pixels
                 .par_iter()
-                .map(|&i| {
+                .zip(&wall)
+                .map(|(&i, &wall)| {
                     let (i, r) = (i as usize, normal[i as usize]);
-                    match around {
-                        Some((before, after)) if model == InterfaceModel::Angular && is_wall([before, from, to, after], i) => {
-                            super::risers::tread_coefficient(r, grid, (from, to), i)
-                        }
-                        _ => r,
+                    if wall {
+                        super::risers::tread_coefficient(r, grid, (from, to), i)
+                    } else {
+                        r
                     }
                 })
                 .collect();
-            let phase = around.and_then(|(before, after)| {
-                let slabs = [before, from, to, after];
+            let phase = slabs.and_then(|slabs| {
                 let phase: Vec<C64> =
                     pixels.par_iter().map(|&i| (C64::i() * face_phase(slabs, i as usize, omega, grid.dz)).exp()).collect();
                 phase.iter().any(|&p| p != C64::new(1.0, 0.0)).then_some(phase)
             });
-            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r, phase } })
+            let walls = around.and_then(|a| walls(grid, omega, a, &pixels, &wall, shared));
+            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r, phase, walls } })
         };
         if model == InterfaceModel::NormalIncidence {
-            return pointwise();
+            return pointwise(shared);
         }
+        // A planar wall of a CT or voxel map takes its own filters even where its plane holds few
+        // material pairs (a CT sampled on its own voxels): the pairs' coefficients are the plane's.
+        let mut made = around.map(|_| pointwise(shared));
+        if made.as_ref().is_some_and(|i| i.as_ref().is_some_and(|i| i.walls().is_some())) {
+            return made.flatten();
+        }
+        let mut pointwise = |shared: &mut Coefficients| made.take().unwrap_or_else(|| pointwise(shared));
         let mut pairs: HashMap<(Key, Key), PairPixels> = HashMap::new();
         for i in 0..n {
             let (a, b) = (key(from, i), key(to, i));
@@ -208,12 +249,12 @@ impl Interface {
                 e.1.push(i as u32);
             }
             if pairs.len() > MAX_SPECTRAL_PAIRS {
-                return pointwise();
+                return pointwise(shared);
             }
         }
         let new_pairs = pairs.keys().filter(|k| !shared.0.contains_key(k)).count();
         if shared.0.len() + new_pairs > MAX_PLAN_PAIRS {
-            return pointwise();
+            return pointwise(shared);
         }
         // In order of each pair's first pixel, so the sum is the same on every run.
         let mut pairs: Vec<((Key, Key), PairPixels)> = pairs.into_iter().collect();
@@ -243,12 +284,12 @@ impl<T: FftNum> Interface<T> {
         let own = self as *const Self as usize;
         match &self.kind {
             // The pixels and coefficients, and the faces' factors (8 or 16 bytes a pixel).
-            Kind::Pointwise { phase, .. } => {
-                if phase.is_some() {
-                    vec![own, own + 1]
-                } else {
-                    vec![own]
+            Kind::Pointwise { phase, walls, .. } => {
+                let mut planes = if phase.is_some() { vec![own, own + 1] } else { vec![own] };
+                if let Some(w) = walls {
+                    planes.extend(w.groups.iter().flat_map(|g| g.filters.iter().map(|f| Arc::as_ptr(f) as usize)));
                 }
+                planes
             }
             Kind::Spectral(pairs) => pairs
                 .iter()
@@ -262,9 +303,22 @@ impl<T: FftNum> Interface<T> {
     /// factors (`None` where every face lies on the plane), or `None` for a spectral interface.
     pub(crate) fn pointwise(&self) -> Option<PointwiseFaces<'_, T>> {
         match &self.kind {
-            Kind::Pointwise { pixels, r, phase } => Some((pixels, r, phase.as_deref())),
+            Kind::Pointwise { pixels, r, phase, .. } => Some((pixels, r, phase.as_deref())),
             Kind::Spectral(_) => None,
         }
+    }
+
+    /// The oblique walls of a pointwise interface, if any.
+    pub(crate) fn walls(&self) -> Option<&Walls<T>> {
+        match &self.kind {
+            Kind::Pointwise { walls, .. } => walls.as_ref(),
+            Kind::Spectral(_) => None,
+        }
+    }
+
+    /// The normal of the interface's largest oblique wall (most treads), if it has one.
+    pub(crate) fn wall_normal(&self) -> Option<[f64; 3]> {
+        self.walls().and_then(|w| w.groups.first()).map(|g| g.normal)
     }
 
     /// `out ← R ⊛ p`: the wave reflected by this interface from the incident wave `p` (for a
@@ -272,6 +326,8 @@ impl<T: FftNum> Interface<T> {
     /// as long as `p`; `work` is overwritten.
     pub fn reflect(&self, fft: &Fft2<T>, p: &[Complex<T>], out: &mut [Complex<T>], work: &mut [Complex<T>], ws: &mut FftWorkspace<T>) {
         match &self.kind {
+            // The march crosses oblique walls itself (`march::cross`); here they would take the
+            // treads' coefficients.
             Kind::Pointwise { pixels, r, .. } => scale_pixels(pixels, r, p, out),
             Kind::Spectral(pairs) => {
                 work.copy_from_slice(p);
@@ -299,7 +355,11 @@ impl<T: FftNum + Into<f64>> Interface<T> {
     pub fn normalise_transmitted(&self, field: &mut [Complex<T>], sign: f64) {
         let power = |s: f64| T::from_f64(if sign < 0.0 { 1.0 / s } else { s }).expect("a finite scale");
         match &self.kind {
-            Kind::Pointwise { pixels, r, .. } => pixels.iter().zip(r).for_each(|(&i, &r)| {
+            Kind::Pointwise { pixels, r, walls, .. } => pixels.iter().zip(r).enumerate().for_each(|(m, (&i, &r))| {
+                // A wall's filter transmits the flux-normalised field itself.
+                if walls.as_ref().is_some_and(|w| w.grouped[m]) {
+                    return;
+                }
                 // Z_a/Z_b = (1 - R)/(1 + R) for R = (Z_b - Z_a)/(Z_a + Z_b).
                 let r: f64 = r.into();
                 let f = &mut field[i as usize];
@@ -319,6 +379,55 @@ impl<T: FftNum + Into<f64>> Interface<T> {
 }
 
 impl Interface {
+    /// The transpose of crossing a pointwise interface that has oblique walls in the direction
+    /// `sign` (`march::cross`): `adjoint` holds the adjoint of the field after the crossing and
+    /// becomes that of the field before it; `kept` is the adjoint of the kept reflected wave on
+    /// the whole plane. A wall's `M·IFFT(f·FFT)` has the transpose `IFFT(f(-k)·FFT(M·))`; the
+    /// other pixels are diagonal. `work` (as long as `adjoint`) is overwritten.
+    pub fn cross_transposed_walls(
+        &self,
+        fft: &Fft2,
+        adjoint: &mut [C64],
+        sign: f64,
+        kept: Option<&[C64]>,
+        work: &mut [C64],
+        ws: &mut FftWorkspace,
+    ) {
+        let Kind::Pointwise { pixels, r, phase, walls: Some(walls) } = &self.kind else { return };
+        let zero = C64::new(0.0, 0.0);
+        let after = adjoint.to_vec();
+        let face = |m: usize| phase.as_ref().map_or(C64::new(1.0, 0.0), |p| if sign < 0.0 { 1.0 / p[m] } else { p[m] });
+        for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
+            let i = i as usize;
+            if walls.grouped[m] {
+                adjoint[i] = zero;
+                continue;
+            }
+            let s = ((1.0 - r) / (1.0 + r)).sqrt();
+            let s = if sign < 0.0 { 1.0 / s } else { s };
+            adjoint[i] = s * (1.0 + sign * r) * after[i] + kept.map_or(zero, |k| sign * r * face(m) * k[i]);
+        }
+        let mut sum = vec![zero; after.len()];
+        let slot = if sign < 0.0 { 2 } else { 0 };
+        let dims = (fft.nx, fft.ny);
+        for g in &walls.groups {
+            for (k, source) in [(0, Some(&after[..])), (1, kept)] {
+                let Some(source) = source else { continue };
+                work.fill(zero);
+                for &m in &g.members {
+                    let i = pixels[m as usize] as usize;
+                    work[i] = if k == 0 { source[i] } else { face(m as usize) * source[i] };
+                }
+                fft.forward(work, ws);
+                let filter = &g.filters[slot + k];
+                sum.iter_mut().zip(&ws.spectrum).enumerate().for_each(|(at, (s, a))| *s += a * filter[opposite(dims, at)]);
+            }
+        }
+        ws.spectrum.copy_from_slice(&sum);
+        fft.inverse(ws, work);
+        adjoint.iter_mut().zip(work.iter()).for_each(|(a, w)| *a += w);
+    }
+
     /// `out ← Rᵀ p`, the transpose of [`Interface::reflect`]: `Σ_pairs IFFT(R_ab · FFT(M_ab · p))`
     /// (each pair's pixels taken before its filter, not after; `R_ab` depends on `kx² + ky²`
     /// only, so the filter is its own transpose). With `faces` (the direction of the incident
@@ -327,7 +436,7 @@ impl Interface {
     pub fn reflect_transposed(&self, fft: &Fft2, p: &[C64], out: &mut [C64], work: &mut [C64], ws: &mut FftWorkspace, faces: Option<f64>) {
         match &self.kind {
             // A pointwise R is diagonal: its own transpose.
-            Kind::Pointwise { pixels, r, phase } => {
+            Kind::Pointwise { pixels, r, phase, .. } => {
                 scale_pixels(pixels, r, p, out);
                 if let (Some(sign), Some(phase)) = (faces, phase) {
                     pixels.iter().zip(phase).for_each(|(&i, &f)| out[i as usize] *= if sign < 0.0 { 1.0 / f } else { f });
@@ -412,7 +521,7 @@ fn scale_pixels<T: FftNum>(pixels: &[u32], r: &[T], p: &[Complex<T>], out: &mut 
 }
 
 /// (density, complex wavenumber at `omega`) of pixel `i`.
-fn medium_at(s: &SliceProperties, i: usize) -> (f64, f64, f64) {
+pub(super) fn medium_at(s: &SliceProperties, i: usize) -> (f64, f64, f64) {
     (s.density[i], s.sound_speed[i], s.attenuation[i])
 }
 

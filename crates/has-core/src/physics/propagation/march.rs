@@ -389,11 +389,25 @@ pub(super) fn cross<T: Real>(
     ws: &mut FftWorkspace<T>,
 ) -> Option<Wave<T>> {
     if let Some((pixels, r, phase)) = interface.pointwise() {
+        // Oblique walls' treads take their walls' filters, from the field before the crossing.
+        let walls = interface.walls().map(|w| {
+            work.resize(field.len(), zero());
+            (w, w.cross(fft, pixels, field, sign, work, ws))
+        });
         let mut values = Vec::with_capacity(if keep { pixels.len() } else { 0 });
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
             let f = &mut field[i as usize];
-            let w = if sign < 0.0 { -(*f * r) } else { *f * r };
-            *f += w;
+            let w = match &walls {
+                Some((w, [transmitted, reflected])) if w.grouped[m] => {
+                    *f = transmitted[m];
+                    reflected[m]
+                }
+                _ => {
+                    let w = if sign < 0.0 { -(*f * r) } else { *f * r };
+                    *f += w;
+                    w
+                }
+            };
             if keep {
                 // The reflected wave leaves the face's true position (see `face_phase`).
                 values.push(match phase {

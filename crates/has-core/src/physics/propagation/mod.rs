@@ -33,11 +33,13 @@
 
 mod interface;
 mod march;
+mod oblique;
 mod operators;
 mod point;
 mod risers;
 mod single;
 mod transpose;
+mod walls;
 
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
@@ -48,9 +50,9 @@ use crate::error::{HasError, Result};
 use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
 use crate::physics::medium::{Medium, SliceProperties};
-use interface::{Coefficients, Interface};
+use interface::{Around, Coefficients, Interface};
 use num_complex::Complex64 as C64;
-use operators::{oblique_toward, propagator, screen, sponge_map, step_screen};
+use operators::{oblique_toward, propagator, screen, sponge_map, step_screen, Refraction};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -135,6 +137,9 @@ struct Step {
     /// exp(i·kz·dz + ᾱ·dz) / (nx·ny), transposed layout (nx, ny).
     propagator: Arc<Vec<C64>>,
     screen: Arc<Vec<C64>>,
+    /// The normal of the oblique wall whose first plane this step starts from: the oblique
+    /// screen's rays refract through it (`operators::refract`).
+    wall_normal: Option<[f64; 3]>,
     mean_wavenumber: f64,
     mean_attenuation: f64,
 }
@@ -264,18 +269,20 @@ impl HasPlan {
                 march::cross(i, &plan.fft, &mut field, 1.0, false, (&mut reflected, &mut work), &mut ws);
             }
             let props = &plan.slabs[slab];
+            let wall_normal = interface.as_ref().and_then(|i| i.wall_normal());
             let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
             let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
             let screen = if oblique_toward(options.screen, props).is_some() {
-                Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz))
+                let wall = wall_normal.map(|normal| Refraction { normal, source: &plan.source_medium });
+                Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz, wall))
             } else {
                 screen_cache
                     .entry((slab, bits[0]))
                     .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
                     .clone()
             };
-            let s = Step { slab, interface, propagator, screen, mean_wavenumber: k_mean, mean_attenuation: a_mean };
+            let s = Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean };
             plan.fft.filter(&mut field, &mut ws, None, &s.propagator, Some(&s.screen));
             plan.steps.push(s);
         }
@@ -387,6 +394,12 @@ impl HasPlan {
             .collect())
     }
 
+    /// How many of the plan's interfaces give a planar wall oblique to the planes its own
+    /// filters (`oblique.rs`).
+    pub fn oblique_walls(&self) -> usize {
+        self.steps.iter().filter(|s| s.interface.as_ref().is_some_and(|i| i.walls().is_some())).count()
+    }
+
     fn check(&self, source: &[C64], spec: &RecordSpec) -> Result<()> {
         let g = &self.grid;
         if source.len() != g.lateral_len() {
@@ -459,8 +472,14 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
                 return None;
             }
             let (from, to) = (before(step), before(step + 1));
-            let around = (!(planar[step] && planar[step + 1])).then(|| (&**before(step.saturating_sub(1)), &**before(step + 2)));
-            Interface::new(grid, from, to, omega, model, around, &mut shared).map(Arc::new)
+            // The slabs before planes step - K ..= step + 1 + K: the face between the K + 1-th and
+            // the K + 2-th.
+            let reach = oblique::normal_slabs(grid.dz);
+            let around = (!(planar[step] && planar[step + 1])).then(|| Around {
+                column: (0..2 * reach + 2).map(|j| &**before((step + j).saturating_sub(reach))).collect(),
+                face: reach + 1,
+            });
+            Interface::new(grid, from, to, omega, model, around.as_ref(), &mut shared).map(Arc::new)
         })
         .collect();
     Layout { frequency, source_medium, slabs, slab_of_step, interfaces }

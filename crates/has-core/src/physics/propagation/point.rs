@@ -14,6 +14,7 @@
 //! the point's nearest pixel (1 where the slab's impedance is the source's).
 
 use super::march::{pressure_scale, Operators};
+use super::operators::Refraction;
 use super::{propagator, sponge_map, step_screen, HasPlan};
 use num_complex::Complex64 as C64;
 use std::f64::consts::PI;
@@ -49,8 +50,9 @@ impl HasPlan {
         let omega = 2.0 * PI * self.frequency;
         let back = propagator(g, dz, step.mean_wavenumber, step.mean_attenuation);
         let mean = (step.mean_wavenumber, step.mean_attenuation);
+        let wall = step.wall_normal.map(|normal| Refraction { normal, source: &self.source_medium });
         let back_screen =
-            step_screen(g, &self.slabs[step.slab], &sponge_map(g, &self.options), omega, mean, self.options.screen, next - 1, dz);
+            step_screen(g, &self.slabs[step.slab], &sponge_map(g, &self.options), omega, mean, self.options.screen, next - 1, dz, wall);
         let mut ws = self.fft.workspace(true);
         self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
         self.to_pressure_weights(next, point, &mut w);

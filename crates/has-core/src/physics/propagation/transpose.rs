@@ -83,6 +83,18 @@ impl<'a> Transposer<'a> {
     /// `a ← S·a`, then `a ← a + sign·(Rᵀ·a + R_φᵀ·kept)`.
     fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Wave<f64>>) {
         let Some(interface) = self.interface(n) else { return };
+        if interface.walls().is_some() {
+            if self.work.len() != adjoint.len() {
+                self.work = self.zero();
+            }
+            if let Some(k) = kept {
+                self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
+                k.write_to(&mut self.unpacked);
+            }
+            let unpacked = kept.map(|_| &self.unpacked[..]);
+            interface.cross_transposed_walls(&self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
+            return;
+        }
         interface.normalise_transmitted(adjoint, sign);
         if self.work.len() != adjoint.len() {
             self.work = self.zero();
