@@ -316,7 +316,8 @@ impl<T: FftNum> Interface<T> {
         }
     }
 
-    /// The normal of the interface's largest oblique wall (most treads), if it has one.
+    /// The normal of the interface's first oblique wall (in the order of their first treads), if
+    /// it has one: a plate's two faces share it.
     pub(crate) fn wall_normal(&self) -> Option<[f64; 3]> {
         self.walls().and_then(|w| w.groups.first()).map(|g| g.normal)
     }
@@ -360,10 +361,8 @@ impl<T: FftNum + Into<f64>> Interface<T> {
                 if walls.as_ref().is_some_and(|w| w.grouped[m]) {
                     return;
                 }
-                // Z_a/Z_b = (1 - R)/(1 + R) for R = (Z_b - Z_a)/(Z_a + Z_b).
-                let r: f64 = r.into();
                 let f = &mut field[i as usize];
-                *f = *f * power(((1.0 - r) / (1.0 + r)).sqrt());
+                *f = *f * power(flux_scale(r.into()));
             }),
             Kind::Spectral(pairs) => {
                 for pair in pairs {
@@ -403,8 +402,7 @@ impl Interface {
                 adjoint[i] = zero;
                 continue;
             }
-            let s = ((1.0 - r) / (1.0 + r)).sqrt();
-            let s = if sign < 0.0 { 1.0 / s } else { s };
+            let s = if sign < 0.0 { 1.0 / flux_scale(r) } else { flux_scale(r) };
             adjoint[i] = s * (1.0 + sign * r) * after[i] + kept.map_or(zero, |k| sign * r * face(m) * k[i]);
         }
         let mut sum = vec![zero; after.len()];
@@ -508,6 +506,12 @@ fn layered_sides(slabs: [&SliceProperties; 4], i: usize) -> (bool, bool) {
 /// A cell next to a face counts as the material of the face's side when its impedance is within
 /// this fraction of the face's jump of it.
 const FACE_NEIGHBOUR: f64 = 0.1;
+
+/// `sqrt(Z_a/Z_b)` of a face whose normal-incidence coefficient is `r`: `Z_a/Z_b = (1 - R)/(1 + R)`
+/// for `R = (Z_b - Z_a)/(Z_a + Z_b)`. The flux normalisation of a wave crossing it from `a` into `b`.
+fn flux_scale(r: f64) -> f64 {
+    ((1.0 - r) / (1.0 + r)).sqrt()
+}
 
 /// `rho·c` of pixel `i`.
 fn impedance(s: &SliceProperties, i: usize) -> f64 {

@@ -33,9 +33,9 @@ pub(crate) struct WallGroup<T: FftNum> {
     pub normal: [f64; 3],
 }
 
-/// At most this many walls (material pair and normal bin) on one plane take their own filters
-/// (each costs two inverse FFTs per crossing); a plane with more (a skull's tables curving
-/// through it) keeps the treads' normal-incidence coefficients.
+/// A plane whose wall treads hold more than this many material pairs (each planar wall costs two
+/// inverse FFTs per crossing; a textured skull's faces hold many) keeps the treads'
+/// normal-incidence coefficients.
 pub const MAX_PLANE_WALLS: usize = 4;
 
 /// A wall takes filters on a plane where at least this share of its treads there have normals
