@@ -78,7 +78,7 @@ SMALL = (
     # inputs and options, and what it shows; only the size changes. A replacement None leaves out
     # the whole command that holds the text.
     ("README.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
-     "one of the five validation cases (17 s for all five; python/tests/test_validate.py runs the suite)"),
+     "one of the nine validation cases (about 30 s for all nine; python/tests/test_validate.py runs the suite)"),
     ("docs/validation.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
      "as in the README"),
     ("docs/tutorial.md", "arfi scenario --default > phantom.toml",

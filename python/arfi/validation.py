@@ -10,7 +10,11 @@ aperture 64 mm; Aubry et al., JASA 152(2), 2022):
   through the layers by transfer matrices;
 - ``shell`` and ``bm5``: caps of cortical bone read from CTs (0.25 mm voxels), a shell about the
   focus (normal incidence) and an ITRUSST BM5-like cap of outer radius 75 mm (oblique incidence),
-  against the spherical-harmonic expansion of the bowl through a spherical shell.
+  against the spherical-harmonic expansion of the bowl through a spherical shell;
+- ``tilt0``, ``tilt10``, ``tilt20``, ``tilt30``: BM3's plate read from a CT (0.25 mm voxels),
+  untilted and turned by 10, 20 and 30 degrees about y, against the bowl's plane waves carried
+  through the fluid plate at their own incidence; compared in 3-D (the focus moves aside) and
+  held to their own, looser tolerances (the march's measured accuracy on bone met obliquely).
 
 Each case is compared on the beam axis and in the focal plane: focal peak pressure, its
 position, the axial profile from 10 mm before to 10 mm after the focus, and the focal plane's
@@ -27,14 +31,15 @@ from typing import Any, Callable, Sequence
 from arfi import _core
 from arfi.io import atomic_write_text
 
-#: Tolerances of every case: relative focal pressure, focal position (mm), axial profile
+#: The suite's tolerances: relative focal pressure, focal position (mm), axial profile
 #: (relative to the exact peak) and the smallest focal-plane correlation. Half the spread of the
-#: eleven codes of the ITRUSST benchmark (10 % and 1 mm).
+#: eleven codes of the ITRUSST benchmark (10 % and 1 mm). A tilted plate has its own (a result's
+#: ``tolerances``).
 TOLERANCES: dict[str, float] = dict(zip(("focal_pressure", "focal_position_mm", "axial_profile", "focal_plane_correlation"),
                                         _core.validation_tolerances()))
 
 #: The cases, in the order they run.
-CASES = ("water", "bm3", "bm4", "shell", "bm5")
+CASES = ("water", "bm3", "bm4", "shell", "bm5", "tilt0", "tilt10", "tilt20", "tilt30")
 
 
 def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
@@ -74,12 +79,14 @@ def summary(r: Any) -> dict[str, Any]:
         "step_mm": r.step_mm,
         "spacing_mm": r.spacing_mm,
         "seconds": r.seconds,
+        "tolerances": _tolerances(r),
         "passed": r.passed,
     }
 
 
 def table(results: Sequence[Any]) -> str:
-    """The results as a Markdown table, with the tolerances in its header."""
+    """The results as a Markdown table, with the suite's tolerances in its header (a case's own
+    in brackets in its row, explained below the table)."""
     t = TOLERANCES
     lines = [
         f"| case | focal pressure, simulated / exact (p/p0) | error (tol ±{100 * t['focal_pressure']:.0f} %) "
@@ -91,10 +98,25 @@ def table(results: Sequence[Any]) -> str:
     for r in results:
         ps, pe = r.focal_pressure
         zs, ze = r.focal_z_mm
-        lines.append(f"| {r.name} | {ps:.3f} / {pe:.3f} | {100 * r.focal_pressure_error:+.1f} % | {zs:.2f} / {ze:.2f} "
-                     f"| {r.focal_position_error_mm:+.2f} | {100 * r.axial_error:.1f} % | {r.correlation:.4f} "
-                     f"| {r.step_mm:.3f} | {'pass' if r.passed else 'FAIL'} |")
+        o = _tolerances(r)
+        own = o != t
+        # The case's own tolerances, in brackets after each metric, where they are not the suite's.
+        p_tol, z_tol, a_tol, c_tol = ((f" ({v})" if own else "") for v in (
+            f"±{100 * o['focal_pressure']:.0f} %", f"±{o['focal_position_mm']:.0f} mm",
+            f"{100 * o['axial_profile']:.0f} %", f"≥ {o['focal_plane_correlation']}"))
+        lines.append(f"| {r.name} | {ps:.3f} / {pe:.3f} | {100 * r.focal_pressure_error:+.1f} %{p_tol} | {zs:.2f} / {ze:.2f} "
+                     f"| {r.focal_position_error_mm:+.2f}{z_tol} | {100 * r.axial_error:.1f} %{a_tol} "
+                     f"| {r.correlation:.4f}{c_tol} | {r.step_mm:.3f} | {'pass' if r.passed else 'FAIL'} |")
+    if any(_tolerances(r) != t for r in results):
+        lines += ["", "A tolerance in brackets is the case's own: a plate tilted against the march's planes is held to "
+                      "the march's measured accuracy there, not to the suite's (its focal position error is the 3-D "
+                      "distance between the peaks, negative when the simulated one lies short)."]
     return "\n".join(lines)
+
+
+def _tolerances(r: Any) -> dict[str, float]:
+    """A result's tolerances, keyed as :data:`TOLERANCES`."""
+    return dict(zip(TOLERANCES, r.tolerances))
 
 
 def figure(r: Any, path: Path) -> str:
@@ -108,7 +130,7 @@ def figure(r: Any, path: Path) -> str:
     a.plot(axis[:, 0], axis[:, 1], "C1.", ms=4, label="arfi (default grid)")
     ze = r.focal_z_mm[1]
     a.axvspan(ze - 10, ze + 10, color="0.9", zorder=0)
-    a.set(xlabel="z (mm)", ylabel="|p| / p0", title=f"{r.name}: beam axis")
+    a.set(xlabel="z (mm)", ylabel="|p| / p0", title=f"{r.name}: along z through the exact focus")
     a.legend(fontsize=8)
     b.plot(line[:, 0], line[:, 2], "k-", lw=1.5, label="exact")
     b.plot(line[:, 0], line[:, 1], "C1.", ms=4, label="arfi")
@@ -136,7 +158,9 @@ def _markdown_table_html(md: str) -> str:
     """The Markdown table of :func:`table` as HTML."""
     import html
 
-    rows = [line.strip("|").split("|") for line in md.splitlines() if not line.startswith("| ---")]
+    lines = md.splitlines()
+    rows = [line.strip("|").split("|") for line in lines if line.startswith("|") and not line.startswith("| ---")]
     head = "<tr>" + "".join(f"<th>{html.escape(c.strip())}</th>" for c in rows[0]) + "</tr>"
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c.strip())}</td>" for c in r) + "</tr>" for r in rows[1:])
-    return f"<table>{head}{body}</table>"
+    notes = "".join(f"<p>{html.escape(line)}</p>" for line in lines if line and not line.startswith("|"))
+    return f"<table>{head}{body}</table>{notes}"

@@ -16,7 +16,7 @@ pub(crate) struct CoreValidationCase(Case);
 
 #[pymethods]
 impl CoreValidationCase {
-    /// Short name (`water`, `bm3`, `bm4`, `shell`, `bm5`).
+    /// Short name (`water`, `bm3`, `bm4`, `shell`, `bm5`, `tilt0`, `tilt10`, `tilt20`, `tilt30`).
     #[getter]
     fn name(&self) -> &str {
         &self.0.name
@@ -47,7 +47,7 @@ impl CoreValidationCase {
     }
 }
 
-/// The suite's cases; a shell's CT is written to `dir` (which must exist) when its case runs.
+/// The suite's cases (the tilted plates last); a case's CT is written to `dir` (which must exist) when its case runs.
 #[pyfunction]
 pub(crate) fn validation_cases(dir: PathBuf) -> PyResult<Vec<CoreValidationCase>> {
     Ok(suite(&dir).map_err(to_py)?.into_iter().map(CoreValidationCase).collect())
@@ -159,10 +159,17 @@ impl CoreComparison {
         self.0.seconds
     }
 
-    /// Whether every metric is within [`tolerances`].
+    /// What the case must meet: `(focal_pressure, focal_position_mm, axial_profile,
+    /// focal_plane_correlation)`, the suite's or a tilted plate's own.
+    #[getter]
+    fn tolerances(&self) -> (f64, f64, f64, f64) {
+        as_tuple(&self.0.tolerances)
+    }
+
+    /// Whether every metric is within the case's [`tolerances`].
     #[getter]
     fn passed(&self) -> bool {
-        self.0.passes(&Tolerances::default())
+        self.0.passed()
     }
 
     fn __repr__(&self) -> String {
@@ -183,6 +190,9 @@ impl CoreComparison {
 /// (relative to the exact peak), `focal_plane_correlation` (smallest).
 #[pyfunction]
 pub(crate) fn validation_tolerances() -> (f64, f64, f64, f64) {
-    let t = Tolerances::default();
+    as_tuple(&Tolerances::default())
+}
+
+fn as_tuple(t: &Tolerances) -> (f64, f64, f64, f64) {
     (t.focal_pressure, t.focal_position * 1e3, t.axial_profile, t.focal_plane_correlation)
 }

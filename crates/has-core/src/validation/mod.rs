@@ -32,6 +32,17 @@ pub struct Tolerances {
     pub focal_plane_correlation: f64,
 }
 
+impl Tolerances {
+    /// A plate read from a CT and tilted against the march's planes: the march's measured
+    /// accuracy there (at most 13 % focal pressure, 2.4 mm, 23 % axial profile, correlation
+    /// 0.971 on the default grid; the untilted CT plate's slabs of bone and water are the worst
+    /// of it), rounded up so that the install check holds what is known and fails on what is
+    /// worse. Not a planning tool's target: read in-situ pressures through bone met obliquely as
+    /// uncertain by that much.
+    pub const OBLIQUE: Tolerances =
+        Tolerances { focal_pressure: 0.15, focal_position: 3e-3, axial_profile: 0.30, focal_plane_correlation: 0.95 };
+}
+
 impl Default for Tolerances {
     fn default() -> Self {
         Tolerances { focal_pressure: 0.05, focal_position: 0.5e-3, axial_profile: 0.05, focal_plane_correlation: 0.99 }
@@ -68,6 +79,8 @@ pub struct Comparison {
     pub spacing: f64,
     /// Seconds the simulation took.
     pub seconds: f64,
+    /// What the case must meet ([`Case::tolerances`]).
+    pub tolerances: Tolerances,
 }
 
 impl Comparison {
@@ -88,6 +101,11 @@ impl Comparison {
         }
     }
 
+    /// Whether every metric is within the case's own tolerances.
+    pub fn passed(&self) -> bool {
+        self.passes(&self.tolerances)
+    }
+
     /// Whether every metric is within `tol`.
     pub fn passes(&self, tol: &Tolerances) -> bool {
         self.focal_pressure_error().abs() <= tol.focal_pressure
@@ -105,7 +123,7 @@ pub fn compare(case: &Case) -> Result<Comparison> {
     let sim = Simulation::new(&case.scenario)?;
     let exact = case.exact()?;
     if let Exact::Oblique(oblique) = &exact {
-        return oblique::compare_oblique(&case.name, &case.description, &sim, oblique);
+        return oblique::compare_oblique(case, &sim, oblique);
     }
     let p0 = sim.source.face_pressure;
     // The exact peak by a 10 µm scan over ±15 mm of the nominal focus.
@@ -158,5 +176,6 @@ pub fn compare(case: &Case) -> Result<Comparison> {
         step: sim.grid.dz,
         spacing: sim.grid.dx,
         seconds: t.elapsed().as_secs_f64(),
+        tolerances: case.tolerances,
     })
 }

@@ -2,7 +2,7 @@
 //! peak found in 3-D on both sides, the profile along z through the exact peak and the plane of
 //! the grid nearest it.
 
-use super::{Comparison, WINDOW};
+use super::{Case, Comparison, WINDOW};
 use crate::error::{HasError, Result};
 use crate::numeric::{parabola, pearson};
 use crate::reference::oblique::ObliqueBowl;
@@ -15,7 +15,7 @@ const SEARCH: [f64; 2] = [12e-3, 15e-3];
 
 /// The focal peak of `sim`'s beam and of `exact`, compared as [`super::compare`] compares an
 /// axisymmetric case.
-pub(super) fn compare_oblique(name: &str, description: &str, sim: &Simulation, exact: &ObliqueBowl) -> Result<Comparison> {
+pub(super) fn compare_oblique(case: &Case, sim: &Simulation, exact: &ObliqueBowl) -> Result<Comparison> {
     let t = std::time::Instant::now();
     let p0 = sim.source.face_pressure;
     let nominal = sim.focus;
@@ -88,8 +88,8 @@ pub(super) fn compare_oblique(name: &str, description: &str, sim: &Simulation, e
         }
     }
     Ok(Comparison {
-        name: name.to_string(),
-        description: description.to_string(),
+        name: case.name.clone(),
+        description: case.description.clone(),
         focal_pressure: [p_sim, p_exact],
         focal_z: [s_point[2], e_point[2]],
         focal_point: [s_point, e_point],
@@ -100,5 +100,6 @@ pub(super) fn compare_oblique(name: &str, description: &str, sim: &Simulation, e
         step: g.dz,
         spacing: g.dx,
         seconds: t.elapsed().as_secs_f64(),
+        tolerances: case.tolerances,
     })
 }

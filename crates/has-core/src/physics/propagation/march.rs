@@ -392,7 +392,7 @@ pub(super) fn cross<T: Real>(
         // Oblique walls' treads take their walls' filters, from the field before the crossing.
         let walls = interface.walls().map(|w| {
             work.resize(field.len(), zero());
-            (w, w.cross(fft, pixels, field, sign, work, ws))
+            (w, w.cross(fft, pixels, field, (sign, keep), work, ws))
         });
         let mut values = Vec::with_capacity(if keep { pixels.len() } else { 0 });
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
@@ -400,7 +400,7 @@ pub(super) fn cross<T: Real>(
             let w = match &walls {
                 Some((w, [transmitted, reflected])) if w.grouped[m] => {
                     *f = transmitted[m];
-                    reflected[m]
+                    reflected.get(m).copied().unwrap_or_else(zero)
                 }
                 _ => {
                     let w = if sign < 0.0 { -(*f * r) } else { *f * r };

@@ -57,24 +57,25 @@ pub const MAX_PLAN_WALLS: usize = 16;
 impl<T: FftNum> Walls<T> {
     /// The waves of `field` crossing the walls in the direction `sign` (+1 forward, -1 back):
     /// the transmitted and the reflected wave at each grouped pixel, indexed as the interface's
-    /// `pixels` (zero at the others). `work` (as long as `field`) is overwritten.
+    /// `pixels` (zero at the others); the reflected one only if `reflected` (else empty: its
+    /// inverse transforms are half the cost). `work` (as long as `field`) is overwritten.
     pub(crate) fn cross(
         &self,
         fft: &Fft2<T>,
         pixels: &[u32],
         field: &[Complex<T>],
-        sign: f64,
+        (sign, reflected): (f64, bool),
         work: &mut [Complex<T>],
         ws: &mut FftWorkspace<T>,
     ) -> [Vec<Complex<T>>; 2] {
         let zero = Complex::new(T::zero(), T::zero());
-        let mut out = [vec![zero; pixels.len()], vec![zero; pixels.len()]];
+        let mut out = [vec![zero; pixels.len()], vec![zero; if reflected { pixels.len() } else { 0 }]];
         work.copy_from_slice(field);
         fft.forward(work, ws);
         let spectrum = ws.spectrum.clone();
         let slot = if sign < 0.0 { 2 } else { 0 };
         for g in &self.groups {
-            for (k, wave) in out.iter_mut().enumerate() {
+            for (k, wave) in out.iter_mut().enumerate().filter(|(_, w)| !w.is_empty()) {
                 ws.spectrum.iter_mut().zip(&spectrum).zip(g.filters[slot + k].iter()).for_each(|((s, a), f)| *s = a * f);
                 fft.inverse(ws, work);
                 g.members.iter().for_each(|&m| wave[m as usize] = work[pixels[m as usize] as usize]);
