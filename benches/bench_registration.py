@@ -127,7 +127,8 @@ def run(a: argparse.Namespace) -> dict:
         bone = json.loads((d / "bone.json").read_text())
         bone_result = {"bone_speed_only": fraction(np.load(d / "bone.npy")),
                        "bone_speed_only_estimate": fraction(np.asarray(bone["phases_rad"])),
-                       "bone_recommended": bone["recommended"], "bone_evidence": bone.get("prior_evidence"),
+                       "bone_recommended": bone["recommended"], "bone_evidence": bone["prior_modes_fit"]["evidence_chi2"],
+                       "bone_prior_check": bone.get("prior_check"),
                        "bone_supported": bone["prior_modes_fit"]["supported"],
                        "bone_speed_percent": bone.get("bone_speed_fit", {}).get("percent")}
         common_result = {"seed": a.seed, "frequency_hz": a.frequency_hz, "target_mm": a.target_mm, "shift_mm": a.shift_mm,
@@ -164,12 +165,13 @@ def main() -> None:
     p.add_argument("--json", help="append the result as one JSON line")
     a = p.parse_args()
     r = run(a)
-    ev = r["bone_evidence"] or {}
+    check = r["bone_prior_check"]
     head = (f"seed {r['seed']} at {a.frequency_hz / 1e3:g} kHz, shift {a.shift_mm} mm, turn {a.turn_deg} deg, bone "
             f"{a.bone_percent:+g} %: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, bone speed alone "
             f"{r['bone_speed_only']:.3f} ({r['bone_recommended']}; its estimate {r['bone_speed_only_estimate']:.3f}, "
-            f"chi-squared fall from the prediction {ev.get('chi2_fall', float('nan')):.1f} of "
-            f"{ev.get('threshold_chi2', float('nan')):.1f} needed)")
+            f"the modes' chi-squared fall {r['bone_evidence']:.1f}; the images at the prediction "
+            + ("not checked" if check is None else f"{check['z']:+.1f} std from the prior's null, conflict {check['conflict']}")
+            + ")")
     if not a.pose:
         print(f"{head}; bone {r['bone_speed_percent']}; predict {r['predict_s']:.1f} s, estimate {r['estimate_s']:.1f} s")
     else:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._core import METHODS, Calibration, Estimate, EstimateSupport, NextAcquisition, NuisanceFit, ShiftCandidate
+from ._core import METHODS, Calibration, Estimate, EstimatePriorCheck, EstimateSupport, NextAcquisition, NuisanceFit, ShiftCandidate
 from ._core import phase_error as _phase_error
 from ._core import wrap_phases as _wrap_phases
 
-__all__ = ["METHODS", "Calibration", "Estimate", "EstimateSupport", "NextAcquisition", "NuisanceFit", "ShiftCandidate",
+__all__ = ["METHODS", "Calibration", "Estimate", "EstimatePriorCheck", "EstimateSupport", "NextAcquisition", "NuisanceFit", "ShiftCandidate",
            "gain", "phase_error", "recovered_fraction", "wrap"]
 
 

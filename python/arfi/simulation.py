@@ -476,7 +476,9 @@ class Simulation:
 
         What to apply is ``recommended_phases_rad`` (``recommended`` names it, ``supported`` is
         True when it is the estimate): with a prior, the prediction when the model does not explain
-        the images (``model_mismatch``). Per element without a prior, the estimate is judged on
+        the images (``model_mismatch``) or, per element, when the images' chi-squared at the
+        prediction lies far above what truths within the prior's std give (``prior_check``: the
+        search's move would absorb what the model cannot form). Per element without a prior, the estimate is judged on
         what the images determine (``support``: the Fisher information at the estimate, about
         50 combinations of 1024 phases for four images at 0.02 rad): unless the correction it is
         expected to leave reaches the uncorrected beam's focus and the group fit's, and its search

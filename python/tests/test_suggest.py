@@ -172,3 +172,44 @@ def test_a_poor_prediction_keeps_rising_along_the_suggested_acquisitions_on_1024
             known.append(np.asarray(e.suggested_phases_rad))
         last.append(focus)
     assert np.mean(last) >= 0.85, last
+
+
+def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_path, capsys) -> None:
+    # Per element with a prior: the images in focus and defocused +-5 mm, moved by one MR pixel
+    # (a focal spot the model cannot form). The search fits them to a misfit near 1 (no MODEL
+    # MISMATCH) by moving its phases; the images' chi-squared at the prediction lies far above
+    # what truths within the prior's +-0.3 rad give (z 15.8 with seed 1 of this array, 11.2 with
+    # seed 3; 0.4 and -0.2 unmoved), so the prediction is recommended: the line says PRIOR
+    # CONFLICT, --out-phases holds the prediction and the JSON gives the check. Unmoved, the
+    # estimate is what it recommends.
+    sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
+    scenario = tmp_path / "small.toml"
+    scenario.write_text(SMALL)
+    truth = sim.skull_phases(1)
+    prediction = truth + np.random.default_rng(1).normal(0.0, 0.3, sim.n_elements)
+    np.save(tmp_path / "prior.npy", prediction)
+    known = [None] + [sim.focus_shift_phases((0.0, 0.0, dz)) for dz in (5.0, -5.0)]
+
+    def estimate(moved: bool) -> tuple[dict, str]:
+        paths = []
+        for i, k in enumerate(known):
+            image = sim.arfi_image(truth + (0.0 if k is None else k), noise_rad=0.02, seed=10 + i)
+            path = tmp_path / f"{'moved' if moved else 'plain'}{i}.nii.gz"
+            arfi.write_arfi_image(path, np.roll(image, 1, axis=0) if moved else image, sim.mr_affine_mm, sim.mr_volume_shape,
+                                  None if k is None else {"applied_phases_rad": list(k)})
+            paths += ["--image", str(path)]
+        assert main(["estimate", "--scenario", str(scenario), *paths, "--groups", str(sim.n_elements), "--prior",
+                     str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3", "--seed", "1", "--out-phases",
+                     str(tmp_path / "out.npy"), "--json", str(tmp_path / "e.json")]) == 0
+        return json.loads((tmp_path / "e.json").read_text()), capsys.readouterr().out
+
+    result, out = estimate(moved=True)
+    check = result["prior_check"]
+    assert check["conflict"] and check["z"] > 3.0 and check["draws"] == 40, check
+    assert not result["model_mismatch"] and result["recommended"] == "prediction", result["misfit"]
+    assert "PRIOR CONFLICT" in out and "NOT to be applied" in out and "out.npy" in out, out
+    assert np.allclose(np.load(tmp_path / "out.npy"), prediction)
+    result, out = estimate(moved=False)
+    assert not result["prior_check"]["conflict"] and result["recommended"] == "estimate", result["prior_check"]
+    assert "PRIOR CONFLICT" not in out
+    assert np.allclose(np.load(tmp_path / "out.npy"), result["phases_rad"])

@@ -42,6 +42,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<results::NextAcquisition>()?;
     m.add_class::<results::ShiftCandidate>()?;
     m.add_class::<support::EstimateSupport>()?;
+    m.add_class::<support::EstimatePriorCheck>()?;
     m.add_class::<diagnose::CoreDiagnosis>()?;
     m.add_class::<diagnose::DiagnosisStep>()?;
     m.add_class::<diagnose::EffectCandidate>()?;

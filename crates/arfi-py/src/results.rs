@@ -2,7 +2,7 @@
 //! convert units (m to mm) in one place. `to_dict` writes the JSON from the same getters, so an
 //! attribute and its JSON key are one name.
 
-use crate::support::EstimateSupport;
+use crate::support::{EstimatePriorCheck, EstimateSupport};
 use has_core::inverse::calibrate::Calibration;
 use has_core::inverse::element::nuisance::FittedNuisance;
 use has_core::inverse::estimate::information::{Candidate, ShiftSuggestion};
@@ -112,7 +112,7 @@ impl CoreEstimate {
     /// The attributes `to_dict` writes, in order.
     #[classattr]
     #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 32] = [
+    const FIELDS: [&'static str; 33] = [
         "phases_rad",
         "cost",
         "evaluations",
@@ -142,6 +142,7 @@ impl CoreEstimate {
         "next_acquisition",
         "converged",
         "support",
+        "prior_check",
         "supported",
         "recommended",
         "recommended_phases_rad",
@@ -348,6 +349,13 @@ impl CoreEstimate {
         self.report.support.clone().map(EstimateSupport)
     }
 
+    /// Per element with a prior (searched): whether the images agree with the prediction as the
+    /// prior states it; None otherwise.
+    #[getter]
+    fn prior_check(&self) -> Option<EstimatePriorCheck> {
+        self.report.prior_check.clone().map(EstimatePriorCheck)
+    }
+
     /// Whether `phases_rad` is the correction to apply (`recommended == "estimate"`).
     #[getter]
     fn supported(&self) -> bool {
@@ -355,7 +363,8 @@ impl CoreEstimate {
     }
 
     /// Which phases to apply: `"estimate"`; `"prediction"` (the prior as given) when an estimate
-    /// with a prior ends in `model_mismatch`; per element without a prior, `"uncorrected"` (zero
+    /// with a prior ends in `model_mismatch` or its images conflict with the prediction
+    /// (`prior_check`); per element without a prior, `"uncorrected"` (zero
     /// phases) or `"groups"` (the default-group fit on its elements) when the images do not
     /// support the estimate or its search did not converge (see `support`).
     #[getter]

@@ -1,8 +1,9 @@
 //! What the images determine of a per-element estimate without a prior, and the focus of the
-//! alternatives it is judged against (the core's `Support`).
+//! alternatives it is judged against (the core's `Support`); with a prior, whether the images
+//! agree with the prediction as the prior states it (the core's `PriorCheck`).
 
 use crate::results::fields_dict;
-use has_core::inverse::estimate::workflow::Support;
+use has_core::inverse::estimate::workflow::{PriorCheck, Support};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -74,6 +75,82 @@ impl EstimateSupport {
             s.uncorrected_focus,
             s.groups_focus,
             if s.converged { "True" } else { "False" }
+        )
+    }
+}
+
+/// Per element with a prior: the images' `chi²` at the prediction against its spread over images
+/// of truths the prior allows (a prior-predictive check, by seeded Monte Carlo). A `conflict`
+/// (`z` above 3 and an excess above 0.2 per pixel) means the model cannot form the images about
+/// the prediction or the prediction errs by more than its std: the search's move would absorb
+/// that, so the prediction is recommended.
+#[pyclass(module = "arfi._core", frozen)]
+pub(crate) struct EstimatePriorCheck(pub(crate) PriorCheck);
+
+#[pymethods]
+impl EstimatePriorCheck {
+    /// The attributes `to_dict` writes, in order.
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 7] = ["chi2_prediction", "null_mean", "null_std", "z", "excess_per_pixel", "conflict", "draws"];
+
+    /// `chi²` of the images at the prediction (cost over the noise's variance).
+    #[getter]
+    fn chi2_prediction(&self) -> f64 {
+        self.0.chi2_prediction
+    }
+
+    /// Mean of the same `chi²` over images of truths drawn from the prior.
+    #[getter]
+    fn null_mean(&self) -> f64 {
+        self.0.null_mean
+    }
+
+    /// Its standard deviation.
+    #[getter]
+    fn null_std(&self) -> f64 {
+        self.0.null_std
+    }
+
+    /// `(chi2_prediction - null_mean) / null_std`.
+    #[getter]
+    fn z(&self) -> f64 {
+        self.0.z
+    }
+
+    /// `(chi2_prediction - null_mean) / n_pixels`.
+    #[getter]
+    fn excess_per_pixel(&self) -> f64 {
+        self.0.excess_per_pixel
+    }
+
+    /// The images conflict with the prediction as the prior states it.
+    #[getter]
+    fn conflict(&self) -> bool {
+        self.0.conflict
+    }
+
+    /// Draws of the prior made.
+    #[getter]
+    fn draws(&self) -> usize {
+        self.0.draws
+    }
+
+    /// The check as a dict of its attributes.
+    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        fields_dict(slf.as_any())
+    }
+
+    fn __repr__(&self) -> String {
+        let c = &self.0;
+        format!(
+            "EstimatePriorCheck(chi2_prediction={:.1}, null_mean={:.1}, null_std={:.1}, z={:.2}, excess_per_pixel={:.3}, conflict={})",
+            c.chi2_prediction,
+            c.null_mean,
+            c.null_std,
+            c.z,
+            c.excess_per_pixel,
+            if c.conflict { "True" } else { "False" }
         )
     }
 }

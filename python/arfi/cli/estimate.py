@@ -186,11 +186,20 @@ def run(args: argparse.Namespace) -> int:
               + (" and its search did not converge" if not e.converged else "")
               + f"; the safer correction is {which}"
               + (f", which is what {args.out_phases} holds" if args.out_phases else "") + ".")
+    c = e.prior_check
+    conflict = c is not None and c.conflict
     if use_prediction:
         which = "the prediction (--prior" + (", moved along its fitted modes" if moved else "") + ")"
-        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
-              f"the model does not explain the images, so this estimate is NOT to be applied: {which} is "
-              f"the safer correction"
+        if e.model_mismatch or c is None:
+            why = (f"MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+                   f"the model does not explain the images")
+        else:
+            why = (f"PRIOR CONFLICT: at the prediction the images leave chi-squared {c.chi2_prediction:.0f}, "
+                   f"{c.z:.1f} std above the {c.null_mean:.0f} that images of truths within the prior's "
+                   f"{args.prior_std_rad:g} rad would leave ({c.excess_per_pixel:.2f} x the noise per pixel more): the "
+                   f"model cannot form these images about the prediction, or the prediction errs by more than its std, "
+                   f"and the fit (misfit {e.misfit:.2f}) absorbs that in its phases")
+        print(f"estimate: {why}, so this estimate is NOT to be applied: {which} is the safer correction"
               + (f" and is what {args.out_phases} holds" if args.out_phases else "")
               + ". Check the scenario against the images (arfi diagnose), then estimate again.")
     elif e.model_mismatch:
@@ -215,7 +224,8 @@ def run(args: argparse.Namespace) -> int:
         flags = [name for name, on in (("KEPT THE PREDICTION", e.kept_prediction), ("AMBIGUOUS", e.ambiguous or e.underdetermined),
                                         ("NOT CONVERGED", not e.converged),
                                         (f"NOT SUPPORTED (recommended: {e.recommended})", e.recommended in ("uncorrected", "groups")),
-                                        (f"MODEL MISMATCH (misfit {e.misfit:.2f} x the noise)", e.model_mismatch)) if on]
+                                        (f"MODEL MISMATCH (misfit {e.misfit:.2f} x the noise)", e.model_mismatch),
+                                        ("PRIOR CONFLICT (recommended: prediction)", conflict)) if on]
         fit_report(args.report, sim, "estimate", image, model, {"image": args.image[0], "method": e.method, "cost": e.cost,
                    "ambiguous": e.ambiguous, "model_mismatch": e.model_mismatch, "misfit": e.misfit,
                    "noise_floor_rad": e.noise_floor}, e.phases_rad,

@@ -16,7 +16,7 @@ mod problem;
 mod solvers;
 pub mod workflow;
 
-pub use assess::{chi2_95, misfit, propose_diversity, rival_solutions, Assessment, RivalSolution};
+pub use assess::{chi2_95, misfit, propose_diversity, rival_solutions, Assessment, RivalSolution, MATERIAL_MISFIT};
 use problem::Problem;
 use solvers::{lbfgs_run, restarted_nelder_mead};
 

@@ -6,6 +6,7 @@
 //! `support`.
 
 mod per_element;
+mod prior_check;
 mod support;
 
 use crate::error::{HasError, Result};
@@ -21,6 +22,7 @@ use std::sync::atomic::AtomicBool;
 
 use per_element::{element_prior, estimate_per_element};
 pub use per_element::{one_acquisition, REPEAT_TOLERANCE_RAD, VIEW_ROUNDS};
+pub use prior_check::{prior_check, PriorCheck, CONFLICT_Z, PRIOR_CHECK_DRAWS};
 pub use support::{converged, element_support, Recommendation, Recommended, Support, GROUPS_MARGIN};
 
 /// The optimiser.
@@ -165,9 +167,14 @@ pub struct EstimateReport {
     /// Per element without a prior: what the images determine and the focus of the
     /// alternatives ([`element_support`]).
     pub support: Option<Support>,
+    /// Per element with a prior (searched, not kept): whether the images agree with the
+    /// prediction as the prior states it ([`prior_check`]).
+    pub prior_check: Option<PriorCheck>,
     /// The phases to apply: the estimate; with a prior, the prediction when the model does not
-    /// explain the images (`assessment.mismatch`); per element without a prior, the uncorrected
-    /// beam or the group fit when the images do not support the estimate ([`Support`]).
+    /// explain the images (`assessment.mismatch`) or the images conflict with the prediction as
+    /// the prior states it ([`PriorCheck::conflict`]: the search's move would absorb what the model
+    /// cannot form); per element without a prior, the uncorrected beam or the group fit when the
+    /// images do not support the estimate ([`Support`]).
     pub recommendation: Recommendation,
 }
 
@@ -180,13 +187,19 @@ impl EstimateReport {
 }
 
 /// The phases to apply for an estimate `phases` (see [`EstimateReport::recommendation`]): with
-/// `prior` (as given) and a model `mismatch`, the prediction; without a prior, per element, the
-/// alternative of an unsupported estimate (`support`, with the default-group fit `groups` spread
-/// to the elements); else the estimate.
-fn recommend(phases: &[f64], prior: Option<&Prior>, mismatch: bool, support: Option<&Support>, groups: Option<&[f64]>) -> Recommendation {
+/// `prior` (as given) and a model `mismatch` or a `conflict` of the images with it, the
+/// prediction; without a prior, per element, the alternative of an unsupported estimate
+/// (`support`, with the default-group fit `groups` spread to the elements); else the estimate.
+fn recommend(
+    phases: &[f64],
+    prior: Option<&Prior>,
+    (mismatch, conflict): (bool, bool),
+    support: Option<&Support>,
+    groups: Option<&[f64]>,
+) -> Recommendation {
     let estimate = || Recommendation { kind: Recommended::Estimate, phases: phases.to_vec() };
     match (prior, support) {
-        (Some(p), _) if mismatch => Recommendation { kind: Recommended::Prediction, phases: p.mean().to_vec() },
+        (Some(p), _) if mismatch || conflict => Recommendation { kind: Recommended::Prediction, phases: p.mean().to_vec() },
         (None, Some(s)) if !s.supported() => match (s.alternative(), groups) {
             (Recommended::Groups, Some(g)) => Recommendation { kind: Recommended::Groups, phases: g.to_vec() },
             _ => Recommendation { kind: Recommended::Uncorrected, phases: vec![0.0; phases.len()] },
@@ -297,7 +310,7 @@ pub fn estimate_aberration_with(
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
     model.cost.fit_amplitude = request.fitted_nuisance().amplitude;
     let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
-    let recommendation = recommend(&estimate.phases, request.prior.as_ref(), assessment.mismatch, None, None);
+    let recommendation = recommend(&estimate.phases, request.prior.as_ref(), (assessment.mismatch, false), None, None);
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
         scale: model.cost.scale(&estimate.phases),
@@ -312,6 +325,7 @@ pub fn estimate_aberration_with(
         nuisance: None,
         suggestion: None,
         support: None,
+        prior_check: None,
         recommendation,
     })
 }

@@ -21,6 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use std::sync::atomic::AtomicBool;
 
+use super::prior_check::prior_check;
 use super::support::element_support;
 use super::{estimator, fit_groups, recommend, EstimateReport, EstimateRequest, Method, ELEMENT_EVALUATIONS, VIEW_ELEMENT_EVALUATIONS};
 
@@ -322,8 +323,15 @@ fn search_and_assess(
     let fitted_phases = if prior.is_some() { 0 } else { sim.n_elements() - 1 };
     (assessment.misfit, assessment.mismatch) = misfit(image_cost, n_pixels, fitted_phases, model.noise);
     assessment.mismatch &= !kept_prediction;
+    // With a prior: do the images agree with the prediction as the prior states it? Where they
+    // do not, the search's move absorbs what the model cannot form.
+    let check = match &prior {
+        Some(p) if !kept_prediction => Some(prior_check(&cost, model.noise, p, &positions, request.seed)?),
+        _ => None,
+    };
+    let conflict = check.as_ref().is_some_and(|c| c.conflict);
     let recommendation =
-        recommend(&elements.phases, request.prior.as_ref(), assessment.mismatch, support.as_ref(), group_elements.as_deref());
+        recommend(&elements.phases, request.prior.as_ref(), (assessment.mismatch, conflict), support.as_ref(), group_elements.as_deref());
     let report = EstimateReport {
         image_cost,
         nuisance: fitted,
@@ -338,6 +346,7 @@ fn search_and_assess(
         prior_used: prior.is_some(),
         suggestion: None,
         support,
+        prior_check: check,
         recommendation,
     };
     Ok((report, cost))
