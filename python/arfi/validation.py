@@ -102,7 +102,7 @@ def table(results: Sequence[Any]) -> str:
         own = o != t
         # The case's own tolerances, in brackets after each metric, where they are not the suite's.
         p_tol, z_tol, a_tol, c_tol = ((f" ({v})" if own else "") for v in (
-            f"±{100 * o['focal_pressure']:.0f} %", f"±{o['focal_position_mm']:.0f} mm",
+            f"±{100 * o['focal_pressure']:.0f} %", f"±{o['focal_position_mm']:g} mm",
             f"{100 * o['axial_profile']:.0f} %", f"≥ {o['focal_plane_correlation']}"))
         lines.append(f"| {r.name} | {ps:.3f} / {pe:.3f} | {100 * r.focal_pressure_error:+.1f} %{p_tol} | {zs:.2f} / {ze:.2f} "
                      f"| {r.focal_position_error_mm:+.2f}{z_tol} | {100 * r.axial_error:.1f} %{a_tol} "

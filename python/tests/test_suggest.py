@@ -178,8 +178,8 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
     # Per element with a prior: the images in focus and defocused +-5 mm, moved by one MR pixel
     # (a focal spot the model cannot form). The search fits them to a misfit near 1 (no MODEL
     # MISMATCH) by moving its phases; the images' chi-squared at the prediction lies far above
-    # what truths within the prior's +-0.3 rad give (z 15.8 with seed 1 of this array, 11.2 with
-    # seed 3; 0.4 and -0.2 unmoved), so the prediction is recommended: the line says PRIOR
+    # what truths within the prior's +-0.3 rad give (z 46.9 with seed 1 of this array, 34.2 with
+    # seed 3; -1.4 and -1.6 unmoved), so the prediction is recommended: the line says PRIOR
     # CONFLICT, --out-phases holds the prediction and the JSON gives the check. Unmoved, the
     # estimate is what it recommends.
     sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))

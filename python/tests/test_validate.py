@@ -44,8 +44,7 @@ def test_a_tilted_plate_is_held_to_its_own_tolerances_and_says_so(tmp_path):
     assert own["focal_pressure"] > validation.TOLERANCES["focal_pressure"]
     assert own["focal_position_mm"] > validation.TOLERANCES["focal_position_mm"]
     assert f"(±{100 * own['focal_pressure']:.0f} %)" in r.stdout and "A tolerance in brackets is the case's own" in r.stdout
-    # Its pass is judged by its own tolerances: the focus is off by more than the suite allows.
-    assert abs(case["focal_position_error_mm"]) > validation.TOLERANCES["focal_position_mm"]
+    # Its pass is judged by its own tolerances.
     assert case["passed"] == (abs(case["focal_pressure_error"]) <= own["focal_pressure"]
                               and abs(case["focal_position_error_mm"]) <= own["focal_position_mm"]
                               and case["axial_error"] <= own["axial_profile"]
@@ -72,11 +71,13 @@ def _rows(md: str) -> dict[str, list[Any]]:
 
     rows = {}
     for line in md.splitlines():
-        cells = [re.sub(r"\(.*?\)", "", c).strip() for c in line.strip().strip("|").split("|")]
+        raw = [c.strip() for c in line.strip().strip("|").split("|")]
+        cells = [re.sub(r"\(.*?\)", "", c).strip() for c in raw]
         if len(cells) == 9 and cells[0] in validation.CASES:
             found = re.findall(r"[-+]?\d+\.\d+", " ".join(cells[1:8]))
             numbers = [(float(v), 10.0 ** -len(v.split(".")[1])) for v in found]
-            rows[cells[0]] = numbers + [cells[8] == "pass"]
+            own = re.findall(r"\(.*?\)", " ".join(raw[1:8]))
+            rows[cells[0]] = numbers + [own, cells[8] == "pass"]
     return rows
 
 
@@ -89,6 +90,7 @@ def test_the_documented_table_is_what_the_suite_prints_now():
     documented, now = _rows(doc), _rows(validation.table(validation.run()))
     assert set(documented) == set(validation.CASES) == set(now)
     for case in validation.CASES:
-        for (d, unit), (n, _) in zip(documented[case][:-1], now[case][:-1]):
+        for (d, unit), (n, _) in zip(documented[case][:-2], now[case][:-2]):
             assert abs(d - n) <= 1.01 * unit, f"{case}: documented {documented[case]}, now {now[case]}"
-        assert documented[case][-1] == now[case][-1], case
+        # The case's own tolerances, in brackets, and whether it passed, exactly.
+        assert documented[case][-2:] == now[case][-2:], case

@@ -98,7 +98,9 @@ def register(sub: Any) -> None:
                    "optionally 'names' and 'units' (M strings each)")
     p.add_argument("--out-phases", dest="out_phases", metavar="F.npy",
                    help="write the phases to subtract, those JSON 'recommended' names: the estimate; when an estimate "
-                   "with --prior ends in MODEL MISMATCH (the images are not explained), the prediction itself, moved along "
+                   "with --prior ends in MODEL MISMATCH (the images are not explained) or PRIOR CONFLICT (per element: the "
+                   "images at the prediction lie far outside what truths within --prior-std-rad give), the prediction "
+                   "itself, moved along "
                    "its fitted modes (registration, bone speed) when they were fitted; per element without --prior, when "
                    "the images do not support the estimate (they determine too few combinations of phases for its "
                    "correction to beat none or the group fit) or its search did not converge, zeros (uncorrected) or the "

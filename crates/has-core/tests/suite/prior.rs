@@ -263,9 +263,8 @@ fn with_a_prior_the_per_element_estimate_starts_from_it_and_is_judged_on_its_pos
 /// mismatch rule's 1.2) by moving its phases, and leaves less focus than the prediction alone
 /// (0.009-0.035 of the optimum lower on six seeds, measured on the focal pressure). The
 /// prior-predictive check sees the images' cost at the prediction far above what images of
-/// truths within the prior leave (z 8-14 there against 3; on images the model forms, -1.5 to
-/// 1.3), and the prediction is recommended. Whatever the check says, no estimate recommended
-/// may leave less than the prediction's focus less 0.01 (the noise's share, as above).
+/// truths within the prior leave (z 12-25 there against 3; on images the model forms, -3.9 to
+/// -0.4), and the prediction is recommended as given.
 #[test]
 fn with_a_prior_images_the_model_cannot_form_recommend_the_prediction() {
     let s = hemisphere();
@@ -296,8 +295,38 @@ fn with_a_prior_images_the_model_cannot_form_recommend_the_prediction() {
         );
         assert!(check.conflict && check.z > CONFLICT_Z, "seed {seed}: the shifted images were not seen: {check:?}");
         assert_eq!(r.recommendation.kind, Recommended::Prediction, "seed {seed}");
-        assert!(applied >= alone - 0.01, "seed {seed}: recommended {applied:.3} vs prediction alone {alone:.3}");
+        assert_eq!(applied, alone, "seed {seed}: the prediction is applied as given");
     }
+}
+
+/// A prediction worse than its prior says is not a conflict: the images, which the model forms,
+/// are fitted and the estimate applied. The [`hemisphere`] as above, the prior stated ±0.3 rad,
+/// the prediction off by 0.5 rad per element (seed 3: the prediction leaves 0.78 of the ideal
+/// focal ARFI, the estimate 0.87; z -3.4). Such a prediction loses focal amplitude, which the
+/// check's refitted scale absorbs (with the scale held at 1 the check called such predictions
+/// conflicts, at z 4-23 on the 256-element planar array, and the prediction was applied:
+/// 0.02-0.06 of the focal pressure lost).
+#[test]
+fn with_a_prior_a_prediction_worse_than_its_std_is_no_conflict() {
+    let s = hemisphere();
+    let per_element = per_element(&s);
+    let positions = s.transducer.reference_points();
+    let ideal = peak(&s.arfi_image(&[]).unwrap());
+    let seed = 3;
+    let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
+    let left = |est: &[f64]| focus_left(&s, &truth, est, ideal);
+    let m = focus_and_defocus_images(&s, &truth, 1.0, 0.02, seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(0xe77 ^ seed);
+    let normal = Normal::new(0.0, 0.5).unwrap();
+    let prediction: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
+    let request = EstimateRequest { prior: Some(Prior::new(prediction.clone(), 0.3).unwrap()), seed, ..EstimateRequest::default() };
+    let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+    let check = r.prior_check.as_ref().expect("a searched estimate with a prior is checked");
+    let (alone, post) = (left(&prediction), left(&r.estimate.phases));
+    println!("stated 0.3, off by 0.5: prediction {alone:.3}, estimate {post:.3}; {check:?}");
+    assert!(!check.conflict, "a prediction worse than its std called a conflict: {check:?}");
+    assert_eq!(r.recommendation.kind, Recommended::Estimate);
+    assert!(post > alone + 0.02, "the estimate {post:.3} should raise the prediction's {alone:.3}");
 }
 
 /// A seeded smooth field with the covariance a smooth prior of `std_rad` over `length` (m)

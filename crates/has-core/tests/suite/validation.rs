@@ -53,7 +53,7 @@ fn assert_held(c: &Comparison, (pressure, position, axial): (f64, f64, f64)) {
 /// fails: their treads take the coefficients of each plane wave's incidence on the plate's face
 /// (total reflection beyond the critical angle) and the oblique screen's rays refract through it
 /// (`propagation/oblique.rs`, `operators::refract`): +8.3 (untilted), +3.5, +13.2 and +10.3 %
-/// focal pressure, the focus 2.4, 0.65, 1.35 and 1.55 mm off (with the treads at normal incidence
+/// focal pressure, the focus 2.4, 0.65, 1.35 and 1.53 mm off (with the treads at normal incidence
 /// and unbent rays, tilted: +30, +54 and +61 %, 1.8-3.4 mm). The untilted plate from a CT is off
 /// where the same plate as a region is exact: its slabs hold bone and, past the CT's edge, water,
 /// and their mean wavenumber falls below bone's (`docs/validation.md`).
@@ -69,7 +69,7 @@ fn every_case_of_the_suite_matches_its_exact_solution_on_the_default_grid_within
         let held = match c.name.as_str() {
             "tilt0" => Some((0.10, 2.8e-3)),
             "tilt10" => Some((0.08, 1.2e-3)),
-            "tilt20" => Some((0.15, 2.0e-3)),
+            "tilt20" => Some((0.14, 2.0e-3)),
             "tilt30" => Some((0.13, 2.0e-3)),
             _ => None,
         };

@@ -33,7 +33,7 @@ pub const CONFLICT_Z: f64 = 3.0;
 #[derive(Debug, Clone, PartialEq)]
 pub struct PriorCheck {
     /// `chi²` of the images at the prediction (the images' cost over `sigma²`, the linear
-    /// nuisance refitted there).
+    /// nuisance refitted there, the amplitude scale always).
     pub chi2_prediction: f64,
     /// Mean and standard deviation of the same `chi²` over images of truths drawn from the
     /// prior (the model's images of `prediction + error`, errors of the prior's std per element,
@@ -67,6 +67,12 @@ pub fn prior_check(cost: &ElementCost, noise: f64, prior: &Prior, positions: &[[
     if n == 0 {
         return Err(HasError::invalid("images", "no masked pixel to check the prediction on"));
     }
+    // The scale refitted on both sides: a prediction that errs by more than its std (or images
+    // weaker than the model's) loses focal amplitude, which the search's move rightly restores;
+    // what no scale explains is a focal spot of another shape or place.
+    let mut checked = cost.clone();
+    checked.fit_amplitude = true;
+    let cost = &checked;
     // The model's powers at the prediction are the same for every draw: only the data change.
     let at_mean = cost.powers(mean);
     let chi2_prediction = cost.cost_of_powers(&at_mean) / sigma.powi(2);
