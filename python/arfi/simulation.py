@@ -404,9 +404,17 @@ class Simulation:
         fit_nuisance: str | Sequence[str] | None = None,
         suggest: bool = False,
         prior_modes: ArrayLike | None = None,
+        noise_rad: float | None = None,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
+
+        ``noise_rad``: the images' noise standard deviation (rad) where it is known (e.g. the
+        standard deviation of the difference of two reference acquisitions over sqrt(2)); by
+        default each image's floor is estimated from its background, which counts any
+        pixel-scale structure there as noise (through a head at 650 kHz: 0.024-0.025 rad for a
+        noise of 0.02, enough to hide a model mismatch). The misfit, ``model_mismatch``,
+        ``prior_check`` and the posterior's weights all use it.
 
         ``method``: ``"nelder-mead"`` (the paper's: zero start, <= 8000 evaluations), ``"pso"``
         or ``"lbfgs"`` (analytic gradient, seeded multi-start; the default). The result flags
@@ -499,7 +507,8 @@ class Simulation:
         return self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
                                 progress=bool(progress), prior=prior_array, prior_std_rad=std,
                                 prior_correlation_mm=length, fit_nuisance=nuisance, suggest=bool(suggest),
-                                prior_modes=modes)
+                                prior_modes=modes,
+                                noise_rad=None if noise_rad is None else as_number(noise_rad, "noise_rad"))
 
     def cost_model(self, images: Images, known: Known = None,
                    fit_amplitude: bool = False) -> CostModel:

@@ -508,7 +508,7 @@ impl CoreSimulation {
     }
 
     /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_amplitude=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None))]
+    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_amplitude=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None, noise_rad=None))]
     #[allow(clippy::too_many_arguments)]
     fn estimate<'py>(
         &self,
@@ -529,6 +529,7 @@ impl CoreSimulation {
         fit_nuisance: Option<Vec<String>>,
         suggest: bool,
         prior_modes: Option<PyReadonlyArray2<'py, f64>>,
+        noise_rad: Option<f64>,
     ) -> PyResult<CoreEstimate> {
         let measurements = measurements(images, known)?;
         let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
@@ -550,6 +551,7 @@ impl CoreSimulation {
             seed,
             starts,
             fit_amplitude,
+            noise_rad,
             nuisance,
             threshold,
             prior,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from typing import Any
@@ -47,6 +48,12 @@ def register(sub: Any) -> None:
     add_method(p, "lbfgs",
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--noise-rad", type=float, dest="noise_rad", metavar="S",
+                   help="the images' noise standard deviation (rad) where it is known, e.g. the standard deviation of "
+                   "the difference of two reference acquisitions over sqrt(2); default: each image's floor from its "
+                   "background, which counts any pixel-scale structure there as noise (through a head at 650 kHz "
+                   "0.024-0.025 rad for a noise of 0.02, enough to hide a model mismatch). The misfit, MODEL MISMATCH, "
+                   "PRIOR CONFLICT and the prior's weight all use it")
     p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
                    help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 200, "
                    "or 120 when --fit-nuisance fits W or the shift)")
@@ -113,6 +120,8 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.noise_rad is not None and not (math.isfinite(args.noise_rad) and args.noise_rad > 0):
+        raise ValueError(f"--noise-rad: must be a finite number > 0, got {args.noise_rad:g}")
     for path, option in ((args.out_phases, "--out-phases"), (args.suggest, "--suggest")):
         if path:
             npy_path(path, option)  # before the estimate, so that neither is written when one is wrong
@@ -133,11 +142,11 @@ def run(args: argparse.Namespace) -> int:
                      time_limit_s=args.time_limit_s, seed=args.seed, starts=args.starts, fit_amplitude=args.fit_amplitude,
                      progress=sys.stderr.isatty(), prior=prior, prior_std_rad=args.prior_std_rad,
                      prior_correlation_mm=args.prior_correlation_mm, fit_nuisance=args.fit_nuisance,
-                     suggest=bool(args.suggest))
+                     suggest=bool(args.suggest), noise_rad=args.noise_rad)
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(f"estimate: {len(e.phases_rad)} {kind} phases by {e.method} from {len(pairs)} image(s): cost {e.cost:.4g} "
-          f"({e.n_pixels} pixels, noise floor {e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
+          f"({e.n_pixels} pixels, noise {'given ' if args.noise_rad is not None else 'floor '}{e.noise_floor:.4f} rad), {e.evaluations} evaluations in {e.seconds:.2f} s ({e.stop})"
           + (f"; with the prior (+-{args.prior_std_rad:g} rad per phase"
              + (f", errors correlated over {args.prior_correlation_mm:g} mm" if args.prior_correlation_mm else "")
              + "), ambiguity judged on the posterior" if e.prior_used else "")
@@ -190,10 +199,11 @@ def run(args: argparse.Namespace) -> int:
               + (f", which is what {args.out_phases} holds" if args.out_phases else "") + ".")
     c = e.prior_check
     conflict = c is not None and c.conflict
+    noise = "the given noise (--noise-rad)" if args.noise_rad is not None else "the noise expected from the image background"
     if use_prediction:
         which = "the prediction (--prior" + (", moved along its fitted modes" if moved else "") + ")"
         if e.model_mismatch or c is None:
-            why = (f"MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+            why = (f"MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x {noise}; "
                    f"the model does not explain the images")
         else:
             why = (f"PRIOR CONFLICT: at the prediction the images leave chi-squared {c.chi2_prediction:.0f}, "
@@ -205,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
               + (f" and is what {args.out_phases} holds" if args.out_phases else "")
               + ". Check the scenario against the images (arfi diagnose), then estimate again.")
     elif e.model_mismatch:
-        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x the noise expected from the image background; "
+        print(f"estimate: MODEL MISMATCH: the best fit leaves {e.misfit:.2f} x {noise}; "
               f"the model does not explain the image (more aberration terms than groups?) and this correction may weaken "
               f"the focus: check it with an image taken with the correction applied (loop 2).")
     if e.next_acquisition is not None:

@@ -271,6 +271,7 @@ fn search_and_assess(
             let sigma = point_reflection(&positions, &grouped.groups);
             let est = estimator(request, Method::Lbfgs, sigma.clone())?;
             let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
+            group_model.noise = request.noise(group_model.noise)?;
             group_model.cost.fit_amplitude = request.fit_amplitude;
             let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, cancel)?;
             WarmStart::Groups { elements: grouped.element_phases(&group.phases)?, groups: group.phases, assessment }
@@ -281,7 +282,8 @@ fn search_and_assess(
         WarmStart::Groups { elements, .. } => elements.clone(),
     };
     let nuisance = request.fitted_nuisance();
-    let model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
+    let mut model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
+    model.noise = request.noise(model.noise)?;
     let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(time_limit);
     let default_budget = if nuisance.view() { VIEW_ELEMENT_EVALUATIONS } else { ELEMENT_EVALUATIONS };
     let budget = request.max_evaluations.unwrap_or(default_budget);
