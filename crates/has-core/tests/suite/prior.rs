@@ -4,7 +4,7 @@
 
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::element::nuisance::Nuisance;
-use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateRequest, Recommended, CONFLICT_Z};
+use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateReport, EstimateRequest, Recommended, CONFLICT_Z};
 use has_core::inverse::estimate::{condense, phase_error, wrap};
 use has_core::inverse::prior::smooth::error_modes;
 use has_core::inverse::prior::Prior;
@@ -212,6 +212,45 @@ fn focus_and_defocus_images(s: &Simulation, truth: &[f64], transmission: f64, no
     [0.0, 5e-3, -5e-3].into_iter().enumerate().map(|(k, dz)| image(s.focus_shift_phases([0.0, 0.0, dz]).unwrap(), k as u64)).collect()
 }
 
+/// The [`hemisphere`] per element with a skull-like truth of `seed` (15 mm, 4 rad peak to peak,
+/// 0.2 rad jitter): what the tests of a per-element prior share.
+struct SkullCase {
+    sim: Simulation,
+    per_element: Simulation,
+    truth: Vec<f64>,
+    ideal: f64,
+    seed: u64,
+}
+
+impl SkullCase {
+    fn new(seed: u64) -> Self {
+        let sim = hemisphere();
+        let positions = sim.transducer.reference_points();
+        let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
+        let ideal = peak(&sim.arfi_image(&[]).unwrap());
+        SkullCase { per_element: per_element(&sim), sim, truth, ideal, seed }
+    }
+
+    /// The focal ARFI (of the ideal) the truth leaves corrected by `estimate`.
+    fn left(&self, estimate: &[f64]) -> f64 {
+        focus_left(&self.sim, &self.truth, estimate, self.ideal)
+    }
+
+    /// The truth off by seeded independent normal errors of `error_rad` per element.
+    fn prediction(&self, error_rad: f64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(0xe77 ^ self.seed);
+        let normal = Normal::new(0.0, error_rad).unwrap();
+        self.truth.iter().map(|t| t + normal.sample(&mut rng)).collect()
+    }
+
+    /// The per-element estimate from `images` with `prediction` as prior of `std_rad`.
+    fn estimate(&self, images: &[Measurement], prediction: &[f64], std_rad: f64) -> EstimateReport {
+        let prior = Some(Prior::new(prediction.to_vec(), std_rad).unwrap());
+        let request = EstimateRequest { prior, seed: self.seed, ..EstimateRequest::default() };
+        estimate_aberration(&self.per_element, images, &request, None, None).unwrap()
+    }
+}
+
 /// Per element with a prior, the estimate starts from the prediction (no default-group fit) and
 /// its ambiguity is judged on the element posterior (searches from draws of the prior; rivals
 /// within the images' noise margin, scored by the focus the correction would leave were they the
@@ -224,21 +263,12 @@ fn focus_and_defocus_images(s: &Simulation, truth: &[f64], transmission: f64, no
 /// much; with ±0.4 rad about 0.86 and 0.92.
 #[test]
 fn with_a_prior_the_per_element_estimate_starts_from_it_and_is_judged_on_its_posterior() {
-    let s = hemisphere();
-    let per_element = per_element(&s);
-    let positions = s.transducer.reference_points();
-    let ideal = peak(&s.arfi_image(&[]).unwrap());
-    let seed = 2;
-    let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
-    let left = |est: &[f64]| focus_left(&s, &truth, est, ideal);
-    let m = focus_and_defocus_images(&s, &truth, 1.0, 0.02, seed);
+    let case = SkullCase::new(2);
+    let m = focus_and_defocus_images(&case.sim, &case.truth, 1.0, 0.02, case.seed);
     for std_rad in [0.15, 0.4] {
-        let mut rng = ChaCha8Rng::seed_from_u64(0xe77 ^ seed);
-        let normal = Normal::new(0.0, std_rad).unwrap();
-        let prediction: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
-        let request = EstimateRequest { prior: Some(Prior::new(prediction.clone(), std_rad).unwrap()), seed, ..EstimateRequest::default() };
-        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
-        let (alone, post, a) = (left(&prediction), left(&r.estimate.phases), &r.assessment);
+        let prediction = case.prediction(std_rad);
+        let r = case.estimate(&m, &prediction, std_rad);
+        let (alone, post, a) = (case.left(&prediction), case.left(&r.estimate.phases), &r.assessment);
         println!(
             "prior +-{std_rad}: prediction {alone:.3}, estimate {post:.3}; {} candidate(s), worst recovery {:.3}",
             a.candidates.len(),
@@ -249,7 +279,7 @@ fn with_a_prior_the_per_element_estimate_starts_from_it_and_is_judged_on_its_pos
         let check = r.prior_check.as_ref().expect("a searched estimate with a prior is checked");
         assert!(!check.conflict && check.z < CONFLICT_Z, "prior +-{std_rad}: false conflict {check:?}");
         assert!(post >= alone - 0.01, "prior +-{std_rad}: {post:.3} vs prediction alone {alone:.3}");
-        assert_eq!(a.ambiguous, a.worst_recovery < request.threshold, "prior +-{std_rad}");
+        assert_eq!(a.ambiguous, a.worst_recovery < EstimateRequest::default().threshold, "prior +-{std_rad}");
         if std_rad < 0.2 {
             assert!(!a.ambiguous && a.worst_recovery > 0.95, "prior +-{std_rad}: worst recovery {:.3}", a.worst_recovery);
         }
@@ -267,28 +297,19 @@ fn with_a_prior_the_per_element_estimate_starts_from_it_and_is_judged_on_its_pos
 /// -0.4), and the prediction is recommended as given.
 #[test]
 fn with_a_prior_images_the_model_cannot_form_recommend_the_prediction() {
-    let s = hemisphere();
-    let per_element = per_element(&s);
-    let positions = s.transducer.reference_points();
-    let ideal = peak(&s.arfi_image(&[]).unwrap());
     for seed in [1, 2] {
-        let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
-        let left = |est: &[f64]| focus_left(&s, &truth, est, ideal);
-        let mut m = focus_and_defocus_images(&s, &truth, 1.0, 0.02, seed);
+        let case = SkullCase::new(seed);
+        let mut m = focus_and_defocus_images(&case.sim, &case.truth, 1.0, 0.02, seed);
         for measurement in m.iter_mut() {
             // One pixel along u (rows), as np.roll: the last row comes round to the first.
             let rows = measurement.image.nrows();
             let shifted = Array2::from_shape_fn(measurement.image.dim(), |(i, j)| measurement.image[[(i + rows - 1) % rows, j]]);
             measurement.image = shifted;
         }
-        let std_rad = 0.3;
-        let mut rng = ChaCha8Rng::seed_from_u64(0xe77 ^ seed);
-        let normal = Normal::new(0.0, std_rad).unwrap();
-        let prediction: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
-        let request = EstimateRequest { prior: Some(Prior::new(prediction.clone(), std_rad).unwrap()), seed, ..EstimateRequest::default() };
-        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+        let prediction = case.prediction(0.3);
+        let r = case.estimate(&m, &prediction, 0.3);
         let check = r.prior_check.as_ref().expect("a searched estimate with a prior is checked");
-        let (alone, post, applied) = (left(&prediction), left(&r.estimate.phases), left(&r.recommendation.phases));
+        let (alone, post, applied) = (case.left(&prediction), case.left(&r.estimate.phases), case.left(&r.recommendation.phases));
         println!(
             "seed {seed}: prediction {alone:.3}, estimate {post:.3}, recommended {:?} {applied:.3}; misfit {:.2}; {check:?}",
             r.recommendation.kind, r.assessment.misfit
@@ -308,21 +329,12 @@ fn with_a_prior_images_the_model_cannot_form_recommend_the_prediction() {
 /// 0.02-0.06 of the focal pressure lost).
 #[test]
 fn with_a_prior_a_prediction_worse_than_its_std_is_no_conflict() {
-    let s = hemisphere();
-    let per_element = per_element(&s);
-    let positions = s.transducer.reference_points();
-    let ideal = peak(&s.arfi_image(&[]).unwrap());
-    let seed = 3;
-    let truth = SkullScreen { correlation_length: 15e-3, peak_to_peak: 4.0, jitter: 0.2 }.phases(&positions, seed).unwrap();
-    let left = |est: &[f64]| focus_left(&s, &truth, est, ideal);
-    let m = focus_and_defocus_images(&s, &truth, 1.0, 0.02, seed);
-    let mut rng = ChaCha8Rng::seed_from_u64(0xe77 ^ seed);
-    let normal = Normal::new(0.0, 0.5).unwrap();
-    let prediction: Vec<f64> = truth.iter().map(|t| t + normal.sample(&mut rng)).collect();
-    let request = EstimateRequest { prior: Some(Prior::new(prediction.clone(), 0.3).unwrap()), seed, ..EstimateRequest::default() };
-    let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+    let case = SkullCase::new(3);
+    let m = focus_and_defocus_images(&case.sim, &case.truth, 1.0, 0.02, case.seed);
+    let prediction = case.prediction(0.5);
+    let r = case.estimate(&m, &prediction, 0.3);
     let check = r.prior_check.as_ref().expect("a searched estimate with a prior is checked");
-    let (alone, post) = (left(&prediction), left(&r.estimate.phases));
+    let (alone, post) = (case.left(&prediction), case.left(&r.estimate.phases));
     println!("stated 0.3, off by 0.5: prediction {alone:.3}, estimate {post:.3}; {check:?}");
     assert!(!check.conflict, "a prediction worse than its std called a conflict: {check:?}");
     assert_eq!(r.recommendation.kind, Recommended::Estimate);
