@@ -195,19 +195,20 @@ def _matrix(values: Any, name: str, n_elements: int) -> NDArray[np.float64]:
 
 
 def fit_prior_modes(skull: Simulation, images: list[NDArray[np.float64]], known: list[NDArray[np.float64] | None],
-                    prior: NDArray[np.float64], modes: list[PriorMode]) -> ModesResult:
+                    prior: NDArray[np.float64], modes: list[PriorMode], noise_rad: float | None = None) -> ModesResult:
     """Fits the coefficients of ``modes`` to ``images`` (each with its ``known`` phases) on
     ``skull``, the head with the CT's bone driven with the reference steering
     (``Simulation(scenario.with_ct_bone())``), and moves ``prior`` (the prediction, rad per
     element) by them: see the module docs. ``supported`` says whether the images support the move
-    (a likelihood-ratio test); the caller keeps the prediction unmoved where they do not."""
+    (a likelihood-ratio test); the caller keeps the prediction unmoved where they do not.
+    ``noise_rad``: the images' noise where it is known (default: their background floor)."""
     if not modes:
         raise ValueError("modes: none to fit")
     if len(prior) != skull.n_elements:
         raise ValueError(f"prior: has {len(prior)} values for {skull.n_elements} elements")
     t = time.perf_counter()
     scaled = np.stack([m.std * m.per_unit_rad for m in modes])
-    fit = skull.fit_modes(images, known, scaled)
+    fit = skull.fit_modes(images, known, scaled, noise_rad=noise_rad)
     coefficients = np.asarray(fit.coefficients)
     prior_std = np.array([m.std for m in modes])
     moved = wrap(prior + coefficients @ scaled)

@@ -536,7 +536,7 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
 
-    def fit_modes(self, images: Images, known: Known, modes: ArrayLike) -> "_core.ModesFit":
+    def fit_modes(self, images: Images, known: Known, modes: ArrayLike, noise_rad: float | None = None) -> "_core.ModesFit":
         """The coefficients ``c`` of several prior ``modes`` (rows: rad per element for c_m = 1;
         each standard normal a priori) that best explain the images jointly, each taken with its
         ``known`` phases: image ``k`` is this model's with ``sum_m c_m * modes[m] + known_k``
@@ -546,12 +546,15 @@ class Simulation:
         CT's bone (:mod:`arfi.prior_modes`). Returns ``coefficients``, ``std`` and
         ``covariance`` (posterior), ``scale``, ``misfit`` and ``misfit_at_zero`` (chi-squared per
         pixel at the fit and with every coefficient zero), ``n_pixels``, ``noise_rad``,
-        ``iterations`` and ``converged``. Ctrl-C stops it before the next iteration."""
+        ``iterations`` and ``converged``. ``noise_rad``: the images' noise where it is known, as
+        for :meth:`estimate` (default: their background floor). Ctrl-C stops it before the next
+        iteration."""
         imgs, knowns = images_and_known(images, known)
         rows = real_array(modes, "modes")
         if rows.ndim != 2:
             raise ValueError(f"modes: must be two-dimensional (modes x elements), got shape {rows.shape}")
-        return self._core.fit_modes(imgs, knowns, np.ascontiguousarray(rows))
+        noise = None if noise_rad is None else as_number(noise_rad, "noise_rad")
+        return self._core.fit_modes(imgs, knowns, np.ascontiguousarray(rows), noise_rad=noise)
 
     def diagnose(self, images: Images, known: Known = None,
                  threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,

@@ -18,7 +18,7 @@ use has_core::inverse::element::{known_per_element, BasisCache};
 use has_core::inverse::estimate::condense;
 use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateRequest, Method};
 use has_core::inverse::prior::mode_fit::fit_mode;
-use has_core::inverse::prior::modes_fit::fit_modes;
+use has_core::inverse::prior::modes_fit::fit_modes_with_noise;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::simulation::{ExternalField, Simulation};
@@ -492,18 +492,21 @@ impl CoreSimulation {
 
     /// The coefficients of prior `modes` (rows: rad per element for a coefficient of 1) fitted
     /// jointly to images, each taken with its known added phases, the phases otherwise this
-    /// model's own.
+    /// model's own; the images' noise `noise_rad` where it is known (else their background floor).
+    #[pyo3(signature = (images, known, modes, noise_rad=None))]
     fn fit_modes(
         &self,
         py: Python<'_>,
         images: Vec<PyReadonlyArray2<'_, f64>>,
         known: Vec<Option<PyReadonlyArray1<'_, f64>>>,
         modes: PyReadonlyArray2<'_, f64>,
+        noise_rad: Option<f64>,
     ) -> PyResult<CoreModesFit> {
         let measurements = measurements(images, known)?;
         let modes: Vec<Vec<f64>> = modes.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
         let cancel = AtomicBool::new(false);
-        let fit = run_interruptible(py, &cancel, || fit_modes(&self.inner, &modes, &measurements, Some(&cancel)))?.map_err(to_py)?;
+        let fit = run_interruptible(py, &cancel, || fit_modes_with_noise(&self.inner, &modes, &measurements, noise_rad, Some(&cancel)))?
+            .map_err(to_py)?;
         Ok(CoreModesFit(fit))
     }
 

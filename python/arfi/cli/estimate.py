@@ -53,7 +53,7 @@ def register(sub: Any) -> None:
                    "the difference of two reference acquisitions over sqrt(2); default: each image's floor from its "
                    "background, which counts any pixel-scale structure there as noise (through a head at 650 kHz "
                    "0.024-0.025 rad for a noise of 0.02, enough to hide a model mismatch). The misfit, MODEL MISMATCH, "
-                   "PRIOR CONFLICT and the prior's weight all use it")
+                   "PRIOR CONFLICT, the prior's weight and the fit of the prediction's modes all use it")
     p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
                    help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 200, "
                    "or 120 when --fit-nuisance fits W or the shift)")
@@ -325,7 +325,8 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     if transmission is not None:
         check_transmission(args, transmission, predicted_at, skull)
     pairs = [read_image(skull, p) for p in args.image]
-    result = prior_modes.fit_prior_modes(skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes)
+    result = prior_modes.fit_prior_modes(skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes,
+                                         noise_rad=args.noise_rad)
     del skull, pairs
     _core.release_freed()
     at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]

@@ -10,7 +10,7 @@
 
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::prior::mode_fit::fit_mode;
-use has_core::inverse::prior::modes_fit::fit_modes;
+use has_core::inverse::prior::modes_fit::{fit_modes, fit_modes_with_noise};
 use has_core::physics::aberration::SkullScreen;
 use has_core::{Scenario, Simulation};
 use std::sync::OnceLock;
@@ -107,4 +107,23 @@ fn modes_of_the_wrong_length_or_not_finite_are_named() {
     assert!(fit_modes(sim(), &[], &meas, None).unwrap_err().to_string().starts_with("modes"));
     let cancel = std::sync::atomic::AtomicBool::new(true);
     assert!(matches!(fit_modes(sim(), &g, &meas, Some(&cancel)).unwrap_err(), has_core::HasError::Interrupted));
+}
+
+/// The images' noise where it is known replaces the background floor: chi-squared at zero (which
+/// the fit does not move) scales with the inverse square of the noise, and the fit reports the
+/// noise it used. A noise that is not a positive number is refused naming `noise_rad`.
+#[test]
+fn a_known_noise_replaces_the_background_floor() {
+    let g = modes(0.3);
+    let meas = images(&g, &[0.5, 0.0, -0.3], 6);
+    let floor = fit_modes(sim(), &g, &meas, None).unwrap();
+    let given = 1.5 * floor.noise;
+    let known = fit_modes_with_noise(sim(), &g, &meas, Some(given), None).unwrap();
+    assert_eq!(known.noise, given);
+    let expected = floor.misfit_at_zero * (floor.noise / given).powi(2);
+    assert!((known.misfit_at_zero / expected - 1.0).abs() < 1e-9, "{} against {expected}", known.misfit_at_zero);
+    for bad in [0.0, -0.01, f64::NAN] {
+        let e = fit_modes_with_noise(sim(), &g, &meas, Some(bad), None).unwrap_err().to_string();
+        assert!(e.starts_with("noise_rad"), "{e}");
+    }
 }

@@ -105,6 +105,19 @@ struct Linearised {
 /// [`super::mode_fit::fit_mode`] takes them. `cancel`, when set by another thread, ends the fit
 /// before the next batch of marches ([`HasError::Interrupted`]).
 pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measurement], cancel: Option<&AtomicBool>) -> Result<ModesFit> {
+    fit_modes_with_noise(sim, modes, measurements, None, cancel)
+}
+
+/// [`fit_modes`] with the images' noise `noise_rad` (rad) where it is known, instead of the
+/// background floor of the box (see `EstimateRequest::noise_rad`: a floor that counts a
+/// background's structure as noise lowers every fall of chi-squared the evidence test weighs).
+pub fn fit_modes_with_noise(
+    sim: &Simulation,
+    modes: &[Vec<f64>],
+    measurements: &[Measurement],
+    noise_rad: Option<f64>,
+    cancel: Option<&AtomicBool>,
+) -> Result<ModesFit> {
     let n = sim.n_elements();
     if modes.is_empty() {
         return Err(HasError::invalid("modes", "none given"));
@@ -115,7 +128,7 @@ pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measureme
         }
         crate::error::require_finite("modes", g)?;
     }
-    let setting = Setting::new(sim, measurements)?;
+    let setting = Setting::new(sim, measurements)?.with_noise(noise_rad)?;
     let start = linearise(&setting, modes, &vec![0.0; modes.len()], cancel)?;
     let (misfit_at_zero, chi2_at_zero) = (start.chi2 / start.rows.len().max(1) as f64, start.chi2);
     let mut at = start;
