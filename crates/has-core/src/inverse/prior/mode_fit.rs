@@ -122,10 +122,9 @@ impl<'a> Setting<'a> {
     /// The same with the images' noise `noise_rad` where it is known (finite, > 0) instead of
     /// the box's background floor.
     pub(super) fn with_noise(mut self, noise_rad: Option<f64>) -> Result<Self> {
-        match noise_rad {
-            Some(n) if n.is_finite() && n > 0.0 => self.noise = n,
-            Some(n) => return Err(HasError::invalid("noise_rad", format!("must be a finite number > 0, got {n}"))),
-            None => {}
+        if let Some(n) = noise_rad {
+            crate::error::require_positive("noise_rad", n)?;
+            self.noise = n;
         }
         Ok(self)
     }

@@ -136,8 +136,7 @@ impl EstimateRequest {
     /// else `estimated` (the images' background floor).
     pub fn noise(&self, estimated: f64) -> Result<f64> {
         match self.noise_rad {
-            Some(n) if n.is_finite() && n > 0.0 => Ok(n),
-            Some(n) => Err(HasError::invalid("noise_rad", format!("must be a finite number > 0, got {n}"))),
+            Some(n) => crate::error::require_positive("noise_rad", n).map(|_| n),
             None => Ok(estimated),
         }
     }
