@@ -204,6 +204,41 @@ pub fn at_points(fields: &[Vec<C64>], xs: &[f64], ys: &[f64], z0: f64, points: &
     (0..fields.len()).map(|f| per_point.iter().map(|v| v[f]).collect()).collect()
 }
 
+/// The gradient of [`at_points`]' sum with respect to the point: for `field` on the same pixels,
+/// `∇_q Σ_pixels v · (-(i·k / 2·pi) · K(R))` at each of `points`, `K(R) = exp((i·k - alpha)·R) / R`,
+/// `R = |x - q|`: the kernel's derivative `K'(R) · ∂R/∂q = -K'(R) · (x - q) / R` summed on the same
+/// pixels, so that it is the derivative of the same discrete sum (the rate at which the sum
+/// changes as the point moves), not of the continuous integral. Single precision per row, as
+/// [`at_points`].
+pub fn gradient_at_points(field: &[C64], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<[C64; 3]> {
+    use rayon::prelude::*;
+    let plane = Plane {
+        xs: xs.iter().map(|&x| x as f32).collect(),
+        ys,
+        z0,
+        parts: vec![(field.iter().map(|v| v.re as f32).collect(), field.iter().map(|v| v.im as f32).collect())],
+        k: k as f32,
+        alpha: alpha as f32,
+    };
+    #[cfg(target_arch = "x86_64")]
+    let wide = std::arch::is_x86_feature_detected!("avx2");
+    let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
+    points
+        .par_iter()
+        .map_init(
+            || std::array::from_fn::<Vec<f32>, 4, _>(|_| vec![0f32; xs.len()]),
+            |rows, p| {
+                #[cfg(target_arch = "x86_64")]
+                if wide {
+                    // SAFETY: the CPU has AVX2 (checked once above).
+                    return unsafe { plane.gradient_avx2(*p, rows) }.map(|t| pre * t);
+                }
+                plane.gradient(*p, rows).map(|t| pre * t)
+            },
+        )
+        .collect()
+}
+
 /// The plane of [`at_points`]: pixel coordinates and the fields in single precision.
 struct Plane<'a> {
     xs: Vec<f32>,
@@ -220,6 +255,58 @@ impl Plane<'_> {
     #[target_feature(enable = "avx2")]
     fn sums_avx2(&self, p: [f64; 3], kr: &mut [f32], ki: &mut [f32]) -> Vec<C64> {
         self.sums(p, kr, ki)
+    }
+
+    /// [`Plane::gradient`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn gradient_avx2(&self, p: [f64; 3], rows: &mut [Vec<f32>; 4]) -> [C64; 3] {
+        self.gradient(p, rows)
+    }
+
+    /// The first field's sum with the kernel's gradient in `p` (without the prefactor; see
+    /// [`gradient_at_points`]): per row, with `G = K'(R)/R`, the sums `S₀ = Σ v·G` and
+    /// `S₁ = Σ v·G·(x - p_x)` give `-(S₁, (y - p_y)·S₀, (z0 - p_z)·S₀)`. `rows` hold one row of
+    /// `G` and of `G·(x - p_x)` (real and imaginary parts, overwritten).
+    #[inline(always)]
+    fn gradient(&self, p: [f64; 3], rows: &mut [Vec<f32>; 4]) -> [C64; 3] {
+        let nx = self.xs.len();
+        let (px, h) = (p[0] as f32, self.z0 - p[2]);
+        let (v_re, v_im) = &self.parts[0];
+        let mut total = [C64::new(0.0, 0.0); 3];
+        let [gr, gi, hr, hi] = rows;
+        for (j, &y) in self.ys.iter().enumerate() {
+            let dy = y - p[1];
+            let d2 = (dy * dy + h * h) as f32;
+            for (((a, b), (c, d)), &x) in gr.iter_mut().zip(gi.iter_mut()).zip(hr.iter_mut().zip(hi.iter_mut())).zip(&self.xs) {
+                let dx = x - px;
+                let r = (dx * dx + d2).sqrt();
+                let (s, co) = sin_cos(self.k * r);
+                let f = if self.alpha > 0.0 { (-self.alpha * r).exp() / r } else { 1.0 / r } / r;
+                // K'(R) = K·(i·k - alpha - 1/R).
+                let m = -self.alpha - 1.0 / r;
+                let (g_re, g_im) = (f * (co * m - s * self.k), f * (s * m + co * self.k));
+                (*a, *b, *c, *d) = (g_re, g_im, g_re * dx, g_im * dx);
+            }
+            let row = j * nx..(j + 1) * nx;
+            let (mut s0, mut s1) = (([0f32; LANES], [0f32; LANES]), ([0f32; LANES], [0f32; LANES]));
+            let lanes = gr.chunks(LANES).zip(gi.chunks(LANES)).zip(hr.chunks(LANES).zip(hi.chunks(LANES)));
+            for (((g_re, g_im), (h_re, h_im)), (vr, vi)) in lanes.zip(v_re[row.clone()].chunks(LANES).zip(v_im[row].chunks(LANES))) {
+                for l in 0..g_re.len() {
+                    s0.0[l] += vr[l] * g_re[l] - vi[l] * g_im[l];
+                    s0.1[l] += vr[l] * g_im[l] + vi[l] * g_re[l];
+                    s1.0[l] += vr[l] * h_re[l] - vi[l] * h_im[l];
+                    s1.1[l] += vr[l] * h_im[l] + vi[l] * h_re[l];
+                }
+            }
+            let sum =
+                |(re, im): ([f32; LANES], [f32; LANES])| C64::new(re.iter().map(|&a| a as f64).sum(), im.iter().map(|&b| b as f64).sum());
+            let (s0, s1) = (sum(s0), sum(s1));
+            total[0] -= s1;
+            total[1] -= dy * s0;
+            total[2] -= h * s0;
+        }
+        total
     }
 
     /// Each field's sum with the kernel `exp((i·k - alpha)·R) / R` from the point `p` (without

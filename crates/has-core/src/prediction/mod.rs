@@ -99,8 +99,8 @@ pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result
 pub struct PredictionOptions {
     /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
     pub bone_speed_sensitivity: bool,
-    /// Also the [`pose_sensitivity`]: six more transposed marches through the skull and twelve
-    /// transposed projections, no plan.
+    /// Also the [`pose_sensitivity`]: six more transposed marches through the skull and two
+    /// evaluations of the Rayleigh kernel, no plan.
     pub pose_sensitivity: bool,
     /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
     /// one), e.g. to march the predicted correction without building its plan again. Without

@@ -20,6 +20,8 @@ use num_complex::{Complex32 as C32, Complex64 as C64};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 
+mod motion;
+
 /// How one element contributes to the source plane.
 #[derive(Debug, Clone)]
 enum Footprint {
@@ -324,15 +326,8 @@ impl SourceModel {
                     .collect()
             })
             .collect();
-        let points: Vec<[f64; 3]> = self.footprints.iter().flat_map(Footprint::points).map(|q| q.position).collect();
-        if !points.is_empty() {
-            let r = self.coarsening();
-            let (cx, cy) = (g.nx / r, g.ny / r);
-            let coarse: Vec<Vec<C64>> =
-                weights.iter().map(|w| if r == 1 { w.clone() } else { fourier_upsample_transposed(w, cx, cy, r) }).collect();
-            let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
-            let ys: Vec<f64> = (0..cy).map(|j| g.y(r * j)).collect();
-            let at = crate::physics::rayleigh::at_points(&coarse, &xs, &ys, g.z0, &points, self.wavenumber, self.attenuation);
+        if self.footprints.iter().any(|fp| !fp.points().is_empty()) {
+            let at = self.at_quadrature_points(weights);
             for (o, at) in out.iter_mut().zip(&at) {
                 let mut next = 0;
                 for (o, fp) in o.iter_mut().zip(&self.footprints) {
@@ -345,6 +340,39 @@ impl SourceModel {
         }
         out.iter_mut().flatten().for_each(|o| *o *= self.face_pressure);
         Ok(out)
+    }
+
+    /// The Rayleigh integral of each of `weights` (fields on the plane, row-major `(ny, nx)`) at
+    /// every quadrature point of the projected elements, in element order (`out[field][point]`):
+    /// the transposed projection before its sum over each element's points, on the coarse
+    /// pixels of [`SourceModel::add_rayleigh`] (the weights' transposed interpolation). The
+    /// kernel is evaluated once for all fields.
+    fn at_quadrature_points(&self, weights: &[Vec<C64>]) -> Vec<Vec<C64>> {
+        let coarse: Vec<Vec<C64>> = weights.iter().map(|w| self.coarse_weights(w)).collect();
+        let (xs, ys) = self.coarse_pixels();
+        crate::physics::rayleigh::at_points(&coarse, &xs, &ys, self.grid.z0, &self.quadrature_points(), self.wavenumber, self.attenuation)
+    }
+
+    /// The projected elements' quadrature points, in element order.
+    fn quadrature_points(&self) -> Vec<[f64; 3]> {
+        self.footprints.iter().flat_map(Footprint::points).map(|q| q.position).collect()
+    }
+
+    /// Weights on every pixel carried to the coarse pixels of the sums (the transpose of their
+    /// Fourier interpolation; unchanged where the sums run on every pixel).
+    fn coarse_weights(&self, weights: &[C64]) -> Vec<C64> {
+        let (g, r) = (&self.grid, self.coarsening());
+        if r == 1 {
+            weights.to_vec()
+        } else {
+            fourier_upsample_transposed(weights, g.nx / r, g.ny / r, r)
+        }
+    }
+
+    /// The x and y (m) of the coarse pixels of the sums.
+    fn coarse_pixels(&self) -> (Vec<f64>, Vec<f64>) {
+        let (g, r) = (&self.grid, self.coarsening());
+        ((0..g.nx / r).map(|i| g.x(r * i)).collect(), (0..g.ny / r).map(|j| g.y(r * j)).collect())
     }
 
     /// The projection of an element symmetric about the z axis (unit drive): the Rayleigh
