@@ -46,7 +46,7 @@ def moved(d: Path, shift_mm: tuple[float, float, float]) -> Scenario:
 
 def test_predict_gives_the_pose_modes_when_asked(head, tmp_path, capsys):
     # Asked (--pose-sensitivity, as the fixture's prediction was made): three rows of finite modes;
-    # by default none (they more than double the prediction's time).
+    # by default none (they add about 70 % to the prediction's time).
     d = json.loads((head / "prediction.json").read_text())
     for key in ("pose_sensitivity_rad_per_mm", "pose_sensitivity_rad_per_deg"):
         g = np.asarray(d[key])

@@ -14,7 +14,7 @@ use pyo3::types::PyDict;
 /// skull's `CoreSimulation` (its ARFI amplitude not calibrated), else `None`. With
 /// `bone_speed_sensitivity`, the prediction also holds
 /// `bone_speed_sensitivity_rad_per_percent` (one more simulation of the skull); with
-/// `pose_sensitivity`, `pose_sensitivity_rad_per_mm` and `pose_sensitivity_rad_per_deg` (three
+/// `pose_sensitivity`, `pose_sensitivity_rad_per_mm` and `pose_sensitivity_rad_per_deg` (six
 /// more transposed marches through the skull, no plan).
 #[pyfunction]
 #[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false, pose_sensitivity=false))]
@@ -154,7 +154,8 @@ impl CorePrediction {
     /// the transducer frame's x, y and z from where the CT is registered (`predict(...,
     /// pose_sensitivity=True)`; else None): rows x, y, z, a column per element. The head's
     /// responses through the moved head are the registered head's to the array and target moved
-    /// the other way, differenced over one grid cell, their weighted common phase removed.
+    /// the other way, differenced over one grid cell either way, their weighted common phase
+    /// removed.
     #[getter]
     fn pose_sensitivity_rad_per_mm<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
         self.pose

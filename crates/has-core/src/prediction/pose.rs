@@ -5,10 +5,12 @@
 //! sends to the array moved the other way: translated by `-t` together with the target, or
 //! turned by `R⁻¹` about the target. In the water around the head both are exact statements of
 //! rigid motion, and both are cheap in the reciprocal form of [`super`]: the transposed march
-//! from the moved target through the registered head's plan (one per translation axis) and the
-//! transposed projection of the source-plane field onto the moved elements (one per axis and
-//! kind). No plan is built again, unlike a finite difference through a moved CT (a plan per
-//! coordinate).
+//! from the moved target through the registered head's plan (two per translation axis, a cell
+//! either way) and the transposed projection of the source-plane field onto the moved elements,
+//! which is the projection onto the array as it is of that field moved the other way (see
+//! [`crate::physics::source::SourceModel::moved_weights`] and
+//! [`crate::physics::source::SourceModel::transposed_rates`]). No plan is built again, unlike a
+//! finite difference through a moved CT (a plan per coordinate).
 //!
 //! The mode of a translation is, per element, the central secant
 //!
@@ -18,12 +20,12 @@
 //! cell either way (the head's staircase of cells shifts by whole cells, as a CT registered a cell
 //! off resamples to). The mode of a rotation is the limit of that secant, the rate at which each
 //! element's phase turns as the array turns about the target (a head's phases are linear in its
-//! turn to 0.01 rad over ±1°; see [`pose_modes`]). Central, not one-sided: a head's phase pattern is far from linear in its shift
-//! over a cell (on the head phantom at 220 kHz the direction of the change turns by about a
-//! radian per mm: the changes for +1.7 mm and -1.7 mm correlate at -0.3, not -1), and a forward
-//! secant `(h(δ) - h(0))/δ` carries half a cell of that curvature as a bias, which predicted the
-//! change for a shift the other way worse than no mode (see `docs/head.md`); the central secant
-//! is the derivative to second order in `δ`. The reference (the head without bone, the
+//! turn to 0.01 rad over ±1°; see [`pose_modes`]). Central, not one-sided: a head's phase
+//! pattern is far from linear in its shift over a cell (on the head phantom at 220 kHz the
+//! direction of the change turns by about a radian per mm: the changes for +1.7 mm and -1.7 mm
+//! correlate at -0.3, not -1), and a forward secant `(h(δ) - h(0))/δ` carries half a cell of
+//! that curvature as a bias, which predicted the change for a shift the other way worse than no
+//! mode (see `docs/head.md`); the central secant is the derivative to second order in `δ`. The reference (the head without bone, the
 //! estimation's model) stays where the CT is registered: the images' model does not move with
 //! the patient, so only the skull's responses change, as for the bone speed mode
 //! ([`super::bone_speed_sensitivity`]). The transmissions' change is left out: a mode is a

@@ -6,8 +6,8 @@
 //! weights `w` onto the array moved by `b`, `Σ_x w(x)·K(x - q - b)`, is the projection onto the
 //! array as it is of the weights moved the other way: laterally `w(x + b)` (an index shift where
 //! `b` is whole cells), along z `P(-b_z)·w`, the weights propagated by `-b_z` through the coupling
-//! medium (`exp(-i·k_z·b_z)` on their angular spectrum: an element moved towards the plane sees
-//! the plane as if it lay farther back; the factor is even in the spatial frequencies, so the
+//! medium (`exp(-i·k_z·b_z)` on their angular spectrum: to an element moved `b_z` towards the
+//! plane the plane is `b_z` nearer; the factor is even in the spatial frequencies, so the
 //! operator is its own transpose). The projection's rate as each point moves with velocity `v`
 //! is `∇u(q)·v`, `u` the weights' Rayleigh integral on the same coarse pixels, the kernel's
 //! gradient summed there ([`gradient_at_points`]): the derivative of the same discrete sum that
@@ -219,7 +219,8 @@ mod tests {
         let rates = model.transposed_rates(&w, &[turn_x, along_y, along_z]).unwrap();
         let (angle, step) = (0.02f64.to_radians(), 0.01e-3);
         let turned = |a: f64| {
-            let r = crate::prediction::pose::axis_rotation(0, a);
+            let (sin, cos) = a.sin_cos();
+            let r = [[1.0, 0.0, 0.0], [0.0, cos, -sin], [0.0, sin, cos]];
             rigidly_moved(&model, move |q| std::array::from_fn(|i| about[i] + (0..3).map(|j| r[i][j] * (q[j] - about[j])).sum::<f64>()))
                 .transposed(&w)
                 .unwrap()
