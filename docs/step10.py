@@ -58,13 +58,14 @@ TABLE_ROWS = (
     # (row label, the phases subtracted from the reference steering: None for none, "optimal" for the bound)
     ("uncorrected (reference steering)", None),
     ("the CT prediction subtracted (`prior.npy`)", "prior.npy"),
-    ("the estimate subtracted (`estimate.npy`)", "estimate.npy"),
+    ("what `arfi estimate` recommends subtracted (`estimate.npy`)", "estimate.npy"),
     ("the real skull's own prediction subtracted (`truth.npy`)", "truth.npy"),
     ("`optimal` of `truth.json` (every wave in phase at the target)", "optimal"),
 )
 TIMED_S = 1.0  # commands faster than this get no time after them
 NUMBER = re.compile(r"[-+]?(?:\d+(?:\.\d+)?|\.\d+)(?:e[-+]?\d+)?")
 SECONDS = re.compile(r"\b\d+(?:\.\d+)? s\b")
+RECOMMENDED = re.compile(r"recommended: \w+")
 
 
 StepError = CommandError  # the tutorial or a command failed: reported as one line, exit 1
@@ -198,8 +199,10 @@ def figures(lines: list[str]) -> list[tuple[str, str]]:
 
 
 def form(line: str) -> str:
-    """A printed line with its numbers replaced by ``#``: what must not change with the size."""
-    return NUMBER.sub("#", line)
+    """A printed line with its numbers replaced by ``#``, and the phases an estimate recommends by
+    ``#`` (the size decides whether the images can judge the prediction): what must not change
+    with the size."""
+    return RECOMMENDED.sub("recommended: #", NUMBER.sub("#", line))
 
 
 #: Lines a command prints only in some cases (an estimate's warnings, a hotter place than the

@@ -270,8 +270,8 @@ def test_fit_figures_crop_to_the_focal_spot_and_carry_a_warning(tmp_path):
 
 def test_the_reports_noise_and_lobe_come_from_the_core():
     # The focal crop's noise: white noise of 0.02 rad on a phase ramp (a background the MAD of raw
-    # values would take for noise), with a hole of NaN pixels: the core's neighbour differences
-    # give 0.02 within 5 % (about 17 000 pairs: the median's spread is under 1 %).
+    # values would take for noise), with a hole of NaN pixels: the core's 3 x 3 second-difference
+    # mask gives 0.02 within 5 % (about 17 000 windows: the median's spread is under 1.5 %).
     from arfi._core import connected_region, image_noise_rad
 
     rng = np.random.default_rng(4)

@@ -27,9 +27,10 @@ pub(crate) fn connected_region<'py>(
 }
 
 /// The noise (rad) of an MR-ARFI image (n_u, n_v) from its background: the standard deviation of
-/// white Gaussian noise from the median absolute difference of neighbouring pixels along u
-/// (`1.4826 · MAD / √2`, blind to a slowly varying background phase and to the few pairs on the
-/// focus); NaN pixels (no signal) skipped.
+/// white Gaussian noise from the median absolute deviation of the image filtered by the 3 x 3
+/// mask of second differences along u times v (`1.4826 · MAD / 6`, blind to a signal linear
+/// along u or v, such as a background phase, and to the few windows on the focus); windows with a
+/// NaN pixel (no signal) skipped.
 #[pyfunction]
 pub(crate) fn image_noise_rad(image: PyReadonlyArray2<'_, f64>) -> f64 {
     noise_floor(&image.as_array().to_owned(), &[0..0, 0..0])
