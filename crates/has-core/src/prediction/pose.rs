@@ -20,7 +20,7 @@
 //! cell either way (the head's staircase of cells shifts by whole cells, as a CT registered a cell
 //! off resamples to). The mode of a rotation is the limit of that secant, the rate at which each
 //! element's phase turns as the array turns about the target (a head's phases are linear in its
-//! turn to 0.01 rad over ±1°; see [`pose_modes`]). Central, not one-sided: a head's phase
+//! turn to 0.01 rad over ±1°; see `pose_modes`). Central, not one-sided: a head's phase
 //! pattern is far from linear in its shift over a cell (on the head phantom at 220 kHz the
 //! direction of the change turns by about a radian per mm: the changes for +1.7 mm and -1.7 mm
 //! correlate at -0.3, not -1), and a forward secant `(h(δ) - h(0))/δ` carries half a cell of
@@ -117,7 +117,7 @@ fn moved_array(sim: &Simulation, target: [f64; 3], pose: &Pose) -> Result<(Trans
 }
 
 /// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
-/// one transposed march from `target` and its projection, then [`pose_modes`]. Refused for an
+/// one transposed march from `target` and its projection, then `pose_modes`. Refused for an
 /// array in its source plane (a planar array: a turned element would leave the half-space behind
 /// the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
