@@ -393,7 +393,6 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
         .collect();
     let common = change.iter().sum::<has_core::Complex64>().arg();
     let exact: Vec<f64> = change.iter().map(|c| has_core::phase::wrap(c.arg() - common) / (100.0 * BONE_SPEED_STEP)).collect();
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let corr = dot(&g, &exact) / (rms(&g) * rms(&exact) * g.len() as f64);
     let slope = dot(&g, &exact) / dot(&exact, &exact);
@@ -446,6 +445,29 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// The uneven shell of the pose tests (outer radius 20 mm about (4, 0, 46) mm, inner 15 mm about
+/// (0, 0, 46) mm, 0.5 mm CT) written to `dir`: its simulation, the target (2, -1, 48) mm, each
+/// element's response there and the pose modes.
+fn uneven_shell_pose(dir: &std::path::Path) -> (Simulation, [f64; 3], Vec<has_core::Complex64>, has_core::prediction::PoseSensitivity) {
+    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
+        .unwrap();
+    let sim = Simulation::new(&bowl_scenario(dir, "")).unwrap();
+    let target = [2e-3, -1e-3, 48e-3];
+    let h = sim.element_responses(target).unwrap();
+    let modes = has_core::prediction::pose_sensitivity(&sim, target).unwrap();
+    (sim, target, h, modes)
+}
+
+/// The RMS of a phase pattern (rad).
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// The correlation of two phase patterns about zero.
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (rms(a) * rms(b) * a.len() as f64)
+}
+
 #[test]
 fn a_moved_head_is_the_array_moved_the_other_way() {
     // The uneven shell again, the head moved rigidly off its registration. Reference, not the
@@ -460,14 +482,8 @@ fn a_moved_head_is_the_array_moved_the_other_way() {
     // over a cell either way: the same tolerance against half the moved CTs' difference between
     // a cell forward and a cell back.
     use has_core::prediction::pose::{moved_head_responses, Pose};
-    use has_core::prediction::pose_sensitivity;
     let dir = scratch("pose");
-    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
-        .unwrap();
-    let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
-    let target = [2e-3, -1e-3, 48e-3];
-    let h = sim.element_responses(target).unwrap();
-    let modes = pose_sensitivity(&sim, target).unwrap();
+    let (sim, target, h, modes) = uneven_shell_pose(&dir);
     let t_mm = target.map(|v| v * 1e3);
     // The CT's registration moved rigidly: x -> R·(x - target) + target + shift (mm).
     let through_moved_ct = |pose: &Pose| {
@@ -484,8 +500,6 @@ fn a_moved_head_is_the_array_moved_the_other_way() {
         let common = c.iter().sum::<has_core::Complex64>().arg();
         c.iter().map(|c| has_core::phase::wrap(c.arg() - common)).collect()
     };
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
-    let corr = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (rms(a) * rms(b) * a.len() as f64);
     let g = &sim.grid;
     let per_cell = |axis: usize, d: f64| Some(modes.translation[axis].iter().map(|v| v * d).collect::<Vec<_>>());
     let turned = Pose { translation: [g.dx, -g.dy, 0.0], rotation: Pose::turn(0, 0.9_f64.to_radians()).rotation };
@@ -529,21 +543,14 @@ fn the_pose_modes_are_the_moved_arrays_secants() {
     // turned elements' own quadrature layout. Measured on the uneven shell: shifts correlate at
     // 0.9998 or better, turns at 0.998 or better, RMS within 1.3 %. Tolerance: correlation 0.99,
     // RMS ratio within 5 %.
+    use has_core::prediction::phase_change;
     use has_core::prediction::pose::{moved_head_responses, Pose};
-    use has_core::prediction::{phase_change, pose_sensitivity};
     let dir = scratch("pose-fast");
-    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
-        .unwrap();
-    let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
-    let target = [2e-3, -1e-3, 48e-3];
-    let h = sim.element_responses(target).unwrap();
-    let modes = pose_sensitivity(&sim, target).unwrap();
+    let (sim, target, h, modes) = uneven_shell_pose(&dir);
     let g = &sim.grid;
     let points = sim.transducer.reference_points();
     let reach = points.iter().map(|p| (0..3).map(|k| (p[k] - target[k]).powi(2)).sum::<f64>().sqrt()).sum::<f64>() / points.len() as f64;
     let turn = 0.5 * g.dx.min(g.dy).min(g.dz) / reach;
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
-    let corr = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (rms(a) * rms(b) * a.len() as f64);
     for axis in 0..3 {
         let cell = [g.dx, g.dy, g.dz][axis];
         for (kind, pose, step, fast) in [
@@ -577,7 +584,6 @@ fn turning_a_head_about_the_centre_of_its_spherical_shell_changes_no_phase() {
     std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, c, 20e-3, c, 16e-3, f64::INFINITY, 0.5e-3)).unwrap();
     let sim = Simulation::new(&bowl_scenario(&dir, "")).unwrap();
     let modes = pose_sensitivity(&sim, c).unwrap();
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let shift = modes.translation.iter().map(|m| rms(m) * 1e-3).fold(f64::INFINITY, f64::min);
     let turn = modes.rotation.iter().map(|m| rms(m) * 1f64.to_radians()).fold(0.0, f64::max);
     println!("concentric shell: RMS phase change for 1 mm at least {shift:.4} rad, for 1 degree at most {turn:.4} rad");
