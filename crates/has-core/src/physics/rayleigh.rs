@@ -176,14 +176,7 @@ impl Sources {
 /// rayon task per point.
 pub fn at_points(fields: &[Vec<C64>], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<Vec<C64>> {
     use rayon::prelude::*;
-    let plane = Plane {
-        xs: xs.iter().map(|&x| x as f32).collect(),
-        ys,
-        z0,
-        parts: fields.iter().map(|v| (v.iter().map(|v| v.re as f32).collect(), v.iter().map(|v| v.im as f32).collect())).collect(),
-        k: k as f32,
-        alpha: alpha as f32,
-    };
+    let plane = Plane::new(fields.iter().map(Vec::as_slice), xs, ys, z0, k, alpha);
     #[cfg(target_arch = "x86_64")]
     let wide = std::arch::is_x86_feature_detected!("avx2");
     let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
@@ -212,14 +205,7 @@ pub fn at_points(fields: &[Vec<C64>], xs: &[f64], ys: &[f64], z0: f64, points: &
 /// [`at_points`].
 pub fn gradient_at_points(field: &[C64], xs: &[f64], ys: &[f64], z0: f64, points: &[[f64; 3]], k: f64, alpha: f64) -> Vec<[C64; 3]> {
     use rayon::prelude::*;
-    let plane = Plane {
-        xs: xs.iter().map(|&x| x as f32).collect(),
-        ys,
-        z0,
-        parts: vec![(field.iter().map(|v| v.re as f32).collect(), field.iter().map(|v| v.im as f32).collect())],
-        k: k as f32,
-        alpha: alpha as f32,
-    };
+    let plane = Plane::new(std::iter::once(field), xs, ys, z0, k, alpha);
     #[cfg(target_arch = "x86_64")]
     let wide = std::arch::is_x86_feature_detected!("avx2");
     let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI));
@@ -249,7 +235,20 @@ struct Plane<'a> {
     alpha: f32,
 }
 
-impl Plane<'_> {
+impl<'a> Plane<'a> {
+    /// The pixels `(xs[i], ys[j], z0)` with `fields` on them, in single precision, and the
+    /// kernel's `k` and `alpha`.
+    fn new<'f>(fields: impl Iterator<Item = &'f [C64]>, xs: &[f64], ys: &'a [f64], z0: f64, k: f64, alpha: f64) -> Self {
+        Plane {
+            xs: xs.iter().map(|&x| x as f32).collect(),
+            ys,
+            z0,
+            parts: fields.map(|v| (v.iter().map(|v| v.re as f32).collect(), v.iter().map(|v| v.im as f32).collect())).collect(),
+            k: k as f32,
+            alpha: alpha as f32,
+        }
+    }
+
     /// [`Plane::sums`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]

@@ -25,11 +25,11 @@
 //! direction of the change turns by about a radian per mm: the changes for +1.7 mm and -1.7 mm
 //! correlate at -0.3, not -1), and a forward secant `(h(δ) - h(0))/δ` carries half a cell of
 //! that curvature as a bias, which predicted the change for a shift the other way worse than no
-//! mode (see `docs/head.md`); the central secant is the derivative to second order in `δ`. The reference (the head without bone, the
-//! estimation's model) stays where the CT is registered: the images' model does not move with
-//! the patient, so only the skull's responses change, as for the bone speed mode
-//! ([`super::bone_speed_sensitivity`]). The transmissions' change is left out: a mode is a
-//! phase pattern.
+//! mode (see `docs/head.md`); the central secant is the derivative to second order in `δ`. The
+//! reference (the head without bone, the estimation's model) stays where the CT is registered:
+//! the images' model does not move with the patient, so only the skull's responses change, as
+//! for the bone speed mode ([`super::bone_speed_sensitivity`]). The transmissions' change is
+//! left out: a mode is a phase pattern.
 
 use super::phase_change;
 use crate::error::{HasError, Result};

@@ -41,6 +41,7 @@ mod single;
 mod transpose;
 mod walls;
 
+pub(crate) use interface::axial_wavenumber;
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
 pub(crate) use single::single;

@@ -216,14 +216,14 @@ impl SourceModel {
         if bytes > PROJECTIONS_MAX_BYTES || crate::memory::check(String::new, bytes, "").is_err() {
             return None;
         }
-        let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
+        let (xs, ys) = self.coarse_pixels();
         let planes = elements
             .par_iter()
             .map(|&e| {
                 let points: Vec<([f64; 3], C64)> =
                     self.footprints[e].points().iter().map(|q| (q.position, C64::new(q.area, 0.0))).collect();
                 let sources = Sources::new(&points, g.z0, self.wavenumber, self.attenuation);
-                (0..cy).flat_map(|j| sources.row(&xs, g.y(r * j))).map(|v| C32::new(v.re as f32, v.im as f32)).collect()
+                ys.iter().flat_map(|&y| sources.row(&xs, y)).map(|v| C32::new(v.re as f32, v.im as f32)).collect()
             })
             .collect();
         Some(Projections { elements, planes })
@@ -265,12 +265,10 @@ impl SourceModel {
         let g = &self.grid;
         let first: Vec<([f64; 3], C64)> = positions.iter().copied().zip(weights[0].iter().copied()).collect();
         let sources = Sources::new(&first, g.z0, self.wavenumber, self.attenuation);
-        let r = self.coarsening();
-        let (cx, cy) = (g.nx / r, g.ny / r);
-        let xs: Vec<f64> = (0..cx).map(|i| g.x(r * i)).collect();
-        let rows: Vec<Vec<Vec<C64>>> = (0..cy)
-            .into_par_iter()
-            .map(|j| if weights.len() == 1 { vec![sources.row(&xs, g.y(r * j))] } else { sources.row_many(weights, &xs, g.y(r * j)) })
+        let (xs, ys) = self.coarse_pixels();
+        let rows: Vec<Vec<Vec<C64>>> = ys
+            .par_iter()
+            .map(|&y| if weights.len() == 1 { vec![sources.row(&xs, y)] } else { sources.row_many(weights, &xs, y) })
             .collect();
         for (set, o) in out.iter_mut().enumerate() {
             self.add_coarse(rows.iter().flat_map(|row| row[set].iter().copied()).collect(), o);

@@ -18,6 +18,7 @@ use super::{Footprint, SourceModel};
 use crate::error::{HasError, Result};
 use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
+use crate::physics::propagation::axial_wavenumber;
 use crate::physics::rayleigh::gradient_at_points;
 use num_complex::Complex64 as C64;
 
@@ -60,7 +61,7 @@ impl SourceModel {
             })
             .collect();
         if shift[2] != 0.0 {
-            moved = self.spectral(&moved, |_, _, kz| (-C64::i() * kz * shift[2]).exp());
+            self.step_through_coupling(&mut moved, -shift[2]);
         }
         Ok(moved)
     }
@@ -68,9 +69,9 @@ impl SourceModel {
     /// The rate of change of [`SourceModel::transposed`] of `weights` (row-major `(ny, nx)`) as
     /// the elements move: for each of `velocities`, each element's
     /// `d/ds Σ_pixels weights · field_s(δ_e)` at `s = 0`, its surface points moving with that
-    /// velocity (`out[velocity][element]`). The weights' three spectral derivatives are integrated
-    /// at the quadrature points in one evaluation of the kernel (see the module docs). Refused
-    /// unless [`SourceModel::is_projected`].
+    /// velocity (`out[velocity][element]`): the gradient of the kernel summed on the coarse pixels
+    /// at every quadrature point in one evaluation ([`gradient_at_points`]), dotted with each
+    /// point's velocity. Refused unless [`SourceModel::is_projected`].
     pub fn transposed_rates(&self, weights: &[C64], velocities: &[Velocity]) -> Result<Vec<Vec<C64>>> {
         self.check_projected(weights)?;
         let (xs, ys) = self.coarse_pixels();
@@ -110,28 +111,23 @@ impl SourceModel {
         Ok(())
     }
 
-    /// `IFFT2(factor(k_x, k_y, k_z) · FFT2(weights))`, normalised, `k_z = sqrt(k² - k_x² - k_y²)`
-    /// with `k` the coupling medium's complex wavenumber (its attenuation the imaginary part) and
-    /// the root's imaginary part non-negative (decaying evanescent waves).
-    fn spectral(&self, weights: &[C64], factor: impl Fn(f64, f64, C64) -> C64) -> Vec<C64> {
+    /// `weights ← IFFT2(exp(i·k_z·dz) · FFT2(weights))`: the plane's field propagated by `dz` (m)
+    /// through the coupling medium, `k_z` the axial wavenumber of its complex wavenumber (the
+    /// attenuation its imaginary part; the root with `Im k_z ≥ 0`, evanescent waves decaying for
+    /// `dz > 0`), as the Rayleigh kernel `exp((i·k - alpha)·R)/R` propagates.
+    fn step_through_coupling(&self, weights: &mut [C64], dz: f64) {
         let g = &self.grid;
         let fft = Fft2::<f64>::new(g.nx, g.ny);
-        let mut ws = fft.workspace(true);
-        let mut field = weights.to_vec();
-        fft.forward(&mut field, &mut ws);
         let k = C64::new(self.wavenumber, self.attenuation);
         let norm = 1.0 / g.lateral_len() as f64;
-        for ix in 0..g.nx {
-            let kx = Grid::wavenumber(ix, g.nx, g.dx);
-            for iy in 0..g.ny {
-                let ky = Grid::wavenumber(iy, g.ny, g.dy);
-                let root = (k * k - kx * kx - ky * ky).sqrt();
-                let kz = if root.im < 0.0 { -root } else { root };
-                ws.spectrum[ix * g.ny + iy] *= factor(kx, ky, kz) * norm;
-            }
-        }
-        fft.inverse(&mut ws, &mut field);
-        field
+        // The transposed spectrum layout (nx, ny) of `Fft2`.
+        let kernel: Vec<C64> = (0..g.lateral_len())
+            .map(|p| {
+                let (kx, ky) = (Grid::wavenumber(p / g.ny, g.nx, g.dx), Grid::wavenumber(p % g.ny, g.ny, g.dy));
+                (C64::i() * axial_wavenumber(k, kx * kx + ky * ky) * dz).exp() * norm
+            })
+            .collect();
+        fft.filter(weights, &mut fft.workspace(true), None, &kernel, None);
     }
 }
 
