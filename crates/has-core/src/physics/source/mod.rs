@@ -327,13 +327,7 @@ impl SourceModel {
         if self.footprints.iter().any(|fp| !fp.points().is_empty()) {
             let at = self.at_quadrature_points(weights);
             for (o, at) in out.iter_mut().zip(&at) {
-                let mut next = 0;
-                for (o, fp) in o.iter_mut().zip(&self.footprints) {
-                    for q in fp.points() {
-                        *o += at[next] * q.area;
-                        next += 1;
-                    }
-                }
+                o.iter_mut().zip(self.over_points(|n, _| at[n])).for_each(|(o, v)| *o += v);
             }
         }
         out.iter_mut().flatten().for_each(|o| *o *= self.face_pressure);
@@ -349,6 +343,25 @@ impl SourceModel {
         let coarse: Vec<Vec<C64>> = weights.iter().map(|w| self.coarse_weights(w)).collect();
         let (xs, ys) = self.coarse_pixels();
         crate::physics::rayleigh::at_points(&coarse, &xs, &ys, self.grid.z0, &self.quadrature_points(), self.wavenumber, self.attenuation)
+    }
+
+    /// Per element, `Σ_q area_q · f(n, q)` over its quadrature points `q` (`n` counts the points
+    /// of all elements in order, as [`SourceModel::at_quadrature_points`] lists them; 0 for an
+    /// element without points).
+    fn over_points(&self, f: impl Fn(usize, &SurfacePoint) -> C64) -> Vec<C64> {
+        let mut next = 0;
+        self.footprints
+            .iter()
+            .map(|fp| {
+                fp.points()
+                    .iter()
+                    .map(|q| {
+                        next += 1;
+                        f(next - 1, q) * q.area
+                    })
+                    .sum()
+            })
+            .collect()
     }
 
     /// The projected elements' quadrature points, in element order.

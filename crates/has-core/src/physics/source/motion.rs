@@ -20,6 +20,7 @@ use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
 use crate::physics::propagation::axial_wavenumber;
 use crate::physics::rayleigh::gradient_at_points;
+use crate::physics::transducer::SurfacePoint;
 use num_complex::Complex64 as C64;
 
 /// A velocity of the elements' surface points: the velocity (m per unit of the motion's
@@ -80,19 +81,11 @@ impl SourceModel {
         Ok(velocities
             .iter()
             .map(|v| {
-                let mut next = 0;
-                self.footprints
-                    .iter()
-                    .map(|fp| {
-                        let mut sum = C64::new(0.0, 0.0);
-                        for q in fp.points() {
-                            let (u, d) = (v(q.position), gradient[next]);
-                            sum += (d[0] * u[0] + d[1] * u[1] + d[2] * u[2]) * q.area;
-                            next += 1;
-                        }
-                        sum * self.face_pressure
-                    })
-                    .collect()
+                let rate = |n: usize, q: &SurfacePoint| {
+                    let (u, d) = (v(q.position), gradient[n]);
+                    d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
+                };
+                self.over_points(rate).into_iter().map(|r| r * self.face_pressure).collect()
             })
             .collect())
     }
