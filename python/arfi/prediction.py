@@ -32,7 +32,7 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_s
     before the skull's own). ``pose_sensitivity`` also gives the pose modes,
     :attr:`Prediction.pose_sensitivity_rad_per_mm` and ``_per_deg`` (how the predicted phases move
     when the head lies shifted or turned off the CT's registration: six more transposed marches
-    through the skull, no plan; needs a curved array). ``keep_simulation`` keeps the skull's simulation as
+    through the skull, side by side, no plan; needs a curved array). ``keep_simulation`` keeps the skull's simulation as
     :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
     prediction, core = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target,

@@ -21,7 +21,6 @@ use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
 use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
-use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::physics::transducer::Transducer;
 use crate::scenario::Scenario;
@@ -99,8 +98,9 @@ pub fn predict_scenario(scenario: &Scenario, target: Option<[f64; 3]>) -> Result
 pub struct PredictionOptions {
     /// Also [`bone_speed_sensitivity`]: one more simulation of the skull.
     pub bone_speed_sensitivity: bool,
-    /// Also the [`pose_sensitivity`]: six more transposed marches through the skull and two
-    /// evaluations of the Rayleigh kernel, no plan.
+    /// Also the [`pose_sensitivity`]: six more transposed marches through the skull (side by
+    /// side with the target's), projected with the prediction's, and one evaluation of the
+    /// Rayleigh kernel's gradient; no plan.
     pub pose_sensitivity: bool,
     /// Return the skull's simulation (ARFI amplitude not calibrated: 1 unless the scenario gives
     /// one), e.g. to march the predicted correction without building its plan again. Without
@@ -125,21 +125,30 @@ pub struct PredictionRun {
 /// [`predict_scenario`] with the bone speed and pose sensitivities and the skull's simulation on
 /// request.
 /// The plans are built one after another, each dropped (and its memory handed back,
-/// [`crate::memory::release_freed`]) before the next unless kept: the faster bone's, the
-/// reference head's, then the skull's; never two at once. The same values as [`predict`] and
-/// [`bone_speed_sensitivity`] to the last bit.
+/// [`crate::memory::release_freed`]) before the next unless kept: the faster bone's (on the
+/// skull's grid and source model, whose element projections it shares, where the faster bone
+/// resolves to the same grid), the reference head's, then the skull's; never two at once. The
+/// skull's marches (the target's and, for the pose modes, the six moved targets') run side by
+/// side, and every transposed march is projected onto the elements in one pass.
+/// The same values as [`predict`] and [`bone_speed_sensitivity`] to the last bit.
 pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, options: PredictionOptions) -> Result<PredictionRun> {
-    let moved = if options.bone_speed_sensitivity {
-        let faster = Simulation::new(&with_amplitude(faster_bone(scenario)?))?;
-        let moved = faster.element_responses(target.unwrap_or(faster.focus))?;
-        drop(faster);
-        crate::memory::release_freed();
-        Some(moved)
+    let mut unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    let target = target.unwrap_or(unbuilt.focus());
+    // Through the faster bone: a march to be projected with the others, or (another grid) the
+    // responses of a simulation of its own.
+    let faster = if options.bone_speed_sensitivity {
+        let faster = with_amplitude(faster_bone(scenario)?);
+        Some(match unbuilt.reciprocal_field_of(&faster, target)? {
+            Some(field) => Ok(field),
+            None => {
+                let responses = Simulation::new(&faster)?.element_responses(target)?;
+                crate::memory::release_freed();
+                Err(responses)
+            }
+        })
     } else {
         None
     };
-    let mut unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
-    let target = target.unwrap_or(unbuilt.focus());
     let reference_medium = without_bone(unbuilt.medium())?;
     let steered_source = unbuilt.steered_source()?.to_vec();
     let through_reference = reference_field(
@@ -153,13 +162,35 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     )?;
     drop(steered_source);
     let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
-    let fields = [reciprocal_field(&sim.plan, target, sim.reflections)?, through_reference];
+    let (through_skull, moved_fields) = pose::skull_marches(&sim, target, options.pose_sensitivity)?;
+    // The fields projected at once: the skull's, the reference's, the faster bone's and the
+    // moved targets' for the pose modes.
+    let mut fields = vec![through_skull, through_reference];
+    let faster_at = match faster {
+        Some(Ok(field)) => {
+            fields.push(field);
+            Some(Ok(fields.len() - 1))
+        }
+        Some(Err(responses)) => Some(Err(responses)),
+        None => None,
+    };
+    let moved_from = fields.len();
+    fields.extend(moved_fields);
+    let mut responses = sim.source.transposed_many(&fields)?;
+    let moved = responses.split_off(moved_from);
+    let faster_responses = match faster_at {
+        Some(Ok(k)) => Some(responses.remove(k)),
+        Some(Err(responses)) => Some(responses),
+        None => None,
+    };
+    let reference = responses.remove(1);
+    let skull = responses.remove(0);
     let prediction =
-        from_fields(&sim.source, &sim.transducer, &reference_medium, sim.frequency, target, &fields, sim.steering_toward(target)?)?;
-    // The pose modes start from the skull's march and the responses the prediction projected.
+        from_responses(&sim.transducer, &reference_medium, sim.frequency, target, skull, reference, sim.steering_toward(target)?)?;
     let pose_sensitivity =
-        options.pose_sensitivity.then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses)).transpose()?;
-    let bone_speed_sensitivity = moved.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
+        options.pose_sensitivity.then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses, &moved)).transpose()?;
+    drop(fields);
+    let bone_speed_sensitivity = faster_responses.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
     let simulation = if options.keep_simulation {
         Some(sim)
     } else {
@@ -201,7 +232,9 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     drop(plan);
     crate::memory::release_freed();
     let through_reference = reference_field(&grid, &reference_medium, frequency, &steered_source, &options, target, reflections)?;
-    from_fields(&source, &transducer, &reference_medium, frequency, target, &[through_skull, through_reference], ray_steering)
+    let mut responses = source.transposed_many(&[through_skull, through_reference])?;
+    let (reference, skull) = (responses.remove(1), responses.remove(0));
+    from_responses(&transducer, &reference_medium, frequency, target, skull, reference, ray_steering)
 }
 
 /// The transposed march from `target` through the head without bone (`medium`), its plan built
@@ -223,21 +256,18 @@ fn reference_field(
     Ok(field)
 }
 
-/// The prediction at `target` from the transposed marches `[through the skull, through the
-/// reference head]`: each element's response through either by one transposed projection of
-/// `source`, the reference steering through `reference_medium`, and the scenario's own steering
-/// `ray_steering` (rad).
-fn from_fields(
-    source: &SourceModel,
+/// The prediction at `target` from each element's response through the skull and through the
+/// reference head, the reference steering through `reference_medium`, and the scenario's own
+/// steering `ray_steering` (rad).
+fn from_responses(
     transducer: &Transducer,
     reference_medium: &Medium,
     frequency: f64,
     target: [f64; 3],
-    fields: &[Vec<C64>; 2],
+    skull: Vec<C64>,
+    reference: Vec<C64>,
     ray_steering: Vec<f64>,
 ) -> Result<Prediction> {
-    let mut responses = source.transposed_many(fields)?;
-    let (reference, skull) = (responses.remove(1), responses.remove(0));
     let reference_steering = steering_phases(transducer, reference_medium, frequency, target)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
     let phases: Vec<f64> = skull.iter().zip(&reference).map(|(s, r)| wrap((s * r.conj()).arg() - common)).collect();

@@ -36,6 +36,7 @@ use crate::error::{HasError, Result};
 use crate::physics::transducer::Transducer;
 use crate::simulation::{reciprocal_field, Simulation};
 use num_complex::Complex64 as C64;
+use rayon::prelude::*;
 
 /// The prediction's pose modes: per transducer-frame axis x, y, z, each element's change of
 /// predicted phase (rad) per unit of the head's translation (m) and of its rotation about the
@@ -121,42 +122,75 @@ fn moved_array(sim: &Simulation, target: [f64; 3], pose: &Pose) -> Result<(Trans
 /// array in its source plane (a planar array: a turned element would leave the half-space behind
 /// the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
-    let field = reciprocal_field(&sim.plan, target, sim.reflections)?;
-    let h = sim.source.transposed(&field)?;
-    pose_modes(sim, target, &field, &h)
+    let (through_skull, moved) = skull_marches(sim, target, true)?;
+    let mut fields = moved;
+    fields.insert(0, through_skull);
+    let mut responses = sim.source.transposed_many(&fields)?;
+    let h = responses.remove(0);
+    pose_modes(sim, target, &fields[0], &h, &responses)
 }
 
-/// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`)
-/// and the elements' responses `h` it gives (a prediction's `skull_responses`). The
-/// translations: six transposed marches from the targets moved a cell either way, each field
-/// moved on the plane as the array moves ([`SourceModel::moved_weights`]: the same quadrature
-/// points, a lateral index shift or a step through the coupling water), all projected in one
-/// evaluation of the Rayleigh kernel. The turns: the rate of the responses as the array turns
-/// about the target ([`SourceModel::transposed_rates`], the gradient of the same projection),
-/// `g_e = Im(h'_e·conj(h_e))/|h_e|² - Im(Σ h'·conj(h))/Σ |h|²`, the limit of the secant with its
-/// weighted common phase removed (the turns' phases are linear to 0.01 rad over ±1° on the head
-/// phantom). Two evaluations of the kernel instead of twelve projections onto moved arrays (at
-/// 650 kHz with 1024 elements about 31 s instead of 74 s); the same modes as
-/// [`moved_head_responses`]' secants to a correlation of 0.999 (the turned arrays' own quadrature
-/// layout and the secant's step).
+/// The transposed march from `target` through `sim`'s head and, with `moved`, the weights whose
+/// projection onto the array as it is gives each element's response through the head shifted a
+/// cell either way along x, y and z (in that order: `+x, -x, +y, …`): the transposed march from
+/// each moved target, moved on the plane as the array moves ([`SourceModel::moved_weights`]).
+/// The marches share the plan and run side by side (on two cores six moved marches take about
+/// two thirds of their time one after another). `(through the head, moved)`; the moved ones'
+/// projection is [`pose_modes`]' `moved`.
 ///
 /// [`SourceModel::moved_weights`]: crate::physics::source::SourceModel::moved_weights
+pub(super) fn skull_marches(sim: &Simulation, target: [f64; 3], moved: bool) -> Result<(Vec<C64>, Vec<Vec<C64>>)> {
+    let g = &sim.grid;
+    let mut steps: Vec<Option<(usize, f64)>> = vec![None];
+    if moved {
+        steps.extend([g.dx, g.dy, g.dz].iter().enumerate().flat_map(|(axis, &cell)| [Some((axis, cell)), Some((axis, -cell))]));
+    }
+    let mut fields: Vec<Vec<C64>> = steps
+        .par_iter()
+        .map(|step| match *step {
+            None => reciprocal_field(&sim.plan, target, sim.reflections),
+            Some((axis, step)) => {
+                let (_, back) = moved_array(sim, target, &Pose::shift(axis, step))?;
+                let moved_target = std::array::from_fn(|k| target[k] + back[k]);
+                sim.source.moved_weights(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?, back)
+            }
+        })
+        .collect::<Result<_>>()?;
+    let through_skull = fields.remove(0);
+    Ok((through_skull, fields))
+}
+
+/// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`),
+/// the elements' responses `h` it gives (a prediction's `skull_responses`) and `moved`, the
+/// projections of [`skull_marches`]' moved fields (made in the caller's one evaluation of the Rayleigh kernel
+/// with the prediction's own fields). The translations: the central secants of the responses
+/// to the targets moved a cell either way. The turns: the rate of the responses as the array
+/// turns about the target ([`SourceModel::transposed_rates`], the gradient of the same
+/// projection), `g_e = Im(h'_e·conj(h_e))/|h_e|² - Im(Σ h'·conj(h))/Σ |h|²`, the limit of the
+/// secant with its weighted common phase removed (the turns' phases are linear to 0.01 rad over
+/// ±1° on the head phantom). The same modes as [`moved_head_responses`]' secants, which lay out
+/// twelve moved arrays anew, to a correlation of 0.999 (the turned arrays' own quadrature layout
+/// and the secant's step). (The shifts' derivative at the registration, which a march of the
+/// point weights' derivative would give with three marches instead of six, is not their secant
+/// over a cell: the phases are far from linear in a shift over a cell, and on the uneven shell
+/// the derivative is twice the secant over a cell, which a CT registered a cell off follows.)
+///
 /// [`SourceModel::transposed_rates`]: crate::physics::source::SourceModel::transposed_rates
-pub(super) fn pose_modes(sim: &Simulation, target: [f64; 3], through_skull: &[C64], h: &[C64]) -> Result<PoseSensitivity> {
+pub(super) fn pose_modes(
+    sim: &Simulation,
+    target: [f64; 3],
+    through_skull: &[C64],
+    h: &[C64],
+    moved: &[Vec<C64>],
+) -> Result<PoseSensitivity> {
     if h.iter().all(|v| v.norm() == 0.0) {
         return Err(HasError::invalid("target", "no element's wave reaches it"));
     }
+    if moved.len() != 6 {
+        return Err(HasError::invalid("moved", format!("has {} responses, the shifts need six", moved.len())));
+    }
     let g = &sim.grid;
     let cells = [g.dx, g.dy, g.dz];
-    let mut weights = Vec::with_capacity(6);
-    for (axis, cell) in cells.iter().enumerate() {
-        for step in [*cell, -cell] {
-            let (_, back) = moved_array(sim, target, &Pose::shift(axis, step))?;
-            let moved_target = std::array::from_fn(|k| target[k] + back[k]);
-            weights.push(sim.source.moved_weights(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?, back)?);
-        }
-    }
-    let moved = sim.source.transposed_many(&weights)?;
     let mut translation: [Vec<f64>; 3] = Default::default();
     for (axis, cell) in cells.iter().enumerate() {
         // Each side's change from `h` wrapped on its own: a single wrap of `h⁺·conj(h⁻)` would

@@ -4,7 +4,7 @@
 //! another plan from the same pieces first (the prediction's head without bone) and never hold
 //! two plans at once.
 
-use super::{choose_grid, section_spec, Simulation};
+use super::{choose_grid, reciprocal_field, section_spec, Simulation};
 use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
@@ -43,14 +43,38 @@ impl Unbuilt {
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
         let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
         let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
-        let options = HasOptions {
-            sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
-            interfaces: r.grid.interface_model()?,
-            screen: r.grid.screen_model(r.focus)?,
-            ..HasOptions::default()
-        };
+        let options = options_of(&r)?;
         let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
         Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source: None })
+    }
+
+    /// The transposed march from `target` (m) through the head of `other`, a scenario that
+    /// differs from this one's in its medium only (e.g. the CT's bone faster): its plan built as
+    /// [`Simulation::new`] builds it (its own steering's beam as reference) but on this
+    /// simulation's grid and source model (their projections shared), then dropped and its memory
+    /// handed back. `None` when `other` resolves to another grid, options, array, frequency,
+    /// reflections or source-plane medium, whose simulation must be built on its own.
+    pub(crate) fn reciprocal_field_of(&self, other: &Scenario, target: [f64; 3]) -> Result<Option<Vec<C64>>> {
+        let r = other.resolve()?;
+        let same = choose_grid(&r)? == self.grid
+            && options_of(&r)? == self.options
+            && r.transducer == self.r.transducer
+            && r.frequency == self.r.frequency
+            && r.acoustic_power == self.r.acoustic_power
+            && r.grid.reflections == self.r.grid.reflections
+            && r.medium.properties_at(0.0, 0.0, self.grid.z0 - 0.5 * self.grid.dz, r.frequency)
+                == self.r.medium.properties_at(0.0, 0.0, self.grid.z0 - 0.5 * self.grid.dz, self.r.frequency);
+        if !same {
+            return Ok(None);
+        }
+        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
+        let field = {
+            let steered = steered_field(&self.source, &steering)?;
+            let (plan, _) = HasPlan::build(&self.grid, &r.medium, r.frequency, &steered, &self.options, &RecordSpec::default())?;
+            reciprocal_field(&plan, target, self.reflections())?
+        };
+        crate::memory::release_freed();
+        Ok(Some(field))
     }
 
     /// The steered array's field on plane 0 (made by the first call, unless the build makes it
@@ -163,6 +187,16 @@ impl Unbuilt {
 /// The field on plane 0 of the array steered by `steering` (rad per element).
 fn steered_field(source: &SourceModel, steering: &[f64]) -> Result<Vec<C64>> {
     source.field(&steering.iter().map(|&p| C64::from_polar(1.0, p)).collect::<Vec<_>>())
+}
+
+/// The march's options that the scenario's `[grid]` sets.
+fn options_of(r: &Resolved) -> Result<HasOptions> {
+    Ok(HasOptions {
+        sponge_width: r.grid.sponge_width_mm.map_or(HasOptions::default().sponge_width, |w| w * 1e-3),
+        interfaces: r.grid.interface_model()?,
+        screen: r.grid.screen_model(r.focus)?,
+        ..HasOptions::default()
+    })
 }
 
 #[cfg(test)]

@@ -325,13 +325,39 @@ impl SourceModel {
             })
             .collect();
         if self.footprints.iter().any(|fp| !fp.points().is_empty()) {
-            let at = self.at_quadrature_points(weights);
-            for (o, at) in out.iter_mut().zip(&at) {
-                o.iter_mut().zip(self.over_points(|n, _| at[n])).for_each(|(o, v)| *o += v);
+            match self.kept_projections() {
+                Some(p) => self.add_transposed_projected(p, weights, &mut out),
+                None => {
+                    let at = self.at_quadrature_points(weights);
+                    for (o, at) in out.iter_mut().zip(&at) {
+                        o.iter_mut().zip(self.over_points(|n, _| at[n])).for_each(|(o, v)| *o += v);
+                    }
+                }
             }
         }
         out.iter_mut().flatten().for_each(|o| *o *= self.face_pressure);
         Ok(out)
+    }
+
+    /// Adds, per projected element `e`, `Σ_c w_c·plane_e(c)` over the coarse pixels of each of
+    /// `weights` carried to them ([`SourceModel::coarse_weights`]): the same sum as over the
+    /// element's quadrature points, `Σ_q area_q·Σ_c w_c·K(c - q)`, in the other order, the kernel
+    /// read from the kept planes instead of evaluated (a plane's dot product per element instead
+    /// of a kernel sum per point; the planes in single precision, as every field's).
+    fn add_transposed_projected(&self, p: &Projections, weights: &[Vec<C64>], out: &mut [Vec<C64>]) {
+        let coarse: Vec<Vec<C64>> = weights.iter().map(|w| self.coarse_weights(w)).collect();
+        let sums: Vec<Vec<C64>> = p
+            .planes
+            .par_iter()
+            .map(|plane| {
+                coarse.iter().map(|w| w.iter().zip(plane).map(|(w, q)| w * C64::new(q.re as f64, q.im as f64)).sum::<C64>()).collect()
+            })
+            .collect();
+        for (&e, sum) in p.elements.iter().zip(&sums) {
+            for (o, v) in out.iter_mut().zip(sum) {
+                o[e] += v;
+            }
+        }
     }
 
     /// The Rayleigh integral of each of `weights` (fields on the plane, row-major `(ny, nx)`) at

@@ -178,9 +178,11 @@ mod tests {
         assert!(model.moved_weights(&w, [0.3 * g.dx, 0.0, 0.0]).is_err());
     }
 
-    /// `model` with every quadrature point moved rigidly by `motion` (the same points, moved).
+    /// `model` with every quadrature point moved rigidly by `motion` (the same points, moved; no
+    /// projections kept from the model's).
     fn rigidly_moved(model: &SourceModel, motion: impl Fn([f64; 3]) -> [f64; 3]) -> SourceModel {
         let mut moved = model.clone();
+        moved.projections = std::sync::Arc::default();
         for fp in &mut moved.footprints {
             if let Footprint::Points(points) = fp {
                 points.iter_mut().for_each(|q| q.position = motion(q.position));
