@@ -118,7 +118,7 @@ fn moved_array(sim: &Simulation, target: [f64; 3], pose: &Pose) -> Result<(Trans
 }
 
 /// The pose modes of the prediction at `target` (m) through `sim`'s head (see the module docs):
-/// one transposed march from `target` and its projection, then `pose_modes`. Refused for an
+/// the transposed marches of `skull_marches` and their projection, then `pose_modes`. Refused for an
 /// array in its source plane (a planar array: a turned element would leave the half-space behind
 /// the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
@@ -134,7 +134,7 @@ pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensit
 /// projection onto the array as it is gives each element's response through the head shifted a
 /// cell either way along x, y and z (in that order: `+x, -x, +y, …`): the transposed march from
 /// each moved target, moved on the plane as the array moves ([`SourceModel::moved_weights`]).
-/// The marches share the plan and run side by side (on two cores six moved marches take about
+/// The marches share the plan and run two at a time (on two cores six moved marches take about
 /// two thirds of their time one after another). `(through the head, moved)`; the moved ones'
 /// projection is [`pose_modes`]' `moved`.
 ///
@@ -145,25 +145,34 @@ pub(super) fn skull_marches(sim: &Simulation, target: [f64; 3], moved: bool) -> 
     if moved {
         steps.extend([g.dx, g.dy, g.dz].iter().enumerate().flat_map(|(axis, &cell)| [Some((axis, cell)), Some((axis, -cell))]));
     }
-    let mut fields: Vec<Vec<C64>> = steps
-        .par_iter()
-        .map(|step| match *step {
-            None => reciprocal_field(&sim.plan, target, sim.reflections),
-            Some((axis, step)) => {
-                let (_, back) = moved_array(sim, target, &Pose::shift(axis, step))?;
-                let moved_target = std::array::from_fn(|k| target[k] + back[k]);
-                sim.source.moved_weights(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?, back)
-            }
-        })
-        .collect::<Result<_>>()?;
+    let march = |step: &Option<(usize, f64)>| match *step {
+        None => reciprocal_field(&sim.plan, target, sim.reflections),
+        Some((axis, step)) => {
+            let (_, back) = moved_array(sim, target, &Pose::shift(axis, step))?;
+            let moved_target = std::array::from_fn(|k| target[k] + back[k]);
+            sim.source.moved_weights(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?, back)
+        }
+    };
+    // Two at a time whatever the cores (each march in flight holds its own planes), and the
+    // first error in step order.
+    let mut fields = Vec::with_capacity(steps.len());
+    for pair in steps.chunks(SIDE_BY_SIDE) {
+        let done: Vec<Result<Vec<C64>>> = pair.par_iter().map(march).collect();
+        for field in done {
+            fields.push(field?);
+        }
+    }
     let through_skull = fields.remove(0);
     Ok((through_skull, fields))
 }
 
+/// How many of [`skull_marches`]' transposed marches run at once.
+const SIDE_BY_SIDE: usize = 2;
+
 /// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`),
 /// the elements' responses `h` it gives (a prediction's `skull_responses`) and `moved`, the
-/// projections of [`skull_marches`]' moved fields (made in the caller's one evaluation of the Rayleigh kernel
-/// with the prediction's own fields). The translations: the central secants of the responses
+/// projections of [`skull_marches`]' moved fields (made in the caller's one projection with the
+/// prediction's own fields). The translations: the central secants of the responses
 /// to the targets moved a cell either way. The turns: the rate of the responses as the array
 /// turns about the target ([`SourceModel::transposed_rates`], the gradient of the same
 /// projection), `g_e = Im(h'_e·conj(h_e))/|h_e|² - Im(Σ h'·conj(h))/Σ |h|²`, the limit of the

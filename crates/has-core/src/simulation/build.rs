@@ -53,7 +53,8 @@ impl Unbuilt {
     /// [`Simulation::new`] builds it (its own steering's beam as reference) but on this
     /// simulation's grid and source model (their projections shared), then dropped and its memory
     /// handed back. `None` when `other` resolves to another grid, options, array, frequency,
-    /// reflections or source-plane medium, whose simulation must be built on its own.
+    /// acoustic power, reflections or source-plane medium, whose simulation must be built on its
+    /// own. Its medium is checked as [`Unbuilt::new`] checks one.
     pub(crate) fn reciprocal_field_of(&self, other: &Scenario, target: [f64; 3]) -> Result<Option<Vec<C64>>> {
         let r = other.resolve()?;
         let same = choose_grid(&r)? == self.grid
@@ -67,6 +68,14 @@ impl Unbuilt {
         if !same {
             return Ok(None);
         }
+        r.medium.check_before_source_plane(
+            self.grid.z0,
+            &r.transducer.reference_points(),
+            r.focus,
+            self.grid.dz.min(0.5e-3),
+            r.frequency,
+        )?;
+        r.medium.check_on_grid(&self.grid)?;
         let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
         let field = {
             let steered = steered_field(&self.source, &steering)?;

@@ -419,8 +419,8 @@ fn the_bone_speed_sensitivity_follows_each_elements_layer() {
     let soft = bowl_scenario(&dir, "conversion = \"schneider-mast\"\n");
     assert!(bone_speed_sensitivity(&soft, &p).unwrap_err().to_string().starts_with("ct.conversion"));
     // `arfi predict --bone-speed-sensitivity --report` builds the plans in another order (the
-    // reference head's, the faster bone's, then the skull's, which it keeps): the same values to
-    // the last bit, and the kept simulation is the skull's (its own march of a drive equals a
+    // faster bone's on the skull's grid and source model, the reference head's, then the skull's,
+    // which it keeps) and projects every march at once: the same values to the last bit, and the kept simulation is the skull's (its own march of a drive equals a
     // fresh simulation's).
     let options = PredictionOptions { bone_speed_sensitivity: true, keep_simulation: true, ..PredictionOptions::default() };
     let run = predict_scenario_with(&scenario, None, options).unwrap();
