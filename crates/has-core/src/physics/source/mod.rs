@@ -554,18 +554,25 @@ mod tests {
         }
     }
 
+    /// A 24-element hemisphere (radius 30 mm, 40°) at 1 MHz before a 96 x 90 plane of λ/4
+    /// pixels (its sums on coarse pixels): the grid and the source model.
+    fn small_hemisphere() -> (Grid, SourceModel) {
+        let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
+        let hemisphere = Transducer::hemisphere(30e-3, 40f64.to_radians(), 24, 4e-3).unwrap();
+        let g = Grid::new(96, 90, 0.375e-3, 0.375e-3, 2, 0.375e-3, 9e-3).unwrap();
+        let model = SourceModel::new(&hemisphere, &g, 2.0, k, 3.0).unwrap();
+        (g, model)
+    }
+
     /// Fields as weighted sums of the elements' kept planes against the Rayleigh sum over every
     /// quadrature point of the driven elements (`add_rayleigh`), for a small hemisphere on
     /// coarse pixels: random drives, two at once, and one element alone. Within 1e-5 of the
     /// field's peak: both sum in single precision (~1e-6 each, see rayleigh.rs).
     #[test]
     fn fields_from_kept_element_planes_match_the_sum_over_points() {
-        let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
-        let hemisphere = Transducer::hemisphere(30e-3, 40f64.to_radians(), 24, 4e-3).unwrap();
-        let g = Grid::new(96, 90, 0.375e-3, 0.375e-3, 2, 0.375e-3, 9e-3).unwrap();
-        let model = SourceModel::new(&hemisphere, &g, 2.0, k, 3.0).unwrap();
+        let (g, model) = small_hemisphere();
         assert_eq!(model.coarsening(), 2);
-        let n = hemisphere.elements.len();
+        let n = model.len();
         let mut alone = vec![C64::new(0.0, 0.0); n];
         alone[7] = C64::new(0.3, -1.2);
         let drives = [random(n, 5), random(n, 6), alone];
@@ -590,10 +597,7 @@ mod tests {
     /// 1e-5 of the largest response: both sum in single precision (~1e-6 each).
     #[test]
     fn transposed_projections_from_kept_planes_match_the_sum_over_points() {
-        let k = 2.0 * std::f64::consts::PI * 1e6 / 1500.0;
-        let hemisphere = Transducer::hemisphere(30e-3, 40f64.to_radians(), 24, 4e-3).unwrap();
-        let g = Grid::new(96, 90, 0.375e-3, 0.375e-3, 2, 0.375e-3, 9e-3).unwrap();
-        let model = SourceModel::new(&hemisphere, &g, 2.0, k, 3.0).unwrap();
+        let (g, model) = small_hemisphere();
         let weights = [random(g.lateral_len(), 8), random(g.lateral_len(), 9), random(g.lateral_len(), 10)];
         // One field alone makes no planes; two do.
         let alone = model.transposed(&weights[0]).unwrap();
