@@ -166,23 +166,19 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
     // The fields projected at once: the skull's, the reference's, the faster bone's and the
     // moved targets' for the pose modes.
     let mut fields = vec![through_skull, through_reference];
-    let faster_at = match faster {
-        Some(Ok(field)) => {
-            fields.push(field);
-            Some(Ok(fields.len() - 1))
-        }
-        Some(Err(responses)) => Some(Err(responses)),
-        None => None,
-    };
+    let mut faster_responses = None;
+    match faster {
+        Some(Ok(field)) => fields.push(field),
+        Some(Err(responses)) => faster_responses = Some(responses),
+        None => {}
+    }
     let moved_from = fields.len();
     fields.extend(moved_fields);
     let mut responses = sim.source.transposed_many(&fields)?;
     let moved = responses.split_off(moved_from);
-    let faster_responses = match faster_at {
-        Some(Ok(k)) => Some(responses.remove(k)),
-        Some(Err(responses)) => Some(responses),
-        None => None,
-    };
+    if responses.len() == 3 {
+        faster_responses = responses.pop();
+    }
     let reference = responses.remove(1);
     let skull = responses.remove(0);
     let prediction =

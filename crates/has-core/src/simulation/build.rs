@@ -34,11 +34,9 @@ impl Unbuilt {
     pub(crate) fn new(scenario: &Scenario) -> Result<Self> {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
-        let step = grid.dz.min(0.5e-3);
-        r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, step, r.frequency)?;
-        r.medium.check_on_grid(&grid)?;
-        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
-        let at_source = r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency);
+        check_medium(&r, &grid)?;
+        let steering = steering_of(&r)?;
+        let at_source = at_source(&r, &grid);
         let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
         let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
@@ -63,20 +61,12 @@ impl Unbuilt {
             && r.frequency == self.r.frequency
             && r.acoustic_power == self.r.acoustic_power
             && r.grid.reflections == self.r.grid.reflections
-            && r.medium.properties_at(0.0, 0.0, self.grid.z0 - 0.5 * self.grid.dz, r.frequency)
-                == self.r.medium.properties_at(0.0, 0.0, self.grid.z0 - 0.5 * self.grid.dz, self.r.frequency);
+            && at_source(&r, &self.grid) == at_source(&self.r, &self.grid);
         if !same {
             return Ok(None);
         }
-        r.medium.check_before_source_plane(
-            self.grid.z0,
-            &r.transducer.reference_points(),
-            r.focus,
-            self.grid.dz.min(0.5e-3),
-            r.frequency,
-        )?;
-        r.medium.check_on_grid(&self.grid)?;
-        let steering = steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)?;
+        check_medium(&r, &self.grid)?;
+        let steering = steering_of(&r)?;
         let field = {
             let steered = steered_field(&self.source, &steering)?;
             let (plan, _) = HasPlan::build(&self.grid, &r.medium, r.frequency, &steered, &self.options, &RecordSpec::default())?;
@@ -196,6 +186,23 @@ impl Unbuilt {
 /// The field on plane 0 of the array steered by `steering` (rad per element).
 fn steered_field(source: &SourceModel, steering: &[f64]) -> Result<Vec<C64>> {
     source.field(&steering.iter().map(|&p| C64::from_polar(1.0, p)).collect::<Vec<_>>())
+}
+
+/// Checks the medium before the source plane (along each element's path to the focus) and on
+/// `grid`.
+fn check_medium(r: &Resolved, grid: &Grid) -> Result<()> {
+    r.medium.check_before_source_plane(grid.z0, &r.transducer.reference_points(), r.focus, grid.dz.min(0.5e-3), r.frequency)?;
+    r.medium.check_on_grid(grid)
+}
+
+/// Each element's steering phase (rad) to the focus through the steering medium.
+fn steering_of(r: &Resolved) -> Result<Vec<f64>> {
+    steering_phases(&r.transducer, r.steering_medium.as_ref().unwrap_or(&r.medium), r.frequency, r.focus)
+}
+
+/// The medium the elements radiate into: half a step before `grid`'s first plane, on the axis.
+fn at_source(r: &Resolved, grid: &Grid) -> crate::physics::medium::Properties {
+    r.medium.properties_at(0.0, 0.0, grid.z0 - 0.5 * grid.dz, r.frequency)
 }
 
 /// The march's options that the scenario's `[grid]` sets.
