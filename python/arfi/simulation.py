@@ -69,11 +69,24 @@ class Simulation:
     (rad; a positive phase ``phi`` delays that element's emission by ``phi / (2*pi*f)``).
     """
 
-    def __init__(self, scenario: Scenario | None = None, groups: int | ArrayLike | None = None):
+    def __init__(self, scenario: Scenario | None = None, groups: int | ArrayLike | None = None, *,
+                 source: _core.CoreSourceModel | None = None):
+        """``source``: another simulation's :meth:`source_model`, reused where this scenario has
+        the same array, grid, acoustic power and coupling medium (its projected elements are
+        then not projected again: seconds for a 1024-element hemisphere); otherwise ignored.
+        The simulation is the same either way."""
         self.scenario = scenario if scenario is not None else Scenario.default()
-        self._core = _core.CoreSimulation(self.scenario.to_toml(), "toml", self.scenario.base_dir)
+        if source is not None and not isinstance(source, _core.CoreSourceModel):
+            raise ValueError(f"source: must be a Simulation.source_model(), got {type(source).__name__}")
+        self._core = _core.CoreSimulation(self.scenario.to_toml(), "toml", self.scenario.base_dir, source)
         if groups is not None:
             self._core = self._core.with_groups(_group_map(groups, self.n_elements))
+
+    def source_model(self) -> _core.CoreSourceModel:
+        """The array projected onto the grid's first plane, to pass as ``source`` to another
+        :class:`Simulation` of the same array (e.g. the head with and without its bone); it keeps
+        the projections alive after this simulation is dropped."""
+        return self._core.source_model()
 
     @classmethod
     def _wrap(cls, scenario: Scenario, core: Any) -> "Simulation":

@@ -261,3 +261,19 @@ def test_images_and_known_take_one_image_or_several_in_every_form():
         images_and_known(np.zeros(5), None)
     with pytest.raises(ValueError, match=r"^known\[1\]: must be one-dimensional"):
         images_and_known([img, img], [p, np.zeros((2, 2))])
+
+
+def test_a_shared_source_model_gives_the_same_simulation(sim):
+    """``Simulation(..., source=other.source_model())`` reuses the array's projection where the
+    array, grid, power and coupling medium are the same, and projects anew where they are not:
+    the images are the same to the bit either way; anything but a source model is refused."""
+    scenario = arfi.Scenario.default()
+    phases = np.linspace(-1.0, 1.0, sim.n_elements)
+    shared = arfi.Simulation(scenario, source=sim.source_model())
+    assert sim.source_model().n_elements == sim.n_elements
+    assert np.array_equal(shared.arfi_image(phases), sim.arfi_image(phases))
+    small = arfi.Simulation(arfi.Scenario.from_toml("[transducer]\nelements_per_side = 4\n"))
+    other = arfi.Simulation(scenario, source=small.source_model())
+    assert np.array_equal(other.arfi_image(phases), sim.arfi_image(phases))
+    with pytest.raises(ValueError, match="^source: "):
+        arfi.Simulation(scenario, source=sim)  # type: ignore[arg-type]

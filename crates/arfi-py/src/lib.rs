@@ -33,6 +33,7 @@ fn release_freed() {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MemoryLimitError", m.py().get_type::<error::MemoryLimitError>())?;
     m.add_class::<simulation::CoreSimulation>()?;
+    m.add_class::<simulation::CoreSourceModel>()?;
     m.add_class::<cost::CoreCostModel>()?;
     m.add_class::<mode_fit::CoreModeFit>()?;
     m.add_class::<mode_fit::CoreModesFit>()?;

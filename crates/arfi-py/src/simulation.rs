@@ -21,6 +21,7 @@ use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::modes_fit::fit_modes_with_noise;
 use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
+use has_core::physics::source::SourceModel;
 use has_core::simulation::{ExternalField, Simulation};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -53,14 +54,44 @@ impl From<Simulation> for CoreSimulation {
     }
 }
 
+/// A simulation's array projected onto its grid's first plane (with the elements' projected
+/// planes once a field made them), to build another simulation of the same array on the same
+/// grid without projecting it again (`Simulation::new_reusing`).
+#[pyclass(module = "arfi._core", frozen)]
+pub(crate) struct CoreSourceModel {
+    inner: SourceModel,
+}
+
+#[pymethods]
+impl CoreSourceModel {
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.len()
+    }
+    fn __repr__(&self) -> String {
+        format!("SourceModel({} elements)", self.inner.len())
+    }
+}
+
 #[pymethods]
 impl CoreSimulation {
     #[new]
-    #[pyo3(signature = (text, format="toml", base_dir=None))]
-    fn new(py: Python<'_>, text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Self> {
+    #[pyo3(signature = (text, format="toml", base_dir=None, source=None))]
+    fn new(py: Python<'_>, text: &str, format: &str, base_dir: Option<&str>, source: Option<PyRef<'_, CoreSourceModel>>) -> PyResult<Self> {
         let s = parse_scenario(text, format, base_dir)?;
-        let inner = py.detach(|| Simulation::new(&s)).map_err(to_py)?;
+        let kept = source.map(|k| k.inner.clone());
+        let inner = py
+            .detach(|| match &kept {
+                Some(k) => Simulation::new_reusing(&s, k),
+                None => Simulation::new(&s),
+            })
+            .map_err(to_py)?;
         Ok(inner.into())
+    }
+
+    /// The simulation's source model, to share with another simulation of the same array.
+    fn source_model(&self) -> CoreSourceModel {
+        CoreSourceModel { inner: self.inner.source.clone() }
     }
 
     #[getter]

@@ -10,6 +10,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from arfi import _core
 from arfi.estimation import METHODS
 from arfi.io import read_arfi_image, read_phases, write_json
 from arfi.scenario import Scenario
@@ -136,10 +137,11 @@ def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | Non
     return image, known
 
 
-def calibrated_simulation(args: argparse.Namespace, scenario: Scenario | None = None) -> Simulation:
+def calibrated_simulation(args: argparse.Namespace, scenario: Scenario | None = None,
+                          source: _core.CoreSourceModel | None = None) -> Simulation:
     """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
-    applied when given."""
-    sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None))
+    applied when given; ``source`` as :class:`Simulation` takes it."""
+    sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None), source=source)
     if getattr(args, "calibration", None):
         path = Path(args.calibration)
         if not path.is_file():

@@ -129,11 +129,11 @@ def run(args: argparse.Namespace) -> int:
     prior = read_optional_phases(args.prior, "--prior")
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     scenario = load_scenario(args)
-    modes = fit_modes(args, scenario, prior, transmission, predicted_at)
+    modes, source = fit_modes(args, scenario, prior, transmission, predicted_at)
     moved = modes is not None and modes.prior_moved
     if modes is not None and moved:
         prior = modes.prior
-    sim = calibrated_simulation(args, scenario)
+    sim = calibrated_simulation(args, scenario, source)
     if transmission is not None:
         check_transmission(args, transmission, predicted_at, sim)
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
@@ -268,13 +268,15 @@ def check_transmission(args: argparse.Namespace, transmission: np.ndarray, predi
 
 
 def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | None, transmission: np.ndarray | None,
-              predicted_at: np.ndarray | None) -> prior_modes.ModesResult | None:
+              predicted_at: np.ndarray | None) -> tuple[prior_modes.ModesResult | None, _core.CoreSourceModel | None]:
     """The prediction's error modes (pose, bone speed, ``--prior-modes``) fitted to the images on
     the head with the CT's bone (:mod:`arfi.prior_modes`), by default wherever the prediction's
     JSON holds them and the estimate is per element; the result's ``prior`` is the prediction
     moved by them and ``prior_moved`` whether it is to be used. None when there is nothing to
     fit. The model with bone is built and dropped here, its memory handed back, before the
-    estimation's own model is built, so that the two plans are never held at once."""
+    estimation's own model is built, so that the two plans are never held at once; its source
+    model (the array projected onto the grid, shared by the estimation's model) is returned
+    with the result."""
     stds = {"--prior-bone-speed-std-percent": args.prior_bone_speed_std_percent, "--prior-pose-std-mm": args.prior_pose_std_mm,
             "--prior-pose-std-deg": args.prior_pose_std_deg}
     for option, std in stds.items():
@@ -285,11 +287,11 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     if prior is None:
         if first:
             raise UsageError(f"{first}: needs --prior (the prediction the modes belong to)")
-        return None
+        return None, None
     if args.groups != len(prior):
         if first:
             raise UsageError(f"{first}: fitted for per-element estimates only (--groups {len(prior)})")
-        return None
+        return None, None
     path = args.prior_transmission
     prediction = prediction_json(path, "--prior-transmission") if path and path.endswith(".json") else {}
     for option, key in MODE_KEYS.items():
@@ -312,11 +314,11 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
         except (FileNotFoundError, ValueError) as e:
             raise UsageError(f"--prior-modes: {e}") from None
     if not modes:
-        return None
+        return None, None
     if scenario.to_dict().get("ct") is None:
         if first:
             raise UsageError(f"{first}: needs a [ct] scenario (the modes are fitted on the head with the CT's bone)")
-        return None
+        return None, None
     if args.prior_std_rad is None:  # checked here too: the fit takes minutes before the estimate would say so
         raise UsageError("--prior-std-rad: required with --prior (the expected error of each predicted phase, rad)")
     skull = calibrated_simulation(args, scenario.with_ct_bone())
@@ -327,6 +329,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
     pairs = [read_image(skull, p) for p in args.image]
     result = prior_modes.fit_prior_modes(skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes,
                                          noise_rad=args.noise_rad)
+    source = skull.source_model()
     del skull, pairs
     _core.release_freed()
     at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]
@@ -344,7 +347,7 @@ def fit_modes(args: argparse.Namespace, scenario: Scenario, prior: np.ndarray | 
               "free coefficients explain of noise)")
     else:
         print("estimate: prior moved along the modes by the fitted values")
-    return result
+    return result, source
 
 
 def option_of(message: str, stds: dict[str, float | None]) -> str:

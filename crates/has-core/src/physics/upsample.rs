@@ -1,15 +1,18 @@
-//! Band-limited (Fourier) interpolation between a field sampled on every `r`-th pixel and the
-//! full grid, and its transpose (the source plane's Rayleigh sums run on the coarse pixels).
+//! Band-limited (Fourier) interpolation between a periodic field sampled on a coarse lattice and a
+//! finer one of the same period, and its transpose (the source plane's Rayleigh sums run on
+//! coarse pixels).
 
 use crate::physics::fft::Fft2;
 use num_complex::Complex64 as C64;
 
-/// Band-limited (Fourier) interpolation of a `(cy, cx)` field sampled on every `r`-th pixel onto
-/// the `(r·cy, r·cx)` grid (coarse sample `m` lands on pixel `r·m`): the coarse spectrum,
-/// zero-padded (the Nyquist bin of an even length split evenly between `±`), transformed back.
-/// Exact for periodic fields without spatial frequencies beyond π/(r·dx). `coarse` is overwritten.
-pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
-    let (nx, ny) = (r * cx, r * cy);
+/// Band-limited (Fourier) interpolation of a `(cy, cx)` field onto the `(ny, nx)` lattice of the
+/// same period and origin (`nx ≥ cx`, `ny ≥ cy`; coarse sample `m` at `m·nx/cx` fine samples): the
+/// coarse spectrum, zero-padded (the Nyquist bin of an even length split evenly between `±`),
+/// transformed back. Exact for periodic fields without spatial frequencies beyond the coarse
+/// lattice's Nyquist frequency; with `nx = r·cx` coarse sample `m` lands on pixel `r·m`.
+/// `coarse` is overwritten.
+pub fn fourier_resample(coarse: &mut [C64], cx: usize, cy: usize, nx: usize, ny: usize) -> Vec<C64> {
+    assert!(nx >= cx && ny >= cy, "a Fourier resampling onto a finer lattice");
     let small = Fft2::new(cx, cy);
     let mut ws = small.workspace(true);
     small.forward(coarse, &mut ws);
@@ -32,12 +35,17 @@ pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> V
     fine
 }
 
-/// The transpose of [`fourier_upsample`]: for `fine` on the `(r·cy, r·cx)` grid, the coarse
-/// `(cy, cx)` vector `c̄` with `Σ c̄ · c = Σ fine · fourier_upsample(c)` for every `c` (the
+/// [`fourier_resample`] onto the lattice `r` times finer.
+pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
+    fourier_resample(coarse, cx, cy, r * cx, r * cy)
+}
+
+/// The transpose of [`fourier_resample`]: for `fine` on the `(ny, nx)` lattice, the coarse
+/// `(cy, cx)` vector `c̄` with `Σ c̄ · c = Σ fine · fourier_resample(c)` for every `c` (the
 /// unnormalised inverse transform of `fine`, the coarse frequencies gathered with the same
 /// weights, the forward transform of those).
-pub fn fourier_upsample_transposed(fine: &[C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
-    let (nx, ny) = (r * cx, r * cy);
+pub fn fourier_resample_transposed(fine: &[C64], cx: usize, cy: usize, nx: usize, ny: usize) -> Vec<C64> {
+    assert!(nx >= cx && ny >= cy, "a Fourier resampling onto a finer lattice");
     let big = Fft2::new(nx, ny);
     let mut wb = big.workspace(true);
     // The unnormalised inverse DFT is symmetric: applied to `fine` as if it were a spectrum.
@@ -64,6 +72,11 @@ pub fn fourier_upsample_transposed(fine: &[C64], cx: usize, cy: usize, r: usize)
     let mut out = vec![C64::new(0.0, 0.0); cx * cy];
     crate::physics::fft::transpose(&ws.spectrum, &mut out, cx, cy, true);
     out
+}
+
+/// [`fourier_resample_transposed`] from the lattice `r` times finer.
+pub fn fourier_upsample_transposed(fine: &[C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
+    fourier_resample_transposed(fine, cx, cy, r * cx, r * cy)
 }
 
 /// Where coarse frequency index `k` of a length-`c` transform goes in a length-`n` one (the
@@ -102,6 +115,30 @@ pub(crate) mod tests {
             let err =
                 (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| (fine[j * nx + i] - at(i, j)).norm()).fold(0.0, f64::max);
             assert!(err < 1e-12, "{nx} x {ny} by {r}: error {err:.2e}");
+        }
+    }
+
+    #[test]
+    fn fourier_resampling_reproduces_a_band_limited_field_on_a_lattice_of_another_ratio() {
+        // The same plane waves on a coarse lattice and on one of the same period 3/2 or 5/3
+        // times finer (samples that do not fall on coarse ones): only rounding.
+        for (cx, cy, nx, ny) in [(24, 18, 36, 27), (30, 24, 50, 40), (20, 30, 30, 30)] {
+            let waves = [(1.0, 2.0, C64::new(1.0, 0.3)), (-3.0, 1.0, C64::new(-0.4, 0.8)), (2.0, -3.0, C64::new(0.2, -0.1))];
+            let at = |x: f64, y: f64| -> C64 {
+                waves.iter().map(|&(fx, fy, a)| a * C64::from_polar(1.0, 2.0 * std::f64::consts::PI * (fx * x + fy * y))).sum()
+            };
+            let mut coarse: Vec<C64> =
+                (0..cy).flat_map(|j| (0..cx).map(move |i| (i, j))).map(|(i, j)| at(i as f64 / cx as f64, j as f64 / cy as f64)).collect();
+            let fine = fourier_resample(&mut coarse, cx, cy, nx, ny);
+            let err = (0..ny)
+                .flat_map(|j| (0..nx).map(move |i| (i, j)))
+                .map(|(i, j)| (fine[j * nx + i] - at(i as f64 / nx as f64, j as f64 / ny as f64)).norm())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-12, "{cx} x {cy} onto {nx} x {ny}: error {err:.2e}");
+            let (c, f) = (random(cx * cy, 3), random(nx * ny, 4));
+            let lhs: C64 = f.iter().zip(&fourier_resample(&mut c.clone(), cx, cy, nx, ny)).map(|(a, b)| a * b).sum();
+            let rhs: C64 = fourier_resample_transposed(&f, cx, cy, nx, ny).iter().zip(&c).map(|(a, b)| a * b).sum();
+            assert!((lhs - rhs).norm() < 1e-12 * lhs.norm().max(1.0), "{cx} x {cy} onto {nx} x {ny}: {lhs} vs {rhs}");
         }
     }
 

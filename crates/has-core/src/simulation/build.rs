@@ -32,6 +32,12 @@ impl Unbuilt {
     /// Resolves the scenario, chooses the grid, steers to the focus and projects the steered
     /// source; checks the medium before the source plane and on the grid.
     pub(crate) fn new(scenario: &Scenario) -> Result<Self> {
+        Unbuilt::new_reusing(scenario, None)
+    }
+
+    /// [`Unbuilt::new`] with the source model `kept` reused where it is the one this scenario
+    /// needs ([`SourceModel::new_reusing`]).
+    pub(crate) fn new_reusing(scenario: &Scenario, kept: Option<&SourceModel>) -> Result<Self> {
         let r = scenario.resolve()?;
         let grid = choose_grid(&r)?;
         check_medium(&r, &grid)?;
@@ -40,7 +46,7 @@ impl Unbuilt {
         let k0 = 2.0 * std::f64::consts::PI * r.frequency / at_source.sound_speed;
         // Plane-wave power: P = p_face² · A / (2·Z) for the whole radiating area A.
         let face_pressure = (2.0 * at_source.impedance() * r.acoustic_power / r.transducer.area()).sqrt();
-        let source = SourceModel::new(&r.transducer, &grid, face_pressure, k0, at_source.attenuation)?;
+        let source = SourceModel::new_reusing(&r.transducer, &grid, face_pressure, k0, at_source.attenuation, kept)?;
         let options = options_of(&r)?;
         let sampler = MrSampler::new(&grid, &r.medium, r.frequency, &r.mr, Broadening { width: r.broadening_width });
         Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source: None })

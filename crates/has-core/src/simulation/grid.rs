@@ -184,18 +184,30 @@ fn align_source_plane(z0: f64, dz: f64, faces: &[f64]) -> f64 {
     }
 }
 
-/// `grid` at the coarser lateral spacing `spacing` (m): at least the same lateral extent
-/// (FFT-friendly sizes), the same source plane, steps chosen as [`choose_grid`] chooses them for
-/// that spacing (a plane on the focal depth `focus_z`), and planes up to at least its last one.
+/// `grid` at a lateral spacing of at most `spacing` (m), coarser than its own: the same lateral
+/// period (even, FFT-friendly sizes, the spacing shrunk to fill the period; for a grid of even
+/// sizes the same first pixel too, so that a source plane's sums carry over by Fourier
+/// resampling, [`crate::physics::source::SourceModel::on_grid`]), the same source plane, steps
+/// chosen as [`choose_grid`] chooses them for the lateral spacing (a plane on the focal depth `focus_z`),
+/// and planes up to at least its last one.
 pub fn coarser_grid(grid: &Grid, focus_z: f64, spacing: f64) -> Result<Grid> {
     if !(spacing > grid.dx.max(grid.dy)) {
         return Err(HasError::invalid("spacing", format!("{spacing} m is not coarser than the grid's {} m", grid.dx.max(grid.dy))));
     }
-    let lateral = |n: usize, d: f64| fft_friendly((n as f64 * d / spacing - 1e-9).ceil() as usize);
-    let dz = step_to_focus(grid.z0, focus_z, spacing.max(grid.dz));
+    let even = |n: usize| {
+        let mut m = fft_friendly(n);
+        while m % 2 == 1 {
+            m = fft_friendly(m + 1);
+        }
+        m
+    };
+    let lateral = |n: usize, d: f64| even((n as f64 * d / spacing - 1e-9).ceil() as usize);
+    let (nx, ny) = (lateral(grid.nx, grid.dx), lateral(grid.ny, grid.dy));
+    let (dx, dy) = (grid.nx as f64 * grid.dx / nx as f64, grid.ny as f64 * grid.dy / ny as f64);
+    let dz = step_to_focus(grid.z0, focus_z, dx.min(dy).max(grid.dz));
     let depth = grid.z(grid.nz - 1) - grid.z0;
     let nz = (depth / dz - 1e-9).ceil() as usize + 1;
-    Grid::new(lateral(grid.nx, grid.dx), lateral(grid.ny, grid.dy), spacing, spacing, nz, dz, grid.z0)
+    Grid::new(nx, ny, dx, dy, nz, dz, grid.z0)
 }
 
 #[cfg(test)]
@@ -250,17 +262,23 @@ mod tests {
         assert_eq!(g.dz, step_to_focus(g.z0, r.focus[2], 0.25 * wavelength));
     }
 
-    /// A coarser grid covers at least the grid's lateral extent and depth, from the same source
-    /// plane, with a plane on the focus and steps of at most its spacing; a spacing that is not
-    /// coarser is refused.
+    /// A coarser grid has the grid's lateral period and first pixel (even sizes), a spacing of at
+    /// most the one asked for, and the grid's depth, from the same source plane, with a plane on
+    /// the focus and steps of at most its spacing; a spacing that is not coarser is refused.
     #[test]
     fn a_coarser_grid_covers_the_grid_with_a_plane_on_the_focus() {
         let r = Scenario::default().resolve().unwrap();
         let g = choose_grid(&r).unwrap();
+        for spacing in [1.5 * g.dx, 1.37 * g.dx, 2.9 * g.dx] {
+            let c = coarser_grid(&g, r.focus[2], spacing).unwrap();
+            assert_eq!(c.z0, g.z0);
+            assert!(c.dx <= spacing && c.dy <= spacing && c.dx > g.dx, "{} {} for {spacing}", c.dx, c.dy);
+            assert!(c.nx % 2 == 0 && c.ny % 2 == 0, "{} x {}", c.nx, c.ny);
+            assert!((c.nx as f64 * c.dx - g.nx as f64 * g.dx).abs() < 1e-12 && (c.ny as f64 * c.dy - g.ny as f64 * g.dy).abs() < 1e-12);
+            assert!((c.x(0) - g.x(0)).abs() < 1e-12 && (c.y(0) - g.y(0)).abs() < 1e-12);
+        }
         let spacing = 1.5 * g.dx;
         let c = coarser_grid(&g, r.focus[2], spacing).unwrap();
-        assert_eq!((c.dx, c.dy, c.z0), (spacing, spacing, g.z0));
-        assert!(c.nx as f64 * c.dx >= g.nx as f64 * g.dx && c.ny as f64 * c.dy >= g.ny as f64 * g.dy);
         assert!(c.z(c.nz - 1) >= g.z(g.nz - 1) - 1e-12 && c.dz <= spacing);
         let steps = (r.focus[2] - c.z0) / c.dz;
         assert!((steps - steps.round()).abs() < 1e-9, "{steps} steps to the focus");

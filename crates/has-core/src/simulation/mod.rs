@@ -157,6 +157,14 @@ impl Simulation {
         Unbuilt::new(scenario)?.build()
     }
 
+    /// [`Simulation::new`] reusing the source model `kept` (another simulation's
+    /// [`Simulation::source`]) where this scenario's array, grid, acoustic power and coupling
+    /// medium are the same ([`SourceModel::new_reusing`]): its elements' projections are then
+    /// shared, not made again. The same simulation either way.
+    pub fn new_reusing(scenario: &Scenario, kept: &SourceModel) -> Result<Self> {
+        Unbuilt::new_reusing(scenario, Some(kept))?.build()
+    }
+
     /// The medium whose straight-ray times of flight give the steering: `medium`, or the head
     /// without its skull with `[ct] steer_without_bone`
     /// ([`crate::scenario::Resolved::steering_medium`]).

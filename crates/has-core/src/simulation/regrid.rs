@@ -12,8 +12,10 @@ impl Simulation {
     /// The same simulation on `grid` (its plane 0 the source plane, as this grid's): medium,
     /// array, steering, element amplitudes, groups, interface and screen models, the MR geometry
     /// with its broadening and shift, and the ARFI amplitude (a property of the tissue and the
-    /// sequence, rad·m³/N, the same on any grid) are kept; the source is projected onto the new
-    /// grid and the HAS plan built there (one march of the steered beam).
+    /// sequence, rad·m³/N, the same on any grid) are kept; the source model is carried to the new
+    /// grid (its sums Fourier-resampled where the grid has the same period, else the array
+    /// projected anew: [`crate::physics::source::SourceModel::on_grid`]) and the HAS plan built
+    /// there (one march of the steered beam).
     pub fn on_grid(&self, grid: Grid) -> Result<Self> {
         self.medium.check_on_grid(&grid)?;
         let source = self.source.on_grid(&self.transducer, &grid)?;

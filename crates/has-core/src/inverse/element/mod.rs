@@ -56,10 +56,11 @@ pub const BASIS_SPACING_WAVELENGTHS: f64 = 0.375;
 pub const BASIS_SPACING_PIXELS: f64 = 0.75;
 
 /// The grid an element basis of `sim` is marched on, where not the simulation's own: a spacing of
-/// [`BASIS_SPACING_WAVELENGTHS`] of the shortest wavelength and at most [`BASIS_SPACING_PIXELS`]
-/// of an MR pixel, when that is coarser (by more than 5 %) and no layer reverberates (soft tissue and water, e.g.
-/// the model of a head without its bone). Such a grid samples every propagating wave (its
-/// Nyquist wavenumber 4/3 of the largest) and the force finer than the pixels it is averaged
+/// at most [`BASIS_SPACING_WAVELENGTHS`] of the shortest wavelength and [`BASIS_SPACING_PIXELS`]
+/// of an MR pixel ([`coarser_grid`]: the simulation's lateral period), when that is coarser (by
+/// more than 5 %) and no layer reverberates (soft tissue and water, e.g. the model of a head
+/// without its bone). Such a grid samples every propagating wave (its Nyquist wavenumber at least
+/// 4/3 of the largest) and the force finer than the pixels it is averaged
 /// over; the steps to the window cost a third of the λ/4 grid's, and the window holds fewer
 /// samples. Its images differ from the simulation's own by about 1 % of their peak at 650 kHz,
 /// well below an MR-ARFI image's noise (`tests/suite/element_basis.rs`); where the wavelength alone

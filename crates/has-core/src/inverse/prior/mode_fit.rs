@@ -20,10 +20,13 @@
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
 use crate::inverse::element::{image_known_per_element, BACKGROUND_MARGIN};
+use crate::memory;
 use crate::numeric;
 use crate::physics::mr::MrSampler;
+use crate::physics::propagation::{SinglePlan, Window};
 use crate::simulation::Simulation;
 use ndarray::Array2;
+use num_complex::Complex64 as C64;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -100,6 +103,9 @@ pub(super) struct Setting<'a> {
     pub(super) sampler: MrSampler,
     box_pixels: [Range<usize>; 2],
     pub(super) noise: f64,
+    /// The plan's steps to the window in single precision, where it marches them
+    /// ([`Setting::window_fields`]).
+    single: Option<SinglePlan>,
 }
 
 impl<'a> Setting<'a> {
@@ -109,13 +115,22 @@ impl<'a> Setting<'a> {
         let boxed = masks_and_box(sim, measurements, sim.mask_fraction, BACKGROUND_MARGIN)?;
         let [u, v] = boxed.pixels.clone();
         let known = measurements.iter().enumerate().map(|(k, m)| image_known_per_element(sim, k, &m.known)).collect::<Result<Vec<_>>>()?;
-        Ok(Setting {
-            sim,
-            measurements,
-            known,
-            sampler: sim.sampler()?.restrict(u.clone(), v.clone())?,
-            box_pixels: [u, v],
-            noise: boxed.noise.max(MIN_NOISE),
+        let sampler = sim.sampler()?.restrict(u.clone(), v.clone())?;
+        let single = single_plan(sim, &sampler.window)?;
+        Ok(Setting { sim, measurements, known, sampler, box_pixels: [u, v], noise: boxed.noise.max(MIN_NOISE), single })
+    }
+
+    /// The fields of `sources` (source planes) on the sampler's window: marched in single
+    /// precision where the plan allows it (see [`single_plan`]), else in double.
+    pub(super) fn window_fields(&self, sources: &[Vec<C64>]) -> Result<Vec<Vec<C64>>> {
+        let window = &self.sampler.window;
+        Ok(match &self.single {
+            Some(plan) => plan
+                .window_batch(sources, window)
+                .into_iter()
+                .map(|w| w.into_iter().map(|v| C64::new(v.re.into(), v.im.into())).collect())
+                .collect(),
+            None => self.sim.record_in(window, sources)?.into_iter().map(|r| r.window).collect(),
         })
     }
 
@@ -152,6 +167,24 @@ impl<'a> Setting<'a> {
         }
         Ok(())
     }
+}
+
+/// `sim`'s plan to the last plane of `window` in single precision, or `None` where the
+/// simulation marches reflections back (not in a single-precision plan); an error where the
+/// memory for it is lacking (as for an element basis: the precision does not depend on the
+/// memory free). A fit's model images come from a few marches through the skull (reverberation
+/// included) for every coefficient tried: single precision halves their time, and rounds each
+/// field to a few 1e-6 of its peak ([`SinglePlan`]), far below an MR-ARFI image's noise (about
+/// 3 % of the focal phase).
+fn single_plan(sim: &Simulation, window: &Window) -> Result<Option<SinglePlan>> {
+    let Some(last) = window.planes.end.checked_sub(1) else { return Ok(None) };
+    let Some(bytes) = sim.plan.single_precision_bytes(last).filter(|_| !sim.reflections) else { return Ok(None) };
+    memory::check(
+        || format!("the HAS plan's steps to plane {last} in single precision"),
+        bytes,
+        "give the MR slice a smaller field of view, or the scenario a coarser grid",
+    )?;
+    Ok(sim.plan.single_precision(last))
 }
 
 /// What one fit holds while it searches.
@@ -208,9 +241,9 @@ impl Fit<'_> {
         let s = &self.setting;
         let added: Vec<Vec<f64>> =
             cs.iter().flat_map(|&c| s.known.iter().map(move |k| k.iter().zip(self.mode).map(|(k, m)| k + c * m).collect())).collect();
-        let recordings = s.sim.record_in(&s.sampler.window, &s.sim.source_fields(&added)?)?;
+        let windows = s.window_fields(&s.sim.source_fields(&added)?)?;
         let amplitude = s.sim.amplitude()?;
-        let images = recordings.iter().map(|r| s.sampler.arfi_image(&r.window, amplitude)).collect::<Result<Vec<_>>>()?;
+        let images = windows.iter().map(|w| s.sampler.arfi_image(w, amplitude)).collect::<Result<Vec<_>>>()?;
         cs.iter().zip(images.chunks(s.measurements.len())).map(|(&c, models)| self.point(c, models)).collect()
     }
 

@@ -41,6 +41,11 @@ const ITERATIONS: usize = 6;
 /// A step whose every coefficient moves by less than this fraction of its posterior standard
 /// deviation ends the fit: the coefficients are then known to well within their uncertainty.
 const STEP_OF_SPREAD: f64 = 0.25;
+/// An undamped short step whose predicted fall of `J` is below this (units of `χ²`) ends the fit
+/// before it is taken: no batch of marches confirms it. Far below any evidence threshold (the
+/// 95 % point of `χ²(1)` is 3.84), so the evidence the fit reports loses nothing that counts;
+/// a short step of correlated coefficients can lower `J` by more, and is marched.
+const SKIPPED_FALL: f64 = 0.1;
 /// The longest step (prior standard deviations, Euclidean) one iteration takes: the phases are
 /// linear in `c`, the images are not.
 const MAX_STEP: f64 = 1.5;
@@ -155,6 +160,15 @@ pub fn fit_modes_with_noise(
         }
         let spread = spd_inverse(&curvature).map(|cov| (0..taken.len()).map(|m| cov[[m + 1, m + 1]].max(0.0).sqrt()).collect::<Vec<_>>());
         let short = spread.is_some_and(|s| taken.iter().zip(&s).all(|(d, s)| d.abs() < STEP_OF_SPREAD * s.max(1e-6)));
+        // Gauss–Newton's predicted fall of `J` along the undamped step: `gᵀ·h⁻¹·g` (`g` and `h`
+        // half the gradient and curvature of `J`).
+        let fall: f64 = step.iter().zip(&gradient).map(|(s, g)| s * g).sum();
+        if short && damping == 0.0 && fall < SKIPPED_FALL {
+            // `at` is the minimum to within a fraction of the spread and of a unit of `χ²`: a
+            // batch of marches to confirm the step would change neither.
+            converged = true;
+            break;
+        }
         let next = linearise(&setting, modes, &next_c, cancel)?;
         iterations += 1;
         if next.j < at.j {
@@ -214,16 +228,16 @@ fn linearise(s: &Setting, modes: &[Vec<f64>], c: &[f64], cancel: Option<&AtomicB
         }
         drives.push(base);
     }
-    let recordings = sim.record_in(&s.sampler.window, &sim.source.fields(&drives)?)?;
+    let windows = s.window_fields(&sim.source.fields(&drives)?)?;
     let amplitude = sim.amplitude()?;
     let per_image = 1 + modes.len();
     let mut models = Vec::with_capacity(s.known.len());
     let mut derivatives: Vec<Vec<Array2<f64>>> = vec![Vec::new(); modes.len()];
-    for chunk in recordings.chunks(per_image) {
-        let p = &chunk[modes.len()].window;
+    for chunk in windows.chunks(per_image) {
+        let p = &chunk[modes.len()];
         models.push(s.sampler.arfi_image(p, amplitude)?);
         for (m, q) in chunk[..modes.len()].iter().enumerate() {
-            let cross: Vec<f64> = p.iter().zip(&q.window).map(|(p, q)| 2.0 * (p.conj() * q).re).collect();
+            let cross: Vec<f64> = p.iter().zip(q).map(|(p, q)| 2.0 * (p.conj() * q).re).collect();
             derivatives[m].push(s.sampler.apply(&cross)? * amplitude);
         }
     }

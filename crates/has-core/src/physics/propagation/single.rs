@@ -115,7 +115,7 @@ impl SinglePlan {
         use rayon::prelude::*;
         let spec = RecordSpec { window: Some(window.clone()), ..RecordSpec::default() };
         let one = |s: &Vec<C64>, parallel: bool| single(&march(self, single(s), &spec, parallel, RoundTrips::Fixed).0.window);
-        if super::in_sequence(self.fft.nx * self.fft.ny) {
+        if sources.len() == 1 || super::in_sequence(self.fft.nx * self.fft.ny) {
             let mut out = Vec::with_capacity(sources.len());
             super::march::in_pool(|| out = sources.iter().map(|s| one(s, true)).collect());
             return out;

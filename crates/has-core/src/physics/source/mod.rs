@@ -15,7 +15,7 @@ use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::rayleigh::Sources;
 use crate::physics::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
-pub use crate::physics::upsample::{fourier_upsample, fourier_upsample_transposed};
+pub use crate::physics::upsample::{fourier_resample, fourier_resample_transposed, fourier_upsample, fourier_upsample_transposed};
 use num_complex::{Complex32 as C32, Complex64 as C64};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
@@ -49,7 +49,13 @@ pub const RADIAL_OVERSAMPLING: usize = 8;
 /// Maps per-element complex drive (phasors) to the pressure on the grid's first plane.
 #[derive(Debug, Clone)]
 pub struct SourceModel {
+    /// The array projected (compared by [`SourceModel::new_reusing`] and [`SourceModel::on_grid`]).
+    transducer: Arc<Transducer>,
     grid: Grid,
+    /// The grid on whose every `r`-th pixel the Rayleigh sums run ([`SourceModel::coarsening`]):
+    /// `grid` itself, or the grid of the same period that a model carried to `grid` was built on
+    /// ([`SourceModel::on_grid`]), its sums Fourier-resampled onto `grid`.
+    lattice: Grid,
     footprints: Vec<Footprint>,
     /// Pressure amplitude on every element face (Pa).
     pub face_pressure: f64,
@@ -98,8 +104,16 @@ impl SourceModel {
         let z0 = grid.z0;
         let wavelength = 2.0 * std::f64::consts::PI / wavenumber;
         let spacing = (wavelength / 8.0).min(grid.dx.min(grid.dy) / 2.0);
-        let mut model =
-            SourceModel { grid: grid.clone(), footprints: Vec::new(), face_pressure, wavenumber, attenuation, projections: Arc::default() };
+        let mut model = SourceModel {
+            transducer: Arc::new(transducer.clone()),
+            grid: grid.clone(),
+            lattice: grid.clone(),
+            footprints: Vec::new(),
+            face_pressure,
+            wavenumber,
+            attenuation,
+            projections: Arc::default(),
+        };
         for e in &transducer.elements {
             let footprint = if e.is_in_plane(z0) {
                 Footprint::Raster(rasterise(e, grid))
@@ -115,10 +129,62 @@ impl SourceModel {
         Ok(model)
     }
 
+    /// [`SourceModel::new`] of the same arguments, reusing `kept` where it was built from them
+    /// (the same array, grid, face pressure and coupling medium): a clone, which shares its
+    /// projected elements' planes, made once by the first field of either ([`SourceModel::fields`]).
+    /// Two simulations of one array in two media (a head with and without its bone) then project
+    /// the array once: at 1024 elements of a hemisphere that is seconds.
+    pub fn new_reusing(
+        transducer: &Transducer,
+        grid: &Grid,
+        face_pressure: f64,
+        wavenumber: f64,
+        attenuation: f64,
+        kept: Option<&SourceModel>,
+    ) -> Result<Self> {
+        // A model carried to its grid from another (its sums resampled) is not what `new` makes.
+        let same = |m: &&SourceModel| {
+            m.grid == *grid
+                && m.lattice == m.grid
+                && *m.transducer == *transducer
+                && m.face_pressure == face_pressure
+                && m.wavenumber == wavenumber
+                && m.attenuation == attenuation
+        };
+        match kept.filter(same) {
+            Some(m) => Ok(m.clone()),
+            None => SourceModel::new(transducer, grid, face_pressure, wavenumber, attenuation),
+        }
+    }
+
     /// The same array's footprints on another grid (its plane 0 at the same z): the same face
-    /// pressure and coupling medium.
+    /// pressure and coupling medium. Where `grid` has the same period and origin as the grid the
+    /// sums run on and samples at least as finely as they do (`SourceModel::resamples_onto`),
+    /// the model keeps its sums, and their kept projections (shared), and Fourier-resamples them
+    /// onto `grid` (exact for the waves the coarse pixels hold, which are the waves that leave
+    /// the plane: see [`SourceModel::fields`]); else it projects the array anew.
     pub fn on_grid(&self, transducer: &Transducer, grid: &Grid) -> Result<Self> {
+        if *self.transducer == *transducer && self.resamples_onto(grid) {
+            return Ok(SourceModel { grid: grid.clone(), ..self.clone() });
+        }
         SourceModel::new(transducer, grid, self.face_pressure, self.wavenumber, self.attenuation)
+    }
+
+    /// Whether the sums can be carried to `grid` by Fourier resampling: every element projected
+    /// by quadrature points (rasters and symmetric caps are laid on the grid's own pixels), the
+    /// same source plane, the same lateral period and first pixel as the sums' lattice, and at
+    /// least as many samples along x and y as the coarse pixels of the sums.
+    fn resamples_onto(&self, grid: &Grid) -> bool {
+        let (l, r) = (&self.lattice, self.coarsening());
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+        self.footprints.iter().all(|f| matches!(f, Footprint::Points(_)))
+            && grid.z0 == l.z0
+            && same(grid.nx as f64 * grid.dx, l.nx as f64 * l.dx)
+            && same(grid.ny as f64 * grid.dy, l.ny as f64 * l.dy)
+            && same(grid.x(0), l.x(0))
+            && same(grid.y(0), l.y(0))
+            && grid.nx >= l.nx / r
+            && grid.ny >= l.ny / r
     }
 
     /// Number of elements.
@@ -142,7 +208,7 @@ impl SourceModel {
     ///
     /// Elements projected by the Rayleigh integral (curved or tilted ones) are integrated once,
     /// by the first call, each on its own for unit drive (no more work than one field's sums;
-    /// `elements × (nx/r)·(ny/r)` single-precision values kept, at most
+    /// `elements × (nx/r)·(ny/r)` single-precision values kept (the sums' lattice), at most
     /// [`PROJECTIONS_MAX_BYTES`], else every call sums the integral): every field, this one
     /// included, is their weighted sum (in double precision), so a later field of other drives,
     /// or of one element, costs a sum over the elements instead of over their quadrature points;
@@ -209,10 +275,9 @@ impl SourceModel {
     /// The projected elements' planes ([`Projections`]), or `None` beyond
     /// [`PROJECTIONS_MAX_BYTES`] or the memory available. One rayon task per element.
     fn project_elements(&self) -> Option<Projections> {
-        let g = &self.grid;
+        let g = &self.lattice;
         let elements: Vec<usize> = (0..self.footprints.len()).filter(|&e| !self.footprints[e].points().is_empty()).collect();
-        let r = self.coarsening();
-        let (cx, cy) = (g.nx / r, g.ny / r);
+        let (cx, cy) = self.coarse_dims();
         let bytes = (elements.len() * cx * cy * std::mem::size_of::<C32>()) as u64;
         if bytes > PROJECTIONS_MAX_BYTES || crate::memory::check(String::new, bytes, "").is_err() {
             return None;
@@ -234,9 +299,7 @@ impl SourceModel {
     /// coarse pixels then interpolated as [`SourceModel::add_rayleigh`] does.
     fn add_projected(&self, p: &Projections, projected: &[(usize, Vec<C64>)], out: &mut [Vec<C64>]) {
         const CHUNK: usize = 4096;
-        let g = &self.grid;
-        let r = self.coarsening();
-        let (cx, cy) = (g.nx / r, g.ny / r);
+        let (cx, cy) = self.coarse_dims();
         let terms: Vec<(&[C64], &[C32])> =
             projected.iter().filter_map(|(e, d)| p.elements.binary_search(e).ok().map(|i| (&d[..], &p.planes[i][..]))).collect();
         for (set, o) in out.iter_mut().enumerate() {
@@ -256,14 +319,16 @@ impl SourceModel {
     /// row, each a single-precision blocked sum ([`crate::physics::rayleigh`]; one set:
     /// [`Sources::row`], several: [`Sources::row_many`], the kernel evaluated once).
     ///
-    /// Where the grid is finer than λ/2, the sum runs on every `r`-th pixel (spacing at most λ/2)
-    /// and is Fourier-interpolated onto the rest ([`fourier_upsample`]): the waves that leave the
+    /// Where the grid is finer than λ/2, the sum runs on every `r`-th pixel of the sums' lattice
+    /// (spacing at most λ/2) and is Fourier-interpolated onto every pixel of the grid
+    /// ([`fourier_resample`]; the lattice is the grid unless the model was carried to it,
+    /// [`SourceModel::on_grid`]): the waves that leave the
     /// plane have spatial frequencies up to `k`, which samples λ/2 apart hold; what they can
     /// alias is the evanescent near field of the elements closest to the plane (λ/2 before it).
     /// `r = 2` at the default λ/4 spacing: a quarter of the work, and for the hemisphere of
     /// `tests/suite/hemisphere.rs` the same focal field to four digits as the sum at every pixel.
     fn add_rayleigh(&self, positions: &[[f64; 3]], weights: &[Vec<C64>], out: &mut [Vec<C64>]) {
-        let g = &self.grid;
+        let g = &self.lattice;
         let first: Vec<([f64; 3], C64)> = positions.iter().copied().zip(weights[0].iter().copied()).collect();
         let sources = Sources::new(&first, g.z0, self.wavenumber, self.attenuation);
         let (xs, ys) = self.coarse_pixels();
@@ -276,18 +341,18 @@ impl SourceModel {
         }
     }
 
-    /// Adds `coarse` (on every `r`-th pixel, [`SourceModel::coarsening`]) to the plane `out`,
-    /// Fourier-interpolated onto every pixel where `r > 1`.
+    /// Adds `coarse` (on the coarse pixels of the sums, [`SourceModel::coarsening`]) to the plane
+    /// `out`, Fourier-interpolated onto every pixel where they are not every pixel.
     fn add_coarse(&self, mut coarse: Vec<C64>, out: &mut [C64]) {
-        let (g, r) = (&self.grid, self.coarsening());
-        let fine = if r == 1 { coarse } else { fourier_upsample(&mut coarse, g.nx / r, g.ny / r, r) };
+        let ((cx, cy), g) = (self.coarse_dims(), &self.grid);
+        let fine = if (cx, cy) == (g.nx, g.ny) { coarse } else { fourier_resample(&mut coarse, cx, cy, g.nx, g.ny) };
         out.iter_mut().zip(fine).for_each(|(o, v)| *o += v);
     }
 
-    /// The coarsening `r` of the Rayleigh sums: the largest whole number with `r·dx ≤ λ/2` that
-    /// divides both `nx` and `ny` (1: every pixel).
+    /// The coarsening `r` of the Rayleigh sums on their lattice: the largest whole number with
+    /// `r·dx ≤ λ/2` that divides both `nx` and `ny` (1: every pixel).
     fn coarsening(&self) -> usize {
-        let g = &self.grid;
+        let g = &self.lattice;
         let wavelength = 2.0 * std::f64::consts::PI / self.wavenumber;
         (1..=((0.5 * wavelength / g.dx.max(g.dy) + 1e-9).floor() as usize).max(1))
             .rev()
@@ -405,18 +470,24 @@ impl SourceModel {
     /// Weights on every pixel carried to the coarse pixels of the sums (the transpose of their
     /// Fourier interpolation; unchanged where the sums run on every pixel).
     fn coarse_weights(&self, weights: &[C64]) -> Vec<C64> {
-        let (g, r) = (&self.grid, self.coarsening());
-        if r == 1 {
+        let ((cx, cy), g) = (self.coarse_dims(), &self.grid);
+        if (cx, cy) == (g.nx, g.ny) {
             weights.to_vec()
         } else {
-            fourier_upsample_transposed(weights, g.nx / r, g.ny / r, r)
+            fourier_resample_transposed(weights, cx, cy, g.nx, g.ny)
         }
+    }
+
+    /// The number of coarse pixels of the sums along x and y.
+    fn coarse_dims(&self) -> (usize, usize) {
+        let (l, r) = (&self.lattice, self.coarsening());
+        (l.nx / r, l.ny / r)
     }
 
     /// The x and y (m) of the coarse pixels of the sums.
     fn coarse_pixels(&self) -> (Vec<f64>, Vec<f64>) {
-        let (g, r) = (&self.grid, self.coarsening());
-        ((0..g.nx / r).map(|i| g.x(r * i)).collect(), (0..g.ny / r).map(|j| g.y(r * j)).collect())
+        let (l, r) = (&self.lattice, self.coarsening());
+        ((0..l.nx / r).map(|i| l.x(r * i)).collect(), (0..l.ny / r).map(|j| l.y(r * j)).collect())
     }
 
     /// The projection of an element symmetric about the z axis (unit drive): the Rayleigh
@@ -562,6 +633,43 @@ mod tests {
         let g = Grid::new(96, 90, 0.375e-3, 0.375e-3, 2, 0.375e-3, 9e-3).unwrap();
         let model = SourceModel::new(&hemisphere, &g, 2.0, k, 3.0).unwrap();
         (g, model)
+    }
+
+    /// A model carried to a coarser grid of the same period ([`SourceModel::on_grid`]) keeps its
+    /// sums and projections and resamples them: its field is the band-limited interpolant of the
+    /// same coarse sums as the model's own, so at the sums' pixels (every 3rd and 4th pixel of
+    /// this grid) it equals the model's field there to rounding (1e-12 of the peak). A grid of
+    /// another period is projected anew. A model is reused by [`SourceModel::new_reusing`] of its
+    /// own arguments, a carried one is not (its sums are not the grid's own).
+    #[test]
+    fn a_model_carried_to_a_coarser_grid_of_the_same_period_resamples_its_sums() {
+        let (g, model) = small_hemisphere();
+        let hemisphere = Transducer::hemisphere(30e-3, 40f64.to_radians(), 24, 4e-3).unwrap();
+        // The same period (36 x 33.75 mm) and first pixel; the sums run every 0.75 mm.
+        let coarse = Grid::new(72, 60, 0.5e-3, 0.5625e-3, 2, 0.375e-3, 9e-3).unwrap();
+        let carried = model.on_grid(&hemisphere, &coarse).unwrap();
+        assert!(Arc::ptr_eq(&carried.projections, &model.projections) && carried.coarse_dims() == model.coarse_dims());
+        let drive = random(model.len(), 9);
+        let (a, fine) = (carried.field(&drive).unwrap(), model.field(&drive).unwrap());
+        let peak = fine.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        let mut compared = 0;
+        for (j, i) in (0..coarse.ny).step_by(4).flat_map(|j| (0..coarse.nx).step_by(3).map(move |i| (j, i))) {
+            let (fi, fj) = (4 * i / 3, 3 * j / 2);
+            assert!((coarse.x(i) - g.x(fi)).abs() < 1e-12 && (coarse.y(j) - g.y(fj)).abs() < 1e-12);
+            let err = (a[j * coarse.nx + i] - fine[fj * g.nx + fi]).norm();
+            assert!(err < 1e-12 * peak, "pixel ({i}, {j}): {err:e} of {peak}");
+            compared += 1;
+        }
+        assert_eq!(compared, 24 * 15);
+        let other = Grid::new(60, 60, 0.5e-3, 0.5e-3, 2, 0.375e-3, 9e-3).unwrap();
+        assert!(!Arc::ptr_eq(&model.on_grid(&hemisphere, &other).unwrap().projections, &model.projections));
+        let k = model.wavenumber;
+        let reused = SourceModel::new_reusing(&hemisphere, &g, 2.0, k, 3.0, Some(&model)).unwrap();
+        assert!(Arc::ptr_eq(&reused.projections, &model.projections));
+        for (grid, pressure, kept) in [(&g, 2.5, &model), (&coarse, 2.0, &carried)] {
+            let fresh = SourceModel::new_reusing(&hemisphere, grid, pressure, k, 3.0, Some(kept)).unwrap();
+            assert!(!Arc::ptr_eq(&fresh.projections, &model.projections));
+        }
     }
 
     /// Fields as weighted sums of the elements' kept planes against the Rayleigh sum over every
