@@ -35,11 +35,6 @@ pub fn fourier_resample(coarse: &mut [C64], cx: usize, cy: usize, nx: usize, ny:
     fine
 }
 
-/// [`fourier_resample`] onto the lattice `r` times finer.
-pub fn fourier_upsample(coarse: &mut [C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
-    fourier_resample(coarse, cx, cy, r * cx, r * cy)
-}
-
 /// The transpose of [`fourier_resample`]: for `fine` on the `(ny, nx)` lattice, the coarse
 /// `(cy, cx)` vector `c̄` with `Σ c̄ · c = Σ fine · fourier_resample(c)` for every `c` (the
 /// unnormalised inverse transform of `fine`, the coarse frequencies gathered with the same
@@ -74,11 +69,6 @@ pub fn fourier_resample_transposed(fine: &[C64], cx: usize, cy: usize, nx: usize
     out
 }
 
-/// [`fourier_resample_transposed`] from the lattice `r` times finer.
-pub fn fourier_upsample_transposed(fine: &[C64], cx: usize, cy: usize, r: usize) -> Vec<C64> {
-    fourier_resample_transposed(fine, cx, cy, r * cx, r * cy)
-}
-
 /// Where coarse frequency index `k` of a length-`c` transform goes in a length-`n` one (the
 /// Nyquist bin of an even length split evenly between `±`).
 fn upsample_targets(k: usize, c: usize, n: usize) -> Vec<(usize, f64)> {
@@ -111,7 +101,7 @@ pub(crate) mod tests {
             };
             let (cx, cy) = (nx / r, ny / r);
             let mut coarse: Vec<C64> = (0..cy).flat_map(|j| (0..cx).map(move |i| (i, j))).map(|(i, j)| at(r * i, r * j)).collect();
-            let fine = fourier_upsample(&mut coarse, cx, cy, r);
+            let fine = fourier_resample(&mut coarse, cx, cy, nx, ny);
             let err =
                 (0..ny).flat_map(|j| (0..nx).map(move |i| (i, j))).map(|(i, j)| (fine[j * nx + i] - at(i, j)).norm()).fold(0.0, f64::max);
             assert!(err < 1e-12, "{nx} x {ny} by {r}: error {err:.2e}");
@@ -158,9 +148,9 @@ pub(crate) mod tests {
         for (nx, ny, r) in [(24, 18, 2), (30, 24, 3), (20, 30, 2)] {
             let (cx, cy) = (nx / r, ny / r);
             let (c, fine) = (random(cx * cy, 1), random(nx * ny, 2));
-            let up = fourier_upsample(&mut c.clone(), cx, cy, r);
+            let up = fourier_resample(&mut c.clone(), cx, cy, nx, ny);
             let lhs: C64 = fine.iter().zip(&up).map(|(a, b)| a * b).sum();
-            let rhs: C64 = fourier_upsample_transposed(&fine, cx, cy, r).iter().zip(&c).map(|(a, b)| a * b).sum();
+            let rhs: C64 = fourier_resample_transposed(&fine, cx, cy, nx, ny).iter().zip(&c).map(|(a, b)| a * b).sum();
             assert!((lhs - rhs).norm() < 1e-12 * lhs.norm().max(1.0), "{nx} x {ny} by {r}: {lhs} vs {rhs}");
         }
     }

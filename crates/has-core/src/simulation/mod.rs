@@ -576,6 +576,18 @@ impl Simulation {
         self.record_in(&self.sampler()?.window, sources)
     }
 
+    /// The bytes of the plan's steps to plane `last` in single precision
+    /// ([`HasPlan::single_precision_bytes`]), or `None` where this simulation marches reflections
+    /// back, which no single-precision plan does, or `last` is beyond the grid: where
+    /// [`HasPlan::single_precision`] may serve its marches to a window ending at `last`.
+    pub fn single_precision_bytes(&self, last: usize) -> Option<u64> {
+        if self.reflections {
+            None
+        } else {
+            self.plan.single_precision_bytes(last)
+        }
+    }
+
     /// Marches several sources in one batch, keeping `window` (e.g. a restricted sampler's),
     /// with reflections as the simulation marches.
     pub fn record_in(&self, window: &Window, sources: &[Vec<C64>]) -> Result<Vec<Recording>> {

@@ -123,7 +123,7 @@ impl FieldBasis {
         // included), with the plan's steps to the window in single precision besides the basis.
         let window = &sampler.window;
         let last = window.planes.end - 1;
-        let steps_bytes = if sim.reflections { None } else { sim.plan.single_precision_bytes(last) };
+        let steps_bytes = sim.single_precision_bytes(last);
         memory::check(
             || format!("a field basis of {s_len} samples x {n} elements"),
             (s_len * n) as u64 * 8 + steps_bytes.unwrap_or(0),

@@ -178,7 +178,7 @@ impl<'a> Setting<'a> {
 /// 3 % of the focal phase).
 fn single_plan(sim: &Simulation, window: &Window) -> Result<Option<SinglePlan>> {
     let Some(last) = window.planes.end.checked_sub(1) else { return Ok(None) };
-    let Some(bytes) = sim.plan.single_precision_bytes(last).filter(|_| !sim.reflections) else { return Ok(None) };
+    let Some(bytes) = sim.single_precision_bytes(last) else { return Ok(None) };
     memory::check(
         || format!("the HAS plan's steps to plane {last} in single precision"),
         bytes,

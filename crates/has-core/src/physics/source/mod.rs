@@ -15,7 +15,7 @@ use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::rayleigh::Sources;
 use crate::physics::transducer::{ElementShape, Surface, SurfacePoint, Transducer};
-pub use crate::physics::upsample::{fourier_resample, fourier_resample_transposed, fourier_upsample, fourier_upsample_transposed};
+pub use crate::physics::upsample::{fourier_resample, fourier_resample_transposed};
 use num_complex::{Complex32 as C32, Complex64 as C64};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
