@@ -14,13 +14,16 @@ from arfi.cli.common import finish
 def register(sub: Any) -> None:
     """Adds the verb to the subcommands ``sub``."""
     p = sub.add_parser("validate", help="check the propagation against exact solutions (water, plates, skull layers, shells, "
-                                        "tilted plates)",
+                                        "tilted plates) and stored full-wave results (textured skull caps)",
                        description="Run the validation suite: the ITRUSST benchmark's bowl (500 kHz, R 64 mm, aperture "
                                    "64 mm) in water, through a 6.5 mm cortical plate (BM3), through the flat layered skull "
                                    "(BM4) and through two caps of cortical bone read from CTs (a shell about the focus, and "
                                    "a BM5-like cap met obliquely), and BM3's plate read from a CT untilted and turned 10, 20 "
                                    "and 30 degrees about y, each on the grid its scenario chooses by default, against "
-                                   "exact solutions written independently of the propagation. Prints the table of focal "
+                                   "exact solutions written independently of the propagation; then three-layer skull caps "
+                                   "about the focus read from CTs, their diploe uniform or textured over 1 and 3 mm, "
+                                   "against stored full-wave results (BabelViscoFDTD at 0.5 mm, made once by "
+                                   "benches/fullwave/caps_fdtd.py), where no exact solution exists. Prints the table of focal "
                                    "pressure, focal position, axial profile and focal-plane correlation with pass/fail "
                                    "(the tilted plates against their own, looser tolerances, printed in their rows), and "
                                    "writes a report with the profiles overlaid. Exit status 1 if a case fails.",
@@ -29,7 +32,7 @@ def register(sub: Any) -> None:
                                                 "PNG per case")
     p.add_argument("--case", action="append", dest="cases", metavar="NAME",
                    help="run only this case (repeatable): water, bm3, bm4, shell, bm5, tilt0, tilt10, tilt20, "
-                        "tilt30")
+                        "tilt30, cap_uniform, cap_texture1, cap_texture3")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
     p.set_defaults(run=run)
 
