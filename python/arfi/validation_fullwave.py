@@ -13,7 +13,7 @@ the focus (a disc). The uniform cap is held to :data:`TOLERANCES`: the spread of
 ITRUSST benchmark (Aubry et al., JASA 152(2), 2022: 10 % and 1 mm), since the reference is itself a
 finite-difference solution (0.5 mm voxels, the bone's faces staircased). The textured caps are held
 where the march is, :data:`TEXTURED_TOLERANCES`: it leaves out the loss of the wave a fine texture
-scatters (measured: 10 % more focal pressure than the engine behind a texture of 1 mm), so that an
+scatters (measured: 9.7 % more focal pressure than the engine behind a texture of 1 mm), so that an
 install check holds what is known and fails on anything worse.
 
 The engine at 6 points per wavelength (0.5 mm voxels) puts the focus of the suite's homogeneous
@@ -144,9 +144,10 @@ def grid_correction(stored: dict[str, dict[float, dict[str, Any]]]) -> float:
 def reference(name: str, stored: dict[str, dict[float, dict[str, Any]]] | None = None) -> dict[str, Any]:
     """The reference of case ``name``: its run at :data:`REFERENCE_PPW` points per wavelength,
     ``|p|`` scaled by the engine's discretisation error on the calibration shell
-    (:func:`grid_correction`; the caps share its faces, radii 30 and 36.5 mm about the focus, and
-    its path through water, which that error comes from), the factor recorded as
-    ``grid_factor``. ValueError when it is not stored."""
+    (:func:`grid_correction`), the factor recorded as ``grid_factor``. That the factor carries over
+    is an assumption: the caps share the shell's outer and inner faces (radii 30 and 36.5 mm about
+    the focus) and its path through water, but add the diploë's two faces and lose most of the
+    focus to it. ValueError when it is not stored."""
     stored = references() if stored is None else stored
     runs = stored.get(name, {})
     if REFERENCE_PPW not in runs:

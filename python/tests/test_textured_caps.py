@@ -54,14 +54,17 @@ def _axis_hu(hu, affine, radii_mm):
     """HU on the axis at the given radii about the focus (towards the bowl)."""
     n = hu.shape[0]
     z0, h = affine[2, 3], affine[2, 2]
-    return [float(hu[n // 2, n // 2, int(round((tc.CENTRE_MM - r - z0) / h))]) for r in radii_mm]
+    k = [int(round((tc.CENTRE_MM - r - z0) / h)) for r in radii_mm]
+    assert all(0 <= i < hu.shape[2] for i in k), k  # no index from the far end
+    return [float(hu[n // 2, n // 2, i]) for i in k]
 
 
 def test_the_cap_has_its_layers_and_the_diploe_its_porosity():
     hu, affine = tc.hounsfield(tc.case("cap_uniform"))
     # The odd box puts a voxel column on the axis: water, inner cortical, diploë, outer cortical, water.
     assert hu.shape[0] % 2 == 1
-    assert _axis_hu(hu, affine, [29.5, 30.5, 33.0, 35.75, 37.5]) == [-1000.0, 2000.0, 1000.0, 2000.0, -1000.0]
+    # (the CT starts 0.5 mm outside the cap: its first voxels are water)
+    assert _axis_hu(hu, affine, [29.5, 30.5, 33.0, 35.75, 36.9]) == [-1000.0, 2000.0, 1000.0, 2000.0, -1000.0]
     hu, affine = tc.hounsfield(tc.case("cap_texture1"))
     n = hu.shape[0]
     x = (np.arange(n) - 0.5 * (n - 1)) * tc.VOXEL_MM
@@ -92,7 +95,7 @@ def march_of_cap():
         return sim.field(volume=True)
 
 
-def test_the_comparison_of_the_march_with_itself_is_exact_and_with_a_louder_reference_fails(march_of_cap):
+def test_the_comparison_of_the_march_with_itself_is_exact_and_each_metric_beyond_its_tolerance_fails(march_of_cap):
     ref = {"case": "cap_texture3", "solid": None, "fdtd": vf.stored_parts(march_of_cap),
            "engine": {"engine": "the march itself", "engine_version": "-", "voxel_mm": 0.7}}
     r = vf.compare("cap_texture3", ref)
@@ -188,7 +191,7 @@ def test_each_stored_reference_was_made_on_the_ct_written_today():
         shell = next(c for c in arfi._core.validation_cases(d) if c.name == "shell").run()
     calibration = stored["shell"][6.0]
     assert calibration["exact_focal_pressure_p0"] == pytest.approx(shell.focal_pressure[1], rel=1e-6)
-    assert 0.85 < vf.grid_correction(stored) < 1.0
+    assert 1 / 1.15 < vf.grid_correction(stored) < 1.0
 
 
 def test_the_march_through_the_uniform_cap_is_the_full_wave_engines():
