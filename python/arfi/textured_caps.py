@@ -161,12 +161,11 @@ def fingerprint(hu: NDArray[np.float32]) -> str:
     return hashlib.sha256(np.ascontiguousarray(np.round(hu).astype(np.int16)).tobytes()).hexdigest()
 
 
-def write_ct(cap: TexturedCap, path: str | Path) -> Path:
-    """Writes the case's CT to ``path`` (NIfTI) and returns it."""
+def write_ct(cap: TexturedCap, path: str | Path) -> str:
+    """Writes the case's CT to ``path`` (NIfTI) and returns its :func:`fingerprint`."""
     hu, affine = hounsfield(cap)
-    p = Path(path)
-    save_nifti(p, hu, affine, f"arfi: {cap.name} (HU)")
-    return p
+    save_nifti(Path(path), hu, affine, f"arfi: {cap.name} (HU)")
+    return fingerprint(hu)
 
 
 def scenario_toml(cap: TexturedCap, ct_file: str, solid: bool = True) -> str:

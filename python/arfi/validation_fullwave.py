@@ -226,23 +226,19 @@ def compare_fields(field: Any, ref: dict[str, Any]) -> dict[str, Any]:
 
 
 def compare(name: str, row: dict[str, Any] | None = None) -> FullWaveResult:
-    """The march on the case ``name``'s default grid against its :func:`reference` (or ``row``, a
-    row of the stored file). ValueError when there is none, or when it was made on another CT
+    """The march on the case ``name``'s default grid against its :func:`reference` (or ``row``, as
+    :func:`reference` gives it). ValueError when there is none, or when it was made on another CT
     than the one written now."""
     import arfi
 
     cap = textured_caps.case(name)
     ref = row if row is not None else reference(name)
     t0 = time.perf_counter()
-    hu, affine = textured_caps.hounsfield(cap)
-    stored = ref.get("ct_sha256")
-    if stored is not None and stored != textured_caps.fingerprint(hu):
-        raise ValueError(f"{name}: the stored full-wave reference was made on another CT than the one written now "
-                         "(re-run benches/fullwave/caps_fdtd.py)")
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as d:
-        from arfi.io import save_nifti
-
-        save_nifti(Path(d) / "cap.nii", hu, affine, f"arfi: {cap.name} (HU)")
+        written = textured_caps.write_ct(cap, Path(d) / "cap.nii")
+        if ref.get("ct_sha256") not in (None, written):
+            raise ValueError(f"{name}: the stored full-wave reference was made on another CT than the one written now "
+                             "(re-run benches/fullwave/caps_fdtd.py)")
         toml = textured_caps.scenario_toml(cap, "cap.nii", solid=ref.get("solid") is not None)
         sim = arfi.Simulation(arfi.Scenario.from_toml(toml, base_dir=d))
         march = sim.field(volume=True)

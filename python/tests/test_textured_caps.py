@@ -208,3 +208,10 @@ def test_the_grid_correction_is_the_exact_over_the_engine_on_the_calibration_she
     assert vf.grid_correction(stored) == pytest.approx(8.72 / 9.5, rel=1e-12)
     with pytest.raises(ValueError, match="calibration case shell"):
         vf.grid_correction({"shell": {8.0: stored["shell"][6.0]}})
+
+
+def test_a_reference_made_on_another_ct_is_refused():
+    row = vf.reference("cap_uniform")
+    row["ct_sha256"] = "0" * 64
+    with pytest.raises(ValueError, match="made on another CT"):
+        vf.compare("cap_uniform", row)
