@@ -3,7 +3,8 @@
 //! solution through the fluid plate, and the exact solid plate (shear 1500 m/s) beside it.
 //!
 //! `cargo run --release -p has-core --example tilted_plate [-- 10 20 step=0.25]` (angles in
-//! degrees; `step=` the march's step in mm instead of the default grid's)
+//! degrees; `step=` the march's step in mm instead of the default grid's; `interfaces=` and
+//! `screen=` as in a scenario's `[grid]`)
 
 use has_core::reference::oblique::ObliqueBowl;
 use has_core::validation::{compare, tilted_plate, Exact};
@@ -19,6 +20,8 @@ fn main() -> has_core::Result<()> {
     for &t in &angles {
         let mut case = tilted_plate(&dir, t, None)?;
         case.scenario.grid.step_mm = step_mm;
+        case.scenario.grid.interfaces = args.iter().find_map(|a| a.strip_prefix("interfaces=").map(String::from));
+        case.scenario.grid.screen = args.iter().find_map(|a| a.strip_prefix("screen=").map(String::from));
         let c = compare(&case)?;
         let solid = match tilted_plate(&dir, t, Some(1500.0))?.exact()? {
             Exact::Oblique(s) => s,

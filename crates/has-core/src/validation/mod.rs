@@ -34,9 +34,9 @@ pub struct Tolerances {
 
 impl Tolerances {
     /// A plate read from a CT and tilted against the march's planes: the march's measured
-    /// accuracy there (at most 13 % focal pressure, 2.4 mm, 23 % axial profile, correlation
-    /// 0.971 on the default grid; the untilted CT plate's slabs of bone and water are the worst
-    /// of it), rounded up so that the install check holds what is known and fails on what is
+    /// accuracy there (at most 8.3 % focal pressure, 2.4 mm, 23 % axial profile, correlation
+    /// 0.986 on the default grid, all from the untilted CT plate's slabs of bone and water; tilted
+    /// 10-30°, -11 to +6 % for steps of 0.25-0.9 mm), rounded up so that the install check holds what is known and fails on what is
     /// worse. Not a planning tool's target: read in-situ pressures through bone met obliquely as
     /// uncertain by that much.
     pub const OBLIQUE: Tolerances =

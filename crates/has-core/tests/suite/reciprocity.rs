@@ -163,6 +163,7 @@ fn transposed_march_passes_the_dot_product_test_through_an_oblique_wall() {
     let walls = plan.oblique_walls();
     eprintln!("tilted plate: {walls} interfaces with oblique walls, reverberation {:?}", plan.reverberation());
     assert!(walls >= 5, "{walls} interfaces with oblique walls: the test needs them");
+    assert!(plan.split_steps() >= 5, "{} steps with two reference media: the test needs them", plan.split_steps());
     dot_test("tilted plate", &tilted(), InterfaceModel::Angular, &[10, 24, 30, 50]);
 }
 

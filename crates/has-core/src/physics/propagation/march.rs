@@ -35,8 +35,9 @@ pub(super) trait Operators<T: Real>: Sync {
     fn fft(&self) -> &Fft2<T>;
     /// The interface at plane `n`, if any.
     fn interface(&self, n: usize) -> Option<&Interface<T>>;
-    /// The propagator and the screen of the step through slab `s` (plane `s` to `s + 1`).
-    fn step(&self, s: usize) -> (&[Complex<T>], &[Complex<T>]);
+    /// The propagator and the screen of the step through slab `s` (plane `s` to `s + 1`), and
+    /// those of its second reference medium where it has one.
+    fn step(&self, s: usize) -> StepOperators<'_, T>;
     /// The properties of the slab the beam crossed to reach plane `n`.
     fn slab(&self, n: usize) -> &SliceProperties;
     /// The medium the source radiates from (half a step before plane 0).
@@ -64,9 +65,8 @@ impl Operators<f64> for HasPlan {
     fn interface(&self, n: usize) -> Option<&Interface<f64>> {
         self.steps.get(n)?.interface.as_deref()
     }
-    fn step(&self, s: usize) -> (&[C64], &[C64]) {
-        let st = &self.steps[s];
-        (&st.propagator, &st.screen)
+    fn step(&self, s: usize) -> StepOperators<'_, f64> {
+        self.steps[s].operators()
     }
     fn slab(&self, n: usize) -> &SliceProperties {
         self.slab_properties(n)
@@ -436,6 +436,37 @@ pub(super) fn cross<T: Real>(
     keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| if sign < 0.0 { -r } else { r })))
 }
 
+/// A step's propagator and screen, and its second reference medium's (`references.rs`).
+pub(super) type StepOperators<'a, T> = ((&'a [Complex<T>], &'a [Complex<T>]), Option<(&'a [Complex<T>], &'a [Complex<T>])>);
+
+/// One step, `field ← S·IFFT(P·FFT(field))`, plus `S₂·IFFT(P₂·FFT(field))` where the slab has a
+/// second reference medium (`work` then holds that part); `transposed`: the step's transpose,
+/// the screens applied first.
+pub(super) fn step<T: Real>(
+    fft: &Fft2<T>,
+    field: &mut [Complex<T>],
+    (ws, work): (&mut FftWorkspace<T>, &mut Vec<Complex<T>>),
+    ((propagator, screen), second): StepOperators<'_, T>,
+    transposed: bool,
+) {
+    let apply = |f: &mut [Complex<T>], ws: &mut FftWorkspace<T>, p: &[Complex<T>], s: &[Complex<T>]| {
+        if transposed {
+            fft.filter(f, ws, Some(s), p, None);
+        } else {
+            fft.filter(f, ws, None, p, Some(s));
+        }
+    };
+    if let Some((p2, s2)) = second {
+        work.clear();
+        work.extend_from_slice(field);
+        apply(work, ws, p2, s2);
+        apply(field, ws, propagator, screen);
+        each_pair(ws.is_parallel(), field, work, |f, &w| *f += w);
+    } else {
+        apply(field, ws, propagator, screen);
+    }
+}
+
 /// Waves starting at given planes, in increasing plane order.
 type Sources<T> = Vec<(usize, Wave<T>)>;
 
@@ -461,8 +492,7 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
 
     /// Propagates `field` through slab `s` (from plane `s` to `s + 1`, or back).
     fn step(&mut self, s: usize, field: &mut [Complex<T>]) {
-        let (propagator, screen) = self.ops.step(s);
-        self.ops.fft().filter(field, &mut self.ws, None, propagator, Some(screen));
+        step(self.ops.fft(), field, (&mut self.ws, &mut self.work), self.ops.step(s), false);
     }
 
     /// Forward sweep from plane `from` to plane `to`. With `entering`, `field` is the incident

@@ -36,6 +36,7 @@ mod march;
 mod oblique;
 mod operators;
 mod point;
+mod references;
 mod risers;
 mod single;
 mod transpose;
@@ -54,6 +55,7 @@ use crate::physics::medium::{Medium, SliceProperties};
 use interface::{Around, Coefficients, Interface};
 use num_complex::Complex64 as C64;
 use operators::{oblique_toward, propagator, screen, sponge_map, step_screen, Refraction};
+use references::References;
 use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -143,6 +145,24 @@ struct Step {
     wall_normal: Option<[f64; 3]>,
     mean_wavenumber: f64,
     mean_attenuation: f64,
+    /// Where a planar oblique wall crosses the slab, its two reference media (`references.rs`):
+    /// `propagator` and `screen` are the first's, this the second's propagator and screen.
+    split: Option<Split>,
+}
+
+/// The second reference medium of a step through a slab an oblique wall crosses.
+#[derive(Clone)]
+struct Split {
+    references: References,
+    propagator: Arc<Vec<C64>>,
+    screen: Arc<Vec<C64>>,
+}
+
+impl Step {
+    /// Its propagator and screen, and those of its second reference medium if it has one.
+    fn operators(&self) -> march::StepOperators<'_, f64> {
+        ((&self.propagator, &self.screen), self.split.as_ref().map(|s| (&s.propagator[..], &s.screen[..])))
+    }
 }
 
 /// The planes bounding the reverberation, and the round trips added.
@@ -271,10 +291,27 @@ impl HasPlan {
             }
             let props = &plan.slabs[slab];
             let wall_normal = interface.as_ref().and_then(|i| i.wall_normal());
-            let (k_mean, a_mean) = mean_wavenumber(&field, props, omega, quantum);
+            // A slab an oblique wall crosses (the wall's plane, or the same slab again after it)
+            // takes two reference media.
+            let crossed = wall_normal.is_some() || (interface.is_none() && plan.steps.last().is_some_and(|s| s.split.is_some()));
+            let references = if crossed { References::of(&field, props, omega, quantum) } else { None };
+            let (k_mean, a_mean) = match references {
+                Some(r) => r.0[0],
+                None => mean_wavenumber(&field, props, omega, quantum),
+            };
+            let mut cached = |(k, a): (f64, f64)| {
+                propagator_cache.entry([k.to_bits(), a.to_bits()]).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k, a))).clone()
+            };
+            let propagator = cached((k_mean, a_mean));
+            let split = references.map(|r| Split {
+                references: r,
+                propagator: cached(r.0[1]),
+                screen: Arc::new(r.screen(1, props, &sponge, omega, grid.dz)),
+            });
             let bits = [k_mean.to_bits(), a_mean.to_bits()];
-            let propagator = propagator_cache.entry(bits).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k_mean, a_mean))).clone();
-            let screen = if oblique_toward(options.screen, props).is_some() {
+            let screen = if let Some(r) = references {
+                Arc::new(r.screen(0, props, &sponge, omega, grid.dz))
+            } else if oblique_toward(options.screen, props).is_some() {
                 let wall = wall_normal.map(|normal| Refraction { normal, source: &plan.source_medium });
                 Arc::new(step_screen(grid, props, &sponge, omega, (k_mean, a_mean), options.screen, step, grid.dz, wall))
             } else {
@@ -283,8 +320,8 @@ impl HasPlan {
                     .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
                     .clone()
             };
-            let s = Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean };
-            plan.fft.filter(&mut field, &mut ws, None, &s.propagator, Some(&s.screen));
+            let s = Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean, split };
+            march::step(&plan.fft, &mut field, (&mut ws, &mut work), s.operators(), false);
             plan.steps.push(s);
         }
         let last = grid.nz - 1;
@@ -332,7 +369,8 @@ impl HasPlan {
         }
     }
 
-    /// The mean wavenumber `k̄` (rad/m) used for the slab after each plane.
+    /// The mean wavenumber `k̄` (rad/m) used for the slab after each plane (the first reference's
+    /// where an oblique wall's slab takes two, see [`HasPlan::split_steps`]).
     pub fn mean_wavenumbers(&self) -> Vec<f64> {
         self.steps.iter().map(|s| s.mean_wavenumber).collect()
     }
@@ -393,6 +431,12 @@ impl HasPlan {
             .par_iter()
             .map(|s| self.kept_recording(s, spec).unwrap_or_else(|| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0))
             .collect())
+    }
+
+    /// How many steps propagate two reference media (`references.rs`): the slabs that planar
+    /// walls oblique to the planes cross.
+    pub fn split_steps(&self) -> usize {
+        self.steps.iter().filter(|s| s.split.is_some()).count()
     }
 
     /// How many of the plan's interfaces give a planar wall oblique to the planes its own

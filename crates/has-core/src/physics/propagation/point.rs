@@ -7,8 +7,9 @@
 //! next plane stepped back by `δz = z - z_next < 0` through the slab between them, the inverse of
 //! a HAS step: `p(z) = IFFT·H(δz)·FFT·(S(δz)·p_next)` with the step's own propagator `H` and
 //! screen `S` (the oblique screen with the step's directions) evaluated for `δz` (evanescent
-//! components left out). The next plane's field is recorded before its interface, so no interface
-//! lies between. On a grid point the weights are that point's alone. Both act on the marched
+//! components left out); a step with two reference media (`references.rs`) steps each part back
+//! through its own medium and adds them. The next plane's field is recorded before its
+//! interface, so no interface lies between. On a grid point the weights are that point's alone. Both act on the marched
 //! field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]), the band-limited one, so the weights on
 //! the recorded pressure carry `c/C_ij`: `C = sqrt(Z/Z_s)` of the slab before the plane, `c` at
 //! the point's nearest pixel (1 where the slab's impedance is the source's).
@@ -48,13 +49,28 @@ impl HasPlan {
         let dz = point[2] - g.z(next);
         let step = &self.steps[next - 1];
         let omega = 2.0 * PI * self.frequency;
-        let back = propagator(g, dz, step.mean_wavenumber, step.mean_attenuation);
-        let mean = (step.mean_wavenumber, step.mean_attenuation);
-        let wall = step.wall_normal.map(|normal| Refraction { normal, source: &self.source_medium });
-        let back_screen =
-            step_screen(g, &self.slabs[step.slab], &sponge_map(g, &self.options), omega, mean, self.options.screen, next - 1, dz, wall);
+        let (props, sponge) = (&self.slabs[step.slab], sponge_map(g, &self.options));
         let mut ws = self.fft.workspace(true);
-        self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
+        match &step.split {
+            // Each reference medium's part stepped back through its own medium.
+            Some(split) => {
+                let r = split.references;
+                let mut second = w.clone();
+                let parts = [(0, &mut w), (1, &mut second)];
+                for (i, part) in parts {
+                    let (k, a) = r.0[i];
+                    self.fft.filter(part, &mut ws, None, &propagator(g, dz, k, a), Some(&r.screen(i, props, &sponge, omega, dz)));
+                }
+                w.iter_mut().zip(&second).for_each(|(w, s)| *w += s);
+            }
+            None => {
+                let back = propagator(g, dz, step.mean_wavenumber, step.mean_attenuation);
+                let mean = (step.mean_wavenumber, step.mean_attenuation);
+                let wall = step.wall_normal.map(|normal| Refraction { normal, source: &self.source_medium });
+                let back_screen = step_screen(g, props, &sponge, omega, mean, self.options.screen, next - 1, dz, wall);
+                self.fft.filter(&mut w, &mut ws, None, &back, Some(&back_screen));
+            }
+        }
         self.to_pressure_weights(next, point, &mut w);
         Some((next, w))
     }

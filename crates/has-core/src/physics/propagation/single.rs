@@ -8,7 +8,7 @@
 //! (tested against the double-precision march), far below any MR image's noise.
 
 use super::interface::Interface;
-use super::march::{march, Operators, RoundTrips, Window};
+use super::march::{march, Operators, RoundTrips, StepOperators, Window};
 use super::{HasPlan, RecordSpec, Zone};
 use crate::physics::fft::Fft2;
 use crate::physics::grid::Grid;
@@ -28,6 +28,8 @@ struct SingleStep {
     interface: Option<Arc<Interface<f32>>>,
     propagator: Arc<Vec<C32>>,
     screen: Arc<Vec<C32>>,
+    /// The second reference medium's propagator and screen (`references.rs`).
+    split: Option<[Arc<Vec<C32>>; 2]>,
 }
 
 /// `v` rounded to single precision.
@@ -53,6 +55,7 @@ impl HasPlan {
                     .map(|i| interfaces.entry(Arc::as_ptr(i) as usize).or_insert_with(|| Arc::new(i.single(&mut copy))).clone()),
                 propagator: copy(&s.propagator),
                 screen: copy(&s.screen),
+                split: s.split.as_ref().map(|p| [copy(&p.propagator), copy(&p.screen)]),
             })
             .collect();
         Some(SinglePlan { plan: self.clone(), fft: Fft2::new(self.grid.nx, self.grid.ny), steps })
@@ -66,7 +69,10 @@ impl HasPlan {
         let steps = self.steps_to(last)?;
         let arrays: std::collections::HashSet<usize> = steps
             .iter()
-            .flat_map(|s| [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize])
+            .flat_map(|s| {
+                let split = s.split.as_ref().map(|p| [Arc::as_ptr(&p.propagator) as usize, Arc::as_ptr(&p.screen) as usize]);
+                [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize].into_iter().chain(split.into_iter().flatten())
+            })
             .chain(steps.iter().filter_map(|s| s.interface.as_deref()).flat_map(Interface::planes))
             .collect();
         Some((arrays.len() * self.grid.lateral_len()) as u64 * 8)
@@ -94,9 +100,9 @@ impl Operators<f32> for SinglePlan {
     fn interface(&self, n: usize) -> Option<&Interface<f32>> {
         self.steps.get(n)?.interface.as_deref()
     }
-    fn step(&self, s: usize) -> (&[C32], &[C32]) {
+    fn step(&self, s: usize) -> StepOperators<'_, f32> {
         let st = &self.steps[s];
-        (&st.propagator, &st.screen)
+        ((&st.propagator, &st.screen), st.split.as_ref().map(|[p, q]| (&p[..], &q[..])))
     }
     fn slab(&self, n: usize) -> &SliceProperties {
         self.plan.slab_properties(n)

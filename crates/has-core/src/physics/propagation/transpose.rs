@@ -74,8 +74,7 @@ impl<'a> Transposer<'a> {
 
     /// The transpose of stepping through slab `s`: screen first, then the propagator.
     fn step(&mut self, s: usize, adjoint: &mut [C64]) {
-        let st = &self.plan.steps[s];
-        self.plan.fft.filter(adjoint, &mut self.ws, Some(&st.screen), &st.propagator, None);
+        super::march::step(&self.plan.fft, adjoint, (&mut self.ws, &mut self.work), self.plan.steps[s].operators(), true);
     }
 
     /// The transpose of crossing plane `n` in direction `sign` (`f ← S·(f + sign·R·f)`, the
