@@ -9,10 +9,11 @@
 //! screen `S` (the oblique screen with the step's directions) evaluated for `δz` (evanescent
 //! components left out); a step with two reference media (`references.rs`) steps each part back
 //! through its own medium and adds them. The next plane's field is recorded before its
-//! interface, so no interface lies between. On a grid point the weights are that point's alone. Both act on the marched
-//! field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]), the band-limited one, so the weights on
-//! the recorded pressure carry `c/C_ij`: `C = sqrt(Z/Z_s)` of the slab before the plane, `c` at
-//! the point's nearest pixel (1 where the slab's impedance is the source's).
+//! interface, so no interface lies between. On a grid point the weights are that point's alone.
+//! Both act on the marched field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]), the
+//! band-limited one, so the weights on the recorded pressure carry `c/C_ij`: `C = sqrt(Z/Z_s)` of
+//! the slab before the plane, `c` at the point's nearest pixel (1 where the slab's impedance is
+//! the source's).
 
 use super::march::{pressure_scale, Operators};
 use super::operators::Refraction;
