@@ -11,7 +11,9 @@ use has_core::validation::{compare, tilted_plate, Exact};
 
 fn main() -> has_core::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let step_mm: Option<f64> = args.iter().find_map(|a| a.strip_prefix("step=").and_then(|v| v.parse().ok()));
+    // The value of the argument `name=value`, if given.
+    let arg = |name: &str| args.iter().find_map(|a| a.strip_prefix(name)?.strip_prefix('='));
+    let step_mm: Option<f64> = arg("step").and_then(|v| v.parse().ok());
     let angles: Vec<f64> = args.iter().filter_map(|a| a.parse().ok()).collect();
     let angles = if angles.is_empty() { vec![0.0, 10.0, 20.0, 30.0] } else { angles };
     let dir = std::env::temp_dir().join(format!("arfi-tilted-{}", std::process::id()));
@@ -20,8 +22,8 @@ fn main() -> has_core::Result<()> {
     for &t in &angles {
         let mut case = tilted_plate(&dir, t, None)?;
         case.scenario.grid.step_mm = step_mm;
-        case.scenario.grid.interfaces = args.iter().find_map(|a| a.strip_prefix("interfaces=").map(String::from));
-        case.scenario.grid.screen = args.iter().find_map(|a| a.strip_prefix("screen=").map(String::from));
+        case.scenario.grid.interfaces = arg("interfaces").map(String::from);
+        case.scenario.grid.screen = arg("screen").map(String::from);
         let c = compare(&case)?;
         let solid = match tilted_plate(&dir, t, Some(1500.0))?.exact()? {
             Exact::Oblique(s) => s,

@@ -36,8 +36,8 @@ impl Tolerances {
     /// A plate read from a CT and tilted against the march's planes: the march's measured
     /// accuracy there (at most 8.3 % focal pressure, 2.4 mm, 23 % axial profile, correlation
     /// 0.986 on the default grid, all from the untilted CT plate's slabs of bone and water; tilted
-    /// 10-30°, -11 to +6 % for steps of 0.25-0.9 mm), rounded up so that the install check holds what is known and fails on what is
-    /// worse. Not a planning tool's target: read in-situ pressures through bone met obliquely as
+    /// 10-30°, -11 to +6 % for steps of 0.25-0.9 mm), rounded up so that the install check holds
+    /// what is known and fails on what is worse. Not a planning tool's target: read in-situ pressures through bone met obliquely as
     /// uncertain by that much.
     pub const OBLIQUE: Tolerances =
         Tolerances { focal_pressure: 0.15, focal_position: 3e-3, axial_profile: 0.30, focal_plane_correlation: 0.95 };
