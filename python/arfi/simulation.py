@@ -170,7 +170,9 @@ class Simulation:
         coefficients of every angular-spectrum component, exact at planar interfaces, with total
         reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
         pixel), ``screen`` (``"oblique"``: each pixel's wave crosses its slab along the line to the
-        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source added) and ``reverberation``
+        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source added),
+        ``shear`` (shear waves carried through solids whose faces lie on the planes, with mode
+        conversion at each face) and ``reverberation``
         (``None``, or the z of the first and last interface between which the waves bouncing
         inside layers are added, and the round trips added)."""
         return dict(self._core.propagation)
@@ -192,15 +194,19 @@ class Simulation:
             text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
                      f"({r['round_trips']} round trips)")
         text += ", reflections towards the source added" if p["reflections"] else ""
-        if self.has_shear:
+        if p.get("shear"):
+            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions), "
+                     "with mode conversion at each face")
+        elif self.has_shear:
             text += ("; compressional waves only: the shear speeds the scenario gives are not carried by the march "
-                     "(arfi field --engine fdtd carries them)")
+                     "where a solid's faces are a CT's or a voxel map's (arfi field --engine fdtd carries them)")
         return text
 
     @property
     def has_shear(self) -> bool:
         """Whether the scenario gives a solid a shear wave (a material's ``shear_sound_speed_m_s``
-        or ``[ct] bone_shear_sound_speed_m_s`` above 0), which only the full-wave engine carries."""
+        or ``[ct] bone_shear_sound_speed_m_s`` above 0). The march carries it where the solid's faces
+        lie on its planes (``propagation["shear"]``); the full-wave engine everywhere."""
         d = self.scenario.to_dict()
         ct = d.get("ct") or {}
         return bool((ct.get("bone_shear_sound_speed_m_s") or 0) > 0

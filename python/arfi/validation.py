@@ -8,6 +8,8 @@ aperture 64 mm; Aubry et al., JASA 152(2), 2022):
 - ``bm3``: a 6.5 mm cortical plate 30 mm from the apex, and ``bm4``: the flat layered skull
   (skin, cortical, trabecular, cortical, then brain), against the angular spectrum carried
   through the layers by transfer matrices;
+- ``bm3_solid``: BM3's plate as a solid (shear 1500 m/s), which the march carries with mode
+  conversion at its faces, against the exact elastic plate;
 - ``shell`` and ``bm5``: caps of cortical bone read from CTs (0.25 mm voxels), a shell about the
   focus (normal incidence) and an ITRUSST BM5-like cap of outer radius 75 mm (oblique incidence),
   against the spherical-harmonic expansion of the bowl through a spherical shell;
@@ -43,7 +45,7 @@ TOLERANCES: dict[str, float] = dict(zip(("focal_pressure", "focal_position_mm", 
                                         _core.validation_tolerances()))
 
 #: The cases, in the order they run.
-CASES = ("water", "bm3", "bm4", "shell", "bm5", "tilt0", "tilt10", "tilt20", "tilt30") + tuple(c.name for c in CAPS)
+CASES = ("water", "bm3", "bm4", "bm3_solid", "shell", "bm5", "tilt0", "tilt10", "tilt20", "tilt30") + tuple(c.name for c in CAPS)
 
 
 def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:

@@ -55,7 +55,7 @@ def test_a_tilted_plate_is_held_to_its_own_tolerances_and_says_so(tmp_path):
 def test_an_unknown_case_or_an_out_that_is_a_file_is_one_line_and_exit_2(tmp_path):
     r = run("--case", "bm9")
     assert r.returncode == 2
-    assert r.stderr.strip() == ("arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, shell, bm5, tilt0, tilt10, "
+    assert r.stderr.strip() == ("arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, "
                                 "tilt20, tilt30, cap_uniform, cap_texture1, cap_texture3")
     (tmp_path / "file").write_text("x")
     r = run("--case", "water", "--out", str(tmp_path / "file"))

@@ -118,7 +118,8 @@ impl CoreSimulation {
         self.inner.frequency
     }
     /// How changes of medium are crossed: dict with `interfaces` ("angular" or
-    /// "normal-incidence"), `screen` ("oblique" or "vertical"), `reflections` (bool) and `reverberation` (None, or dict with
+    /// "normal-incidence"), `screen` ("oblique" or "vertical"), `reflections` (bool), `shear` (bool: the march carries
+    /// shear waves through solids whose faces lie on its planes) and `reverberation` (None, or dict with
     /// `first_interface_z_mm`, `last_interface_z_mm`, `round_trips`).
     #[getter]
     fn propagation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -127,6 +128,7 @@ impl CoreSimulation {
         d.set_item("interfaces", p.interfaces)?;
         d.set_item("screen", p.screen)?;
         d.set_item("reflections", p.reflections)?;
+        d.set_item("shear", p.shear)?;
         match p.reverberation {
             None => d.set_item("reverberation", py.None())?,
             Some((a, b, n)) => {

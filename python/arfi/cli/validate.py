@@ -31,7 +31,7 @@ def register(sub: Any) -> None:
     p.add_argument("--out", metavar="DIR", help="write DIR/report.html, DIR/validation.md, DIR/validation.json and one "
                                                 "PNG per case")
     p.add_argument("--case", action="append", dest="cases", metavar="NAME",
-                   help="run only this case (repeatable): water, bm3, bm4, shell, bm5, tilt0, tilt10, tilt20, "
+                   help="run only this case (repeatable): water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, tilt20, "
                         "tilt30, cap_uniform, cap_texture1, cap_texture3")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
     p.set_defaults(run=run)

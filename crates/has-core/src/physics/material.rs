@@ -37,8 +37,9 @@ pub struct Material {
     pub attenuation_db_cm_mhz: f64,
     /// Frequency exponent y of the power law (1 = linear).
     pub attenuation_power: f64,
-    /// Shear-wave speed c_s (m/s) of a solid; 0 for a fluid. The march carries compressional
-    /// waves only; a full-wave engine given the medium uses it.
+    /// Shear-wave speed c_s (m/s) of a solid; 0 for a fluid. The march carries the shear wave
+    /// where the solid's faces lie on its planes (`propagation/elastic.rs`); a full-wave engine
+    /// given the medium uses it everywhere.
     pub shear_sound_speed: f64,
     /// Shear-wave attenuation a0_s (dB/cm/MHz^y, the same power law as the compressional wave).
     pub shear_attenuation_db_cm_mhz: f64,
@@ -118,7 +119,7 @@ pub struct Properties {
     pub density: f64,
     /// Amplitude attenuation coefficient alpha at the frequency asked for, Np/m.
     pub attenuation: f64,
-    /// Shear-wave speed c_s, m/s (0: a fluid). Not used by the march.
+    /// Shear-wave speed c_s, m/s (0: a fluid).
     pub shear_sound_speed: f64,
     /// Shear-wave amplitude attenuation at the frequency asked for, Np/m.
     pub shear_attenuation: f64,

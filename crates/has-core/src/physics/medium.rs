@@ -446,7 +446,16 @@ impl Medium {
             ct.fill_slice(grid, z, frequency, props);
         }
         let field = |f: fn(&Properties) -> f64| map_collect(true, props, f);
-        SliceProperties { sound_speed: field(|p| p.sound_speed), density: field(|p| p.density), attenuation: field(|p| p.attenuation) }
+        let shear = props
+            .iter()
+            .any(|p| p.shear_sound_speed > 0.0)
+            .then(|| ShearMaps { sound_speed: field(|p| p.shear_sound_speed), attenuation: field(|p| p.shear_attenuation) });
+        SliceProperties {
+            sound_speed: field(|p| p.sound_speed),
+            density: field(|p| p.density),
+            attenuation: field(|p| p.attenuation),
+            shear,
+        }
     }
 
     /// Which regions' z-ranges contain `z`; two heights with equal keys have identical slices.
@@ -476,9 +485,30 @@ pub struct SliceProperties {
     pub density: Vec<f64>,
     /// Amplitude attenuation coefficient alpha at the slice's frequency, Np/m.
     pub attenuation: Vec<f64>,
+    /// The shear wave's maps where any pixel is a solid (`None`: every pixel a fluid).
+    pub shear: Option<ShearMaps>,
+}
+
+/// Shear-wave maps of one lateral slice, row-major `(ny, nx)`: 0 m/s at a fluid's pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShearMaps {
+    /// Shear-wave speed c_s, m/s.
+    pub sound_speed: Vec<f64>,
+    /// Shear-wave amplitude attenuation at the slice's frequency, Np/m.
+    pub attenuation: Vec<f64>,
 }
 
 impl SliceProperties {
+    /// A slice of fluids (no shear maps).
+    pub fn fluid(sound_speed: Vec<f64>, density: Vec<f64>, attenuation: Vec<f64>) -> Self {
+        SliceProperties { sound_speed, density, attenuation, shear: None }
+    }
+
+    /// The shear speed (m/s) at pixel `i`: 0 in a fluid.
+    pub fn shear_speed(&self, i: usize) -> f64 {
+        self.shear.as_ref().map_or(0.0, |s| s.sound_speed[i])
+    }
+
     /// Whether sound speed and attenuation are the same at every pixel.
     pub fn is_uniform(&self) -> bool {
         let same = |v: &[f64]| v.iter().all(|x| *x == v[0]);

@@ -159,8 +159,9 @@ pub struct MaterialSpec {
     #[serde(default = "d::one")]
     pub attenuation_power: f64,
     /// A solid's shear-wave speed c_s, m/s (absent or 0: a fluid); below √3/2 of
-    /// `sound_speed_m_s`. The march carries compressional waves only (it says so when a scenario
-    /// gives shear); `arfi field --engine fdtd` carries both.
+    /// `sound_speed_m_s`. The march carries the shear wave where the solid's faces lie on its
+    /// planes (material regions) and compressional waves alone through a CT's faces (it says so);
+    /// `arfi field --engine fdtd` carries both everywhere.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shear_sound_speed_m_s: Option<f64>,
     /// The shear wave's attenuation a0_s in `a0_s·(f / 1 MHz)^y` dB/cm (default 0).

@@ -102,6 +102,9 @@ pub struct Propagation {
     pub reverberation: Option<(f64, f64, usize)>,
     /// Whether waves reflected back towards the source are added.
     pub reflections: bool,
+    /// Whether the march carries shear waves (a solid's faces with other media on the planes,
+    /// see [`HasPlan::carries_shear`]).
+    pub shear: bool,
 }
 
 /// A pressure field on one plane and along the beam axis.
@@ -311,6 +314,7 @@ impl Simulation {
             screen: self.plan.options.screen.name(),
             reverberation: self.plan.reverberation().map(|(a, b, n)| (self.grid.z(a), self.grid.z(b), n)),
             reflections: self.reflections,
+            shear: self.plan.carries_shear(),
         }
     }
 

@@ -96,6 +96,9 @@ enum Geometry {
     /// A cap of cortical bone on a sphere about `(0, 0, centre)` (m) within `cap_deg` of the
     /// direction towards the bowl, water inside and out, read from the CT at `ct`.
     Shell { centre: f64, inner: f64, outer: f64, cap_deg: f64, ct: PathBuf },
+    /// A cortical plate of `thickness` (m) from `z1` (m) on the planes, a solid of shear speed
+    /// `shear` (m/s) in the scenario (a material region) and in the exact solution.
+    SolidPlate { z1: f64, thickness: f64, shear: f64 },
     /// A cortical plate of `thickness` (m) whose first face passes through `(0, 0, z1)` with its
     /// normal turned by `tilt_deg` about y, read from the CT at `ct`; a solid of shear speed
     /// `shear` (m/s) for the exact solution, or a fluid.
@@ -121,7 +124,7 @@ impl Case {
     /// Writes what the case's scenario reads (a shell's CT; layered cases read nothing).
     pub fn write_inputs(&self) -> Result<()> {
         match &self.geometry {
-            Geometry::Layered { .. } => Ok(()),
+            Geometry::Layered { .. } | Geometry::SolidPlate { .. } => Ok(()),
             &Geometry::Shell { centre, inner, outer, cap_deg, ref ct } => write_shell_ct(ct, centre, inner, outer, cap_deg),
             &Geometry::Tilted { z1, thickness, tilt_deg, ref ct, .. } => write_plate_ct(ct, z1, thickness, tilt_deg),
         }
@@ -139,6 +142,11 @@ impl Case {
             &Geometry::Shell { centre, inner, outer, .. } => {
                 let shell = Shell { centre, inner_radius: inner, outer_radius: outer, wall: CORTICAL.fluid(), interior: water };
                 Ok(Exact::Shell(ShellBowl::new(&bowl, water, shell, Passes::One, inner - 1e-3)?, centre))
+            }
+            &Geometry::SolidPlate { z1, thickness, shear } => {
+                let a = CORTICAL.fluid().k.im;
+                let plate = Plate::Solid(Solid::new(CORTICAL.1, shear, CORTICAL.2, a, a, FREQUENCY)?, thickness);
+                Ok(Exact::Oblique(ObliqueBowl::new(&bowl, water, z1, 0.0, &plate, water, OBLIQUE_REACH)?))
             }
             &Geometry::Tilted { z1, thickness, tilt_deg, shear, .. } => {
                 let plate = match shear {
@@ -187,6 +195,29 @@ fn layered(name: &str, description: &str, z1_mm: f64, layers: &[(Tissue, f64)], 
         scenario: scenario(&media, &regions, None)?,
         tolerances: Tolerances::default(),
         geometry: Geometry::Layered { z1: z1_mm * 1e-3, layers: layers.iter().map(|&(t, d)| (t, d * 1e-3)).collect(), exit },
+    })
+}
+
+/// The ITRUSST plate (BM3: 6.5 mm of cortical bone from 30 mm, on the planes) as a solid of shear
+/// speed `shear` (m/s) with the compressional wave's attenuation (4 dB/cm at 500 kHz), against
+/// the exact elastic solution ([`crate::reference::elastic`] through
+/// [`crate::reference::oblique`]).
+pub fn solid_plate(shear: f64) -> Result<Case> {
+    let (z1, d) = (30.0, 6.5);
+    let material =
+        format!("{}shear_sound_speed_m_s = {shear:.1}\nshear_attenuation_db_cm_mhz = {}\n", CORTICAL.toml(), CORTICAL.db_cm_mhz());
+    let regions = format!("[[region]]\nmaterial = \"cortical\"\nshape = \"slab\"\nz_min_mm = {z1}\nz_max_mm = {}\n", z1 + d);
+    let text = format!(
+        "name = \"ITRUSST SC1\"\nfrequency_hz = {FREQUENCY}\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = {ROC_MM}\n\
+         aperture_diameter_mm = {APERTURE_MM}\n[focus]\nposition_mm = [0.0, 0.0, {ROC_MM}]\n{}{material}[medium]\nbackground = \"water\"\n{regions}",
+        WATER.toml()
+    );
+    Ok(Case {
+        name: if shear == 1500.0 { "bm3_solid".into() } else { format!("bm3_solid_cs{shear:.0}") },
+        description: format!("cortical plate 6.5 mm thick from 30 mm (ITRUSST BM3) as a solid, shear {shear:.0} m/s"),
+        scenario: Scenario::from_toml(&text, None)?,
+        tolerances: Tolerances::default(),
+        geometry: Geometry::SolidPlate { z1: z1 * 1e-3, thickness: d * 1e-3, shear },
     })
 }
 
@@ -293,6 +324,7 @@ pub fn suite(dir: &Path) -> Result<Vec<Case>> {
             &[(SKIN, 4.0), (CORTICAL, 1.5), (TRABECULAR, 4.0), (CORTICAL, 1.0)],
             BRAIN,
         )?,
+        solid_plate(1500.0)?,
         shell(dir, "shell", "cortical shell cap from a CT, radii 30-36.5 mm about the focus (normal incidence)", ROC_MM, 30.0, 36.5, 80.0)?,
         shell(
             dir,

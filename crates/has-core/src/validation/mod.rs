@@ -11,7 +11,7 @@
 mod cases;
 mod oblique;
 
-pub use cases::{suite, thin_shells, tilted_plate, tilted_plates, Case, Exact};
+pub use cases::{solid_plate, suite, thin_shells, tilted_plate, tilted_plates, Case, Exact};
 
 use crate::error::Result;
 use crate::numeric::{parabolic_peak, pearson};

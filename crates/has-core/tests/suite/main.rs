@@ -9,6 +9,7 @@ mod common;
 mod bone;
 mod ct;
 mod diagnose;
+mod elastic_march;
 mod element_basis;
 mod estimation;
 mod focal;

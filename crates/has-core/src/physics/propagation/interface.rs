@@ -38,6 +38,7 @@
 //! trips inside a curved bone wall, whose faces snap by up to half a step, add up with phases
 //! spread over ±k·dz and the wall's reverberation is lost.
 
+use super::elastic::{filters, single_filters, ElasticPair, Filters, Side};
 use super::oblique::opposite;
 use super::walls::{walls, WallFilters, WallGroup, WallKey, Walls};
 use crate::physics::fft::{Fft2, FftWorkspace};
@@ -89,9 +90,27 @@ pub const MAX_SPECTRAL_PAIRS: usize = 8;
 /// pixel (a voxel map of continuously varying properties).
 pub const MAX_PLAN_PAIRS: usize = 64;
 
-/// Spectral coefficients shared by every interface of a plan, by material pair.
+/// At most this many bytes of a plan's spectra for faces between a solid and another medium
+/// (`elastic.rs`: 4-16 spectra per material pair, 16 bytes per grid sample each); interfaces
+/// needing more cross per pixel and convert no shear.
+pub const MAX_ELASTIC_BYTES: u64 = 512 << 20;
+
+/// The number of spectra the elastic filters of the pair at pixel `i` from `from` into `to` hold:
+/// per direction, the waves arriving times the waves leaving (SV only in a solid).
+fn spectra(from: &SliceProperties, to: &SliceProperties, i: usize) -> usize {
+    let waves = |s: &SliceProperties| if s.shear_speed(i) > 0.0 { 2 } else { 1 };
+    let (a, b) = (waves(from), waves(to));
+    a * (a + b) + b * (a + b)
+}
+
+/// Spectral coefficients shared by every interface of a plan, by material pair (fluid pairs,
+/// oblique walls, and pairs with a solid, [`super::elastic`]).
 #[derive(Default)]
-pub(crate) struct Coefficients(HashMap<(Key, Key), Arc<Vec<C64>>>, pub(super) HashMap<WallKey, WallFilters>);
+pub(crate) struct Coefficients(
+    HashMap<(Key, Key), Arc<Vec<C64>>>,
+    pub(super) HashMap<WallKey, WallFilters>,
+    HashMap<(Key, Key), Arc<Filters<f64>>>,
+);
 
 /// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one
 /// (in double precision, or single for a single-precision march).
@@ -109,6 +128,9 @@ enum Kind<T: FftNum> {
     Pointwise { pixels: Arc<Vec<u32>>, r: Vec<T>, phase: Option<Vec<Complex<T>>>, walls: Option<Walls<T>> },
     /// `Σ_pairs M_ab · IFFT(R_ab · FFT(p))`.
     Spectral(Vec<Pair<T>>),
+    /// Pairs of which at least one holds a solid: ψ and the SV field crossed together
+    /// ([`super::elastic`]).
+    Elastic(Vec<ElasticPair<T>>),
 }
 
 struct Pair<T: FftNum> {
@@ -138,14 +160,21 @@ impl Around<'_> {
 /// A pointwise interface's pixels, their coefficients `R` and their faces' factors `exp(i·φ)`.
 pub(crate) type PointwiseFaces<'a, T> = (&'a Arc<Vec<u32>>, &'a [T], Option<&'a [Complex<T>]>);
 
-/// Properties of one pixel as exact bits (equal bits: the same material).
-pub(super) type Key = [u64; 3];
+/// Properties of one pixel as exact bits (equal bits: the same material): sound speed, density,
+/// attenuation, shear speed and shear attenuation.
+pub(super) type Key = [u64; 5];
 
 /// A material pair's first pixel and all its pixels.
 type PairPixels = (usize, Vec<u32>);
 
+/// [`key`] with the shear wave's bits left 0 (a face that converts no shear).
+pub(super) fn fluid_key(s: &SliceProperties, i: usize) -> Key {
+    [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits(), 0, 0]
+}
+
 pub(super) fn key(s: &SliceProperties, i: usize) -> Key {
-    [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits()]
+    let (cs, a) = s.shear.as_ref().map_or((0.0, 0.0), |m| (m.sound_speed[i], m.attenuation[i]));
+    [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits(), cs.to_bits(), a.to_bits()]
 }
 
 impl Interface {
@@ -168,6 +197,9 @@ impl Interface {
             },
             Kind::Spectral(pairs) => Kind::Spectral(
                 pairs.iter().map(|p| Pair { scale: p.scale, pixels: p.pixels.clone(), coefficient: copy(&p.coefficient) }).collect(),
+            ),
+            Kind::Elastic(pairs) => Kind::Elastic(
+                pairs.iter().map(|p| ElasticPair { pixels: p.pixels.clone(), filters: Arc::new(single_filters(&p.filters)) }).collect(),
             ),
         };
         Interface { strength: self.strength, kind }
@@ -241,9 +273,12 @@ impl Interface {
             return made.flatten();
         }
         let mut pointwise = |shared: &mut Coefficients| made.take().unwrap_or_else(|| pointwise(shared));
+        // Faces of material regions (on planes between planar slabs) convert shear; a CT's or a
+        // voxel map's, whose treads may step across the planes, cross as between fluids.
+        let shear = around.is_none();
         let mut pairs: HashMap<(Key, Key), PairPixels> = HashMap::new();
         for i in 0..n {
-            let (a, b) = (key(from, i), key(to, i));
+            let (a, b) = if shear { (key(from, i), key(to, i)) } else { (fluid_key(from, i), fluid_key(to, i)) };
             if a != b {
                 let e = pairs.entry((a, b)).or_insert_with(|| (i, Vec::new()));
                 e.1.push(i as u32);
@@ -252,13 +287,35 @@ impl Interface {
                 return pointwise(shared);
             }
         }
-        let new_pairs = pairs.keys().filter(|k| !shared.0.contains_key(k)).count();
-        if shared.0.len() + new_pairs > MAX_PLAN_PAIRS {
+        let elastic = shear && pairs.values().any(|&(first, _)| from.shear_speed(first) > 0.0 || to.shear_speed(first) > 0.0);
+        let fresh = |k: &&(Key, Key)| !shared.0.contains_key(*k) && !shared.2.contains_key(*k);
+        if elastic {
+            // Pairs with a solid hold 4-16 spectra each (`elastic::Filters`): bounded in bytes.
+            let held: usize = shared.2.values().map(|f| f.iter().flatten().flatten().flatten().count()).sum();
+            let new: usize = pairs.iter().filter(|(k, _)| fresh(k)).map(|(_, &(first, _))| spectra(from, to, first)).sum();
+            if ((held + new) * n * 16) as u64 > MAX_ELASTIC_BYTES {
+                return pointwise(shared);
+            }
+        } else if shared.0.len() + pairs.keys().filter(fresh).count() > MAX_PLAN_PAIRS {
             return pointwise(shared);
         }
         // In order of each pair's first pixel, so the sum is the same on every run.
         let mut pairs: Vec<((Key, Key), PairPixels)> = pairs.into_iter().collect();
         pairs.sort_unstable_by_key(|p| p.1 .0);
+        if elastic {
+            let pairs = pairs
+                .into_iter()
+                .map(|(k, (first, pixels))| ElasticPair {
+                    filters: shared
+                        .2
+                        .entry(k)
+                        .or_insert_with(|| Arc::new(filters(grid, &Side::of(from, first, omega), &Side::of(to, first, omega))))
+                        .clone(),
+                    pixels: (pixels.len() < n).then_some(pixels),
+                })
+                .collect();
+            return Some(Interface { strength, kind: Kind::Elastic(pairs) });
+        }
         let pairs = pairs
             .into_iter()
             .map(|(k, (first, pixels))| Pair {
@@ -296,6 +353,11 @@ impl<T: FftNum> Interface<T> {
                 .map(|p| Arc::as_ptr(&p.coefficient) as usize)
                 .chain(pairs.iter().any(|p| p.pixels.is_some()).then_some(own))
                 .collect(),
+            Kind::Elastic(pairs) => pairs
+                .iter()
+                .flat_map(|p| p.filters.iter().flatten().flatten().flatten().map(|f| Arc::as_ptr(f) as usize))
+                .chain(pairs.iter().any(|p| p.pixels.is_some()).then_some(own))
+                .collect(),
         }
     }
 
@@ -304,7 +366,7 @@ impl<T: FftNum> Interface<T> {
     pub(crate) fn pointwise(&self) -> Option<PointwiseFaces<'_, T>> {
         match &self.kind {
             Kind::Pointwise { pixels, r, phase, .. } => Some((pixels, r, phase.as_deref())),
-            Kind::Spectral(_) => None,
+            Kind::Spectral(_) | Kind::Elastic(_) => None,
         }
     }
 
@@ -312,7 +374,15 @@ impl<T: FftNum> Interface<T> {
     pub(crate) fn walls(&self) -> Option<&Walls<T>> {
         match &self.kind {
             Kind::Pointwise { walls, .. } => walls.as_ref(),
-            Kind::Spectral(_) => None,
+            Kind::Spectral(_) | Kind::Elastic(_) => None,
+        }
+    }
+
+    /// The pairs of an interface where a solid meets another medium on a plane, if it is one.
+    pub(crate) fn elastic(&self) -> Option<&[ElasticPair<T>]> {
+        match &self.kind {
+            Kind::Elastic(pairs) => Some(pairs),
+            _ => None,
         }
     }
 
@@ -331,19 +401,37 @@ impl<T: FftNum> Interface<T> {
             // treads' coefficients.
             Kind::Pointwise { pixels, r, .. } => scale_pixels(pixels, r, p, out),
             Kind::Spectral(pairs) => {
-                work.copy_from_slice(p);
-                fft.forward(work, ws);
-                let spectrum = ws.spectrum.clone();
-                out.fill(Complex::new(T::zero(), T::zero()));
-                for pair in pairs {
-                    ws.spectrum.iter_mut().zip(&spectrum).zip(pair.coefficient.iter()).for_each(|((s, a), r)| *s = a * r);
-                    fft.inverse(ws, work);
-                    match &pair.pixels {
-                        None => out.iter_mut().zip(work.iter()).for_each(|(o, w)| *o = *o + w),
-                        Some(px) => px.iter().for_each(|&i| out[i as usize] = out[i as usize] + work[i as usize]),
-                    }
-                }
+                let pairs = pairs.iter().map(|p| (&p.pixels, &p.coefficient[..]));
+                filter_pairs(fft, pairs, p, out, work, ws);
             }
+            // The P wave's reflection alone (the march crosses these faces in `elastic::cross`).
+            Kind::Elastic(pairs) => {
+                let pairs = pairs.iter().filter_map(|p| p.filters[0][2][0].as_ref().map(|f| (&p.pixels, &f[..])));
+                filter_pairs(fft, pairs, p, out, work, ws);
+            }
+        }
+    }
+}
+
+/// `out ← Σ_pairs M · IFFT(f · FFT(p))` over `(pixels, filter)` pairs (`None`: every pixel).
+fn filter_pairs<'a, T: FftNum>(
+    fft: &Fft2<T>,
+    pairs: impl Iterator<Item = (&'a Option<Vec<u32>>, &'a [Complex<T>])>,
+    p: &[Complex<T>],
+    out: &mut [Complex<T>],
+    work: &mut [Complex<T>],
+    ws: &mut FftWorkspace<T>,
+) {
+    work.copy_from_slice(p);
+    fft.forward(work, ws);
+    let spectrum = ws.spectrum.clone();
+    out.fill(Complex::new(T::zero(), T::zero()));
+    for (pixels, coefficient) in pairs {
+        ws.spectrum.iter_mut().zip(&spectrum).zip(coefficient.iter()).for_each(|((s, a), r)| *s = a * r);
+        fft.inverse(ws, work);
+        match pixels {
+            None => out.iter_mut().zip(work.iter()).for_each(|(o, w)| *o = *o + w),
+            Some(px) => px.iter().for_each(|&i| out[i as usize] = out[i as usize] + work[i as usize]),
         }
     }
 }
@@ -373,6 +461,8 @@ impl<T: FftNum + Into<f64>> Interface<T> {
                     }
                 }
             }
+            // Its filters transmit the flux-normalised fields themselves.
+            Kind::Elastic(_) => {}
         }
     }
 }
@@ -440,6 +530,8 @@ impl Interface {
                     pixels.iter().zip(phase).for_each(|(&i, &f)| out[i as usize] *= if sign < 0.0 { 1.0 / f } else { f });
                 }
             }
+            // No transposed march carries shear (`HasPlan::transposed` refuses it).
+            Kind::Elastic(_) => out.fill(C64::new(0.0, 0.0)),
             Kind::Spectral(pairs) => {
                 let mut sum = vec![C64::new(0.0, 0.0); p.len()];
                 for pair in pairs {
@@ -587,6 +679,7 @@ mod tests {
                 sound_speed: vec![c],
                 density: vec![centre.0 * centre.1 / c],
                 attenuation: vec![bone_part * bone.2 + (1.0 - bone_part) * water.2],
+                shear: None,
             }
         })
     }
@@ -627,6 +720,7 @@ mod tests {
                 sound_speed: vec![1500.0 + 300.0 * k as f64],
                 density: vec![1000.0 + 200.0 * k as f64],
                 attenuation: vec![0.0],
+                shear: None,
             })
             .collect();
         assert!(!is_wall([&ramp[0], &ramp[1], &ramp[2], &ramp[3]], 0));

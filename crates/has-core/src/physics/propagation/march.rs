@@ -42,6 +42,10 @@ pub(super) trait Operators<T: Real>: Sync {
     fn slab(&self, n: usize) -> &SliceProperties;
     /// The medium the source radiates from (half a step before plane 0).
     fn source_medium(&self) -> &SliceProperties;
+    /// The length of a marched field: a plane, or `[ψ | s]` where the plan carries shear.
+    fn field_len(&self) -> usize {
+        self.grid().lateral_len()
+    }
     /// The medium on the side of plane `n` its recording is taken on (the source's on plane 0).
     fn before(&self, n: usize) -> &SliceProperties {
         if n == 0 {
@@ -74,6 +78,9 @@ impl Operators<f64> for HasPlan {
     fn source_medium(&self) -> &SliceProperties {
         &self.source_medium
     }
+    fn field_len(&self) -> usize {
+        HasPlan::field_len(self)
+    }
 }
 
 /// `v` in double precision.
@@ -82,7 +89,7 @@ fn double<T: Real>(v: Complex<T>) -> C64 {
 }
 
 /// A zero of `Complex<T>`.
-fn zero<T: Real>() -> Complex<T> {
+pub(super) fn zero<T: Real>() -> Complex<T> {
     Complex::new(T::zero(), T::zero())
 }
 
@@ -103,7 +110,7 @@ pub struct RecordSpec {
     /// while marching (the complex sum), 4 after, where `window` takes 16.
     pub magnitude: Option<Window>,
     /// Keep the power `∫ |p|² / (2·Z) dA` (W) of the forward wave through every plane (inside a
-    /// reverberating layer: of its first pass).
+    /// reverberating layer: of its first pass; inside a solid: of its compressional wave).
     pub power: bool,
     /// Add the waves reflected back towards the source at changes of impedance (single
     /// reflections, plus what leaves a reverberating layer backwards). The forward march then
@@ -388,6 +395,12 @@ pub(super) fn cross<T: Real>(
     (reflected, work): (&mut Vec<Complex<T>>, &mut Vec<Complex<T>>),
     ws: &mut FftWorkspace<T>,
 ) -> Option<Wave<T>> {
+    if let Some(pairs) = interface.elastic() {
+        return super::elastic::cross(pairs, fft, field, sign, keep, work, ws);
+    }
+    // Where the march carries shear, a face that converts none crosses ψ alone; the SV field
+    // passes, and the next slab's screen clears it from pixels that are no longer solid.
+    let field = &mut field[..fft.nx * fft.ny];
     if let Some((pixels, r, phase)) = interface.pointwise() {
         // Oblique walls' treads take their walls' filters, from the field before the crossing.
         let walls = interface.walls().map(|w| {
@@ -436,19 +449,25 @@ pub(super) fn cross<T: Real>(
     keep.then(|| Wave::Dense(map_collect(parallel, reflected, |&r| if sign < 0.0 { -r } else { r })))
 }
 
-/// A step's propagator and screen, and its second reference medium's (`references.rs`).
-pub(super) type StepOperators<'a, T> = ((&'a [Complex<T>], &'a [Complex<T>]), Option<(&'a [Complex<T>], &'a [Complex<T>])>);
+/// A propagator and a screen.
+type Filter<'a, T> = (&'a [Complex<T>], &'a [Complex<T>]);
 
-/// One step, `field ← S·IFFT(P·FFT(field))`, plus `S₂·IFFT(P₂·FFT(field))` where the slab has a
-/// second reference medium (`work` then holds that part); `transposed`: the step's transpose,
-/// the screens applied first.
+/// A step's propagator and screen, its second reference medium's (`references.rs`), and the SV
+/// field's (`elastic.rs`).
+pub(super) type StepOperators<'a, T> = (Filter<'a, T>, Option<Filter<'a, T>>, Option<Filter<'a, T>>);
+
+/// One step, `ψ ← S·IFFT(P·FFT(ψ))`, plus `S₂·IFFT(P₂·FFT(ψ))` where the slab has a second
+/// reference medium (`work` then holds that part); `transposed`: the step's transpose, the
+/// screens applied first. A field `[ψ | s]` steps its SV half with the shear operators, or clears
+/// it where the slab holds no solid.
 pub(super) fn step<T: Real>(
     fft: &Fft2<T>,
     field: &mut [Complex<T>],
     (ws, work): (&mut FftWorkspace<T>, &mut Vec<Complex<T>>),
-    ((propagator, screen), second): StepOperators<'_, T>,
+    ((propagator, screen), second, shear): StepOperators<'_, T>,
     transposed: bool,
 ) {
+    let (field, sv) = field.split_at_mut(fft.nx * fft.ny);
     let apply = |f: &mut [Complex<T>], ws: &mut FftWorkspace<T>, p: &[Complex<T>], s: &[Complex<T>]| {
         if transposed {
             fft.filter(f, ws, Some(s), p, None);
@@ -464,6 +483,12 @@ pub(super) fn step<T: Real>(
         each_pair(ws.is_parallel(), field, work, |f, &w| *f += w);
     } else {
         apply(field, ws, propagator, screen);
+    }
+    if !sv.is_empty() {
+        match shear {
+            Some((p, s)) => apply(sv, ws, p, s),
+            None => sv.fill(zero()),
+        }
     }
 }
 
@@ -548,8 +573,7 @@ impl<'a, T: Real, O: Operators<T>> Sweeper<'a, T, O> {
         inject: Option<(usize, &[Complex<T>])>,
         rec: &mut Recorder,
     ) -> (Vec<Complex<T>>, Sources<T>) {
-        let n = self.ops.grid().lateral_len();
-        let mut b = vec![zero(); n];
+        let mut b = vec![zero(); self.ops.field_len()];
         let mut forward = Sources::new();
         let Some(top) = sources.last().map(|s| s.0).max(inject.map(|i| i.0)) else {
             return (b, forward);
@@ -604,6 +628,7 @@ pub(super) fn march<T: Real, O: Operators<T>>(
 ) -> (Recording, usize) {
     let g = ops.grid();
     let last = spec.last_plane(g.nz);
+    field.resize(ops.field_len(), zero());
     let mut rec = Recorder::new(g, spec, last);
     let mut sweeper = Sweeper::new(ops, parallel);
     let zone = ops.zone().filter(|z| z.first <= last);
@@ -631,7 +656,7 @@ pub(super) fn march<T: Real, O: Operators<T>>(
                 RoundTrips::Fixed => (z.round_trips, None),
                 RoundTrips::UntilBelow(t) => (super::MAX_ROUND_TRIPS, Some(t * incident)),
             };
-            let mut leaving = vec![zero(); g.lateral_len()];
+            let mut leaving = vec![zero(); ops.field_len()];
             while done < cap && !inside.is_empty() {
                 // Counting, a backward sweep is kept only if its round trip is added, so
                 // that the recording equals the march with that many trips.
@@ -649,7 +674,7 @@ pub(super) fn march<T: Real, O: Operators<T>>(
                     break;
                 }
                 let start = u[0].0;
-                let mut f = vec![zero(); g.lateral_len()];
+                let mut f = vec![zero(); ops.field_len()];
                 let back = sweeper.forward(&mut f, start, z.last, false, u, &keep, false, &mut rec);
                 each_pair(parallel, &mut field, &f, |a, &b| *a += b);
                 sort(back, &mut inside);
@@ -709,7 +734,7 @@ mod tests {
     fn a_pointwise_crossing_equals_the_whole_planes_reflection() {
         let g = Grid::new(12, 10, 0.5e-3, 0.5e-3, 4, 0.5e-3, 0.0).unwrap();
         let n = g.lateral_len();
-        let water = SliceProperties { sound_speed: vec![1500.0; n], density: vec![1000.0; n], attenuation: vec![0.0; n] };
+        let water = SliceProperties::fluid(vec![1500.0; n], vec![1000.0; n], vec![0.0; n]);
         // Ten distinct bone-like pixels (more pairs than the spectral model takes), water elsewhere.
         let mut bone = water.clone();
         for (m, i) in (7..n).step_by(11).enumerate() {

@@ -31,6 +31,7 @@
 //! reflected back towards the source are added in front of the zone only when
 //! [`RecordSpec::reflections`] asks for them.
 
+mod elastic;
 mod interface;
 mod march;
 mod oblique;
@@ -148,7 +149,13 @@ struct Step {
     /// Where a planar oblique wall crosses the slab, its two reference media (`references.rs`):
     /// `propagator` and `screen` are the first's, this the second's propagator and screen.
     split: Option<Split>,
+    /// The SV field's propagator and screen through a slab that holds a solid, in a plan that
+    /// carries shear (`elastic.rs`).
+    shear: Option<Operators>,
 }
+
+/// A propagator and a screen, shared between the steps that use them.
+type Operators = (Arc<Vec<C64>>, Arc<Vec<C64>>);
 
 /// The second reference medium of a step through a slab an oblique wall crosses.
 #[derive(Clone)]
@@ -161,7 +168,11 @@ struct Split {
 impl Step {
     /// Its propagator and screen, and those of its second reference medium if it has one.
     fn operators(&self) -> march::StepOperators<'_, f64> {
-        ((&self.propagator, &self.screen), self.split.as_ref().map(|s| (&s.propagator[..], &s.screen[..])))
+        (
+            (&self.propagator, &self.screen),
+            self.split.as_ref().map(|s| (&s.propagator[..], &s.screen[..])),
+            self.shear.as_ref().map(|(p, s)| (&p[..], &s[..])),
+        )
     }
 }
 
@@ -192,6 +203,9 @@ pub struct HasPlan {
     /// The reference beam's recording of a window, kept where the build marched it through the
     /// reverberation (see [`HasPlan::propagate`]).
     kept: Option<Arc<Kept>>,
+    /// Whether its marches carry the SV field beside `ψ` (a solid meets another medium on a
+    /// plane, `elastic.rs`): fields are then `[ψ | s]`, twice a plane long.
+    shear: bool,
 }
 
 /// A recording of one source, and what it recorded.
@@ -275,11 +289,13 @@ impl HasPlan {
             steps: Vec::with_capacity(grid.nz - 1),
             zone: None,
             kept: None,
+            shear: interfaces.iter().flatten().any(|i| i.elastic().is_some()),
         };
         // March the reference one way (single transmission at each interface) to fix the means;
         // without reverberation or reflections that march is the recording asked for.
         let mut recorder = march::Recorder::new(grid, spec, spec.last_plane(grid.nz));
         let mut field = reference.to_vec();
+        field.resize(plan.field_len(), C64::new(0.0, 0.0));
         let mut ws = plan.fft.workspace(true);
         let (mut work, mut reflected) = (Vec::new(), Vec::new());
         for (step, (slab, interface)) in slab_of_step.into_iter().zip(interfaces).enumerate() {
@@ -294,11 +310,13 @@ impl HasPlan {
             // A slab an oblique wall crosses (the wall's plane, or the same slab again after it)
             // takes two reference media.
             let crossed = wall_normal.is_some() || (interface.is_none() && plan.steps.last().is_some_and(|s| s.split.is_some()));
-            let references = if crossed { References::of(&field, props, omega, quantum) } else { None };
+            let psi = &field[..n];
+            let references = if crossed { References::of(psi, props, omega, quantum) } else { None };
             let (k_mean, a_mean) = match references {
                 Some(r) => r.0[0],
-                None => mean_wavenumber(&field, props, omega, quantum),
+                None => mean_wavenumber(psi, props, omega, quantum),
             };
+            let shear_mean = props.shear.as_ref().filter(|_| plan.shear).map(|m| (m, elastic::mean_shear(psi, m, omega, quantum)));
             let mut cached = |(k, a): (f64, f64)| {
                 propagator_cache.entry([k.to_bits(), a.to_bits()]).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k, a))).clone()
             };
@@ -320,7 +338,9 @@ impl HasPlan {
                     .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
                     .clone()
             };
-            let s = Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean, split };
+            let shear = shear_mean.map(|(maps, (k, a))| (cached((k, a)), Arc::new(elastic::screen(maps, &sponge, omega, k, grid.dz))));
+            let s =
+                Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean, split, shear };
             march::step(&plan.fft, &mut field, (&mut ws, &mut work), s.operators(), false);
             plan.steps.push(s);
         }
@@ -431,6 +451,24 @@ impl HasPlan {
             .par_iter()
             .map(|s| self.kept_recording(s, spec).unwrap_or_else(|| self.march(s.clone(), spec, false, march::RoundTrips::Fixed).0))
             .collect())
+    }
+
+    /// Whether its marches carry shear: the SV wave of a solid whose faces with other media lie
+    /// on the planes (material regions), with mode conversion at those faces (`elastic.rs`).
+    /// Faces off the planes (a CT's) convert nothing.
+    pub fn carries_shear(&self) -> bool {
+        self.shear
+    }
+
+    /// How many of the plan's interfaces convert between compressional and shear waves (a
+    /// solid meeting another medium on a plane, `elastic.rs`).
+    pub fn elastic_interfaces(&self) -> usize {
+        self.steps.iter().filter(|s| s.interface.as_ref().is_some_and(|i| i.elastic().is_some())).count()
+    }
+
+    /// The length of a marched field: a plane, or two (`[ψ | s]`) where it carries shear.
+    pub(crate) fn field_len(&self) -> usize {
+        self.grid.lateral_len() * if self.shear { 2 } else { 1 }
     }
 
     /// How many steps propagate two reference media (`references.rs`): the slabs that planar

@@ -308,6 +308,7 @@ mod tests {
             sound_speed: (0..g.lateral_len()).map(|p| cell(g.x(p % g.nx), g.z(m) - 0.5 * g.dz)).collect(),
             density: vec![1000.0; g.lateral_len()],
             attenuation: vec![0.0; g.lateral_len()],
+            shear: None,
         };
         let slabs: Vec<SliceProperties> = (0..g.nz).map(slab).collect();
         let (mut checked, reach) = (0, normal_slabs(g.dz));

@@ -110,6 +110,7 @@ mod tests {
             sound_speed: (0..n).map(|p| if g.x(p % g.nx) > 0.0 { BONE } else { WATER }).collect(),
             density: vec![1000.0; n],
             attenuation: vec![0.0; n],
+            shear: None,
         }
     }
 

@@ -94,7 +94,7 @@ mod tests {
                     1.0 / (1.0 / 1500.0 + 0.1 * (direction[0] * x + direction[1] * y + direction[2] * z))
                 })
                 .collect::<Vec<f64>>();
-            SliceProperties { density: vec![1000.0; c.len()], attenuation: vec![0.0; c.len()], sound_speed: c }
+            SliceProperties { density: vec![1000.0; c.len()], attenuation: vec![0.0; c.len()], sound_speed: c, shear: None }
         };
         let (from, to) = (slab(1.25e-3), slab(1.75e-3));
         for p in [g.nx + 1, 7 * g.nx + 9, 14 * g.nx + 14] {

@@ -30,6 +30,8 @@ struct SingleStep {
     screen: Arc<Vec<C32>>,
     /// The second reference medium's propagator and screen (`references.rs`).
     split: Option<[Arc<Vec<C32>>; 2]>,
+    /// The SV field's propagator and screen (`elastic.rs`).
+    shear: Option<[Arc<Vec<C32>>; 2]>,
 }
 
 /// `v` rounded to single precision.
@@ -56,6 +58,7 @@ impl HasPlan {
                 propagator: copy(&s.propagator),
                 screen: copy(&s.screen),
                 split: s.split.as_ref().map(|p| [copy(&p.propagator), copy(&p.screen)]),
+                shear: s.shear.as_ref().map(|(p, q)| [copy(p), copy(q)]),
             })
             .collect();
         Some(SinglePlan { plan: self.clone(), fft: Fft2::new(self.grid.nx, self.grid.ny), steps })
@@ -71,7 +74,11 @@ impl HasPlan {
             .iter()
             .flat_map(|s| {
                 let split = s.split.as_ref().map(|p| [Arc::as_ptr(&p.propagator) as usize, Arc::as_ptr(&p.screen) as usize]);
-                [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize].into_iter().chain(split.into_iter().flatten())
+                let shear = s.shear.as_ref().map(|(p, q)| [Arc::as_ptr(p) as usize, Arc::as_ptr(q) as usize]);
+                [Arc::as_ptr(&s.propagator) as usize, Arc::as_ptr(&s.screen) as usize]
+                    .into_iter()
+                    .chain(split.into_iter().flatten())
+                    .chain(shear.into_iter().flatten())
             })
             .chain(steps.iter().filter_map(|s| s.interface.as_deref()).flat_map(Interface::planes))
             .collect();
@@ -102,13 +109,19 @@ impl Operators<f32> for SinglePlan {
     }
     fn step(&self, s: usize) -> StepOperators<'_, f32> {
         let st = &self.steps[s];
-        ((&st.propagator, &st.screen), st.split.as_ref().map(|[p, q]| (&p[..], &q[..])))
+        fn pair(f: &[Arc<Vec<C32>>; 2]) -> (&[C32], &[C32]) {
+            (&f[0], &f[1])
+        }
+        ((&st.propagator, &st.screen), st.split.as_ref().map(pair), st.shear.as_ref().map(pair))
     }
     fn slab(&self, n: usize) -> &SliceProperties {
         self.plan.slab_properties(n)
     }
     fn source_medium(&self) -> &SliceProperties {
         &self.plan.source_medium
+    }
+    fn field_len(&self) -> usize {
+        self.plan.field_len()
     }
 }
 

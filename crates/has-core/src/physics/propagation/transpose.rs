@@ -209,6 +209,13 @@ impl HasPlan {
         if weights.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()) {
             return Err(HasError::invalid("weights", "contains NaN or infinite values"));
         }
+        if self.shear {
+            return Err(HasError::invalid(
+                "medium",
+                "the transposed march (each element's response by reciprocity) does not carry shear: \
+                 give the solid no shear speed, or march each element forward",
+            ));
+        }
         let mut out = Vec::new();
         super::march::in_pool(|| out = self.transposed_here(plane, weights, reflections));
         Ok(out)

@@ -2,7 +2,7 @@
 //! one (a material pair whose treads' fitted normals on the plane agree), their shared filters
 //! (`oblique.rs`), and the crossing through them.
 
-use super::interface::{key, medium_at, Around, Coefficients, Key};
+use super::interface::{fluid_key, medium_at, Around, Coefficients, Key};
 use super::oblique::{bin_centre, bin_of, wall_filters, wall_normals, NormalBin};
 use crate::numeric::unit;
 use crate::physics::fft::{Fft2, FftWorkspace};
@@ -105,7 +105,7 @@ pub(super) fn walls(
 ) -> Option<Walls<f64>> {
     let (before, after) = around.outer();
     let members: Vec<usize> = (0..pixels.len()).filter(|&m| wall[m]).collect();
-    let materials = |m: usize| (key(before, pixels[m] as usize), key(after, pixels[m] as usize));
+    let materials = |m: usize| (fluid_key(before, pixels[m] as usize), fluid_key(after, pixels[m] as usize));
     // By material pair, in order of first pixel.
     let mut by_pair: Vec<((Key, Key), Vec<usize>)> = Vec::new();
     for &m in &members {

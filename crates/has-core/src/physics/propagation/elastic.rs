@@ -1,0 +1,451 @@
+//! Faces where a solid meets a fluid or another solid: the compressional (P) and shear-vertical
+//! (SV) plane waves of each angular-spectrum component reflected and transmitted with mode
+//! conversion, and the SV wave's step through a solid slab.
+//!
+//! Where a slab holds a solid (its properties have shear maps) and a face between material
+//! regions lies on a plane (a spectral interface), the march carries a second field beside `ψ`:
+//! the SV wave's, flux-normalised like `ψ` but with the shear impedance. With `u = ∇Φ + ∇×(Ψ·ŷ)`,
+//! `ψ = P·sqrt(Z_s/(ρ·c))` and `s = S·sqrt(Z_s/(ρ·c_s))` for the scaled amplitudes `P = ρω²·Φ`
+//! (a fluid's pressure) and `S = ρω²·Ψ`. Each component's SV amplitude is taken in its own plane of
+//! incidence (x along its transverse wavenumber), so every coefficient depends on `ξ = |kt|` alone.
+//!
+//! Per unit scaled amplitude, a wave travelling in direction `s = ±1` along z has the state
+//! `(ω²·u_x, ω²·u_z, σ_zz, σ_xz)`:
+//! - P: `(iξ/ρ, i·s·α/ρ, -(1 - 2ξ²/ks²), -2·s·ξ·α/ks²)`,
+//! - SV: `(-i·s·β/ρ, iξ/ρ, -2·s·ξ·β/ks², (β² - ξ²)/ks²)`,
+//!
+//! with `α = sqrt(kp² - ξ²)`, `β = sqrt(ks² - ξ²)` (`Im >= 0`); a fluid (`ks → ∞`) has P alone and
+//! `σ_zz = -p`. Between two solids the displacement and both stresses are continuous; between a
+//! fluid and a solid `u_z` and `σ_zz` are, and the solid's shear stress vanishes (the boundary
+//! conditions of [`crate::reference::elastic`]). Solving them per `ξ` gives the waves leaving the
+//! face from those arriving at it (e.g. Brekhovskikh, *Waves in Layered Media*, 1980, §4).
+//! Components evanescent in every wave of both media are crossed as between fluids: they carry no
+//! power, and among them lie the face's surface-wave poles (Scholte, Stoneley), which would
+//! amplify them.
+//!
+//! The SV field is stepped through a solid slab as `ψ` is (propagator of the slab's mean shear
+//! wavenumber, screen of its deviation and of the shear attenuation) and is zero in a fluid's
+//! pixels. Faces off the planes (a CT's, a voxel map's) convert nothing: they cross `ψ` as before
+//! and leave the SV field to the next slab's screen.
+
+use super::march::{zero, Real, Wave};
+use crate::physics::fft::{Fft2, FftWorkspace};
+use crate::physics::grid::Grid;
+use crate::physics::medium::{ShearMaps, SliceProperties};
+use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
+use std::sync::Arc;
+
+/// One side of a face: density (kg/m³), the compressional and shear wavenumbers (rad/m, the
+/// imaginary part the amplitude attenuation in Np/m; no shear in a fluid) and the impedances
+/// `ρ·c` of its P and SV waves (Rayl) that the fields are normalised by.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Side {
+    pub density: f64,
+    pub kp: C64,
+    pub ks: Option<C64>,
+    pub impedance: [f64; 2],
+}
+
+impl Side {
+    /// Pixel `i` of slab `s` at angular frequency `omega`.
+    pub fn of(s: &SliceProperties, i: usize, omega: f64) -> Side {
+        let (rho, c, a) = (s.density[i], s.sound_speed[i], s.attenuation[i]);
+        let shear = s.shear.as_ref().map(|m| (m.sound_speed[i], m.attenuation[i])).filter(|&(cs, _)| cs > 0.0);
+        Side {
+            density: rho,
+            kp: C64::new(omega / c, a),
+            ks: shear.map(|(cs, a)| C64::new(omega / cs, a)),
+            impedance: [rho * c, shear.map_or(0.0, |(cs, _)| rho * cs)],
+        }
+    }
+
+    /// Whether it carries shear.
+    pub fn is_solid(&self) -> bool {
+        self.ks.is_some()
+    }
+
+    /// The state `(ω²·u_x, ω²·u_z, σ_zz, σ_xz)` of its wave `wave` (0: P, 1: SV) travelling in
+    /// direction `dir` (±1) at transverse wavenumber `xi`, per unit scaled amplitude; `None`: SV
+    /// in a fluid.
+    fn state(&self, wave: usize, dir: f64, xi: f64) -> Option<[C64; 4]> {
+        let i = C64::i();
+        let rho = self.density;
+        let vertical = |k: C64| super::interface::axial_wavenumber(k, xi * xi);
+        match (wave, self.ks) {
+            (0, None) => Some([i * xi / rho, i * dir * vertical(self.kp) / rho, C64::new(-1.0, 0.0), C64::new(0.0, 0.0)]),
+            (0, Some(ks)) => {
+                let (alpha, ks2) = (vertical(self.kp), ks * ks);
+                Some([i * xi / rho, i * dir * alpha / rho, -(1.0 - 2.0 * xi * xi / ks2), -2.0 * dir * xi * alpha / ks2])
+            }
+            (_, Some(ks)) => {
+                let (beta, ks2) = (vertical(ks), ks * ks);
+                Some([-i * dir * beta / rho, i * xi / rho, -2.0 * dir * xi * beta / ks2, (beta * beta - xi * xi) / ks2])
+            }
+            _ => None,
+        }
+    }
+
+    /// The largest real wavenumber of its waves (rad/m).
+    fn largest_wavenumber(&self) -> f64 {
+        self.ks.map_or(self.kp.re, |ks| ks.re.max(self.kp.re))
+    }
+}
+
+/// The waves leaving a face from those arriving at it, in scaled amplitudes `P`, `S` (not
+/// flux-normalised): `m[out][in]` with `out` = `[P⁻_a, S⁻_a, P⁺_b, S⁺_b]` (reflected into `a`,
+/// transmitted into `b`) and `in` = `[P⁺_a, S⁺_a, P⁻_b, S⁻_b]` (arriving from `a` travelling +z,
+/// from `b` travelling -z), at transverse wavenumber `xi` (rad/m). Entries of SV in a fluid are 0;
+/// a singular system gives zeros.
+pub(super) fn scattering(a: &Side, b: &Side, xi: f64) -> [[C64; 4]; 4] {
+    let zero = C64::new(0.0, 0.0);
+    let mut m = [[zero; 4]; 4];
+    if xi > a.largest_wavenumber().max(b.largest_wavenumber()) {
+        // Evanescent everywhere: the fluid coefficients of the P waves.
+        let (ka, kb) = (super::interface::axial_wavenumber(a.kp, xi * xi), super::interface::axial_wavenumber(b.kp, xi * xi));
+        let den = b.density * ka + a.density * kb;
+        if den.norm_sqr() > 0.0 {
+            let r = (b.density * ka - a.density * kb) / den;
+            m[0][0] = r;
+            m[2][0] = 1.0 + r;
+            m[2][2] = -r;
+            m[0][2] = 1.0 - r;
+        }
+        return m;
+    }
+    // Unknowns (outgoing) and knowns (arriving): (side, wave, direction).
+    let side = |k: usize| if k < 2 { a } else { b };
+    let present = |k: usize| k % 2 == 0 || side(k).is_solid();
+    let outgoing = |k: usize| (side(k), k % 2, if k < 2 { -1.0 } else { 1.0 });
+    let arriving = |k: usize| (side(k), k % 2, if k < 2 { 1.0 } else { -1.0 });
+    // Conditions: (row of the state, which side's waves: 0 both (a minus b), 1 a's, 2 b's).
+    let rows: Vec<(usize, u8)> = match (a.is_solid(), b.is_solid()) {
+        (true, true) => vec![(0, 0), (1, 0), (2, 0), (3, 0)],
+        (false, true) => vec![(1, 0), (2, 0), (3, 2)],
+        (true, false) => vec![(1, 0), (2, 0), (3, 1)],
+        (false, false) => vec![(1, 0), (2, 0)],
+    };
+    let unknowns: Vec<usize> = (0..4).filter(|&k| present(k)).collect();
+    let coefficient = |row: (usize, u8), (s, wave, dir): (&Side, usize, f64), on_a: bool| -> C64 {
+        let include = match row.1 {
+            0 => true,
+            1 => on_a,
+            _ => !on_a,
+        };
+        match s.state(wave, dir, xi) {
+            Some(v) if include => {
+                if row.1 == 0 && !on_a {
+                    -v[row.0]
+                } else {
+                    v[row.0]
+                }
+            }
+            _ => zero,
+        }
+    };
+    let n = unknowns.len();
+    let mut lhs = vec![vec![zero; n]; n];
+    let mut rhs = vec![vec![zero; 4]; n];
+    for (r, &row) in rows.iter().enumerate() {
+        for (c, &k) in unknowns.iter().enumerate() {
+            lhs[r][c] = coefficient(row, outgoing(k), k < 2);
+        }
+        for (k, v) in rhs[r].iter_mut().enumerate() {
+            if present(k) {
+                *v = -coefficient(row, arriving(k), k < 2);
+            }
+        }
+    }
+    let Some(x) = solve(lhs, rhs) else { return m };
+    for (c, &k) in unknowns.iter().enumerate() {
+        m[k] = [x[c][0], x[c][1], x[c][2], x[c][3]];
+    }
+    m
+}
+
+/// `X` with `A·X = B` (`A` n×n, `B` n×4) by Gaussian elimination with rows scaled to unit largest
+/// entry (they mix displacements and stresses) and partial pivoting; `None` if singular or not
+/// finite.
+fn solve(mut a: Vec<Vec<C64>>, mut b: Vec<Vec<C64>>) -> Option<Vec<Vec<C64>>> {
+    let n = a.len();
+    for (row, rhs) in a.iter_mut().zip(b.iter_mut()) {
+        let s = row.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        if s > 0.0 {
+            row.iter_mut().for_each(|v| *v /= s);
+            rhs.iter_mut().for_each(|v| *v /= s);
+        }
+    }
+    for col in 0..n {
+        let p = (col..n).max_by(|&x, &y| a[x][col].norm().total_cmp(&a[y][col].norm()))?;
+        a.swap(col, p);
+        b.swap(col, p);
+        let d = a[col][col];
+        if d.norm() == 0.0 {
+            return None;
+        }
+        let (pivot_a, pivot_b) = (a[col].clone(), b[col].clone());
+        for (row, rhs) in a.iter_mut().zip(b.iter_mut()).skip(col + 1) {
+            let f = row[col] / d;
+            row.iter_mut().zip(&pivot_a).skip(col).for_each(|(v, p)| *v -= f * p);
+            rhs.iter_mut().zip(&pivot_b).for_each(|(v, p)| *v -= f * p);
+        }
+    }
+    let mut x = vec![vec![C64::new(0.0, 0.0); 4]; n];
+    for r in (0..n).rev() {
+        for c in 0..4 {
+            let s: C64 = (r + 1..n).map(|k| a[r][k] * x[k][c]).sum();
+            x[r][c] = (b[r][c] - s) / a[r][r];
+        }
+    }
+    x.iter().flatten().all(|v| v.re.is_finite() && v.im.is_finite()).then_some(x)
+}
+
+/// A face's filters for the march's fields, `/(nx·ny)` on the transposed spectrum layout, by
+/// direction of the arriving waves (0: forward, from `a`; 1: backward, from `b`), output
+/// (0: transmitted ψ, 1: transmitted s, 2: reflected ψ, 3: reflected s) and input (0: ψ, 1: s);
+/// `None` where zero at every component (SV in a fluid).
+pub(super) type Filters<T> = [[[Option<Arc<Vec<Complex<T>>>>; 2]; 4]; 2];
+
+/// The filters of the face from `a` into `b` on grid `g` (see [`Filters`]): the scattering
+/// matrix of each component, flux-normalised (`sqrt(Z_in/Z_out)` of the waves' impedances).
+pub(super) fn filters(g: &Grid, a: &Side, b: &Side) -> Filters<f64> {
+    let norm = 1.0 / g.lateral_len() as f64;
+    let sides = [a, b];
+    // [direction][out][in] -> (index into scattering's out, its in; the sides and waves).
+    let out_index = |dir: usize, out: usize| match (dir, out) {
+        (0, o) if o < 2 => 2 + o, // transmitted into b
+        (0, o) => o - 2,          // reflected into a
+        (_, o) if o < 2 => o,     // transmitted into a
+        (_, o) => o,              // reflected into b (2 + o - 2)
+    };
+    let in_index = |dir: usize, wave: usize| 2 * dir + wave;
+    let side_of = |k: usize| sides[k / 2];
+    let mut out: Filters<f64> = Default::default();
+    let mut values = vec![[[[C64::new(0.0, 0.0); 2]; 4]; 2]; g.lateral_len()];
+    let mut at = 0;
+    for i in 0..g.nx {
+        let kx = Grid::wavenumber(i, g.nx, g.dx);
+        for j in 0..g.ny {
+            let ky = Grid::wavenumber(j, g.ny, g.dy);
+            let m = scattering(a, b, (kx * kx + ky * ky).sqrt());
+            values[at] = std::array::from_fn(|dir| {
+                std::array::from_fn(|o| {
+                    std::array::from_fn(|w| {
+                        let (ko, ki) = (out_index(dir, o), in_index(dir, w));
+                        let (zi, zo) = (side_of(ki).impedance[ki % 2], side_of(ko).impedance[ko % 2]);
+                        if zi > 0.0 && zo > 0.0 {
+                            m[ko][ki] * (zi / zo).sqrt() * norm
+                        } else {
+                            C64::new(0.0, 0.0)
+                        }
+                    })
+                })
+            });
+            at += 1;
+        }
+    }
+    for (dir, per_dir) in out.iter_mut().enumerate() {
+        for (o, per_out) in per_dir.iter_mut().enumerate() {
+            for (w, slot) in per_out.iter_mut().enumerate() {
+                if values.iter().any(|v| v[dir][o][w] != C64::new(0.0, 0.0)) {
+                    *slot = Some(Arc::new(values.iter().map(|v| v[dir][o][w]).collect()));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// One material pair of an elastic interface: its pixels (`None`: every pixel) and filters.
+pub(super) struct ElasticPair<T> {
+    pub pixels: Option<Vec<u32>>,
+    pub filters: Arc<Filters<T>>,
+}
+
+/// The single-precision copy of `f`.
+pub(super) fn single_filters(f: &Filters<f64>) -> Filters<f32> {
+    f.clone().map(|d| d.map(|o| o.map(|w| w.map(|v| Arc::new(v.iter().map(|&c| C32::new(c.re as f32, c.im as f32)).collect::<Vec<_>>())))))
+}
+
+/// Crosses the pairs' face in direction `sign` (+1 forward): `field` (`[ψ | s]`, `2·nx·ny`)
+/// becomes the transmitted waves, and the reflected ones (`[ψ | s]`) are returned when `keep`.
+/// Pixels in no pair keep both fields. `work` is overwritten.
+pub(super) fn cross<T: Real>(
+    pairs: &[ElasticPair<T>],
+    fft: &Fft2<T>,
+    field: &mut [Complex<T>],
+    sign: f64,
+    keep: bool,
+    work: &mut Vec<Complex<T>>,
+    ws: &mut FftWorkspace<T>,
+) -> Option<Wave<T>> {
+    let n = fft.nx * fft.ny;
+    let dir = usize::from(sign < 0.0);
+    let spectra: Vec<Vec<Complex<T>>> = field
+        .chunks_exact(n)
+        .map(|half| {
+            work.clear();
+            work.extend_from_slice(half);
+            fft.forward(work, ws);
+            ws.spectrum.clone()
+        })
+        .collect();
+    let mut transmitted = field.to_vec();
+    for pair in pairs {
+        match &pair.pixels {
+            None => transmitted.fill(zero()),
+            Some(px) => px.iter().for_each(|&i| {
+                transmitted[i as usize] = zero();
+                transmitted[n + i as usize] = zero();
+            }),
+        }
+    }
+    let mut reflected = if keep { vec![zero(); 2 * n] } else { Vec::new() };
+    work.resize(n, zero());
+    for pair in pairs {
+        for (o, inputs) in pair.filters[dir].iter().enumerate() {
+            let target = if o < 2 { &mut transmitted } else { &mut reflected };
+            if target.is_empty() || inputs.iter().all(Option::is_none) {
+                continue;
+            }
+            ws.spectrum.fill(zero());
+            for (spectrum, filter) in spectra.iter().zip(inputs) {
+                if let Some(f) = filter {
+                    ws.spectrum.iter_mut().zip(spectrum).zip(f.iter()).for_each(|((s, a), f)| *s += *a * *f);
+                }
+            }
+            fft.inverse(ws, work);
+            let half = &mut target[(o % 2) * n..(o % 2 + 1) * n];
+            match &pair.pixels {
+                None => half.iter_mut().zip(work.iter()).for_each(|(t, w)| *t += *w),
+                Some(px) => px.iter().for_each(|&i| half[i as usize] += work[i as usize]),
+            }
+        }
+    }
+    field.copy_from_slice(&transmitted);
+    keep.then_some(Wave::Dense(reflected))
+}
+
+/// The SV field's screen through a slab, `exp(i·(ks - k̄s)·dz - (alpha_s + sigma)·dz)` on its
+/// solid pixels (`sigma` the absorbing layer) and 0 on its fluid ones, for the mean shear
+/// wavenumber `k̄s` whose propagator carries the step.
+pub(super) fn screen(shear: &ShearMaps, sponge: &[f64], omega: f64, k_mean: f64, dz: f64) -> Vec<C64> {
+    shear
+        .sound_speed
+        .iter()
+        .zip(&shear.attenuation)
+        .zip(sponge)
+        .map(
+            |((&cs, &a), &s)| {
+                if cs > 0.0 {
+                    C64::from_polar((-(a + s) * dz).exp(), (omega / cs - k_mean) * dz)
+                } else {
+                    C64::new(0.0, 0.0)
+                }
+            },
+        )
+        .collect()
+}
+
+/// The mean shear wavenumber and attenuation of a slab's solid pixels weighted by `|ψ|` there
+/// (by the pixels alone where `ψ` is zero on them; sequential sums, the same with any number of
+/// threads), rounded to multiples of `quantum` as the compressional means are.
+pub(super) fn mean_shear(field: &[C64], shear: &ShearMaps, omega: f64, quantum: f64) -> (f64, f64) {
+    let mean = |weight: &dyn Fn(usize) -> f64| {
+        let (mut k, mut a, mut w) = (0.0, 0.0, 0.0);
+        for (i, (&cs, &att)) in shear.sound_speed.iter().zip(&shear.attenuation).enumerate() {
+            if cs > 0.0 {
+                let v = weight(i);
+                k += v * omega / cs;
+                a += v * att;
+                w += v;
+            }
+        }
+        (w > 0.0).then(|| (k / w, a / w))
+    };
+    let (k, a) = mean(&|i| field[i].norm()).or_else(|| mean(&|_| 1.0)).unwrap_or((0.0, 0.0));
+    ((k / quantum).round() * quantum, (a / quantum).round() * quantum)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reference::elastic::{plate_response, Solid};
+    use crate::reference::Fluid;
+    use std::f64::consts::PI;
+
+    const OMEGA: f64 = 2.0 * PI * 500e3;
+
+    fn water() -> Side {
+        Side { density: 1000.0, kp: C64::new(OMEGA / 1500.0, 0.0), ks: None, impedance: [1.5e6, 0.0] }
+    }
+
+    fn bone(cs: f64, loss: f64) -> Side {
+        Side {
+            density: 1850.0,
+            kp: C64::new(OMEGA / 2800.0, loss),
+            ks: Some(C64::new(OMEGA / cs, loss)),
+            impedance: [1850.0 * 2800.0, 1850.0 * cs],
+        }
+    }
+
+    /// Between two fluids the scattering is the pressure coefficients `R`, `1 + R` of
+    /// [`super::super::reflection_coefficient`] and their reverse `-R`, `1 - R`, to 1e-12.
+    #[test]
+    fn between_fluids_it_is_the_fluid_face() {
+        let oil = Side { density: 900.0, kp: C64::new(OMEGA / 1400.0, 3.0), ks: None, impedance: [900.0 * 1400.0, 0.0] };
+        for xi in [0.0, 500.0, 1500.0, 2200.0, 4000.0] {
+            let m = scattering(&water(), &oil, xi);
+            let r = super::super::reflection_coefficient(OMEGA, (1000.0, 1500.0, 0.0), (900.0, 1400.0, 3.0), xi * xi);
+            for (got, want) in [(m[0][0], r), (m[2][0], 1.0 + r), (m[2][2], -r), (m[0][2], 1.0 - r)] {
+                assert!((got - want).norm() < 1e-12, "xi {xi}: {got} vs {want}");
+            }
+        }
+    }
+
+    /// Lossless fluid-solid-fluid faces conserve the z-flux of propagating waves: for each arriving
+    /// wave, `Σ |m|²·Re(kz_out)/Re(kz_in)·ρ_in/ρ_out` over the outgoing ones (the flux of a unit
+    /// scaled amplitude is `|P|²·Re(kz)/(2ρω)` for either wave) is 1, to 1e-12, at angles below and
+    /// beyond both critical angles, into the solid and out of it, and between two solids.
+    #[test]
+    fn a_lossless_face_conserves_flux() {
+        let (w, b, soft) = (water(), bone(1500.0, 0.0), bone(1100.0, 0.0));
+        let soft = Side { density: 1400.0, kp: C64::new(OMEGA / 2200.0, 0.0), impedance: [1400.0 * 2200.0, 1400.0 * 1100.0], ..soft };
+        let kz = |s: &Side, wave: usize, xi: f64| {
+            let k = if wave == 0 { s.kp } else { s.ks.unwrap_or(C64::new(0.0, 0.0)) };
+            super::super::interface::axial_wavenumber(k, xi * xi).re
+        };
+        for (a, b) in [(w, b), (b, w), (b, soft), (soft, b)] {
+            for deg in [0.0, 10.0, 25.0, 31.0, 45.0, 70.0] {
+                let xi = a.largest_wavenumber().min(b.largest_wavenumber()) * f64::sin(f64::to_radians(deg)) * 0.999;
+                let m = scattering(&a, &b, xi);
+                let side = |k: usize| if k < 2 { &a } else { &b };
+                for i in (0..4).filter(|&i| i % 2 == 0 || side(i).is_solid()) {
+                    let kin = kz(side(i), i % 2, xi);
+                    if kin <= 0.0 {
+                        continue;
+                    }
+                    let flux: f64 = (0..4)
+                        .filter(|&o| o % 2 == 0 || side(o).is_solid())
+                        .map(|o| m[o][i].norm_sqr() * kz(side(o), o % 2, xi) / kin * side(i).density / side(o).density)
+                        .sum();
+                    assert!((flux - 1.0).abs() < 1e-12, "{deg}°, arriving {i}: {flux}");
+                }
+            }
+        }
+    }
+
+    /// The half-space reflection of water on bone equals the reference's thick plate, whose back
+    /// face returns nothing (to 1e-9), at angles on both sides of the critical angles.
+    #[test]
+    fn water_on_bone_reflects_as_the_reference_half_space() {
+        let loss = 40.0;
+        let solid = Solid { kp: C64::new(OMEGA / 2800.0, loss), ks: C64::new(OMEGA / 1500.0, loss), density: 1850.0 };
+        let fluid = Fluid { k: C64::new(OMEGA / 1500.0, 0.0), density: 1000.0 };
+        for deg in [0.0, 12.0, 28.0, 33.0, 50.0, 75.0] {
+            let xi = OMEGA / 1500.0 * f64::sin(f64::to_radians(deg));
+            let want = plate_response(fluid, solid, 0.6, fluid, C64::new(xi, 0.0)).reflection;
+            let got = scattering(&water(), &bone(1500.0, loss), xi)[0][0];
+            assert!((got - want).norm() < 1e-9, "{deg}°: {got} vs {want}");
+        }
+    }
+}
