@@ -194,12 +194,14 @@ class Simulation:
             text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
                      f"({r['round_trips']} round trips)")
         text += ", reflections towards the source added" if p["reflections"] else ""
+        ct_shear = bool(((self.scenario.to_dict().get("ct") or {}).get("bone_shear_sound_speed_m_s") or 0) > 0)
         if p.get("shear"):
             text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions), "
                      "with mode conversion at each face")
-        elif self.has_shear:
-            text += ("; compressional waves only: the shear speeds the scenario gives are not carried by the march "
-                     "where a solid's faces are a CT's or a voxel map's (arfi field --engine fdtd carries them)")
+        if self.has_shear and (ct_shear or not p.get("shear")):
+            text += ("; compressional waves only through a CT's or a voxel map's faces and faces crossed pixel by pixel: "
+                     "the shear speeds the scenario gives there are not carried by the march "
+                     "(arfi field --engine fdtd carries them)")
         return text
 
     @property

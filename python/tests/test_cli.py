@@ -53,7 +53,7 @@ def test_field_in_lossless_water_needs_no_mr_model(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "angle-dependent interface transmission" in r.stdout
     result = json.loads(js.read_text())
-    assert result["propagation"] == {"interfaces": "angular", "screen": "oblique", "reflections": False, "reverberation": None}
+    assert result["propagation"] == {"interfaces": "angular", "screen": "oblique", "reflections": False, "shear": False, "reverberation": None}
     # The bowl focuses near its centre of curvature (O'Neil: the peak lies ~2 mm before it).
     assert 80.0 < result["axis_peak_z_mm"] < 85.5
     # Only the verbs that need MR-ARFI images refuse it, with the reason and exit 2.

@@ -187,7 +187,7 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
     assert abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"] and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
     assert r["round_trips"] >= 1
     normal = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\ninterfaces = \"normal-incidence\"\n[medium]")))
-    assert normal.propagation == {"interfaces": "normal-incidence", "screen": "oblique", "reflections": False, "reverberation": None}
+    assert normal.propagation == {"interfaces": "normal-incidence", "screen": "oblique", "reflections": False, "shear": False, "reverberation": None}
     vertical = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\nscreen = \"vertical\"\n[medium]")))
     assert vertical.propagation["screen"] == "vertical"
     with pytest.raises(ValueError, match="grid.screen"):

@@ -39,6 +39,7 @@
 //! spread over ±k·dz and the wall's reverberation is lost.
 
 use super::elastic::{filters, single_filters, ElasticPair, Filters, Side};
+use super::faces::{face_phase, is_wall};
 use super::oblique::opposite;
 use super::walls::{walls, WallFilters, WallGroup, WallKey, Walls};
 use crate::physics::fft::{Fft2, FftWorkspace};
@@ -288,15 +289,15 @@ impl Interface {
             }
         }
         let elastic = shear && pairs.values().any(|&(first, _)| from.shear_speed(first) > 0.0 || to.shear_speed(first) > 0.0);
-        let fresh = |k: &&(Key, Key)| !shared.0.contains_key(*k) && !shared.2.contains_key(*k);
         if elastic {
             // Pairs with a solid hold 4-16 spectra each (`elastic::Filters`): bounded in bytes.
             let held: usize = shared.2.values().map(|f| f.iter().flatten().flatten().flatten().count()).sum();
-            let new: usize = pairs.iter().filter(|(k, _)| fresh(k)).map(|(_, &(first, _))| spectra(from, to, first)).sum();
+            let new: usize =
+                pairs.iter().filter(|(k, _)| !shared.2.contains_key(*k)).map(|(_, &(first, _))| spectra(from, to, first)).sum();
             if ((held + new) * n * 16) as u64 > MAX_ELASTIC_BYTES {
                 return pointwise(shared);
             }
-        } else if shared.0.len() + pairs.keys().filter(fresh).count() > MAX_PLAN_PAIRS {
+        } else if shared.0.len() + pairs.keys().filter(|k| !shared.0.contains_key(*k)).count() > MAX_PLAN_PAIRS {
             return pointwise(shared);
         }
         // In order of each pair's first pixel, so the sum is the same on every run.
@@ -530,74 +531,42 @@ impl Interface {
                     pixels.iter().zip(phase).for_each(|(&i, &f)| out[i as usize] *= if sign < 0.0 { 1.0 / f } else { f });
                 }
             }
-            // No transposed march carries shear (`HasPlan::transposed` refuses it).
-            Kind::Elastic(_) => out.fill(C64::new(0.0, 0.0)),
-            Kind::Spectral(pairs) => {
-                let mut sum = vec![C64::new(0.0, 0.0); p.len()];
-                for pair in pairs {
-                    match &pair.pixels {
-                        None => work.copy_from_slice(p),
-                        Some(px) => {
-                            work.fill(C64::new(0.0, 0.0));
-                            px.iter().for_each(|&i| work[i as usize] = p[i as usize]);
-                        }
-                    }
-                    fft.forward(work, ws);
-                    sum.iter_mut().zip(&ws.spectrum).zip(pair.coefficient.iter()).for_each(|((s, a), r)| *s += a * r);
-                }
-                ws.spectrum.copy_from_slice(&sum);
-                fft.inverse(ws, out);
+            // The transpose of `reflect`'s P wave alone (no transposed march carries shear:
+            // `HasPlan::transposed` refuses such a medium).
+            Kind::Elastic(pairs) => {
+                let pairs = pairs.iter().filter_map(|p| p.filters[0][2][0].as_ref().map(|f| (&p.pixels, &f[..])));
+                transposed_pairs(fft, pairs, p, out, work, ws);
             }
+            Kind::Spectral(pairs) => transposed_pairs(fft, pairs.iter().map(|p| (&p.pixels, &p.coefficient[..])), p, out, work, ws),
         }
     }
 }
 
-/// The complex phase `φ = 2·(κ_P·f - κ_C·g)·dz`, `κ = omega·s + i·alpha`, of the face between
-/// slabs `P` and `C` at pixel `i` (`slabs` = the slab before `P`, `P`, `C`, the slab after `C`;
-/// `s` slowness, `alpha` attenuation; the true path of the wave reflected at the face less the
-/// marched one, there and back): a face inside `C` (whose centre lies beyond it) leaves the fraction `f = (s_C - s_N)/(s_P - s_N)` of
-/// `C` in `P`'s material, a face inside `P` the fraction `g = (s_P - s_A)/(s_C - s_A)` of `P` in
-/// `C`'s. Each is taken only where the cell beyond it is of the material its centre holds
-/// (impedance within [`FACE_NEIGHBOUR`] of the jump: a face between two layers at least a step
-/// thick) and whose slowness differs from the other side's (by more than 1e-6: a change of
-/// density alone leaves the fraction undefined), and held below one half (the centre decides the
-/// side).
-fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C64 {
-    let [a, p, c, n] = slabs.map(|s| 1.0 / s.sound_speed[i]);
-    let kappa = |s: &SliceProperties, slowness: f64| C64::new(omega * slowness, s.attenuation[i]);
-    let (before_is_p, after_is_c) = layered_sides(slabs, i);
-    let mut phase = C64::new(0.0, 0.0);
-    let differ = |x: f64, y: f64| (x - y).abs() > 1e-6 * x.abs().max(y.abs());
-    if after_is_c && differ(p, n) {
-        phase += 2.0 * kappa(slabs[1], p) * ((c - n) / (p - n)).clamp(0.0, 0.5) * dz;
+/// `out ← Σ_pairs IFFT(f · FFT(M · p))` over `(pixels, filter)` pairs, the transpose of
+/// [`filter_pairs`] (each filter depends on `kx² + ky²` only: its own transpose).
+fn transposed_pairs<'a>(
+    fft: &Fft2,
+    pairs: impl Iterator<Item = (&'a Option<Vec<u32>>, &'a [C64])>,
+    p: &[C64],
+    out: &mut [C64],
+    work: &mut [C64],
+    ws: &mut FftWorkspace,
+) {
+    let mut sum = vec![C64::new(0.0, 0.0); p.len()];
+    for (pixels, coefficient) in pairs {
+        match pixels {
+            None => work.copy_from_slice(p),
+            Some(px) => {
+                work.fill(C64::new(0.0, 0.0));
+                px.iter().for_each(|&i| work[i as usize] = p[i as usize]);
+            }
+        }
+        fft.forward(work, ws);
+        sum.iter_mut().zip(&ws.spectrum).zip(coefficient.iter()).for_each(|((s, a), r)| *s += a * r);
     }
-    if before_is_p && differ(c, a) {
-        phase -= 2.0 * kappa(slabs[2], c) * ((p - a) / (c - a)).clamp(0.0, 0.5) * dz;
-    }
-    phase
+    ws.spectrum.copy_from_slice(&sum);
+    fft.inverse(ws, out);
 }
-
-/// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
-/// between two layers: the cells on both sides of it hold its two materials
-/// ([`layered_sides`]). Inside graded or textured bone the neighbours differ, and the slowness
-/// gradient there is texture, not a wall's normal.
-fn is_wall(slabs: [&SliceProperties; 4], i: usize) -> bool {
-    let (before_is_p, after_is_c) = layered_sides(slabs, i);
-    before_is_p && after_is_c
-}
-
-/// Whether, at pixel `i` of the face between `P` and `C` (`slabs` as in [`face_phase`]), the
-/// cell before `P` is of `P`'s material and the cell after `C` of `C`'s: impedance within
-/// [`FACE_NEIGHBOUR`] of the face's jump.
-fn layered_sides(slabs: [&SliceProperties; 4], i: usize) -> (bool, bool) {
-    let [a, p, c, n] = slabs.map(|s| impedance(s, i));
-    let jump = (c - p).abs();
-    ((a - p).abs() <= FACE_NEIGHBOUR * jump, (n - c).abs() <= FACE_NEIGHBOUR * jump)
-}
-
-/// A cell next to a face counts as the material of the face's side when its impedance is within
-/// this fraction of the face's jump of it.
-const FACE_NEIGHBOUR: f64 = 0.1;
 
 /// `sqrt(Z_a/Z_b)` of a face whose normal-incidence coefficient is `r`: `Z_a/Z_b = (1 - R)/(1 + R)`
 /// for `R = (Z_b - Z_a)/(Z_a + Z_b)`. The flux normalisation of a wave crossing it from `a` into `b`.
@@ -606,7 +575,7 @@ fn flux_scale(r: f64) -> f64 {
 }
 
 /// `rho·c` of pixel `i`.
-fn impedance(s: &SliceProperties, i: usize) -> f64 {
+pub(super) fn impedance(s: &SliceProperties, i: usize) -> f64 {
     s.density[i] * s.sound_speed[i]
 }
 
@@ -665,66 +634,6 @@ mod tests {
 
     const WATER: (f64, f64, f64) = (1000.0, 1500.0, 0.0);
     const BONE: (f64, f64, f64) = (1850.0, 2800.0, 0.0);
-
-    /// Cells of `dz` about a face at `face` (m; water before it, bone after), each holding the
-    /// slowness and attenuation averaged over it and the impedance at its centre, as a CT's cells do.
-    fn cells_about(face: f64, dz: f64, centres: [f64; 4]) -> [SliceProperties; 4] {
-        let (water, bone) = ((1500.0, 1000.0, 0.0), (2800.0, 1850.0, 46.0));
-        centres.map(|z| {
-            let bone_part = ((z + 0.5 * dz - face) / dz).clamp(0.0, 1.0);
-            let slowness = bone_part / bone.0 + (1.0 - bone_part) / water.0;
-            let centre = if z >= face { bone } else { water };
-            let c = 1.0 / slowness;
-            SliceProperties {
-                sound_speed: vec![c],
-                density: vec![centre.0 * centre.1 / c],
-                attenuation: vec![bone_part * bone.2 + (1.0 - bone_part) * water.2],
-                shear: None,
-            }
-        })
-    }
-
-    /// The face's phase is the path the reflected wave lacks, there and back: a face 0.2 mm
-    /// beyond the plane where the jump is applied gives `2·k_water·0.2 mm` (water lies between),
-    /// one 0.2 mm before it `-2·(k_bone + i·alpha_bone)·0.2 mm` (bone lies between); on the plane,
-    /// nothing. To rounding (1e-12 rad).
-    #[test]
-    fn a_face_inside_a_cell_gets_the_phase_of_its_position() {
-        let (omega, dz) = (2.0 * PI * 5e5, 0.75e-3);
-        let plane = 30e-3;
-        let centres = [plane - 1.5 * dz, plane - 0.5 * dz, plane + 0.5 * dz, plane + 1.5 * dz];
-        for (offset, want) in [
-            (0.2e-3, C64::new(2.0 * omega / 1500.0 * 0.2e-3, 0.0)),
-            (-0.2e-3, -2.0 * C64::new(omega / 2800.0, 46.0) * 0.2e-3),
-            (0.0, C64::new(0.0, 0.0)),
-        ] {
-            let cells = cells_about(plane + offset, dz, centres);
-            let phase = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
-            assert!((phase - want).norm() < 1e-12, "offset {offset}: {phase} vs {want}");
-        }
-    }
-
-    /// A face between a layer of water and one of bone is a wall wherever inside its cells it
-    /// lies; a face inside a ramp of impedance (graded or textured bone: the cells beyond it
-    /// differ from the cells at it by more than a tenth of its jump) is not.
-    #[test]
-    fn a_wall_lies_between_two_layers() {
-        let dz = 0.75e-3;
-        let centres = [-1.5 * dz, -0.5 * dz, 0.5 * dz, 1.5 * dz];
-        for offset in [-0.3e-3, 0.0, 0.3e-3] {
-            let cells = cells_about(offset, dz, centres);
-            assert!(is_wall([&cells[0], &cells[1], &cells[2], &cells[3]], 0), "face at {offset}");
-        }
-        let ramp: Vec<SliceProperties> = (0..4)
-            .map(|k| SliceProperties {
-                sound_speed: vec![1500.0 + 300.0 * k as f64],
-                density: vec![1000.0 + 200.0 * k as f64],
-                attenuation: vec![0.0],
-                shear: None,
-            })
-            .collect();
-        assert!(!is_wall([&ramp[0], &ramp[1], &ramp[2], &ramp[3]], 0));
-    }
 
     #[test]
     fn normal_incidence_gives_the_impedance_formula() {

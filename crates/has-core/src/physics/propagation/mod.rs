@@ -32,11 +32,13 @@
 //! [`RecordSpec::reflections`] asks for them.
 
 mod elastic;
+mod faces;
 mod interface;
 mod march;
 mod oblique;
 mod operators;
 mod point;
+mod record;
 mod references;
 mod risers;
 mod single;

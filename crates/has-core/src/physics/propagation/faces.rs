@@ -1,0 +1,120 @@
+//! Where a face of a CT or a voxel map lies inside its cells: the phase of its true position,
+//! which the reflected waves carry ([`face_phase`]), and whether it is a wall between two layers
+//! ([`is_wall`]), which oblique walls' filters and the treads' coefficients need.
+
+use super::interface::impedance;
+use crate::physics::medium::SliceProperties;
+use num_complex::Complex64 as C64;
+
+/// The complex phase `φ = 2·(κ_P·f - κ_C·g)·dz`, `κ = omega·s + i·alpha`, of the face between
+/// slabs `P` and `C` at pixel `i` (`slabs` = the slab before `P`, `P`, `C`, the slab after `C`;
+/// `s` slowness, `alpha` attenuation; the true path of the wave reflected at the face less the
+/// marched one, there and back): a face inside `C` (whose centre lies beyond it) leaves the fraction `f = (s_C - s_N)/(s_P - s_N)` of
+/// `C` in `P`'s material, a face inside `P` the fraction `g = (s_P - s_A)/(s_C - s_A)` of `P` in
+/// `C`'s. Each is taken only where the cell beyond it is of the material its centre holds
+/// (impedance within [`FACE_NEIGHBOUR`] of the jump: a face between two layers at least a step
+/// thick) and whose slowness differs from the other side's (by more than 1e-6: a change of
+/// density alone leaves the fraction undefined), and held below one half (the centre decides the
+/// side).
+pub(super) fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C64 {
+    let [a, p, c, n] = slabs.map(|s| 1.0 / s.sound_speed[i]);
+    let kappa = |s: &SliceProperties, slowness: f64| C64::new(omega * slowness, s.attenuation[i]);
+    let (before_is_p, after_is_c) = layered_sides(slabs, i);
+    let mut phase = C64::new(0.0, 0.0);
+    let differ = |x: f64, y: f64| (x - y).abs() > 1e-6 * x.abs().max(y.abs());
+    if after_is_c && differ(p, n) {
+        phase += 2.0 * kappa(slabs[1], p) * ((c - n) / (p - n)).clamp(0.0, 0.5) * dz;
+    }
+    if before_is_p && differ(c, a) {
+        phase -= 2.0 * kappa(slabs[2], c) * ((p - a) / (c - a)).clamp(0.0, 0.5) * dz;
+    }
+    phase
+}
+
+/// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
+/// between two layers: the cells on both sides of it hold its two materials
+/// ([`layered_sides`]). Inside graded or textured bone the neighbours differ, and the slowness
+/// gradient there is texture, not a wall's normal.
+pub(super) fn is_wall(slabs: [&SliceProperties; 4], i: usize) -> bool {
+    let (before_is_p, after_is_c) = layered_sides(slabs, i);
+    before_is_p && after_is_c
+}
+
+/// Whether, at pixel `i` of the face between `P` and `C` (`slabs` as in [`face_phase`]), the
+/// cell before `P` is of `P`'s material and the cell after `C` of `C`'s: impedance within
+/// [`FACE_NEIGHBOUR`] of the face's jump.
+fn layered_sides(slabs: [&SliceProperties; 4], i: usize) -> (bool, bool) {
+    let [a, p, c, n] = slabs.map(|s| impedance(s, i));
+    let jump = (c - p).abs();
+    ((a - p).abs() <= FACE_NEIGHBOUR * jump, (n - c).abs() <= FACE_NEIGHBOUR * jump)
+}
+
+/// A cell next to a face counts as the material of the face's side when its impedance is within
+/// this fraction of the face's jump of it.
+const FACE_NEIGHBOUR: f64 = 0.1;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// Cells of `dz` about a face at `face` (m; water before it, bone after), each holding the
+    /// slowness and attenuation averaged over it and the impedance at its centre, as a CT's cells do.
+    fn cells_about(face: f64, dz: f64, centres: [f64; 4]) -> [SliceProperties; 4] {
+        let (water, bone) = ((1500.0, 1000.0, 0.0), (2800.0, 1850.0, 46.0));
+        centres.map(|z| {
+            let bone_part = ((z + 0.5 * dz - face) / dz).clamp(0.0, 1.0);
+            let slowness = bone_part / bone.0 + (1.0 - bone_part) / water.0;
+            let centre = if z >= face { bone } else { water };
+            let c = 1.0 / slowness;
+            SliceProperties {
+                sound_speed: vec![c],
+                density: vec![centre.0 * centre.1 / c],
+                attenuation: vec![bone_part * bone.2 + (1.0 - bone_part) * water.2],
+                shear: None,
+            }
+        })
+    }
+
+    /// The face's phase is the path the reflected wave lacks, there and back: a face 0.2 mm
+    /// beyond the plane where the jump is applied gives `2·k_water·0.2 mm` (water lies between),
+    /// one 0.2 mm before it `-2·(k_bone + i·alpha_bone)·0.2 mm` (bone lies between); on the plane,
+    /// nothing. To rounding (1e-12 rad).
+    #[test]
+    fn a_face_inside_a_cell_gets_the_phase_of_its_position() {
+        let (omega, dz) = (2.0 * PI * 5e5, 0.75e-3);
+        let plane = 30e-3;
+        let centres = [plane - 1.5 * dz, plane - 0.5 * dz, plane + 0.5 * dz, plane + 1.5 * dz];
+        for (offset, want) in [
+            (0.2e-3, C64::new(2.0 * omega / 1500.0 * 0.2e-3, 0.0)),
+            (-0.2e-3, -2.0 * C64::new(omega / 2800.0, 46.0) * 0.2e-3),
+            (0.0, C64::new(0.0, 0.0)),
+        ] {
+            let cells = cells_about(plane + offset, dz, centres);
+            let phase = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
+            assert!((phase - want).norm() < 1e-12, "offset {offset}: {phase} vs {want}");
+        }
+    }
+
+    /// A face between a layer of water and one of bone is a wall wherever inside its cells it
+    /// lies; a face inside a ramp of impedance (graded or textured bone: the cells beyond it
+    /// differ from the cells at it by more than a tenth of its jump) is not.
+    #[test]
+    fn a_wall_lies_between_two_layers() {
+        let dz = 0.75e-3;
+        let centres = [-1.5 * dz, -0.5 * dz, 0.5 * dz, 1.5 * dz];
+        for offset in [-0.3e-3, 0.0, 0.3e-3] {
+            let cells = cells_about(offset, dz, centres);
+            assert!(is_wall([&cells[0], &cells[1], &cells[2], &cells[3]], 0), "face at {offset}");
+        }
+        let ramp: Vec<SliceProperties> = (0..4)
+            .map(|k| SliceProperties {
+                sound_speed: vec![1500.0 + 300.0 * k as f64],
+                density: vec![1000.0 + 200.0 * k as f64],
+                attenuation: vec![0.0],
+                shear: None,
+            })
+            .collect();
+        assert!(!is_wall([&ramp[0], &ramp[1], &ramp[2], &ramp[3]], 0));
+    }
+}
