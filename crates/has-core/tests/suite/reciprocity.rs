@@ -142,6 +142,24 @@ fn transposed_march_passes_the_dot_product_test_through_a_reverberating_plate() 
     dot_test("plate, angular", &plate(), InterfaceModel::Angular, &[3, inside, last, last + 2, 36, 50]);
 }
 
+/// The plate with solid bone and diploë (shear 1500 and 1100 m/s): the march carries the SV
+/// field, its faces convert (fluid-solid on the whole plane, solid-solid on the cylinder's ends,
+/// pairs on part of the plane) and the transposed march transposes both fields.
+#[test]
+fn transposed_march_passes_the_dot_product_test_through_a_solid_plate() {
+    let mut solid = plate();
+    for (m, cs) in [(1, 1500.0), (2, 1100.0)] {
+        solid.materials[m].shear_sound_speed = cs;
+        solid.materials[m].shear_attenuation_db_cm_mhz = 20.0;
+    }
+    let g = grid();
+    let (plan, _) = HasPlan::build(&g, &solid, F, &reference(&g), &HasOptions::default(), &RecordSpec::default()).unwrap();
+    let (first, last, trips) = plan.reverberation().expect("the plate reverberates");
+    assert!(plan.carries_shear() && plan.elastic_interfaces() == 4, "{} elastic interfaces", plan.elastic_interfaces());
+    assert!(trips >= 2, "{trips} round trips: the test needs several");
+    dot_test("solid plate", &solid, InterfaceModel::Angular, &[3, (first + last) / 2, last, last + 2, 36, 50]);
+}
+
 #[test]
 fn transposed_march_passes_the_dot_product_test_with_normal_incidence_and_voxels() {
     dot_test("plate, normal incidence", &plate(), InterfaceModel::NormalIncidence, &[20, 50]);

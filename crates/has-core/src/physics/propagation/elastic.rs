@@ -325,6 +325,64 @@ pub(super) fn cross<T: Real>(
     keep.then_some(Wave::Dense(reflected))
 }
 
+/// The transpose of [`cross`] in direction `sign`: `adjoint` (`[ψ | s]`) holds the adjoint of the
+/// transmitted waves and becomes that of the waves arriving; `kept` is the adjoint of the
+/// reflected ones (`None`: not kept). Each output's `M·IFFT(f·FFT(·))` has the transpose
+/// `IFFT(f·FFT(M·))` (the filters depend on `kx² + ky²` only: their own transposes); pixels in no
+/// pair pass both fields. `work` is overwritten.
+pub(super) fn cross_transposed(
+    pairs: &[ElasticPair<f64>],
+    fft: &Fft2,
+    adjoint: &mut [C64],
+    sign: f64,
+    kept: Option<&[C64]>,
+    work: &mut Vec<C64>,
+    ws: &mut FftWorkspace,
+) {
+    let n = fft.nx * fft.ny;
+    let dir = usize::from(sign < 0.0);
+    let zero = C64::new(0.0, 0.0);
+    let after = adjoint.to_vec();
+    for pair in pairs {
+        match &pair.pixels {
+            None => adjoint.fill(zero),
+            Some(px) => px.iter().for_each(|&i| {
+                adjoint[i as usize] = zero;
+                adjoint[n + i as usize] = zero;
+            }),
+        }
+    }
+    let mut sums = [vec![zero; n], vec![zero; n]];
+    work.resize(n, zero);
+    for pair in pairs {
+        for (o, inputs) in pair.filters[dir].iter().enumerate() {
+            let Some(source) = (if o < 2 { Some(&after[..]) } else { kept }) else { continue };
+            if inputs.iter().all(Option::is_none) {
+                continue;
+            }
+            let half = &source[(o % 2) * n..(o % 2 + 1) * n];
+            match &pair.pixels {
+                None => work.copy_from_slice(half),
+                Some(px) => {
+                    work.fill(zero);
+                    px.iter().for_each(|&i| work[i as usize] = half[i as usize]);
+                }
+            }
+            fft.forward(work, ws);
+            for (sum, filter) in sums.iter_mut().zip(inputs) {
+                if let Some(f) = filter {
+                    sum.iter_mut().zip(&ws.spectrum).zip(f.iter()).for_each(|((s, a), f)| *s += a * f);
+                }
+            }
+        }
+    }
+    for (w, sum) in sums.iter().enumerate() {
+        ws.spectrum.copy_from_slice(sum);
+        fft.inverse(ws, work);
+        adjoint[w * n..(w + 1) * n].iter_mut().zip(work.iter()).for_each(|(a, v)| *a += v);
+    }
+}
+
 /// The SV field's screen through a slab, `exp(i·(ks - k̄s)·dz - (alpha_s + sigma)·dz)` on its
 /// solid pixels (`sigma` the absorbing layer) and 0 on its fluid ones, for the mean shear
 /// wavenumber `k̄s` whose propagator carries the step.

@@ -531,8 +531,8 @@ impl Interface {
                     pixels.iter().zip(phase).for_each(|(&i, &f)| out[i as usize] *= if sign < 0.0 { 1.0 / f } else { f });
                 }
             }
-            // The transpose of `reflect`'s P wave alone (no transposed march carries shear:
-            // `HasPlan::transposed` refuses such a medium).
+            // The transpose of `reflect`'s P wave alone (the transposed march crosses these
+            // faces in `elastic::cross_transposed`).
             Kind::Elastic(pairs) => {
                 let pairs = pairs.iter().filter_map(|p| p.filters[0][2][0].as_ref().map(|f| (&p.pixels, &f[..])));
                 transposed_pairs(fft, pairs, p, out, work, ws);

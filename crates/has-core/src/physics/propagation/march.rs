@@ -122,7 +122,13 @@ impl<T: Real> Wave<T> {
     /// `plane ← wave` (zero off a sparse wave's pixels).
     pub(super) fn write_to(&self, plane: &mut [Complex<T>]) {
         match self {
-            Wave::Dense(w) => plane.copy_from_slice(w),
+            // A wave `[ψ | s]` written to a plane of ψ alone gives its ψ (and a ψ wave to a
+            // plane `[ψ | s]`, zero SV).
+            Wave::Dense(w) => {
+                let m = plane.len().min(w.len());
+                plane[..m].copy_from_slice(&w[..m]);
+                plane[m..].fill(zero());
+            }
             Wave::Sparse { pixels, values } => {
                 plane.fill(zero());
                 pixels.iter().zip(values).for_each(|(&i, &w)| plane[i as usize] = w);

@@ -8,7 +8,9 @@
 //! `Mᵀ` is the product of the transposed factors in reverse order: `Pᵀ = IFFT · propagator · FFT
 //! · screen` (the propagator depends on `kx² + ky²` only, which makes `IFFT · propagator · FFT`
 //! symmetric), `Rᵀ` masks each material pair's pixels before its filter
-//! ([`Interface::reflect_transposed`]), and every wave the march adds, reflects or keeps becomes
+//! ([`Interface::reflect_transposed`]), a face that converts shear takes the transpose of its
+//! scattering of both fields (`elastic::cross_transposed`), and every wave the march adds,
+//! reflects or keeps becomes
 //! an adjoint wave that the transposed sweep collects. The control flow of a march with a fixed
 //! number of round trips does not depend on the source, so the transposed sweeps follow the same
 //! plane lists backwards. This is discrete reciprocity: `Mᵀ·δ` at a pixel is the field a point
@@ -42,8 +44,9 @@ struct Transposer<'a> {
 }
 
 impl<'a> Transposer<'a> {
+    /// A zero adjoint of a marched field (`[ψ | s]` where the plan carries shear).
     fn zero(&self) -> Vec<C64> {
-        vec![C64::new(0.0, 0.0); self.plan.grid.lateral_len()]
+        vec![C64::new(0.0, 0.0); self.plan.field_len()]
     }
 
     fn interface(&self, n: usize) -> Option<&'a Interface> {
@@ -82,13 +85,24 @@ impl<'a> Transposer<'a> {
     /// `a ← S·a`, then `a ← a + sign·(Rᵀ·a + R_φᵀ·kept)`.
     fn cross(&mut self, n: usize, adjoint: &mut [C64], sign: f64, kept: Option<&Wave<f64>>) {
         let Some(interface) = self.interface(n) else { return };
-        if interface.walls().is_some() {
-            if self.work.len() != adjoint.len() {
-                self.work = self.zero();
-            }
+        if let Some(pairs) = interface.elastic() {
             if let Some(k) = kept {
                 self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
                 k.write_to(&mut self.unpacked);
+            }
+            let unpacked = kept.map(|_| &self.unpacked[..]);
+            super::elastic::cross_transposed(pairs, &self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
+            return;
+        }
+        // A face that converts no shear crosses ψ alone (`march::cross`): the SV field passes.
+        let adjoint = &mut adjoint[..self.plan.grid.lateral_len()];
+        if interface.walls().is_some() {
+            if self.work.len() != adjoint.len() {
+                self.work = vec![C64::new(0.0, 0.0); adjoint.len()];
+            }
+            if let Some(k) = kept {
+                self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
+                k.write_to(&mut self.unpacked[..adjoint.len()]);
             }
             let unpacked = kept.map(|_| &self.unpacked[..]);
             interface.cross_transposed_walls(&self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
@@ -96,7 +110,7 @@ impl<'a> Transposer<'a> {
         }
         interface.normalise_transmitted(adjoint, sign);
         if self.work.len() != adjoint.len() {
-            self.work = self.zero();
+            self.work = vec![C64::new(0.0, 0.0); adjoint.len()];
         }
         self.incident.copy_from_slice(adjoint);
         let faces = interface.pointwise().is_some_and(|p| p.2.is_some());
@@ -104,8 +118,15 @@ impl<'a> Transposer<'a> {
             if faces {
                 // The kept wave carries the faces' phases, the transmitted one does not.
                 self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
-                k.write_to(&mut self.unpacked);
-                interface.reflect_transposed(&self.plan.fft, &self.unpacked, &mut self.reflected, &mut self.work, &mut self.ws, Some(sign));
+                k.write_to(&mut self.unpacked[..adjoint.len()]);
+                interface.reflect_transposed(
+                    &self.plan.fft,
+                    &self.unpacked[..adjoint.len()],
+                    &mut self.reflected,
+                    &mut self.work,
+                    &mut self.ws,
+                    Some(sign),
+                );
                 adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
             } else {
                 k.add_to(&mut self.incident, false);
@@ -209,15 +230,10 @@ impl HasPlan {
         if weights.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()) {
             return Err(HasError::invalid("weights", "contains NaN or infinite values"));
         }
-        if self.shear {
-            return Err(HasError::invalid(
-                "medium",
-                "the transposed march (each element's response by reciprocity) does not carry shear: \
-                 give the solid no shear speed, or march each element forward",
-            ));
-        }
         let mut out = Vec::new();
         super::march::in_pool(|| out = self.transposed_here(plane, weights, reflections));
+        // The source is a compressional field: the transpose of setting its SV half to zero.
+        out.truncate(g.lateral_len());
         Ok(out)
     }
 
