@@ -26,18 +26,7 @@ fn main() -> has_core::Result<()> {
             }
         }
         let c = compare(&case)?;
-        let [s, e] = c.focal_point;
-        println!(
-            "{cs:6.0} | {:+6.1} % | ({:+.2}, {:+.2}) | {:.3} at ({:+.2}, {:.2}) | {:.3} | {:.1}",
-            100.0 * c.focal_pressure_error(),
-            (s[0] - e[0]) * 1e3,
-            (s[2] - e[2]) * 1e3,
-            c.focal_pressure[1],
-            e[0] * 1e3,
-            e[2] * 1e3,
-            c.focal_pressure[0],
-            c.seconds
-        );
+        println!("{cs:6.0} | {} | {:.3} | {:.1}", c.against_exact(), c.focal_pressure[0], c.seconds);
     }
     Ok(())
 }

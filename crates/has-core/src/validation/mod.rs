@@ -84,6 +84,21 @@ pub struct Comparison {
 }
 
 impl Comparison {
+    /// One line for a table: the focal pressure's error (%), the simulated focus less the exact
+    /// one in x and z (mm), and the exact peak (`|p|/p0`) with its x and z (mm).
+    pub fn against_exact(&self) -> String {
+        let [s, e] = self.focal_point;
+        format!(
+            "{:+6.1} % | ({:+.2}, {:+.2}) | {:.3} at ({:+.2}, {:.2})",
+            100.0 * self.focal_pressure_error(),
+            (s[0] - e[0]) * 1e3,
+            (s[2] - e[2]) * 1e3,
+            self.focal_pressure[1],
+            e[0] * 1e3,
+            e[2] * 1e3
+        )
+    }
+
     /// Relative error of the focal peak.
     pub fn focal_pressure_error(&self) -> f64 {
         self.focal_pressure[0] / self.focal_pressure[1] - 1.0
