@@ -281,6 +281,27 @@ mod tests {
         }
     }
 
+    /// Reciprocity: an asymmetric stack (different solids, a fluid layer among them) between the
+    /// same fluid transmits the same from either side, to 1e-10, below and beyond the critical
+    /// angles: a solid-solid face between different solids with a condition or a column wrong
+    /// would break it (energy conservation alone does not test the phase).
+    #[test]
+    fn an_asymmetric_stack_transmits_alike_both_ways() {
+        let water = fluid(1500.0, 1000.0, 0.0);
+        let layers = [
+            StackLayer::Solid(solid(2800.0, 1500.0, 1850.0, 4.0), 1.5e-3),
+            StackLayer::Solid(solid(2300.0, 1100.0, 1700.0, 8.0), 4e-3),
+            StackLayer::Fluid(fluid(1610.0, 1090.0, 2.3), 0.8e-3),
+            StackLayer::Solid(solid(2600.0, 1300.0, 1800.0, 2.0), 1e-3),
+        ];
+        let reversed: Vec<StackLayer> = layers.iter().rev().copied().collect();
+        for deg in ANGLES {
+            let kt = kt_at(&water, deg);
+            let (a, b) = (stack_response(water, &layers, water, kt).transmission, stack_response(water, &reversed, water, kt).transmission);
+            assert!((a - b).norm() < 1e-10 * a.norm().max(1e-6), "{deg}°: {a} vs {b}");
+        }
+    }
+
     /// At normal incidence no shear is excited: solid layers act as the fluids of their
     /// compressional wave, to 1e-12.
     #[test]

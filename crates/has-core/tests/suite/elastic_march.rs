@@ -134,6 +134,69 @@ fn the_solid_plate_marches_alike_in_single_precision_and_on_any_number_of_thread
     assert_eq!(on_one, double);
 }
 
+/// A layered skull with solid bone (ITRUSST BM4's layers: skin 4 mm, cortical 1.5, trabecular 4,
+/// cortical 1, then brain; the tables with shear 1500 m/s, the diploë 1100 m/s): plane waves
+/// through it against the exact stack (`reference::stack`, held against the plate, the fluid
+/// transfer matrices, a solid cut in two and energy conservation), at angles below, near and
+/// beyond the compressional critical angles. Every face kind crosses here: fluid-fluid (water to
+/// skin), fluid-solid, solid-solid (cortical to trabecular and back) and solid-fluid (to brain).
+/// Tolerance 3e-3 of the incident amplitude: the reverberation is summed until a round trip
+/// returns less than 1e-3 of it.
+#[test]
+fn plane_waves_cross_a_layered_solid_skull_as_the_exact_stack() {
+    use has_core::reference::stack::{stack_response, StackLayer};
+    let text = format!(
+        "frequency_hz = {F}\n[transducer]\nelements_per_side = 4\n[focus]\nposition_mm = [0.0, 0.0, 40.0]\n\
+         [arfi]\namplitude_rad_m3_per_n = 1.0\n[medium]\nbackground = \"water\"\n\
+         [[material]]\nname = \"water\"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\n\
+         [[material]]\nname = \"skin\"\nsound_speed_m_s = 1610.0\ndensity_kg_m3 = 1090.0\nattenuation_db_cm_mhz = 0.4\n\
+         [[material]]\nname = \"cortical\"\nsound_speed_m_s = 2800.0\ndensity_kg_m3 = 1850.0\nattenuation_db_cm_mhz = 8.0\n\
+         shear_sound_speed_m_s = 1500.0\nshear_attenuation_db_cm_mhz = 8.0\n\
+         [[material]]\nname = \"trabecular\"\nsound_speed_m_s = 2300.0\ndensity_kg_m3 = 1700.0\nattenuation_db_cm_mhz = 16.0\n\
+         shear_sound_speed_m_s = 1100.0\nshear_attenuation_db_cm_mhz = 16.0\n\
+         [[material]]\nname = \"brain\"\nsound_speed_m_s = 1560.0\ndensity_kg_m3 = 1040.0\nattenuation_db_cm_mhz = 0.6\n\
+         [[region]]\nmaterial = \"skin\"\nshape = \"slab\"\nz_min_mm = 5.0\nz_max_mm = 9.0\n\
+         [[region]]\nmaterial = \"cortical\"\nshape = \"slab\"\nz_min_mm = 9.0\nz_max_mm = 10.5\n\
+         [[region]]\nmaterial = \"trabecular\"\nshape = \"slab\"\nz_min_mm = 10.5\nz_max_mm = 14.5\n\
+         [[region]]\nmaterial = \"cortical\"\nshape = \"slab\"\nz_min_mm = 14.5\nz_max_mm = 15.5\n\
+         [[region]]\nmaterial = \"brain\"\nshape = \"slab\"\nz_min_mm = 15.5\nz_max_mm = 100.0\n"
+    );
+    let medium = Scenario::from_toml(&text, None).unwrap().resolve().unwrap().medium;
+    let (nx, ny, dx, dz) = (256, 4, 0.2e-3, 0.25e-3);
+    let g = Grid::new(nx, ny, dx, dx, 81, dz, 0.0).unwrap();
+    let omega = 2.0 * PI * F;
+    let np = |db_cm: f64| db_cm * 100.0 * LN_10 / 20.0;
+    let fluid = |c: f64, rho: f64, db_cm: f64| Fluid { k: C64::new(omega / c, np(db_cm)), density: rho };
+    let (water, brain) = (fluid(1500.0, 1000.0, 0.0), fluid(1560.0, 1040.0, 0.3));
+    let cortical = Solid::new(2800.0, 1500.0, 1850.0, np(4.0), np(4.0), F).unwrap();
+    let trabecular = Solid::new(2300.0, 1100.0, 1700.0, np(8.0), np(8.0), F).unwrap();
+    let layers = [
+        StackLayer::Fluid(fluid(1610.0, 1090.0, 0.2), 4e-3),
+        StackLayer::Solid(cortical, 1.5e-3),
+        StackLayer::Solid(trabecular, 4e-3),
+        StackLayer::Solid(cortical, 1e-3),
+    ];
+    let options = HasOptions { sponge_width: 0.0, ..HasOptions::default() };
+    let record = 70; // 17.5 mm: 2 mm into the brain
+    for m in [0usize, 3, 5, 9, 11, 13] {
+        let kt = 2.0 * PI * m as f64 / (nx as f64 * dx);
+        let source: Vec<C64> = (0..g.lateral_len()).map(|i| C64::new(0.0, kt * g.x(i % nx)).exp()).collect();
+        let spec = RecordSpec { planes: vec![record], ..RecordSpec::default() };
+        let (plan, rec) = HasPlan::build(&g, &medium, F, &source, &options, &spec).unwrap();
+        assert_eq!(plan.elastic_interfaces(), 4, "the four faces of the bone");
+        let t = stack_response(water, &layers, brain, C64::new(kt, 0.0)).transmission;
+        let (kz_w, kz_b) = (water.kz(C64::new(kt, 0.0)), brain.kz(C64::new(kt, 0.0)));
+        let deg = (kt / water.k.re).asin().to_degrees();
+        let mut worst: f64 = 0.0;
+        for i in 0..nx {
+            let want = t * (C64::i() * (kt * g.x(i) + kz_w * 5e-3 + kz_b * (g.z(record) - 15.5e-3))).exp();
+            worst = worst.max((rec.planes[0][i] - want).norm());
+        }
+        eprintln!("[elastic] layered skull, {deg:5.1}°: |T| {:.4}, largest error {worst:.1e}, {:?}", t.norm(), plan.reverberation());
+        assert!(worst < 3e-3, "{deg:.1}°: error {worst:.2e} against |T| {:.4}", t.norm());
+    }
+}
+
 /// A plate whose faces cover the plane but for its corners (a cylinder region reaching the
 /// absorbing layer, where the field is below 1e-3 of its peak) crosses its faces as masked
 /// material pairs, both fields written pixel by pixel. Its focal window differs from the unbounded

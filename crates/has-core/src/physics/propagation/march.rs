@@ -1,10 +1,8 @@
 //! Marching a source through a plan: the one-way sweep, the round trips of the reverberation
 //! zone and the backward pass of reflections (what is recorded on the way: `record.rs`).
 //!
-//! The march carries the flux-normalised field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]).
-//! Recorded values are the total pressure on the plane: at an interface plane, the side before
-//! the interface (incident forward wave plus the backward wave leaving it), which equals the side
-//! after it by pressure continuity.
+//! The march carries the flux-normalised field `ψ = p·sqrt(Z_s/Z)` (see [`super::interface`]),
+//! and beside it the shear wave's where a solid's faces convert (`elastic.rs`).
 //!
 //! A march runs in the precision of the operators it is given ([`Operators`]): the plan's own
 //! (double precision) or a [`super::SinglePlan`]'s; it records in double precision either way.
@@ -125,6 +123,7 @@ impl<T: Real> Wave<T> {
             // A wave `[ψ | s]` written to a plane of ψ alone gives its ψ (and a ψ wave to a
             // plane `[ψ | s]`, zero SV).
             Wave::Dense(w) => {
+                debug_assert!(w.len() == plane.len() || w.len() == 2 * plane.len() || plane.len() == 2 * w.len());
                 let m = plane.len().min(w.len());
                 plane[..m].copy_from_slice(&w[..m]);
                 plane[m..].fill(zero());
