@@ -204,21 +204,15 @@ fn layered(name: &str, description: &str, z1_mm: f64, layers: &[(Tissue, f64)], 
 /// [`crate::reference::oblique`]).
 pub fn solid_plate(shear: f64) -> Result<Case> {
     let (z1, d) = (30.0, 6.5);
-    let material =
-        format!("{}shear_sound_speed_m_s = {shear:.1}\nshear_attenuation_db_cm_mhz = {}\n", CORTICAL.toml(), CORTICAL.db_cm_mhz());
-    let regions = format!("[[region]]\nmaterial = \"cortical\"\nshape = \"slab\"\nz_min_mm = {z1}\nz_max_mm = {}\n", z1 + d);
-    let text = format!(
-        "name = \"ITRUSST SC1\"\nfrequency_hz = {FREQUENCY}\n[transducer]\nkind = \"bowl\"\nradius_of_curvature_mm = {ROC_MM}\n\
-         aperture_diameter_mm = {APERTURE_MM}\n[focus]\nposition_mm = [0.0, 0.0, {ROC_MM}]\n{}{material}[medium]\nbackground = \"water\"\n{regions}",
-        WATER.toml()
-    );
-    Ok(Case {
-        name: if shear == 1500.0 { "bm3_solid".into() } else { format!("bm3_solid_cs{shear:.0}") },
-        description: format!("cortical plate 6.5 mm thick from 30 mm (ITRUSST BM3) as a solid, shear {shear:.0} m/s"),
-        scenario: Scenario::from_toml(&text, None)?,
-        tolerances: Tolerances::default(),
-        geometry: Geometry::SolidPlate { z1: z1 * 1e-3, thickness: d * 1e-3, shear },
-    })
+    let name = if shear == 1500.0 { "bm3_solid".to_string() } else { format!("bm3_solid_cs{shear:.0}") };
+    let description = format!("cortical plate 6.5 mm thick from 30 mm (ITRUSST BM3) as a solid, shear {shear:.0} m/s");
+    let mut case = layered(&name, &description, z1, &[(CORTICAL, d)], WATER)?;
+    for m in case.scenario.materials.iter_mut().flatten().filter(|m| m.name == CORTICAL.0) {
+        m.shear_sound_speed_m_s = Some(shear);
+        m.shear_attenuation_db_cm_mhz = Some(CORTICAL.db_cm_mhz());
+    }
+    case.geometry = Geometry::SolidPlate { z1: z1 * 1e-3, thickness: d * 1e-3, shear };
+    Ok(case)
 }
 
 /// CT voxel size of the shells, m.

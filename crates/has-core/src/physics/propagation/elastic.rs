@@ -404,26 +404,6 @@ pub(super) fn screen(shear: &ShearMaps, sponge: &[f64], omega: f64, k_mean: f64,
         .collect()
 }
 
-/// The mean shear wavenumber and attenuation of a slab's solid pixels weighted by `|ψ|` there
-/// (by the pixels alone where `ψ` is zero on them; sequential sums, the same with any number of
-/// threads), rounded to multiples of `quantum` as the compressional means are.
-pub(super) fn mean_shear(field: &[C64], shear: &ShearMaps, omega: f64, quantum: f64) -> (f64, f64) {
-    let mean = |weight: &dyn Fn(usize) -> f64| {
-        let (mut k, mut a, mut w) = (0.0, 0.0, 0.0);
-        for (i, (&cs, &att)) in shear.sound_speed.iter().zip(&shear.attenuation).enumerate() {
-            if cs > 0.0 {
-                let v = weight(i);
-                k += v * omega / cs;
-                a += v * att;
-                w += v;
-            }
-        }
-        (w > 0.0).then(|| (k / w, a / w))
-    };
-    let (k, a) = mean(&|i| field[i].norm()).or_else(|| mean(&|_| 1.0)).unwrap_or((0.0, 0.0));
-    ((k / quantum).round() * quantum, (a / quantum).round() * quantum)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -174,8 +174,11 @@ pub(super) fn fluid_key(s: &SliceProperties, i: usize) -> Key {
 }
 
 pub(super) fn key(s: &SliceProperties, i: usize) -> Key {
-    let (cs, a) = s.shear.as_ref().map_or((0.0, 0.0), |m| (m.sound_speed[i], m.attenuation[i]));
-    [s.sound_speed[i].to_bits(), s.density[i].to_bits(), s.attenuation[i].to_bits(), cs.to_bits(), a.to_bits()]
+    let mut key = fluid_key(s, i);
+    if let Some(m) = &s.shear {
+        key[3..].copy_from_slice(&[m.sound_speed[i].to_bits(), m.attenuation[i].to_bits()]);
+    }
+    key
 }
 
 impl Interface {

@@ -318,7 +318,11 @@ impl HasPlan {
                 Some(r) => r.0[0],
                 None => mean_wavenumber(psi, props, omega, quantum),
             };
-            let shear_mean = props.shear.as_ref().filter(|_| plan.shear).map(|m| (m, elastic::mean_shear(psi, m, omega, quantum)));
+            let shear_mean = props
+                .shear
+                .as_ref()
+                .filter(|_| plan.shear)
+                .map(|m| (m, weighted_mean(psi, &m.sound_speed, &m.attenuation, omega, quantum)));
             let mut cached = |(k, a): (f64, f64)| {
                 propagator_cache.entry([k.to_bits(), a.to_bits()]).or_insert_with(|| Arc::new(propagator(grid, grid.dz, k, a))).clone()
             };
@@ -570,22 +574,27 @@ fn layout(grid: &Grid, medium: &Medium, frequency: f64, model: InterfaceModel) -
     Layout { frequency, source_medium, slabs, slab_of_step, interfaces }
 }
 
-/// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (sequential sums: identical with any
-/// number of threads), rounded to multiples of `quantum` so slabs of equal medium share one
-/// propagator.
+/// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` over the slab (see [`weighted_mean`]).
 fn mean_wavenumber(field: &[C64], props: &SliceProperties, omega: f64, quantum: f64) -> (f64, f64) {
-    let (mut k_sum, mut a_sum, mut den) = (0.0, 0.0, 0.0);
-    for ((p, c), a) in field.iter().zip(&props.sound_speed).zip(&props.attenuation) {
-        let w = p.norm_sqr().sqrt(); // |p| without hypot's overflow care: 2x faster here
-        k_sum += w * omega / c;
-        a_sum += w * a;
-        den += w;
-    }
-    let (k, a) = if den > 0.0 {
-        (k_sum / den, a_sum / den)
-    } else {
-        let n = props.sound_speed.len() as f64;
-        (props.sound_speed.iter().map(|c| omega / c).sum::<f64>() / n, props.attenuation.iter().sum::<f64>() / n)
+    weighted_mean(field, &props.sound_speed, &props.attenuation, omega, quantum)
+}
+
+/// `Σ|p|·k / Σ|p|` and `Σ|p|·alpha / Σ|p|` (`k = omega/c`) over the pixels whose speed `c` is
+/// above 0 (every pixel of a compressional map; a shear map's solids), by the pixels alone where
+/// the field is zero on them (sequential sums: identical with any number of threads), rounded to
+/// multiples of `quantum` so slabs of equal medium share one propagator; 0 where no pixel counts.
+fn weighted_mean(field: &[C64], speed: &[f64], attenuation: &[f64], omega: f64, quantum: f64) -> (f64, f64) {
+    let mean = |weight: &dyn Fn(&C64) -> f64| {
+        let (mut k_sum, mut a_sum, mut den) = (0.0, 0.0, 0.0);
+        for ((p, c), a) in field.iter().zip(speed).zip(attenuation).filter(|((_, &c), _)| c > 0.0) {
+            let w = weight(p);
+            k_sum += w * omega / c;
+            a_sum += w * a;
+            den += w;
+        }
+        (den > 0.0).then(|| (k_sum / den, a_sum / den))
     };
+    // |p| without hypot's overflow care: 2x faster here.
+    let (k, a) = mean(&|p| p.norm_sqr().sqrt()).or_else(|| mean(&|_| 1.0)).unwrap_or((0.0, 0.0));
     ((k / quantum).round() * quantum, (a / quantum).round() * quantum)
 }

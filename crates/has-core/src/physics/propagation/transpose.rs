@@ -102,7 +102,7 @@ impl<'a> Transposer<'a> {
             }
             if let Some(k) = kept {
                 self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
-                k.write_to(&mut self.unpacked[..adjoint.len()]);
+                k.write_to(&mut self.unpacked);
             }
             let unpacked = kept.map(|_| &self.unpacked[..]);
             interface.cross_transposed_walls(&self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
@@ -118,15 +118,8 @@ impl<'a> Transposer<'a> {
             if faces {
                 // The kept wave carries the faces' phases, the transmitted one does not.
                 self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
-                k.write_to(&mut self.unpacked[..adjoint.len()]);
-                interface.reflect_transposed(
-                    &self.plan.fft,
-                    &self.unpacked[..adjoint.len()],
-                    &mut self.reflected,
-                    &mut self.work,
-                    &mut self.ws,
-                    Some(sign),
-                );
+                k.write_to(&mut self.unpacked);
+                interface.reflect_transposed(&self.plan.fft, &self.unpacked, &mut self.reflected, &mut self.work, &mut self.ws, Some(sign));
                 adjoint.iter_mut().zip(&self.reflected).for_each(|(a, r)| *a += sign * r);
             } else {
                 k.add_to(&mut self.incident, false);
