@@ -2,9 +2,10 @@
 //! default grid (the plate read from a CT of 0.25 mm voxels) against the exact angular-spectrum
 //! solution through the fluid plate, and the exact solid plate (shear 1500 m/s) beside it.
 //!
-//! `cargo run --release -p has-core --example tilted_plate [-- 10 20 step=0.25]` (angles in
-//! degrees; `step=` the march's step in mm instead of the default grid's; `interfaces=` and
-//! `screen=` as in a scenario's `[grid]`)
+//! `cargo run --release -p has-core --example tilted_plate [-- 10 20 step=0.25 shear=1500]`
+//! (angles in degrees; `step=` the march's step in mm instead of the default grid's; `shear=` the
+//! CT's bone as a solid of that shear speed, m/s, against the exact solid plate; `interfaces=`
+//! and `screen=` as in a scenario's `[grid]`)
 
 use has_core::reference::oblique::ObliqueBowl;
 use has_core::validation::{compare, tilted_plate, Exact};
@@ -14,13 +15,15 @@ fn main() -> has_core::Result<()> {
     // The value of the argument `name=value`, if given.
     let arg = |name: &str| args.iter().find_map(|a| a.strip_prefix(name)?.strip_prefix('='));
     let step_mm: Option<f64> = arg("step").and_then(|v| v.parse().ok());
+    let shear: Option<f64> = arg("shear").and_then(|v| v.parse().ok());
     let angles: Vec<f64> = args.iter().filter_map(|a| a.parse().ok()).collect();
     let angles = if angles.is_empty() { vec![0.0, 10.0, 20.0, 30.0] } else { angles };
     let dir = std::env::temp_dir().join(format!("arfi-tilted-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| has_core::HasError::invalid("dir", e.to_string()))?;
-    println!("tilt | march/exact fluid | march focus - exact (x, z mm) | exact fluid peak, (x, z) mm | exact solid (cs 1500) peak, (x, z) mm | s");
+    let kind = if shear.is_some() { "solid" } else { "fluid" };
+    println!("tilt | march/exact {kind} | march focus - exact (x, z mm) | exact fluid peak, (x, z) mm | exact solid (cs 1500) peak, (x, z) mm | s");
     for &t in &angles {
-        let mut case = tilted_plate(&dir, t, None)?;
+        let mut case = tilted_plate(&dir, t, shear)?;
         case.scenario.grid.step_mm = step_mm;
         case.scenario.grid.interfaces = arg("interfaces").map(String::from);
         case.scenario.grid.screen = arg("screen").map(String::from);

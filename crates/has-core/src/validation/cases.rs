@@ -291,6 +291,14 @@ fn cortical_ct(file: &str) -> String {
     )
 }
 
+/// The `[ct]` lines of a bone of shear speed `shear` (m/s) with the compressional wave's
+/// attenuation (none for a fluid bone).
+fn shear_ct(shear: Option<f64>) -> String {
+    shear.map_or(String::new(), |cs| {
+        format!("bone_shear_sound_speed_m_s = {cs:.1}\nbone_shear_attenuation_db_cm_mhz = {}\n", CORTICAL.db_cm_mhz())
+    })
+}
+
 /// The shell case `name` (radii in mm about the axis point `centre_mm`, a cap of `cap_deg`), its
 /// CT to be written to `dir/{name}.nii` by [`Case::write_inputs`].
 fn shell(dir: &Path, name: &str, description: &str, centre_mm: f64, inner_mm: f64, outer_mm: f64, cap_deg: f64) -> Result<Case> {
@@ -357,8 +365,8 @@ pub fn tilted_plates(dir: &Path) -> Result<Vec<Case>> {
     [0.0, 10.0, 20.0, 30.0].iter().map(|&t| tilted_plate(dir, t, None)).collect()
 }
 
-/// The plate turned by `tilt_deg`, a solid of shear speed `shear` (m/s) in the exact solution or a
-/// fluid; the CT (and so the march) is the same either way.
+/// The plate turned by `tilt_deg`, a solid of shear speed `shear` (m/s, the CT's bone shear with
+/// the compressional wave's attenuation, and the exact solution's) or a fluid.
 pub fn tilted_plate(dir: &Path, tilt_deg: f64, shear: Option<f64>) -> Result<Case> {
     let name = match shear {
         None => format!("tilt{tilt_deg:.0}"),
@@ -372,7 +380,7 @@ pub fn tilted_plate(dir: &Path, tilt_deg: f64, shear: Option<f64>) -> Result<Cas
     Ok(Case {
         name: name.clone(),
         description: format!("cortical plate 6.5 mm thick from 30 mm, turned {tilt_deg:.0}° about y, from a CT ({kind})"),
-        scenario: scenario(&[], &cortical_ct(&file), Some(dir))?,
+        scenario: scenario(&[], &(cortical_ct(&file) + &shear_ct(shear)), Some(dir))?,
         tolerances: Tolerances::OBLIQUE,
         geometry: Geometry::Tilted { z1: 30e-3, thickness: 6.5e-3, tilt_deg, shear, ct: dir.join(file) },
     })

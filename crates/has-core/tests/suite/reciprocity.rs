@@ -6,6 +6,8 @@
 //! path beyond the plan's operators, so a transposed factor in the wrong order or a wave left out
 //! shows at once; what remains is rounding (tolerance 1e-10 of `Σ |w|·|M·s|`; seen ~1e-15).
 
+use has_core::nifti::Volume;
+use has_core::physics::ct::{BoneShear, CtMedium, HuConversion};
 use has_core::physics::grid::Grid;
 use has_core::physics::medium::{Material, Medium, Region, Shape, VoxelMap};
 use has_core::physics::propagation::{HasOptions, HasPlan, InterfaceModel, RecordSpec};
@@ -91,6 +93,35 @@ fn tilted() -> Medium {
         attenuation_db_cm_mhz: (0..n).map(|i| if bone(i) { 8.0 } else { 0.0 }).collect(),
         attenuation_power: 1.0,
     });
+    medium
+}
+
+/// The plate of [`tilted`] as solid bone (shear 1500 m/s) read from a CT of 0.25 mm voxels: its
+/// oblique walls convert between P and SV waves (`oblique_shear.rs`).
+fn tilted_solid_ct() -> Medium {
+    // (nk, nj, ni), the NIfTI's RAS x and y the frame's negated (identity transform).
+    let (spacing, shape) = (0.25e-3, [120, 96, 112]);
+    let t = 20f64.to_radians();
+    let origin = [-14e-3, -12e-3, 4e-3];
+    let values: Vec<f32> = (0..shape.iter().product())
+        .map(|f: usize| {
+            let (x, z) = (origin[0] + (f % shape[2]) as f64 * spacing, origin[2] + (f / (shape[2] * shape[1])) as f64 * spacing);
+            if (0.0..4e-3).contains(&(x * t.sin() + (z - 12e-3) * t.cos())) {
+                2000.0
+            } else {
+                -1000.0
+            }
+        })
+        .collect();
+    let mm = |v: f64| v * 1e3;
+    let affine =
+        [[-mm(spacing), 0.0, 0.0, -mm(origin[0])], [0.0, -mm(spacing), 0.0, -mm(origin[1])], [0.0, 0.0, mm(spacing), mm(origin[2])]];
+    let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+    let mut conversion = HuConversion::named("aubry2003").unwrap();
+    conversion.bone_shear = BoneShear { sound_speed: 1500.0, attenuation_db_cm_mhz: 8.0 };
+    let ct = CtMedium::new(Volume { shape, values, affine }, identity, conversion, "tilted plate").unwrap();
+    let mut medium = Medium::homogeneous(Material::new("water", 1500.0, 1000.0, 0.0).unwrap());
+    medium.ct = Some(std::sync::Arc::new(ct));
     medium
 }
 
@@ -183,6 +214,24 @@ fn transposed_march_passes_the_dot_product_test_through_an_oblique_wall() {
     assert!(walls >= 5, "{walls} interfaces with oblique walls: the test needs them");
     assert!(plan.split_steps() >= 5, "{} steps with two reference media: the test needs them", plan.split_steps());
     dot_test("tilted plate", &tilted(), InterfaceModel::Angular, &[10, 24, 30, 50]);
+}
+
+/// The tilted plate as a solid read from a CT: the march carries the SV field, the walls'
+/// treads convert (with reflected SV waves kept for the round trips) and the transposed march
+/// transposes both fields there.
+#[test]
+fn transposed_march_passes_the_dot_product_test_through_an_oblique_solid_wall() {
+    let g = grid();
+    let medium = tilted_solid_ct();
+    let (plan, _) = HasPlan::build(&g, &medium, F, &reference(&g), &HasOptions::default(), &RecordSpec::default()).unwrap();
+    let (walls, converting) = (plan.oblique_walls(), plan.elastic_interfaces());
+    eprintln!(
+        "tilted solid plate: {walls} interfaces with oblique walls, {converting} converting, reverberation {:?}",
+        plan.reverberation()
+    );
+    assert!(plan.carries_shear() && converting >= 5, "{converting} converting interfaces: the test needs them");
+    assert!(plan.reverberation().is_some_and(|r| r.2 >= 1), "the plate must reverberate");
+    dot_test("tilted solid plate", &medium, InterfaceModel::Angular, &[10, 24, 30, 50]);
 }
 
 #[test]

@@ -258,7 +258,7 @@ impl CtMedium {
     ) -> Option<Properties> {
         let n = self.samples(size);
         let (mut slowness, mut attenuation, mut tissue) = (0.0, 0.0, false);
-        let (mut shear, mut shear_attenuation) = (0.0, 0.0);
+        let (mut shear_slowness, mut shear_attenuation, mut solid) = (0.0, 0.0, 0.0);
         for k in 0..n[2] {
             for j in 0..n[1] {
                 for i in 0..n[0] {
@@ -269,8 +269,11 @@ impl CtMedium {
                     let q = q.unwrap_or(outside);
                     slowness += 1.0 / q.sound_speed;
                     attenuation += q.attenuation;
-                    shear += q.shear_sound_speed;
-                    shear_attenuation += q.shear_attenuation;
+                    if q.shear_sound_speed > 0.0 {
+                        shear_slowness += 1.0 / q.shear_sound_speed;
+                        shear_attenuation += q.shear_attenuation;
+                        solid += 1.0;
+                    }
                 }
             }
         }
@@ -280,13 +283,16 @@ impl CtMedium {
             // The impedance of the medium at the centre: a face inside the cell reflects as the
             // sharp face between the materials on either side, at the nearest plane.
             let centre = self.hu_at(center).and_then(convert).unwrap_or(outside);
-            // Shear (which the march does not carry) by its mean over the cell.
+            // The cell is a solid where its centre is, as the centre places its faces; its shear
+            // wave then takes the slowness and attenuation of the solid samples (a mean with the
+            // fluid's zeros would give a face cell a third of bone's shear speed).
+            let is_solid = centre.shear_sound_speed > 0.0 && solid > 0.0;
             Properties {
                 sound_speed,
                 density: centre.impedance() / sound_speed,
                 attenuation: attenuation / count,
-                shear_sound_speed: shear / count,
-                shear_attenuation: shear_attenuation / count,
+                shear_sound_speed: if is_solid { solid / shear_slowness } else { 0.0 },
+                shear_attenuation: if is_solid { shear_attenuation / solid } else { 0.0 },
             }
         })
     }

@@ -195,8 +195,13 @@ impl Interface {
                     groups: w
                         .groups
                         .iter()
-                        .map(|g| WallGroup { members: g.members.clone(), filters: g.filters.clone().map(|f| copy(&f)), normal: g.normal })
+                        .map(|g| WallGroup {
+                            members: g.members.clone(),
+                            filters: Arc::new(g.filters.as_ref().clone().map(|d| d.map(|o| o.map(|w| w.map(|f| copy(&f)))))),
+                            normal: g.normal,
+                        })
                         .collect(),
+                    kept: w.kept.clone(),
                 }),
             },
             Kind::Spectral(pairs) => Kind::Spectral(
@@ -348,7 +353,9 @@ impl<T: FftNum> Interface<T> {
             Kind::Pointwise { phase, walls, .. } => {
                 let mut planes = if phase.is_some() { vec![own, own + 1] } else { vec![own] };
                 if let Some(w) = walls {
-                    planes.extend(w.groups.iter().flat_map(|g| g.filters.iter().map(|f| Arc::as_ptr(f) as usize)));
+                    planes.extend(
+                        w.groups.iter().flat_map(|g| g.filters.iter().flatten().flatten().flatten().map(|f| Arc::as_ptr(f) as usize)),
+                    );
                 }
                 planes
             }
@@ -380,6 +387,12 @@ impl<T: FftNum> Interface<T> {
             Kind::Pointwise { walls, .. } => walls.as_ref(),
             Kind::Spectral(_) | Kind::Elastic(_) => None,
         }
+    }
+
+    /// Whether it converts between compressional and shear waves: a solid meets another medium
+    /// on the plane, or on an oblique wall among its pixels.
+    pub(crate) fn converts_shear(&self) -> bool {
+        self.elastic().is_some() || self.walls().is_some_and(|w| w.converts())
     }
 
     /// The pairs of an interface where a solid meets another medium on a plane, if it is one.
@@ -473,51 +486,67 @@ impl<T: FftNum + Into<f64>> Interface<T> {
 
 impl Interface {
     /// The transpose of crossing a pointwise interface that has oblique walls in the direction
-    /// `sign` (`march::cross`): `adjoint` holds the adjoint of the field after the crossing and
-    /// becomes that of the field before it; `kept` is the adjoint of the kept reflected wave on
-    /// the whole plane. A wall's `M·IFFT(f·FFT)` has the transpose `IFFT(f(-k)·FFT(M·))`; the
-    /// other pixels are diagonal. `work` (as long as `adjoint`) is overwritten.
+    /// `sign` (`march::cross`): `adjoint` (`ψ`, or `[ψ | s]`) holds the adjoint of the field
+    /// after the crossing and becomes that of the field before it; `kept` is the adjoint of the
+    /// kept reflected wave written out on a field as long. A wall's `M·IFFT(f·FFT)` has the
+    /// transpose `IFFT(f(-k)·FFT(M·))`; the other pixels are diagonal, and the SV field passes
+    /// except at the treads of walls that convert. `work` is overwritten.
     pub fn cross_transposed_walls(
         &self,
         fft: &Fft2,
         adjoint: &mut [C64],
         sign: f64,
         kept: Option<&[C64]>,
-        work: &mut [C64],
+        work: &mut Vec<C64>,
         ws: &mut FftWorkspace,
     ) {
         let Kind::Pointwise { pixels, r, phase, walls: Some(walls) } = &self.kind else { return };
         let zero = C64::new(0.0, 0.0);
+        let n = fft.nx * fft.ny;
+        let halves = if walls.converts() { adjoint.len() / n } else { 1 };
         let after = adjoint.to_vec();
         let face = |m: usize| phase.as_ref().map_or(C64::new(1.0, 0.0), |p| if sign < 0.0 { 1.0 / p[m] } else { p[m] });
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
             let i = i as usize;
             if walls.grouped[m] {
                 adjoint[i] = zero;
+                if halves == 2 {
+                    adjoint[n + i] = zero;
+                }
                 continue;
             }
             let s = if sign < 0.0 { 1.0 / flux_scale(r) } else { flux_scale(r) };
             adjoint[i] = s * (1.0 + sign * r) * after[i] + kept.map_or(zero, |k| sign * r * face(m) * k[i]);
         }
-        let mut sum = vec![zero; after.len()];
-        let slot = if sign < 0.0 { 2 } else { 0 };
+        let mut sums = vec![vec![zero; n]; halves];
+        let dir = usize::from(sign < 0.0);
         let dims = (fft.nx, fft.ny);
+        work.resize(n, zero);
         for g in &walls.groups {
-            for (k, source) in [(0, Some(&after[..])), (1, kept)] {
-                let Some(source) = source else { continue };
+            for (o, inputs) in g.filters[dir].iter().enumerate() {
+                let source = if o < 2 { Some(&after[..]) } else { kept };
+                let (Some(source), half) = (source, o % 2) else { continue };
+                if half >= halves || inputs.iter().all(Option::is_none) {
+                    continue;
+                }
                 work.fill(zero);
                 for &m in &g.members {
                     let i = pixels[m as usize] as usize;
-                    work[i] = if k == 0 { source[i] } else { face(m as usize) * source[i] };
+                    work[i] = if o < 2 { source[half * n + i] } else { face(m as usize) * source[half * n + i] };
                 }
                 fft.forward(work, ws);
-                let filter = &g.filters[slot + k];
-                sum.iter_mut().zip(&ws.spectrum).enumerate().for_each(|(at, (s, a))| *s += a * filter[opposite(dims, at)]);
+                for (sum, filter) in sums.iter_mut().zip(inputs) {
+                    if let Some(f) = filter {
+                        sum.iter_mut().zip(&ws.spectrum).enumerate().for_each(|(at, (s, a))| *s += a * f[opposite(dims, at)]);
+                    }
+                }
             }
         }
-        ws.spectrum.copy_from_slice(&sum);
-        fft.inverse(ws, work);
-        adjoint.iter_mut().zip(work.iter()).for_each(|(a, w)| *a += w);
+        for (half, sum) in sums.iter().enumerate() {
+            ws.spectrum.copy_from_slice(sum);
+            fft.inverse(ws, work);
+            adjoint[half * n..(half + 1) * n].iter_mut().zip(work.iter()).for_each(|(a, w)| *a += w);
+        }
     }
 
     /// `out ← Rᵀ p`, the transpose of [`Interface::reflect`]: `Σ_pairs IFFT(R_ab · FFT(M_ab · p))`

@@ -163,20 +163,30 @@ pub(super) fn cross<T: Real>(
         return super::elastic::cross(pairs, fft, field, sign, keep, work, ws);
     }
     // Where the march carries shear, a face that converts none crosses ψ alone; the SV field
-    // passes, and the next slab's screen clears it from pixels that are no longer solid.
-    let field = &mut field[..fft.nx * fft.ny];
+    // passes, and the next slab's screen clears it from pixels that are no longer solid. Oblique
+    // walls of a solid convert at their treads (`oblique_shear.rs`).
+    let n = fft.nx * fft.ny;
     if let Some((pixels, r, phase)) = interface.pointwise() {
         // Oblique walls' treads take their walls' filters, from the field before the crossing.
-        let walls = interface.walls().map(|w| {
-            work.resize(field.len(), zero());
-            (w, w.cross(fft, pixels, field, (sign, keep), work, ws))
-        });
+        let walls = interface.walls().map(|w| (w, w.cross(fft, pixels, field, (sign, keep), work, ws)));
+        let (psi, sv) = field.split_at_mut(n);
+        // The reflected wave leaves the face's true position (see `face_phase`).
+        let at_face = |m: usize, w: Complex<T>| match phase {
+            Some(phase) => {
+                let f = phase[m];
+                w * if sign < 0.0 { Complex::new(T::one(), T::zero()) / f } else { f }
+            }
+            None => w,
+        };
         let mut values = Vec::with_capacity(if keep { pixels.len() } else { 0 });
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
-            let f = &mut field[i as usize];
+            let f = &mut psi[i as usize];
             let w = match &walls {
-                Some((w, [transmitted, reflected])) if w.grouped[m] => {
+                Some((w, [transmitted, sv_transmitted, reflected, _])) if w.grouped[m] => {
                     *f = transmitted[m];
+                    if let Some(&s) = sv_transmitted.get(m) {
+                        sv[i as usize] = s;
+                    }
                     reflected.get(m).copied().unwrap_or_else(zero)
                 }
                 _ => {
@@ -186,19 +196,22 @@ pub(super) fn cross<T: Real>(
                 }
             };
             if keep {
-                // The reflected wave leaves the face's true position (see `face_phase`).
-                values.push(match phase {
-                    Some(phase) => {
-                        let f = phase[m];
-                        w * if sign < 0.0 { Complex::new(T::one(), T::zero()) / f } else { f }
-                    }
-                    None => w,
-                });
+                values.push(at_face(m, w));
             }
         }
-        interface.normalise_transmitted(field, sign);
-        return keep.then(|| Wave::Sparse { pixels: pixels.clone(), values });
+        interface.normalise_transmitted(psi, sign);
+        // Walls that convert keep the SV field's reflected wave at their treads too.
+        let kept = match &walls {
+            Some((w, [.., sv_reflected])) if keep && w.kept.is_some() => {
+                let grouped = (0..pixels.len()).filter(|&m| w.grouped[m]);
+                values.extend(grouped.map(|m| at_face(m, sv_reflected.get(m).copied().unwrap_or_else(zero))));
+                w.kept.clone()
+            }
+            _ => None,
+        };
+        return keep.then(|| Wave::Sparse { pixels: kept.unwrap_or_else(|| pixels.clone()), values });
     }
+    let field = &mut field[..n];
     for buffer in [&mut *reflected, &mut *work] {
         buffer.resize(field.len(), zero());
     }

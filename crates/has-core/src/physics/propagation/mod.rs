@@ -36,6 +36,7 @@ mod faces;
 mod interface;
 mod march;
 mod oblique;
+mod oblique_shear;
 mod operators;
 mod point;
 mod record;
@@ -291,7 +292,7 @@ impl HasPlan {
             steps: Vec::with_capacity(grid.nz - 1),
             zone: None,
             kept: None,
-            shear: interfaces.iter().flatten().any(|i| i.elastic().is_some()),
+            shear: interfaces.iter().flatten().any(|i| i.converts_shear()),
         };
         // March the reference one way (single transmission at each interface) to fix the means;
         // without reverberation or reflections that march is the recording asked for.
@@ -460,16 +461,17 @@ impl HasPlan {
     }
 
     /// Whether its marches carry shear: the SV wave of a solid whose faces with other media lie
-    /// on the planes (material regions), with mode conversion at those faces (`elastic.rs`).
-    /// Faces off the planes (a CT's) convert nothing.
+    /// on the planes (material regions, `elastic.rs`) or on planar walls oblique to them (a
+    /// tilted CT plate, `oblique_shear.rs`), with mode conversion at those faces. A CT's other
+    /// faces (curved, or its treads on the planes) convert nothing.
     pub fn carries_shear(&self) -> bool {
         self.shear
     }
 
     /// How many of the plan's interfaces convert between compressional and shear waves (a
-    /// solid meeting another medium on a plane, `elastic.rs`).
+    /// solid meeting another medium on a plane or on a planar oblique wall).
     pub fn elastic_interfaces(&self) -> usize {
-        self.steps.iter().filter(|s| s.interface.as_ref().is_some_and(|i| i.elastic().is_some())).count()
+        self.steps.iter().filter(|s| s.interface.as_ref().is_some_and(|i| i.converts_shear())).count()
     }
 
     /// The length of a marched field: a plane, or two (`[ψ | s]`) where it carries shear.

@@ -57,8 +57,15 @@ impl<'a> Transposer<'a> {
     /// The adjoint on plane `n` as the reflection there reads it: on a pointwise interface's
     /// pixels, or the whole plane.
     fn keep(&self, n: usize, adjoint: &[C64]) -> Wave<f64> {
-        match self.interface(n).and_then(Interface::pointwise) {
-            Some((pixels, ..)) => Wave::Sparse { pixels: pixels.clone(), values: pixels.iter().map(|&i| adjoint[i as usize]).collect() },
+        let interface = self.interface(n);
+        // Walls that convert keep the SV field's reflected wave at their treads too.
+        let kept = interface.and_then(Interface::walls).and_then(|w| w.kept.clone());
+        match interface.and_then(Interface::pointwise) {
+            Some((pixels, ..)) => {
+                let pixels = kept.unwrap_or_else(|| pixels.clone());
+                let values = pixels.iter().map(|&i| adjoint[i as usize]).collect();
+                Wave::Sparse { pixels, values }
+            }
             None => Wave::Dense(adjoint.to_vec()),
         }
     }
@@ -94,12 +101,7 @@ impl<'a> Transposer<'a> {
             super::elastic::cross_transposed(pairs, &self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
             return;
         }
-        // A face that converts no shear crosses ψ alone (`march::cross`): the SV field passes.
-        let adjoint = &mut adjoint[..self.plan.grid.lateral_len()];
         if interface.walls().is_some() {
-            if self.work.len() != adjoint.len() {
-                self.work = vec![C64::new(0.0, 0.0); adjoint.len()];
-            }
             if let Some(k) = kept {
                 self.unpacked.resize(adjoint.len(), C64::new(0.0, 0.0));
                 k.write_to(&mut self.unpacked);
@@ -108,6 +110,8 @@ impl<'a> Transposer<'a> {
             interface.cross_transposed_walls(&self.plan.fft, adjoint, sign, unpacked, &mut self.work, &mut self.ws);
             return;
         }
+        // A face that converts no shear crosses ψ alone (`march::cross`): the SV field passes.
+        let adjoint = &mut adjoint[..self.plan.grid.lateral_len()];
         interface.normalise_transmitted(adjoint, sign);
         if self.work.len() != adjoint.len() {
             self.work = vec![C64::new(0.0, 0.0); adjoint.len()];

@@ -2,33 +2,41 @@
 //! one (a material pair whose treads' fitted normals on the plane agree), their shared filters
 //! (`oblique.rs`), and the crossing through them.
 
-use super::interface::{fluid_key, medium_at, Around, Coefficients, Key};
+use super::elastic::{Filters, Side};
+use super::interface::{key, medium_at, Around, Coefficients, Key};
 use super::oblique::{bin_centre, bin_of, wall_filters, wall_normals, NormalBin};
+use super::oblique_shear::elastic_wall_filters;
 use crate::numeric::unit;
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
-use num_complex::{Complex, Complex64 as C64};
+use crate::physics::medium::SliceProperties;
+use num_complex::Complex;
 use rustfft::FftNum;
 use std::sync::Arc;
 
-/// A planar wall of a plan: its two materials and its binned normal.
+/// A planar wall of a plan: its two materials (with their shear) and its binned normal.
 pub(super) type WallKey = (Key, Key, NormalBin);
 
-/// A wall's filters `[τ_ab, R_ab, τ_ba, R_ba]` ([`super::oblique::wall_filters`]).
-pub(super) type WallFilters = [Arc<Vec<C64>>; 4];
+/// A wall's filters in the layout of [`Filters`]: a fluid wall's `τ` and `R` on `ψ`
+/// ([`super::oblique::wall_filters`]), a solid's with mode conversion
+/// ([`super::oblique_shear::elastic_wall_filters`]).
+pub(super) type WallFilters = Arc<Filters<f64>>;
 
 /// The treads of oblique walls on a pointwise interface, by wall (materials and binned normal).
 pub(crate) struct Walls<T: FftNum> {
     /// Per pixel of the interface (in its order): whether a wall's filters give its waves.
     pub grouped: Vec<bool>,
     pub groups: Vec<WallGroup<T>>,
+    /// Where a wall converts to or from shear: the pixels of the reflected wave it keeps, the
+    /// interface's pixels followed by the SV field's at its treads (offset by a plane).
+    pub kept: Option<Arc<Vec<u32>>>,
 }
 
 /// One wall's treads on a plane: their positions in the interface's pixel list and the wall's
-/// filters `[τ_ab, R_ab, τ_ba, R_ba]` ([`super::oblique::wall_filters`]).
+/// filters.
 pub(crate) struct WallGroup<T: FftNum> {
     pub members: Vec<u32>,
-    pub filters: [Arc<Vec<Complex<T>>>; 4],
+    pub filters: Arc<Filters<T>>,
     /// The wall's unit normal (its bin's centre, towards +z).
     pub normal: [f64; 3],
 }
@@ -51,32 +59,57 @@ pub const PLANAR_SPREAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 /// A wall needs at least this many treads on a plane to take its filters.
 pub const MIN_WALL_PIXELS: usize = 8;
 
-/// At most this many distinct walls in one plan (four spectra each).
+/// At most this many distinct walls in one plan (4-18 spectra each).
 pub const MAX_PLAN_WALLS: usize = 16;
 
 impl<T: FftNum> Walls<T> {
-    /// The waves of `field` crossing the walls in the direction `sign` (+1 forward, -1 back):
-    /// the transmitted and the reflected wave at each grouped pixel, indexed as the interface's
-    /// `pixels` (zero at the others); the reflected one only if `reflected` (else empty: its
-    /// inverse transforms are half the cost). `work` (as long as `field`) is overwritten.
+    /// Whether its walls' filters give SV waves (a solid on a side).
+    pub(crate) fn converts(&self) -> bool {
+        self.kept.is_some()
+    }
+
+    /// The waves of `field` (`ψ`, or `[ψ | s]` where the march carries shear) crossing the walls
+    /// in the direction `sign` (+1 forward, -1 back): the transmitted ψ and s and the reflected ψ
+    /// and s at each grouped pixel, indexed as the interface's `pixels` (zero at the others);
+    /// the reflected ones only if `reflected`, the SV ones only where the walls convert (else
+    /// empty). `work` is overwritten.
     pub(crate) fn cross(
         &self,
         fft: &Fft2<T>,
         pixels: &[u32],
         field: &[Complex<T>],
         (sign, reflected): (f64, bool),
-        work: &mut [Complex<T>],
+        work: &mut Vec<Complex<T>>,
         ws: &mut FftWorkspace<T>,
-    ) -> [Vec<Complex<T>>; 2] {
+    ) -> [Vec<Complex<T>>; 4] {
         let zero = Complex::new(T::zero(), T::zero());
-        let mut out = [vec![zero; pixels.len()], vec![zero; if reflected { pixels.len() } else { 0 }]];
-        work.copy_from_slice(field);
-        fft.forward(work, ws);
-        let spectrum = ws.spectrum.clone();
-        let slot = if sign < 0.0 { 2 } else { 0 };
+        let n = fft.nx * fft.ny;
+        let halves = if self.converts() { field.len() / n } else { 1 };
+        work.resize(n, zero);
+        let spectra: Vec<Vec<Complex<T>>> = field
+            .chunks_exact(n)
+            .take(halves)
+            .map(|half| {
+                work.copy_from_slice(half);
+                fft.forward(work, ws);
+                ws.spectrum.clone()
+            })
+            .collect();
+        let wanted = |o: usize| (o < 2 || reflected) && (o % 2 == 0 || halves == 2);
+        let mut out: [Vec<Complex<T>>; 4] = std::array::from_fn(|o| vec![zero; if wanted(o) { pixels.len() } else { 0 }]);
+        let dir = usize::from(sign < 0.0);
         for g in &self.groups {
-            for (k, wave) in out.iter_mut().enumerate().filter(|(_, w)| !w.is_empty()) {
-                ws.spectrum.iter_mut().zip(&spectrum).zip(g.filters[slot + k].iter()).for_each(|((s, a), f)| *s = a * f);
+            for (o, wave) in out.iter_mut().enumerate().filter(|(_, w)| !w.is_empty()) {
+                let inputs = &g.filters[dir][o];
+                if inputs.iter().all(Option::is_none) {
+                    continue;
+                }
+                ws.spectrum.fill(zero);
+                for (spectrum, filter) in spectra.iter().zip(inputs) {
+                    if let Some(f) = filter {
+                        ws.spectrum.iter_mut().zip(spectrum).zip(f.iter()).for_each(|((s, a), f)| *s = *s + *a * *f);
+                    }
+                }
                 fft.inverse(ws, work);
                 g.members.iter().for_each(|&m| wave[m as usize] = work[pixels[m as usize] as usize]);
             }
@@ -105,7 +138,7 @@ pub(super) fn walls(
 ) -> Option<Walls<f64>> {
     let (before, after) = around.outer();
     let members: Vec<usize> = (0..pixels.len()).filter(|&m| wall[m]).collect();
-    let materials = |m: usize| (fluid_key(before, pixels[m] as usize), fluid_key(after, pixels[m] as usize));
+    let materials = |m: usize| (key(before, pixels[m] as usize), key(after, pixels[m] as usize));
     // By material pair, in order of first pixel.
     let mut by_pair: Vec<((Key, Key), Vec<usize>)> = Vec::new();
     for &m in &members {
@@ -141,18 +174,40 @@ pub(super) fn walls(
         return None;
     }
     let mut grouped = vec![false; pixels.len()];
-    let groups = groups
+    let groups: Vec<WallGroup<f64>> = groups
         .into_iter()
         .map(|(k, members)| {
             members.iter().for_each(|&m| grouped[m as usize] = true);
             let i = pixels[members[0] as usize] as usize;
-            let filters = shared
-                .1
-                .entry(k)
-                .or_insert_with(|| wall_filters(grid, omega, medium_at(before, i), medium_at(after, i), bin_centre(k.2)).map(Arc::new))
-                .clone();
+            let filters =
+                shared.1.entry(k).or_insert_with(|| Arc::new(filters_of(grid, omega, (before, after), i, bin_centre(k.2)))).clone();
             WallGroup { members, filters, normal: bin_centre(k.2) }
         })
         .collect();
-    Some(Walls { grouped, groups })
+    // The SV field's reflected wave is kept at every grouped tread where any wall converts.
+    let converts = groups.iter().any(|g| {
+        g.filters.iter().flatten().enumerate().any(|(o, inputs)| (o % 2 == 1 && inputs.iter().any(Option::is_some)) || inputs[1].is_some())
+    });
+    let kept = converts.then(|| {
+        let n = grid.lateral_len() as u32;
+        let shear = (0..pixels.len()).filter(|&m| grouped[m]).map(|m| n + pixels[m]);
+        Arc::new(pixels.iter().copied().chain(shear).collect())
+    });
+    Some(Walls { grouped, groups, kept })
+}
+
+/// The filters of the wall at pixel `i` between slabs `before` and `after` with unit normal `n`:
+/// with mode conversion where a side is a solid, else a fluid wall's `τ` and `R` on `ψ`.
+fn filters_of(grid: &Grid, omega: f64, (before, after): (&SliceProperties, &SliceProperties), i: usize, n: [f64; 3]) -> Filters<f64> {
+    let (a, b) = (Side::of(before, i, omega), Side::of(after, i, omega));
+    if a.is_solid() || b.is_solid() {
+        return elastic_wall_filters(grid, &a, &b, n);
+    }
+    let [tau, r, tau_back, r_back] = wall_filters(grid, omega, medium_at(before, i), medium_at(after, i), n).map(Arc::new);
+    let mut f: Filters<f64> = Default::default();
+    f[0][0][0] = Some(tau);
+    f[0][2][0] = Some(r);
+    f[1][0][0] = Some(tau_back);
+    f[1][2][0] = Some(r_back);
+    f
 }
