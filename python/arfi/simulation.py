@@ -171,8 +171,8 @@ class Simulation:
         reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
         pixel), ``screen`` (``"oblique"``: each pixel's wave crosses its slab along the line to the
         focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source added),
-        ``shear`` (shear waves carried through solids whose faces lie on the planes, with mode
-        conversion at each face) and ``reverberation``
+        ``shear`` (shear waves carried through solids whose faces lie on the planes or on planar walls
+        tilted against them, with mode conversion at each such face) and ``reverberation``
         (``None``, or the z of the first and last interface between which the waves bouncing
         inside layers are added, and the round trips added)."""
         return dict(self._core.propagation)
@@ -196,19 +196,20 @@ class Simulation:
         text += ", reflections towards the source added" if p["reflections"] else ""
         ct_shear = bool(((self.scenario.to_dict().get("ct") or {}).get("bone_shear_sound_speed_m_s") or 0) > 0)
         if p.get("shear"):
-            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions), "
-                     "with mode conversion at each face")
+            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions) "
+                     "or on planar walls tilted against them (a CT's), with mode conversion at each such face")
         if self.has_shear and (ct_shear or not p.get("shear")):
-            text += ("; compressional waves only through a CT's or a voxel map's faces and faces crossed pixel by pixel: "
-                     "the shear speeds the scenario gives there are not carried by the march "
-                     "(arfi field --engine fdtd carries them)")
+            text += ("; compressional waves only through a CT's other faces (curved, or along the planes), a voxel map's "
+                     "faces and faces crossed pixel by pixel: the shear speeds the scenario gives there are not carried "
+                     "by the march (arfi field --engine fdtd carries them)")
         return text
 
     @property
     def has_shear(self) -> bool:
         """Whether the scenario gives a solid a shear wave (a material's ``shear_sound_speed_m_s``
         or ``[ct] bone_shear_sound_speed_m_s`` above 0). The march carries it where the solid's faces
-        lie on its planes (``propagation["shear"]``); the full-wave engine everywhere."""
+        lie on its planes or on planar walls tilted against them (``propagation["shear"]``); the
+        full-wave engine everywhere."""
         d = self.scenario.to_dict()
         ct = d.get("ct") or {}
         return bool((ct.get("bone_shear_sound_speed_m_s") or 0) > 0

@@ -385,23 +385,78 @@ pub(super) fn cross_transposed(
 
 /// The SV field's screen through a slab, `exp(i·(ks - k̄s)·dz - (alpha_s + sigma)·dz)` on its
 /// solid pixels (`sigma` the absorbing layer) and 0 on its fluid ones, for the mean shear
-/// wavenumber `k̄s` whose propagator carries the step.
-pub(super) fn screen(shear: &ShearMaps, sponge: &[f64], omega: f64, k_mean: f64, dz: f64) -> Vec<C64> {
+/// wavenumber and attenuation `(k̄s, ā_s)` whose propagator carries the step. With
+/// `continuation` (the grid's `(nx, ny)` and a reach in pixels along x and y), fluid pixels
+/// within the reach of a solid one carry the SV wave on as the slab's mean solid would,
+/// `exp(-(ā_s + sigma)·dz)` (`oblique_shear::CONTINUATION`).
+pub(super) fn screen(
+    shear: &ShearMaps,
+    sponge: &[f64],
+    omega: f64,
+    (k_mean, a_mean): (f64, f64),
+    dz: f64,
+    continuation: Option<([usize; 2], [usize; 2])>,
+) -> Vec<C64> {
+    let near = continuation.map(|(dims, reach)| near_solid(&shear.sound_speed, dims, reach));
     shear
         .sound_speed
         .iter()
         .zip(&shear.attenuation)
         .zip(sponge)
-        .map(
-            |((&cs, &a), &s)| {
-                if cs > 0.0 {
-                    C64::from_polar((-(a + s) * dz).exp(), (omega / cs - k_mean) * dz)
-                } else {
-                    C64::new(0.0, 0.0)
-                }
-            },
-        )
+        .enumerate()
+        .map(|(p, ((&cs, &a), &s))| {
+            if cs > 0.0 {
+                C64::from_polar((-(a + s) * dz).exp(), (omega / cs - k_mean) * dz)
+            } else if near.as_ref().is_some_and(|near| near[p]) {
+                C64::new((-(a_mean + s) * dz).exp(), 0.0)
+            } else {
+                C64::new(0.0, 0.0)
+            }
+        })
         .collect()
+}
+
+/// Whether each pixel of a plane `(nx, ny)` lies within `reach` pixels (along x, along y) of a
+/// pixel of positive shear speed: the solid mask dilated by a box, row by row then column by
+/// column.
+fn near_solid(speed: &[f64], [nx, ny]: [usize; 2], [rx, ry]: [usize; 2]) -> Vec<bool> {
+    let mut rows = vec![false; nx * ny];
+    for y in 0..ny {
+        let row = &speed[y * nx..(y + 1) * nx];
+        // Distance to the last solid pixel at or before x, then after.
+        let mut last: Option<usize> = None;
+        for x in 0..nx {
+            if row[x] > 0.0 {
+                last = Some(x);
+            }
+            rows[y * nx + x] = last.is_some_and(|l| x - l <= rx);
+        }
+        let mut next: Option<usize> = None;
+        for x in (0..nx).rev() {
+            if row[x] > 0.0 {
+                next = Some(x);
+            }
+            rows[y * nx + x] |= next.is_some_and(|n| n - x <= rx);
+        }
+    }
+    let mut out = vec![false; nx * ny];
+    for x in 0..nx {
+        let mut last: Option<usize> = None;
+        for y in 0..ny {
+            if rows[y * nx + x] {
+                last = Some(y);
+            }
+            out[y * nx + x] = last.is_some_and(|l| y - l <= ry);
+        }
+        let mut next: Option<usize> = None;
+        for y in (0..ny).rev() {
+            if rows[y * nx + x] {
+                next = Some(y);
+            }
+            out[y * nx + x] |= next.is_some_and(|n| n - y <= ry);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

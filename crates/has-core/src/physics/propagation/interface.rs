@@ -199,6 +199,7 @@ impl Interface {
                             members: g.members.clone(),
                             filters: Arc::new(g.filters.as_ref().clone().map(|d| d.map(|o| o.map(|w| w.map(|f| copy(&f)))))),
                             normal: g.normal,
+                            ahead: g.ahead.clone(),
                         })
                         .collect(),
                     kept: w.kept.clone(),
@@ -505,18 +506,23 @@ impl Interface {
         let n = fft.nx * fft.ny;
         let halves = if walls.converts() { adjoint.len() / n } else { 1 };
         let after = adjoint.to_vec();
+        let dir = usize::from(sign < 0.0);
         let face = |m: usize| phase.as_ref().map_or(C64::new(1.0, 0.0), |p| if sign < 0.0 { 1.0 / p[m] } else { p[m] });
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
             let i = i as usize;
             if walls.grouped[m] {
                 adjoint[i] = zero;
-                if halves == 2 {
-                    adjoint[n + i] = zero;
-                }
                 continue;
             }
             let s = if sign < 0.0 { 1.0 / flux_scale(r) } else { flux_scale(r) };
             adjoint[i] = s * (1.0 + sign * r) * after[i] + kept.map_or(zero, |k| sign * r * face(m) * k[i]);
+        }
+        // The SV field that a wall's transmitted wave replaces (at its treads and ahead of them).
+        if halves == 2 {
+            for g in walls.groups.iter().filter(|g| g.transmits_sv(dir)) {
+                g.members.iter().for_each(|&m| adjoint[n + pixels[m as usize] as usize] = zero);
+                g.ahead[dir].iter().for_each(|&i| adjoint[n + i as usize] = zero);
+            }
         }
         let mut sums = vec![vec![zero; n]; halves];
         let dir = usize::from(sign < 0.0);
@@ -533,6 +539,9 @@ impl Interface {
                 for &m in &g.members {
                     let i = pixels[m as usize] as usize;
                     work[i] = if o < 2 { source[half * n + i] } else { face(m as usize) * source[half * n + i] };
+                }
+                if o == 1 {
+                    g.ahead[dir].iter().for_each(|&i| work[i as usize] = source[n + i as usize]);
                 }
                 fft.forward(work, ws);
                 for (sum, filter) in sums.iter_mut().zip(inputs) {

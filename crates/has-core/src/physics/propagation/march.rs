@@ -170,6 +170,18 @@ pub(super) fn cross<T: Real>(
         // Oblique walls' treads take their walls' filters, from the field before the crossing.
         let walls = interface.walls().map(|w| (w, w.cross(fft, pixels, field, (sign, keep), work, ws)));
         let (psi, sv) = field.split_at_mut(n);
+        let dir = usize::from(sign < 0.0);
+        // Walls that transmit into a solid give their treads the SV wave they transmit, and the
+        // fluid's pixels ahead of them its continuation (`oblique_shear::CONTINUATION`); elsewhere
+        // the SV field passes.
+        if let Some((w, ([_, sv_transmitted, ..], ahead))) = &walls {
+            if !sv.is_empty() {
+                for g in w.groups.iter().filter(|g| g.transmits_sv(dir)) {
+                    g.members.iter().for_each(|&m| sv[pixels[m as usize] as usize] = sv_transmitted[m as usize]);
+                }
+                ahead.iter().for_each(|&(i, v)| sv[i as usize] = v);
+            }
+        }
         // The reflected wave leaves the face's true position (see `face_phase`).
         let at_face = |m: usize, w: Complex<T>| match phase {
             Some(phase) => {
@@ -182,11 +194,8 @@ pub(super) fn cross<T: Real>(
         for (m, (&i, &r)) in pixels.iter().zip(r).enumerate() {
             let f = &mut psi[i as usize];
             let w = match &walls {
-                Some((w, [transmitted, sv_transmitted, reflected, _])) if w.grouped[m] => {
+                Some((w, ([transmitted, _, reflected, _], _))) if w.grouped[m] => {
                     *f = transmitted[m];
-                    if let Some(&s) = sv_transmitted.get(m) {
-                        sv[i as usize] = s;
-                    }
                     reflected.get(m).copied().unwrap_or_else(zero)
                 }
                 _ => {
@@ -202,7 +211,7 @@ pub(super) fn cross<T: Real>(
         interface.normalise_transmitted(psi, sign);
         // Walls that convert keep the SV field's reflected wave at their treads too.
         let kept = match &walls {
-            Some((w, [.., sv_reflected])) if keep && w.kept.is_some() => {
+            Some((w, ([.., sv_reflected], _))) if keep && w.kept.is_some() => {
                 let grouped = (0..pixels.len()).filter(|&m| w.grouped[m]);
                 values.extend(grouped.map(|m| at_face(m, sv_reflected.get(m).copied().unwrap_or_else(zero))));
                 w.kept.clone()

@@ -297,6 +297,14 @@ impl HasPlan {
         // March the reference one way (single transmission at each interface) to fix the means;
         // without reverberation or reflections that march is the recording asked for.
         let mut recorder = march::Recorder::new(grid, spec, spec.last_plane(grid.nz));
+        // Where walls transmit SV waves into a solid, the SV field is continued into the fluid
+        // beside the solid (`oblique_shear::CONTINUATION`).
+        let continues =
+            interfaces.iter().flatten().any(|i| i.walls().is_some_and(|w| w.groups.iter().any(|g| g.ahead.iter().any(|a| !a.is_empty()))));
+        let continuation = continues.then(|| {
+            let reach = |d: f64| (oblique_shear::CONTINUATION / d).round() as usize;
+            ([grid.nx, grid.ny], [reach(grid.dx), reach(grid.dy)])
+        });
         let mut field = reference.to_vec();
         field.resize(plan.field_len(), C64::new(0.0, 0.0));
         let mut ws = plan.fft.workspace(true);
@@ -345,7 +353,8 @@ impl HasPlan {
                     .or_insert_with(|| Arc::new(screen(props, &sponge, omega, k_mean, a_mean, None, grid.dz)))
                     .clone()
             };
-            let shear = shear_mean.map(|(maps, (k, a))| (cached((k, a)), Arc::new(elastic::screen(maps, &sponge, omega, k, grid.dz))));
+            let shear = shear_mean
+                .map(|(maps, (k, a))| (cached((k, a)), Arc::new(elastic::screen(maps, &sponge, omega, (k, a), grid.dz, continuation))));
             let s =
                 Step { slab, interface, propagator, screen, wall_normal, mean_wavenumber: k_mean, mean_attenuation: a_mean, split, shear };
             march::step(&plan.fft, &mut field, (&mut ws, &mut work), s.operators(), false);

@@ -5,7 +5,7 @@
 use super::elastic::{Filters, Side};
 use super::interface::{key, medium_at, Around, Coefficients, Key};
 use super::oblique::{bin_centre, bin_of, wall_filters, wall_normals, NormalBin};
-use super::oblique_shear::elastic_wall_filters;
+use super::oblique_shear::{elastic_wall_filters, CONTINUATION};
 use crate::numeric::unit;
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
@@ -21,6 +21,10 @@ pub(super) type WallKey = (Key, Key, NormalBin);
 /// ([`super::oblique::wall_filters`]), a solid's with mode conversion
 /// ([`super::oblique_shear::elastic_wall_filters`]).
 pub(super) type WallFilters = Arc<Filters<f64>>;
+
+/// The waves leaving a plane's walls ([`Walls::cross`]): per grouped pixel the transmitted ψ and s
+/// and the reflected ψ and s; and the SV wave continued ahead of the treads (plane index, value).
+pub(crate) type WallWaves<T> = ([Vec<Complex<T>>; 4], Vec<(u32, Complex<T>)>);
 
 /// The treads of oblique walls on a pointwise interface, by wall (materials and binned normal).
 pub(crate) struct Walls<T: FftNum> {
@@ -39,6 +43,18 @@ pub(crate) struct WallGroup<T: FftNum> {
     pub filters: Arc<Filters<T>>,
     /// The wall's unit normal (its bin's centre, towards +z).
     pub normal: [f64; 3],
+    /// Per direction (forward, back), where the wall transmits into a solid from a fluid: the
+    /// fluid's pixels within [`super::oblique_shear::CONTINUATION`] of its treads (plane indices,
+    /// none a tread of any wall), where the transmitted SV wave is continued.
+    pub ahead: [Vec<u32>; 2],
+}
+
+impl<T: FftNum> WallGroup<T> {
+    /// Whether crossing in direction `dir` (0 forward, 1 back) transmits an SV wave: its treads
+    /// and the pixels ahead of them take it.
+    pub(crate) fn transmits_sv(&self, dir: usize) -> bool {
+        self.filters[dir][1].iter().any(Option::is_some)
+    }
 }
 
 /// A plane whose wall treads hold more than this many material pairs (each planar wall costs two
@@ -72,7 +88,8 @@ impl<T: FftNum> Walls<T> {
     /// in the direction `sign` (+1 forward, -1 back): the transmitted ψ and s and the reflected ψ
     /// and s at each grouped pixel, indexed as the interface's `pixels` (zero at the others);
     /// the reflected ones only if `reflected`, the SV ones only where the walls convert (else
-    /// empty). `work` is overwritten.
+    /// empty); and the transmitted SV wave at the pixels ahead of the treads (plane index,
+    /// value). `work` is overwritten.
     pub(crate) fn cross(
         &self,
         fft: &Fft2<T>,
@@ -81,7 +98,7 @@ impl<T: FftNum> Walls<T> {
         (sign, reflected): (f64, bool),
         work: &mut Vec<Complex<T>>,
         ws: &mut FftWorkspace<T>,
-    ) -> [Vec<Complex<T>>; 4] {
+    ) -> WallWaves<T> {
         let zero = Complex::new(T::zero(), T::zero());
         let n = fft.nx * fft.ny;
         let halves = if self.converts() { field.len() / n } else { 1 };
@@ -98,6 +115,7 @@ impl<T: FftNum> Walls<T> {
         let wanted = |o: usize| (o < 2 || reflected) && (o % 2 == 0 || halves == 2);
         let mut out: [Vec<Complex<T>>; 4] = std::array::from_fn(|o| vec![zero; if wanted(o) { pixels.len() } else { 0 }]);
         let dir = usize::from(sign < 0.0);
+        let mut ahead = Vec::new();
         for g in &self.groups {
             for (o, wave) in out.iter_mut().enumerate().filter(|(_, w)| !w.is_empty()) {
                 let inputs = &g.filters[dir][o];
@@ -112,9 +130,12 @@ impl<T: FftNum> Walls<T> {
                 }
                 fft.inverse(ws, work);
                 g.members.iter().for_each(|&m| wave[m as usize] = work[pixels[m as usize] as usize]);
+                if o == 1 {
+                    ahead.extend(g.ahead[dir].iter().map(|&i| (i, work[i as usize])));
+                }
             }
         }
-        out
+        (out, ahead)
     }
 }
 
@@ -181,9 +202,11 @@ pub(super) fn walls(
             let i = pixels[members[0] as usize] as usize;
             let filters =
                 shared.1.entry(k).or_insert_with(|| Arc::new(filters_of(grid, omega, (before, after), i, bin_centre(k.2)))).clone();
-            WallGroup { members, filters, normal: bin_centre(k.2) }
+            WallGroup { members, filters, normal: bin_centre(k.2), ahead: [Vec::new(), Vec::new()] }
         })
         .collect();
+    let mut groups = groups;
+    continue_sv(grid, around, pixels, &grouped, &mut groups);
     // The SV field's reflected wave is kept at every grouped tread where any wall converts.
     let converts = groups.iter().any(|g| {
         g.filters.iter().flatten().enumerate().any(|(o, inputs)| (o % 2 == 1 && inputs.iter().any(Option::is_some)) || inputs[1].is_some())
@@ -194,6 +217,37 @@ pub(super) fn walls(
         Arc::new(pixels.iter().copied().chain(shear).collect())
     });
     Some(Walls { grouped, groups, kept })
+}
+
+/// Gives each wall that transmits an SV wave from a fluid into a solid the fluid's pixels ahead
+/// of its treads (`WallGroup::ahead`): fluid on both sides of the face, within
+/// [`super::oblique_shear::CONTINUATION`] of a tread, no tread of any wall and claimed by the
+/// first such wall alone (the march writes each once).
+fn continue_sv(grid: &Grid, around: &Around, pixels: &[u32], grouped: &[bool], groups: &mut [WallGroup<f64>]) {
+    let (from, to) = (around.column[around.face - 1], around.column[around.face]);
+    let reach = [(CONTINUATION / grid.dx).round() as i64, (CONTINUATION / grid.dy).round() as i64];
+    for dir in 0..2 {
+        let mut taken = vec![false; grid.lateral_len()];
+        (0..pixels.len()).filter(|&m| grouped[m]).for_each(|m| taken[pixels[m] as usize] = true);
+        for g in groups.iter_mut().filter(|g| g.transmits_sv(dir)) {
+            let mut ahead = Vec::new();
+            for &m in &g.members {
+                let p = pixels[m as usize] as i64;
+                let (x, y) = (p % grid.nx as i64, p / grid.nx as i64);
+                for yy in (y - reach[1]).max(0)..=(y + reach[1]).min(grid.ny as i64 - 1) {
+                    for xx in (x - reach[0]).max(0)..=(x + reach[0]).min(grid.nx as i64 - 1) {
+                        let q = (yy * grid.nx as i64 + xx) as usize;
+                        if !taken[q] && from.shear_speed(q) <= 0.0 && to.shear_speed(q) <= 0.0 {
+                            taken[q] = true;
+                            ahead.push(q as u32);
+                        }
+                    }
+                }
+            }
+            ahead.sort_unstable();
+            g.ahead[dir] = ahead;
+        }
+    }
 }
 
 /// The filters of the wall at pixel `i` between slabs `before` and `after` with unit normal `n`:
