@@ -21,7 +21,7 @@ fn main() -> has_core::Result<()> {
     let dir = std::env::temp_dir().join(format!("arfi-tilted-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| has_core::HasError::invalid("dir", e.to_string()))?;
     let kind = if shear.is_some() { "solid" } else { "fluid" };
-    println!("tilt | march/exact {kind} | march focus - exact (x, z mm) | exact fluid peak, (x, z) mm | exact solid (cs 1500) peak, (x, z) mm | s");
+    println!("tilt | march/exact {kind} | march focus - exact (x, z mm) | exact {kind} peak, (x, z) mm | exact solid (cs 1500) peak, (x, z) mm | s");
     for &t in &angles {
         let mut case = tilted_plate(&dir, t, shear)?;
         case.scenario.grid.step_mm = step_mm;

@@ -230,6 +230,7 @@ fn transposed_march_passes_the_dot_product_test_through_an_oblique_solid_wall() 
         plan.reverberation()
     );
     assert!(plan.carries_shear() && converting >= 5, "{converting} converting interfaces: the test needs them");
+    assert!(plan.continues_shear(), "the walls' SV wave must be continued beside the solid: the test needs it");
     assert!(plan.reverberation().is_some_and(|r| r.2 >= 1), "the plate must reverberate");
     dot_test("tilted solid plate", &medium, InterfaceModel::Angular, &[10, 24, 30, 50]);
 }

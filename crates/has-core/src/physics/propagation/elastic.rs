@@ -25,8 +25,10 @@
 //!
 //! The SV field is stepped through a solid slab as `ψ` is (propagator of the slab's mean shear
 //! wavenumber, screen of its deviation and of the shear attenuation) and is zero in a fluid's
-//! pixels. Faces off the planes (a CT's, a voxel map's) convert nothing: they cross `ψ` as before
-//! and leave the SV field to the next slab's screen.
+//! pixels, except within `oblique_shear::CONTINUATION` of a solid in plans whose tilted walls
+//! continue it (`screen`). Planar walls tilted against the planes convert at their own incidence
+//! (`oblique_shear.rs`); a CT's other faces and a voxel map's convert nothing: they cross `ψ` as
+//! before and leave the SV field to the next slab's screen.
 
 use super::march::{zero, Real, Wave};
 use crate::physics::fft::{Fft2, FftWorkspace};
@@ -467,6 +469,28 @@ mod tests {
     use std::f64::consts::PI;
 
     const OMEGA: f64 = 2.0 * PI * 500e3;
+
+    /// The solid mask dilated by a box, row then column, against every pixel's box searched
+    /// directly (seeded random masks, unequal reaches, a reach wider than the plane).
+    #[test]
+    fn near_solid_is_the_box_dilation_of_the_solid_mask() {
+        let mut state = 7u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) as f64 / (1u64 << 31) as f64
+        };
+        for (nx, ny, rx, ry, density) in [(17, 11, 2, 1, 0.05), (9, 13, 0, 3, 0.1), (6, 5, 7, 0, 0.2), (12, 12, 3, 3, 0.0)] {
+            let speed: Vec<f64> = (0..nx * ny).map(|_| if next() < density { 1500.0 } else { 0.0 }).collect();
+            let fast = near_solid(&speed, [nx, ny], [rx, ry]);
+            for y in 0..ny {
+                for x in 0..nx {
+                    let slow =
+                        (0..ny).any(|yy| (0..nx).any(|xx| speed[yy * nx + xx] > 0.0 && x.abs_diff(xx) <= rx && y.abs_diff(yy) <= ry));
+                    assert_eq!(fast[y * nx + x], slow, "({x}, {y}) of {nx}x{ny}, reach ({rx}, {ry})");
+                }
+            }
+        }
+    }
 
     fn water() -> Side {
         Side { density: 1000.0, kp: C64::new(OMEGA / 1500.0, 0.0), ks: None, impedance: [1.5e6, 0.0] }

@@ -163,8 +163,9 @@ pub(super) fn cross<T: Real>(
         return super::elastic::cross(pairs, fft, field, sign, keep, work, ws);
     }
     // Where the march carries shear, a face that converts none crosses ψ alone; the SV field
-    // passes, and the next slab's screen clears it from pixels that are no longer solid. Oblique
-    // walls of a solid convert at their treads (`oblique_shear.rs`).
+    // passes, and the next slab's screen clears it from pixels that are no longer solid (beyond
+    // the continuation's reach, `elastic::screen`). Oblique walls of a solid convert at their
+    // treads (`oblique_shear.rs`).
     let n = fft.nx * fft.ny;
     if let Some((pixels, r, phase)) = interface.pointwise() {
         // Oblique walls' treads take their walls' filters, from the field before the crossing.

@@ -38,6 +38,7 @@ mod march;
 mod oblique;
 mod oblique_shear;
 mod operators;
+mod options;
 mod point;
 mod record;
 mod references;
@@ -49,6 +50,7 @@ mod walls;
 pub(crate) use interface::axial_wavenumber;
 pub use interface::{reflection_coefficient, InterfaceModel, MAX_PLAN_PAIRS, MAX_SPECTRAL_PAIRS};
 pub use march::{RecordSpec, Recording, Window};
+pub use options::{HasOptions, Screen};
 pub(crate) use single::single;
 pub use single::SinglePlan;
 
@@ -88,52 +90,6 @@ fn in_sequence(samples: usize) -> bool {
 
 /// At most this many round trips (a layer with near-total reflection and no loss).
 pub const MAX_ROUND_TRIPS: usize = 32;
-
-/// Options of the propagation.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HasOptions {
-    /// Width of the absorbing layer at each lateral edge (m); 0 disables it.
-    pub sponge_width: f64,
-    /// Attenuation (Np) the layer applies to a wave crossing it along z over a distance equal to
-    /// its width; the profile is quadratic, `sigma = 3·strength/width · (depth/width)²`.
-    pub sponge_strength: f64,
-    /// How changes of medium between slabs are applied.
-    pub interfaces: InterfaceModel,
-    /// The phase screen's model of the waves' direction.
-    pub screen: Screen,
-}
-
-/// The direction the phase screen assumes for the waves crossing a slab.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Screen {
-    /// Along z (the plain HAS screen `(k - k̄)·dz`), exact for waves travelling along the beam
-    /// axis; an oblique wave in a medium other than `k̄` gains `(k - k̄)·(1/cos θ - 1)·dz` too
-    /// little phase per step and is absorbed along z instead of along its path.
-    #[default]
-    Vertical,
-    /// Along the line from each pixel to the point `toward` (m, the focus): the screen gives
-    /// each pixel the phase and absorption of a wave crossing it at that angle (see `screen`).
-    Oblique {
-        /// The point the rays converge to (m).
-        toward: [f64; 3],
-    },
-}
-
-impl Screen {
-    /// The scenario's name for it (`[grid] screen`).
-    pub fn name(&self) -> &'static str {
-        match self {
-            Screen::Vertical => "vertical",
-            Screen::Oblique { .. } => "oblique",
-        }
-    }
-}
-
-impl Default for HasOptions {
-    fn default() -> Self {
-        HasOptions { sponge_width: 10e-3, sponge_strength: 6.9, interfaces: InterfaceModel::default(), screen: Screen::default() }
-    }
-}
 
 #[derive(Clone)]
 struct Step {
@@ -209,6 +165,8 @@ pub struct HasPlan {
     /// Whether its marches carry the SV field beside `ψ` (a solid meets another medium on a
     /// plane, `elastic.rs`): fields are then `[ψ | s]`, twice a plane long.
     shear: bool,
+    /// Whether walls continue the SV wave they transmit into the fluid beside the solid.
+    continues: bool,
 }
 
 /// A recording of one source, and what it recorded.
@@ -293,6 +251,7 @@ impl HasPlan {
             zone: None,
             kept: None,
             shear: interfaces.iter().flatten().any(|i| i.converts_shear()),
+            continues: false,
         };
         // March the reference one way (single transmission at each interface) to fix the means;
         // without reverberation or reflections that march is the recording asked for.
@@ -301,6 +260,7 @@ impl HasPlan {
         // beside the solid (`oblique_shear::CONTINUATION`).
         let continues =
             interfaces.iter().flatten().any(|i| i.walls().is_some_and(|w| w.groups.iter().any(|g| g.ahead.iter().any(|a| !a.is_empty()))));
+        plan.continues = continues;
         let continuation = continues.then(|| {
             let reach = |d: f64| (oblique_shear::CONTINUATION / d).round() as usize;
             ([grid.nx, grid.ny], [reach(grid.dx), reach(grid.dy)])
@@ -475,6 +435,12 @@ impl HasPlan {
     /// faces (curved, or its treads on the planes) convert nothing.
     pub fn carries_shear(&self) -> bool {
         self.shear
+    }
+
+    /// Whether the SV wave its tilted walls transmit into a solid is continued into the fluid
+    /// beside the solid (`oblique_shear::CONTINUATION`).
+    pub fn continues_shear(&self) -> bool {
+        self.continues
     }
 
     /// How many of the plan's interfaces convert between compressional and shear waves (a

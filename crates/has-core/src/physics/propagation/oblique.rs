@@ -14,7 +14,7 @@
 //! `R = R_ab(kt')` is the planar coefficient ([`super::reflection_coefficient`]) at the
 //! tangential wavenumber `kt'² = |K|² - (K·n)²` on the wall's face and `τ = (1 + R)·sqrt(Z_a/Z_b)`
 //! the face's pressure transmission carried by the flux-normalised field `ψ`, as at a face on a
-//! plane (`interface.rs`), but zero beyond the critical angle on the wall's face (`kt'` above
+//! plane (`interface`), but zero beyond the critical angle on the wall's face (`kt'` above
 //! `b`'s wavenumber). There the transmitted wave is evanescent along the wall's normal and dies
 //! within a wavelength; where the face lies on a plane the march's own `kz` decays it, but the
 //! march carries the wave of an oblique wall along z, where it would propagate. Evanescent

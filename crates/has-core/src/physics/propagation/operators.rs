@@ -115,7 +115,7 @@ pub(super) fn step_screen(
     screen(props, sponge, omega, mean.0, mean.1, sin2.as_deref(), dz)
 }
 
-/// An oblique wall through a slab (`interface.rs`, `oblique.rs`): its unit normal and the medium
+/// An oblique wall through a slab (`interface`, `oblique.rs`): its unit normal and the medium
 /// the screen's rays arrive through (the source's).
 #[derive(Clone, Copy)]
 pub(super) struct Refraction<'a> {

@@ -43,7 +43,7 @@ pub(crate) struct WallGroup<T: FftNum> {
     pub filters: Arc<Filters<T>>,
     /// The wall's unit normal (its bin's centre, towards +z).
     pub normal: [f64; 3],
-    /// Per direction (forward, back), where the wall transmits into a solid from a fluid: the
+    /// Per direction (forward, back), where the wall transmits an SV wave (into a solid): the
     /// fluid's pixels within [`super::oblique_shear::CONTINUATION`] of its treads (plane indices,
     /// none a tread of any wall), where the transmitted SV wave is continued.
     pub ahead: [Vec<u32>; 2],
@@ -219,8 +219,8 @@ pub(super) fn walls(
     Some(Walls { grouped, groups, kept })
 }
 
-/// Gives each wall that transmits an SV wave from a fluid into a solid the fluid's pixels ahead
-/// of its treads (`WallGroup::ahead`): fluid on both sides of the face, within
+/// Gives each wall that transmits an SV wave (into a solid) the fluid's pixels ahead of its
+/// treads (`WallGroup::ahead`): fluid on both sides of the face, within
 /// [`super::oblique_shear::CONTINUATION`] of a tread, no tread of any wall and claimed by the
 /// first such wall alone (the march writes each once).
 fn continue_sv(grid: &Grid, around: &Around, pixels: &[u32], grouped: &[bool], groups: &mut [WallGroup<f64>]) {
