@@ -12,7 +12,8 @@ impl Interface {
     /// after the crossing and becomes that of the field before it; `kept` is the adjoint of the
     /// kept reflected wave written out on a field as long. A wall's `M·IFFT(f·FFT)` has the
     /// transpose `IFFT(f(-k)·FFT(M·))`; the other pixels are diagonal, and the SV field passes
-    /// except at the treads of walls that convert. `work` is overwritten.
+    /// except where a wall's transmitted SV wave replaces it (its treads and the pixels ahead of
+    /// them). `work` is overwritten.
     pub fn cross_transposed_walls(
         &self,
         fft: &Fft2,
