@@ -47,7 +47,7 @@ impl CoreValidationCase {
     }
 }
 
-/// The suite's cases (the tilted plates last); a case's CT is written to `dir` (which must exist) when its case runs.
+/// The suite's cases (the tilted plates last, fluid then solid); a case's CT is written to `dir` (which must exist) when its case runs.
 #[pyfunction]
 pub(crate) fn validation_cases(dir: PathBuf) -> PyResult<Vec<CoreValidationCase>> {
     Ok(suite(&dir).map_err(to_py)?.into_iter().map(CoreValidationCase).collect())

@@ -25,14 +25,15 @@ def register(sub: Any) -> None:
                                    "against stored full-wave results (BabelViscoFDTD at 0.5 mm, made once by "
                                    "benches/fullwave/caps_fdtd.py), where no exact solution exists. Prints the table of focal "
                                    "pressure, focal position, axial profile and focal-plane correlation with pass/fail "
-                                   "(the tilted plates against their own, looser tolerances, printed in their rows), and "
+                                   "(the tilted plates, fluid and solid, against their own, looser tolerances, printed in their rows), and "
                                    "writes a report with the profiles overlaid. Exit status 1 if a case fails.",
                        epilog="example: arfi validate --out validation/")
     p.add_argument("--out", metavar="DIR", help="write DIR/report.html, DIR/validation.md, DIR/validation.json and one "
                                                 "PNG per case")
     p.add_argument("--case", action="append", dest="cases", metavar="NAME",
                    help="run only this case (repeatable): water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, tilt20, "
-                        "tilt30, cap_uniform, cap_texture1, cap_texture3")
+                        "tilt30, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
+                        "cap_texture3")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
     p.set_defaults(run=run)
 

@@ -11,7 +11,7 @@
 mod cases;
 mod oblique;
 
-pub use cases::{solid_plate, suite, thin_shells, tilted_plate, tilted_plates, Case, Exact};
+pub use cases::{lossy_shells, solid_plate, suite, thin_shells, tilted_plate, tilted_plates, Case, Exact, SOLID_TILT_SHEAR};
 
 use crate::error::Result;
 use crate::numeric::{parabolic_peak, pearson};
@@ -41,6 +41,14 @@ impl Tolerances {
     /// uncertain by that much.
     pub const OBLIQUE: Tolerances =
         Tolerances { focal_pressure: 0.15, focal_position: 3e-3, axial_profile: 0.30, focal_plane_correlation: 0.95 };
+
+    /// The same plate as a solid (shear 1500 m/s), tilted 10-30°, against the exact elastic
+    /// plate: the focal pressure held to the ITRUSST spread (measured within 4.7 %), the rest to
+    /// the march's measured accuracy rounded up (focus up to 1.93 mm off, axial profile up to
+    /// 14.4 %, focal-plane correlation down to 0.905: each tread's SV wave is born a step after
+    /// its neighbour's, see `docs/validation.md`).
+    pub const OBLIQUE_SOLID: Tolerances =
+        Tolerances { focal_pressure: 0.10, focal_position: 2.5e-3, axial_profile: 0.20, focal_plane_correlation: 0.85 };
 }
 
 impl Default for Tolerances {

@@ -7,7 +7,7 @@
 //! the CT shells with the staircase of their walls' faces given the loss of its risers
 //! (`physics/propagation/risers.rs`).
 
-use has_core::validation::{compare, suite, thin_shells, tilted_plate, Case, Comparison, Tolerances};
+use has_core::validation::{compare, lossy_shells, suite, thin_shells, tilted_plate, Case, Comparison, Tolerances};
 
 /// A new folder for a test's CT files.
 fn scratch(tag: &str) -> std::path::PathBuf {
@@ -58,7 +58,9 @@ fn assert_held(c: &Comparison, (pressure, position, axial): (f64, f64, f64)) {
 /// +3.5, +13.2 and +10.3 %, 0.65-1.53 mm; with the treads at normal incidence and unbent rays:
 /// +30, +54 and +61 %, 1.8-3.4 mm). The untilted plate from a CT is off where the same plate as a
 /// region is exact: its faces lie inside the default grid's steps, and its slabs hold bone and,
-/// past the CT's edge, water, and their mean wavenumber falls below bone's (`docs/validation.md`).
+/// past the CT's edge, water, which pulls their mean wavenumber 8-17 % above bone's (`docs/validation.md`).
+/// The plates tilted 10-30° as solids (shear 1500 m/s) are held to [`Tolerances::OBLIQUE_SOLID`]
+/// against the exact elastic plate.
 #[test]
 fn every_case_of_the_suite_matches_its_exact_solution_on_the_default_grid_within_its_tolerances() {
     let dir = scratch("test");
@@ -73,6 +75,10 @@ fn every_case_of_the_suite_matches_its_exact_solution_on_the_default_grid_within
             "tilt10" => Some((0.04, 0.6e-3)),
             "tilt20" => Some((0.07, 1.2e-3)),
             "tilt30" => Some((0.07, 1.0e-3)),
+            // Measured +0.4, +4.7, -0.2 %, 1.02, 1.05, 1.93 mm.
+            "tilt10_shear1500" => Some((0.03, 1.3e-3)),
+            "tilt20_shear1500" => Some((0.07, 1.3e-3)),
+            "tilt30_shear1500" => Some((0.03, 2.2e-3)),
             _ => None,
         };
         if let Some((pressure, position)) = held {
@@ -83,19 +89,20 @@ fn every_case_of_the_suite_matches_its_exact_solution_on_the_default_grid_within
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The tilted plate as a solid (shear 1500 and 1700 m/s: the CT's bone shear, with the
+/// The tilted plate as a solid of shear faster than water (1700 m/s; the suite holds 1500 m/s:
+/// the CT's bone shear, with the
 /// compressional wave's attenuation) against the exact elastic solution through it
 /// (`reference::elastic` in `reference::oblique`), on the default grid. Its walls convert at each
 /// wave's own incidence (`physics/propagation/oblique_shear.rs`): measured +0.4, +4.7, -0.2 %
 /// (1500 m/s) and -8.3, +1.0, -7.5 % (1700 m/s) focal pressure at 10, 20 and 30°, the focus
 /// within 1.0-1.9 and 0.4-0.7 mm; the same CT marched without shear (a fluid bone) is -9 to
 /// -60 % and up to 10 mm off there (-32 to -60 % at 20-30°, where shear carries most of what
-/// crosses). Held within 12 % and 2.5 mm (1.0 mm at 1700 m/s), so that a change that makes them
-/// worse fails, and so that losing the conversion fails at once.
+/// crosses). Held within 12 % and 1.0 mm at 1700 m/s, so that a change that makes them worse
+/// fails, and so that losing the conversion fails at once.
 #[test]
 fn tilted_solid_plates_convert_at_their_walls_towards_the_exact_elastic_solution() {
     let dir = scratch("tilted-solid");
-    for (cs, position) in [(1500.0, 2.5e-3), (1700.0, 1.0e-3)] {
+    for (cs, position) in [(1700.0, 1.0e-3)] {
         for tilt in [10.0, 20.0, 30.0] {
             let case = tilted_plate(&dir, tilt, Some(cs)).unwrap();
             let c = compared(&case);
@@ -139,6 +146,28 @@ fn thin_ct_shells_are_held_where_they_are() {
             _ => (tol.focal_pressure, tol.focal_position, tol.axial_profile),
         };
         assert_held(&c, (pressure, position, axial));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The suite's caps (`shell`, `bm5`) with cortical bone of 2 and 8 dB/cm at 500 kHz (ITRUSST's is
+/// 4), against their exact solutions on the default grid. Measured: 2 dB/cm `shell` +1.9 %,
+/// -0.41 mm, axial 4.8 %; `bm5` +2.8 %, -0.36 mm, 3.6 % (the suite's tolerances met); 8 dB/cm
+/// `shell` -0.5 %, **-0.59 mm, axial 6.8 %**; `bm5` +4.1 %, -0.30 mm, 5.0 %. The 8 dB/cm caps are
+/// held where they are (`docs/validation.md`), so that a change that makes them worse fails.
+#[test]
+fn ct_shells_of_other_bone_losses_match_their_exact_solutions() {
+    let dir = scratch("lossy");
+    let tol = Tolerances::default();
+    for db_cm in [2.0, 8.0] {
+        for case in lossy_shells(&dir, db_cm).unwrap() {
+            let c = compared(&case);
+            match c.name.as_str() {
+                "shell_8db" => assert_held(&c, (tol.focal_pressure, 0.65e-3, 0.075)),
+                "bm5_8db" => assert_held(&c, (tol.focal_pressure, tol.focal_position, 0.055)),
+                _ => assert!(c.passes(&tol), "{} fails: {c:?}", c.name),
+            }
+        }
     }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -35,6 +35,8 @@ use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
 use crate::physics::medium::{ShearMaps, SliceProperties};
 use num_complex::{Complex, Complex32 as C32, Complex64 as C64};
+use rayon::prelude::*;
+use rustfft::FftNum;
 use std::sync::Arc;
 
 /// One side of a face: density (kg/m³), the compressional and shear wavenumbers (rad/m, the
@@ -221,15 +223,12 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side) -> Filters<f64> {
     };
     let in_index = |dir: usize, wave: usize| 2 * dir + wave;
     let side_of = |k: usize| sides[k / 2];
-    let mut out: Filters<f64> = Default::default();
-    let mut values = vec![[[[C64::new(0.0, 0.0); 2]; 4]; 2]; g.lateral_len()];
-    let mut at = 0;
-    for i in 0..g.nx {
-        let kx = Grid::wavenumber(i, g.nx, g.dx);
-        for j in 0..g.ny {
-            let ky = Grid::wavenumber(j, g.ny, g.dy);
+    let values: Vec<Values> = (0..g.lateral_len())
+        .into_par_iter()
+        .map(|at| {
+            let (kx, ky) = (Grid::wavenumber(at / g.ny, g.nx, g.dx), Grid::wavenumber(at % g.ny, g.ny, g.dy));
             let m = scattering(a, b, (kx * kx + ky * ky).sqrt());
-            values[at] = std::array::from_fn(|dir| {
+            std::array::from_fn(|dir| {
                 std::array::from_fn(|o| {
                     std::array::from_fn(|w| {
                         let (ko, ki) = (out_index(dir, o), in_index(dir, w));
@@ -241,10 +240,19 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side) -> Filters<f64> {
                         }
                     })
                 })
-            });
-            at += 1;
-        }
-    }
+            })
+        })
+        .collect();
+    pack(&values)
+}
+
+/// One spectrum sample of a face's filters: `[direction][output][input]` (see [`Filters`]).
+pub(super) type Values = [[[C64; 2]; 4]; 2];
+
+/// The filters of per-sample `values` (in the spectrum's layout): one spectrum per direction,
+/// output and input, `None` where it is zero at every sample.
+pub(super) fn pack(values: &[Values]) -> Filters<f64> {
+    let mut out: Filters<f64> = Default::default();
     for (dir, per_dir) in out.iter_mut().enumerate() {
         for (o, per_out) in per_dir.iter_mut().enumerate() {
             for (w, slot) in per_out.iter_mut().enumerate() {
@@ -268,6 +276,38 @@ pub(super) fn single_filters(f: &Filters<f64>) -> Filters<f32> {
     f.clone().map(|d| d.map(|o| o.map(|w| w.map(|v| Arc::new(v.iter().map(|&c| C32::new(c.re as f32, c.im as f32)).collect::<Vec<_>>())))))
 }
 
+/// The spectra of the first `halves` planes of `field` (`[ψ | s]`, one plane each). `work` is
+/// overwritten.
+pub(super) fn spectra_of<T: FftNum>(
+    fft: &Fft2<T>,
+    field: &[Complex<T>],
+    halves: usize,
+    work: &mut Vec<Complex<T>>,
+    ws: &mut FftWorkspace<T>,
+) -> Vec<Vec<Complex<T>>> {
+    let n = fft.nx * fft.ny;
+    work.resize(n, Complex::new(T::zero(), T::zero()));
+    field
+        .chunks_exact(n)
+        .take(halves)
+        .map(|half| {
+            work.copy_from_slice(half);
+            fft.forward(work, ws);
+            ws.spectrum.clone()
+        })
+        .collect()
+}
+
+/// One output's spectrum into `ws`: `Σ_in spectra[in]·filters[in]` (the inputs' `None` skipped).
+pub(super) fn combine<T: FftNum>(ws: &mut FftWorkspace<T>, spectra: &[Vec<Complex<T>>], filters: &[Option<Arc<Vec<Complex<T>>>>; 2]) {
+    ws.spectrum.fill(Complex::new(T::zero(), T::zero()));
+    for (spectrum, filter) in spectra.iter().zip(filters) {
+        if let Some(f) = filter {
+            ws.spectrum.iter_mut().zip(spectrum).zip(f.iter()).for_each(|((s, a), f)| *s = *s + *a * *f);
+        }
+    }
+}
+
 /// Crosses the pairs' face in direction `sign` (+1 forward): `field` (`[ψ | s]`, `2·nx·ny`)
 /// becomes the transmitted waves, and the reflected ones (`[ψ | s]`) are returned when `keep`.
 /// Pixels in no pair keep both fields. `work` is overwritten.
@@ -282,15 +322,7 @@ pub(super) fn cross<T: Real>(
 ) -> Option<Wave<T>> {
     let n = fft.nx * fft.ny;
     let dir = usize::from(sign < 0.0);
-    let spectra: Vec<Vec<Complex<T>>> = field
-        .chunks_exact(n)
-        .map(|half| {
-            work.clear();
-            work.extend_from_slice(half);
-            fft.forward(work, ws);
-            ws.spectrum.clone()
-        })
-        .collect();
+    let spectra = spectra_of(fft, field, field.len() / n, work, ws);
     let mut transmitted = field.to_vec();
     for pair in pairs {
         match &pair.pixels {
@@ -309,12 +341,7 @@ pub(super) fn cross<T: Real>(
             if target.is_empty() || inputs.iter().all(Option::is_none) {
                 continue;
             }
-            ws.spectrum.fill(zero());
-            for (spectrum, filter) in spectra.iter().zip(inputs) {
-                if let Some(f) = filter {
-                    ws.spectrum.iter_mut().zip(spectrum).zip(f.iter()).for_each(|((s, a), f)| *s += *a * *f);
-                }
-            }
+            combine(ws, &spectra, inputs);
             fft.inverse(ws, work);
             let half = &mut target[(o % 2) * n..(o % 2 + 1) * n];
             match &pair.pixels {

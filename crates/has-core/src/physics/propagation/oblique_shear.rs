@@ -21,10 +21,10 @@
 //! solid plates against the exact elastic solution, and what limits it: each tread's SV field is
 //! born with an edge one tread wide (the next tread's is born a step later), which diffracts.
 
-use super::elastic::{scattering, Filters, Side};
+use super::elastic::{pack, scattering, Filters, Side, Values};
 use crate::physics::grid::Grid;
 use num_complex::Complex64 as C64;
-use std::sync::Arc;
+use rayon::prelude::*;
 
 /// How far (m) the SV wave a wall transmits into a solid is continued into the fluid beside the
 /// solid, laterally: a shear wavelength at 500 kHz, over two Fresnel widths `sqrt(λ_s·dz)` of the
@@ -53,8 +53,8 @@ pub(super) fn elastic_wall_filters(g: &Grid, a: &Side, b: &Side, n: [f64; 3]) ->
     let wavenumber = |s: &Side, wave: usize| if wave == 0 { Some(s.kp.re) } else { s.ks.map(|k| k.re) };
     let largest = [a, b].iter().flat_map(|s| [Some(s.kp.re), s.ks.map(|k| k.re)]).flatten().fold(0.0, f64::max);
     let poles_from = [a, b].iter().filter_map(|s| s.ks.map(|k| k.re)).fold(f64::INFINITY, f64::min);
-    let mut values = vec![[[[zero; 2]; 4]; 2]; g.lateral_len()];
-    for (at, value) in values.iter_mut().enumerate() {
+    let sample = |at: usize| {
+        let mut value: Values = [[[zero; 2]; 4]; 2];
         let (i, j) = (at / g.ny, at % g.ny);
         let (kx, ky) = (Grid::wavenumber(i, g.nx, g.dx), Grid::wavenumber(j, g.ny, g.dy));
         let kt2 = kx * kx + ky * ky;
@@ -96,18 +96,9 @@ pub(super) fn elastic_wall_filters(g: &Grid, a: &Side, b: &Side, n: [f64; 3]) ->
                 }
             }
         }
-    }
-    let mut out: Filters<f64> = Default::default();
-    for (dir, per_dir) in out.iter_mut().enumerate() {
-        for (o, per_out) in per_dir.iter_mut().enumerate() {
-            for (w, slot) in per_out.iter_mut().enumerate() {
-                if values.iter().any(|v| v[dir][o][w] != zero) {
-                    *slot = Some(Arc::new(values.iter().map(|v| v[dir][o][w]).collect()));
-                }
-            }
-        }
-    }
-    out
+        value
+    };
+    pack(&(0..g.lateral_len()).into_par_iter().map(sample).collect::<Vec<_>>())
 }
 
 #[cfg(test)]

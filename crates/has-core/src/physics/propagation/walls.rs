@@ -2,7 +2,7 @@
 //! one (a material pair whose treads' fitted normals on the plane agree), their shared filters
 //! (`oblique.rs`), and the crossing through them.
 
-use super::elastic::{Filters, Side};
+use super::elastic::{combine, spectra_of, Filters, Side};
 use super::interface::{key, medium_at, Around, Coefficients, Key};
 use super::oblique::{bin_centre, bin_of, wall_filters, wall_normals, NormalBin};
 use super::oblique_shear::{elastic_wall_filters, CONTINUATION};
@@ -102,16 +102,7 @@ impl<T: FftNum> Walls<T> {
         let zero = Complex::new(T::zero(), T::zero());
         let n = fft.nx * fft.ny;
         let halves = if self.converts() { field.len() / n } else { 1 };
-        work.resize(n, zero);
-        let spectra: Vec<Vec<Complex<T>>> = field
-            .chunks_exact(n)
-            .take(halves)
-            .map(|half| {
-                work.copy_from_slice(half);
-                fft.forward(work, ws);
-                ws.spectrum.clone()
-            })
-            .collect();
+        let spectra = spectra_of(fft, field, halves, work, ws);
         let wanted = |o: usize| (o < 2 || reflected) && (o % 2 == 0 || halves == 2);
         let mut out: [Vec<Complex<T>>; 4] = std::array::from_fn(|o| vec![zero; if wanted(o) { pixels.len() } else { 0 }]);
         let dir = usize::from(sign < 0.0);
@@ -122,12 +113,7 @@ impl<T: FftNum> Walls<T> {
                 if inputs.iter().all(Option::is_none) {
                     continue;
                 }
-                ws.spectrum.fill(zero);
-                for (spectrum, filter) in spectra.iter().zip(inputs) {
-                    if let Some(f) = filter {
-                        ws.spectrum.iter_mut().zip(spectrum).zip(f.iter()).for_each(|((s, a), f)| *s = *s + *a * *f);
-                    }
-                }
+                combine(ws, &spectra, inputs);
                 fft.inverse(ws, work);
                 g.members.iter().for_each(|&m| wave[m as usize] = work[pixels[m as usize] as usize]);
                 if o == 1 {
