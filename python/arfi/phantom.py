@@ -131,6 +131,27 @@ def head_phantom(seed: int = 0, voxel_mm: float = 0.5, thickness_mm: tuple[float
     return HeadPhantom(hu=hu, affine=affine, thickness_mm=thick, seed=int(seed))
 
 
+#: The hemisphere's focus (its centre) in the transducer frame, mm, and its scenario lines.
+HEMISPHERE_FOCUS_MM = (0.0, 0.0, 150.0)
+HEMISPHERE_TOML = ("frequency_hz = 650000.0\n\n[transducer]\nkind = \"hemisphere\"\nradius_of_curvature_mm = 150.0\n"
+                   "polar_angle_max_deg = 60.0\nelements = 1024\n\n[focus]\nposition_mm = [0.0, 0.0, 150.0]\n")
+
+
+def array_focus_mm(array: str) -> tuple[float, float, float]:
+    """The focus of ``array`` (``planar``: the paper's array, 85 mm in front of it; ``hemisphere``:
+    its centre), transducer frame, mm."""
+    return HEMISPHERE_FOCUS_MM if array == "hemisphere" else (0.0, 0.0, 85.0)
+
+
+def scenario_for(ct_path: str, seed: int, array: str) -> str:
+    """The scenario (TOML) of the phantom written to ``ct_path`` (as the scenario's ``[ct] file``,
+    relative to its folder) with ``array`` focused at :func:`array_focus_mm`: the head placed by
+    :func:`placement`, conversion ``aubry2003``, water around it."""
+    rows = ", ".join("[" + ", ".join(f"{v:g}" for v in row) + "]" for row in placement(focus_mm=array_focus_mm(array)))
+    return (f"name = \"head-phantom-seed{seed}\"\n" + (HEMISPHERE_TOML if array == "hemisphere" else "")
+            + f"\n[ct]\nfile = \"{ct_path}\"\nconversion = \"aubry2003\"\npatient_to_transducer_mm = [{rows}]\n")
+
+
 def placement(target_mm: tuple[float, float, float] = (0.0, 0.0, 20.0),
               focus_mm: tuple[float, float, float] = (0.0, 0.0, 85.0)) -> NDArray[np.float64]:
     """The rigid ``patient_to_transducer_mm`` putting the head's point ``target_mm`` (patient frame,

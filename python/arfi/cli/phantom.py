@@ -39,13 +39,10 @@ def register(sub: Any) -> None:
 
 
 #: The hemisphere's centre of curvature, where ``--array hemisphere`` puts the target, mm.
-HEMISPHERE_FOCUS_MM = (0.0, 0.0, 150.0)
-HEMISPHERE_TOML = ("frequency_hz = 650000.0\n\n[transducer]\nkind = \"hemisphere\"\nradius_of_curvature_mm = 150.0\n"
-                   "polar_angle_max_deg = 60.0\nelements = 1024\n\n[focus]\nposition_mm = [0.0, 0.0, 150.0]\n")
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.phantom import head_phantom, placement
+    from arfi.phantom import array_focus_mm, head_phantom, placement, scenario_for
     from arfi.scenario import Scenario
 
     t = time.perf_counter()
@@ -55,16 +52,11 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario_out is not None and not args.scenario_out.endswith(".toml"):
         raise ValueError(f"--scenario-out: {args.scenario_out}: a scenario must be written as .toml")
     head = head_phantom(args.seed, args.voxel_mm, tuple(args.thickness_mm), args.noise_hu)
-    focus_mm = HEMISPHERE_FOCUS_MM if args.array == "hemisphere" else (0.0, 0.0, 85.0)
-    transform = placement(focus_mm=focus_mm)
+    transform = placement(focus_mm=array_focus_mm(args.array))
     scenario_text = None
     if args.scenario_out is not None:
-        folder = Path(args.scenario_out).resolve().parent
-        rel = os.path.relpath(out.resolve(), folder)
-        rows = ", ".join("[" + ", ".join(f"{v:g}" for v in row) + "]" for row in transform)
-        scenario_text = (f"name = \"head-phantom-seed{args.seed}\"\n"
-                         + (HEMISPHERE_TOML if args.array == "hemisphere" else "")
-                         + f"\n[ct]\nfile = \"{rel}\"\nconversion = \"aubry2003\"\npatient_to_transducer_mm = [{rows}]\n")
+        rel = os.path.relpath(out.resolve(), Path(args.scenario_out).resolve().parent)
+        scenario_text = scenario_for(rel, args.seed, args.array)
     head.save(out)
     if scenario_text is not None:
         Scenario.from_toml(scenario_text, Path(args.scenario_out).resolve().parent)  # checks the placement against the CT
