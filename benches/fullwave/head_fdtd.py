@@ -7,9 +7,9 @@ Writes ``python/arfi/data/fullwave_head.json``.
     python benches/fullwave/head_fdtd.py [--work DIR]
 
 The engine takes about 23 min at 6 points per wavelength (316 x 316 x 157 voxels of 1.136 mm, 1440
-steps) and 12 min at 5 (268 x 268 x 136 of 1.364 mm) on 2 cores; the march about 2 s. Runs whose
-output files are in ``--work`` already are not made again (the CT written there must be the
-module's).
+steps) and 12 min at 5 (268 x 268 x 136 of 1.364 mm) on 2 cores; the march about 2 s (made
+each time). The engine's runs whose output files are in ``--work`` already are not made again
+(refused when that folder's CT was another).
 """
 
 from __future__ import annotations
@@ -35,16 +35,17 @@ def arfi(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "arfi", *args], check=True)
 
 
-def run(work: Path, scenario: Path, engine: str, ppw: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """``arfi field`` on the scenario with ``engine`` (or reuses its outputs): its :func:`parts` and JSON."""
+def run(work: Path, scenario: Path, engine: str, ppw: float | None = None, cut: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``arfi field`` on the scenario with ``engine`` (the engine's runs reused from ``work``): its
+    :func:`arfi.validation_head.parts` and JSON."""
     stem = work / (engine if ppw is None else f"{engine}{ppw:g}")
     npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
-    if not js.exists():
+    if engine == "has" or not js.exists():
         extra = ["--engine", "fdtd", "--fdtd-points-per-wavelength", f"{ppw:g}"] if engine == "fdtd" else []
         arfi("field", "--scenario", str(scenario), "--out", str(npz), "--json", str(js), *extra)
     f, j = np.load(npz), json.loads(js.read_text())
-    return vh.parts(f["pressure"], f["x_mm"], f["y_mm"], f["axis_z_mm"], f["axis_pressure"], j["focal_peak_pa"],
-                    j["focal_peak_mm"], float(f["surface_pressure_pa"])), j
+    return vh.parts(f["pressure"], f["x_mm"], f["y_mm"], float(f["z_mm"]), f["axis_z_mm"], f["axis_pressure"], j["focal_peak_pa"],
+                    j["focal_peak_mm"], float(f["surface_pressure_pa"]), cut=cut), j
 
 
 def main() -> None:
@@ -56,6 +57,12 @@ def main() -> None:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
         scenario, sha = vh.write_inputs(work)
+        # The engine's runs kept in the folder must be of this CT.
+        made = work / "ct.sha256"
+        if made.exists() and made.read_text().strip() != sha:
+            raise SystemExit(f"{work}: its engine runs were made on another CT; empty the folder")
+        made.write_text(sha + "\n")
+        march_whole, _ = run(work, scenario, "has", cut=False)
         march, _ = run(work, scenario, "has")
         runs = []
         for ppw in PPW:
@@ -63,7 +70,7 @@ def main() -> None:
             runs.append({"points_per_wavelength": ppw, "fdtd": j["fdtd"], "parts": p})
         fine, coarse = sorted(runs, key=lambda r: r["fdtd"]["voxel_mm"])[:2]
         ref = vh.scaled(fine["parts"], coarse["parts"], fine["fdtd"]["voxel_mm"], coarse["fdtd"]["voxel_mm"])
-        m = vh.metrics(march, ref)
+        m = vh.metrics(march_whole, ref)
         out = {
             "case": vh.NAME, "frequency_hz": vh.FREQUENCY_HZ, "elements": vh.ELEMENTS, "seed": vh.SEED, "ct_voxel_mm": vh.VOXEL_MM,
             "ct_sha256": sha, "engine": fullwave.ENGINE, "engine_version": fullwave.ENGINE_VERSION,

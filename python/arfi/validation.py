@@ -65,8 +65,9 @@ def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
 
 def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[Any]:
     """Runs the named cases (all by default), each on its scenario's default grid, and returns
-    their :class:`arfi._core.ValidationResult` (for the textured caps a
-    :class:`arfi.validation_fullwave.FullWaveResult`). Raises ValueError naming an unknown case."""
+    their :class:`arfi._core.ValidationResult` (for the textured caps and the head a
+    :class:`arfi.validation_fullwave.FullWaveResult`). Raises ValueError naming an unknown case,
+    or a missing stored reference before any case runs."""
     from arfi.validation_fullwave import CALIBRATION, REFERENCE_PPW, compare, reference, references
 
     wanted = check_cases(cases)
@@ -77,6 +78,10 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
         if missing:
             raise ValueError(f"validate: no stored full-wave run of {', '.join(missing)} at {REFERENCE_PPW:g} points per "
                              "wavelength (benches/fullwave/caps_fdtd.py makes them)")
+    if "head220" in wanted:
+        from arfi import validation_head
+
+        validation_head.reference()  # one line before the run, not after it
     results: list[Any] = []
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as tmp:
         for case in _core.validation_cases(tmp):

@@ -88,7 +88,6 @@ def test_the_engine_run_through_arfi_agrees_with_the_exact_solution(row, exact):
         assert gap <= 1.0, gap
 
 
-
 def test_the_head_reference_is_scaled_by_an_engine_error_that_the_exact_shell_confirms():
     # arfi validate's head220 (arfi.validation_head): the engine's run at 6 points per wavelength
     # scaled by its own error there, measured from two voxel sizes (second-order convergence). The
@@ -103,6 +102,26 @@ def test_the_head_reference_is_scaled_by_an_engine_error_that_the_exact_shell_co
     assert abs(factor / shell - 1) <= 0.02, (factor, shell)
     assert [r["points_per_wavelength"] for r in head["runs"]] == [6.0, 5.0]
     assert all(r["fdtd"]["steady_change"] < 0.01 for r in head["runs"])
-    # The finer run's focus lies between the coarser's and their limit (second-order convergence).
-    z = [r["parts"]["focal_point_mm"][2] for r in head["runs"]] + [head["reference"]["extrapolated_focal_point_mm"][2]]
-    assert z[1] < z[0] < z[2], z
+    # The focal depth converges towards the array's far side: the finer run's focus lies deeper
+    # than the coarser's (their limit deeper still, by construction).
+    z = [r["parts"]["focal_point_mm"][2] for r in head["runs"]]
+    assert z[1] < z[0], z
+
+
+def test_the_head_comparison_reports_a_moved_focus_and_refuses_another_grid(tmp_path):
+    # A march whose focus moved aside still gets its row (the plane and the axis are taken on the
+    # reference's samples, not about the march's own focus); a reference on other samples is one
+    # ValueError.
+    from arfi import validation_head
+
+    ref = validation_head.reference()["reference"]
+    path, _ = validation_head.write_inputs(tmp_path)
+    march, _ = validation_head.march_parts(path)
+    for dx in (-3.0, 3.0):
+        moved = {**march, "focal_point_mm": [march["focal_point_mm"][0] + dx, *march["focal_point_mm"][1:]]}
+        m = validation_head.metrics(moved, ref)
+        assert abs(abs(m["focal_position_error_mm"]) - float(np.hypot(dx + march["focal_point_mm"][0] - ref["focal_point_mm"][0],
+                                                                      march["focal_point_mm"][2] - ref["focal_point_mm"][2]))) < 0.2
+    shifted = {**ref, "plane_x_mm": [v + 0.3 for v in ref["plane_x_mm"]]}
+    with pytest.raises(ValueError, match="plane"):
+        validation_head.metrics(march, shifted)

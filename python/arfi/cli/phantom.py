@@ -38,9 +38,6 @@ def register(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-#: The hemisphere's centre of curvature, where ``--array hemisphere`` puts the target, mm.
-
-
 def run(args: argparse.Namespace) -> int:
     from arfi.phantom import array_focus_mm, head_phantom, placement, scenario_for
     from arfi.scenario import Scenario

@@ -2,7 +2,8 @@
 //!
 //! Tolerances: the suite's own (`Tolerances::default()`: focal pressure 5 %, focal position
 //! 0.5 mm, axial profile 5 % of the peak over ±10 mm, focal-plane correlation 0.99; half the
-//! spread of the ITRUSST benchmark's eleven codes), or a tilted plate's (`Tolerances::OBLIQUE`).
+//! spread of the ITRUSST benchmark's eleven codes), or a plate from a CT's (`Tolerances::OBLIQUE`,
+//! and `Tolerances::OBLIQUE_SOLID` for the tilted solid plates).
 //! Every case meets them on the default grid: the layered ones with their faces on march planes,
 //! the CT shells with the staircase of their walls' faces given the loss of its risers
 //! (`physics/propagation/risers.rs`).
