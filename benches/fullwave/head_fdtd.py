@@ -35,17 +35,21 @@ def arfi(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "arfi", *args], check=True)
 
 
-def run(work: Path, scenario: Path, engine: str, ppw: float | None = None, cut: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+def run(work: Path, scenario: Path, engine: str, ppw: float | None = None) -> tuple[Any, dict[str, Any]]:
     """``arfi field`` on the scenario with ``engine`` (the engine's runs reused from ``work``): its
-    :func:`arfi.validation_head.parts` and JSON."""
+    npz and JSON."""
     stem = work / (engine if ppw is None else f"{engine}{ppw:g}")
     npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
     if engine == "has" or not js.exists():
         extra = ["--engine", "fdtd", "--fdtd-points-per-wavelength", f"{ppw:g}"] if engine == "fdtd" else []
         arfi("field", "--scenario", str(scenario), "--out", str(npz), "--json", str(js), *extra)
-    f, j = np.load(npz), json.loads(js.read_text())
+    return np.load(npz), json.loads(js.read_text())
+
+
+def parts(f: Any, j: dict[str, Any], cut: bool = True) -> dict[str, Any]:
+    """:func:`arfi.validation_head.parts` of a run's npz ``f`` and JSON ``j``."""
     return vh.parts(f["pressure"], f["x_mm"], f["y_mm"], float(f["z_mm"]), f["axis_z_mm"], f["axis_pressure"], j["focal_peak_pa"],
-                    j["focal_peak_mm"], float(f["surface_pressure_pa"]), cut=cut), j
+                    j["focal_peak_mm"], float(f["surface_pressure_pa"]), cut=cut)
 
 
 def main() -> None:
@@ -62,12 +66,12 @@ def main() -> None:
         if made.exists() and made.read_text().strip() != sha:
             raise SystemExit(f"{work}: its engine runs were made on another CT; empty the folder")
         made.write_text(sha + "\n")
-        march_whole, _ = run(work, scenario, "has", cut=False)
-        march, _ = run(work, scenario, "has")
+        f, j = run(work, scenario, "has")
+        march_whole, march = parts(f, j, cut=False), parts(f, j)
         runs = []
         for ppw in PPW:
-            p, j = run(work, scenario, "fdtd", ppw)
-            runs.append({"points_per_wavelength": ppw, "fdtd": j["fdtd"], "parts": p})
+            f, j = run(work, scenario, "fdtd", ppw)
+            runs.append({"points_per_wavelength": ppw, "fdtd": j["fdtd"], "parts": parts(f, j)})
         fine, coarse = sorted(runs, key=lambda r: r["fdtd"]["voxel_mm"])[:2]
         ref = vh.scaled(fine["parts"], coarse["parts"], fine["fdtd"]["voxel_mm"], coarse["fdtd"]["voxel_mm"])
         m = vh.metrics(march_whole, ref)

@@ -78,10 +78,10 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
         if missing:
             raise ValueError(f"validate: no stored full-wave run of {', '.join(missing)} at {REFERENCE_PPW:g} points per "
                              "wavelength (benches/fullwave/caps_fdtd.py makes them)")
-    if "head220" in wanted:
-        from arfi import validation_head
+    from arfi import validation_head
 
-        validation_head.reference()  # one line before the run, not after it
+    # Read before any case runs: a missing reference is one line, not a lost run.
+    head = validation_head.reference() if "head220" in wanted else None
     results: list[Any] = []
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as tmp:
         for case in _core.validation_cases(tmp):
@@ -94,12 +94,10 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
             if progress is not None:
                 progress(cap.name)
             results.append(compare(cap.name, reference(cap.name, stored)))
-    if "head220" in wanted:
-        from arfi import validation_head
-
+    if head is not None:
         if progress is not None:
             progress("head220")
-        results.append(validation_head.compare())
+        results.append(validation_head.compare(head))
     return results
 
 

@@ -53,9 +53,9 @@ WINDOW_MM = 10.0
 LINE_MM = 15.0
 
 
-def write_inputs(folder: Path, extra_toml: str = "") -> tuple[Path, str]:
-    """Writes the phantom's CT and the case's scenario (``extra_toml`` appended) into ``folder``;
-    returns the scenario's path and the CT's SHA-256 (of its HU)."""
+def write_inputs(folder: Path) -> tuple[Path, str]:
+    """Writes the phantom's CT and the case's scenario into ``folder``; returns the scenario's
+    path and the CT's SHA-256 (of its HU)."""
     from arfi.phantom import head_phantom, scenario_for
 
     head = head_phantom(SEED, VOXEL_MM)
@@ -66,7 +66,7 @@ def write_inputs(folder: Path, extra_toml: str = "") -> tuple[Path, str]:
             raise RuntimeError(f"the phantom's scenario no longer holds {old!r}")
         toml = toml.replace(old, new)
     path = folder / "head.toml"
-    path.write_text(toml + extra_toml)
+    path.write_text(toml)
     return path, hashlib.sha256(np.ascontiguousarray(head.hu).tobytes()).hexdigest()
 
 
@@ -167,13 +167,13 @@ def march_parts(scenario: Path) -> tuple[dict[str, Any], Any]:
                  focus["focal_peak_mm"], f.surface_pressure_pa, cut=False), sim
 
 
-def compare() -> Any:
-    """The march on the case's default grid against the stored reference
-    (:class:`arfi.validation_fullwave.FullWaveResult`); ValueError when there is none, or when it
-    was made on another CT than the one written now."""
+def compare(stored: dict[str, Any] | None = None) -> Any:
+    """The march on the case's default grid against the stored reference (or ``stored``, as
+    :func:`reference` gives it) (:class:`arfi.validation_fullwave.FullWaveResult`); ValueError when
+    there is none, or when it was made on another CT than the one written now."""
     from arfi.validation_fullwave import FullWaveResult
 
-    stored = reference()
+    stored = reference() if stored is None else stored
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as d:
         path, sha = write_inputs(Path(d))
