@@ -56,7 +56,7 @@ def test_an_unknown_case_or_an_out_that_is_a_file_is_one_line_and_exit_2(tmp_pat
     r = run("--case", "bm9")
     assert r.returncode == 2
     assert r.stderr.strip() == ("arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, "
-                                "tilt20, tilt30, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
+                                "tilt20, tilt30, tilt0_shear1500, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
                                 "cap_texture3, head220")
     (tmp_path / "file").write_text("x")
     r = run("--case", "water", "--out", str(tmp_path / "file"))

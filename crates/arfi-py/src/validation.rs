@@ -16,7 +16,7 @@ pub(crate) struct CoreValidationCase(Case);
 
 #[pymethods]
 impl CoreValidationCase {
-    /// Short name (`water`, `bm3`, `bm4`, `bm3_solid`, `shell`, `bm5`, `tilt0`, `tilt10`, `tilt20`, `tilt30`).
+    /// Short name (`water`, `bm3`, `bm4`, `bm3_solid`, `shell`, `bm5`, `tilt0`, `tilt10`, `tilt20`, `tilt30`, `tilt0_shear1500`, ...).
     #[getter]
     fn name(&self) -> &str {
         &self.0.name

@@ -32,7 +32,7 @@ def register(sub: Any) -> None:
                                                 "PNG per case")
     p.add_argument("--case", action="append", dest="cases", metavar="NAME",
                    help="run only this case (repeatable): water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, tilt20, "
-                        "tilt30, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
+                        "tilt30, tilt0_shear1500, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
                         "cap_texture3, head220")
     p.add_argument("--json", metavar="FILE", help="write machine-readable results to FILE")
     p.set_defaults(run=run)

@@ -8,12 +8,16 @@
 //! transducer frame.
 //!
 //! Sampling: each grid cell (dx × dy × dz about its centre) averages the converted properties of
-//! `n_x × n_y × n_z` points spread over it, `n_a = ceil(d_a / s)` for the CT's finest voxel size
-//! `s` (at most [`MAX_SAMPLES_PER_AXIS`]), each point taking the HU of the voxel it lies in
-//! (a voxel is a box of one material: interpolating HU across a bone surface would invent soft
-//! tissue between air and bone). Sound speed is averaged as slowness (travel time through the
-//! cell is kept) and attenuation arithmetically. A plate thinner than a cell thus keeps its
-//! travel-time delay instead of appearing or vanishing with the grid's phase.
+//! `n_x × n_y` columns spread over it, `n_a = ceil(d_a / s)` for the CT's finest voxel size `s`
+//! (at most [`MAX_SAMPLES_PER_AXIS`]), each column along z taking every voxel it crosses by the
+//! length it runs in it (a voxel is a box of one material: interpolating HU across a bone surface
+//! would invent soft tissue between air and bone). Sound speed is averaged as slowness (travel
+//! time through the cell is kept) and attenuation arithmetically. A plate thinner than a cell thus
+//! keeps its travel-time delay instead of appearing or vanishing with the grid's phase, and a face
+//! inside a cell is placed by the exact fraction of the cell on each side of it along the march's
+//! axis (points spread along z would round it to `1/n_z` of the cell: a 6.5 mm plate read at
+//! 0.4 mm steps from 0.25 mm voxels came out 6.4 mm thick, which moves the waves a solid plate
+//! converts to shear by a tenth of a radian and more).
 //!
 //! The impedance `rho·c` is the one at the cell's centre (the density is set to give it with the
 //! averaged speed): a bone surface inside a cell then reflects as the sharp face between the
@@ -259,25 +263,45 @@ impl CtMedium {
         let n = self.samples(size);
         let (mut slowness, mut attenuation, mut tissue) = (0.0, 0.0, false);
         let (mut shear_slowness, mut shear_attenuation, mut solid) = (0.0, 0.0, 0.0);
-        for k in 0..n[2] {
-            for j in 0..n[1] {
-                for i in 0..n[0] {
-                    let off = |s: usize, n: usize, d: f64| ((s as f64 + 0.5) / n as f64 - 0.5) * d;
-                    let p = [center[0] + off(i, n[0], size[0]), center[1] + off(j, n[1], size[1]), center[2] + off(k, n[2], size[2])];
-                    let q = self.hu_at(p).and_then(convert);
+        let mut crossings = Vec::new();
+        for j in 0..n[1] {
+            for i in 0..n[0] {
+                let off = |s: usize, n: usize, d: f64| ((s as f64 + 0.5) / n as f64 - 0.5) * d;
+                let (x, y) = (center[0] + off(i, n[0], size[0]), center[1] + off(j, n[1], size[1]));
+                let z_lo = center[2] - 0.5 * size[2];
+                self.column_crossings([x, y, z_lo], size[2], &mut crossings);
+                // Runs of one material are taken whole (their length as one difference), so a
+                // cell of one material gets the same bits wherever the voxels' faces cross it.
+                let mut run: Option<(Option<Properties>, f64)> = None;
+                let mut add = |q: Option<Properties>, length: f64| {
                     tissue |= q.is_some();
                     let q = q.unwrap_or(outside);
-                    slowness += 1.0 / q.sound_speed;
-                    attenuation += q.attenuation;
+                    let w = length / size[2];
+                    slowness += w / q.sound_speed;
+                    attenuation += w * q.attenuation;
                     if q.shear_sound_speed > 0.0 {
-                        shear_slowness += 1.0 / q.shear_sound_speed;
-                        shear_attenuation += q.shear_attenuation;
-                        solid += 1.0;
+                        shear_slowness += w / q.shear_sound_speed;
+                        shear_attenuation += w * q.shear_attenuation;
+                        solid += w;
                     }
+                };
+                for t in crossings.windows(2) {
+                    let q = self.hu_at([x, y, z_lo + 0.5 * (t[0] + t[1])]).and_then(convert);
+                    match run {
+                        Some((r, _)) if r == q => {}
+                        Some((r, start)) => {
+                            add(r, t[0] - start);
+                            run = Some((q, t[0]));
+                        }
+                        None => run = Some((q, t[0])),
+                    }
+                }
+                if let Some((r, start)) = run {
+                    add(r, size[2] - start);
                 }
             }
         }
-        let count = (n[0] * n[1] * n[2]) as f64;
+        let count = (n[0] * n[1]) as f64;
         tissue.then(|| {
             let sound_speed = count / slowness;
             // The impedance of the medium at the centre: a face inside the cell reflects as the
@@ -295,6 +319,31 @@ impl CtMedium {
                 shear_attenuation: if is_solid { shear_attenuation / solid } else { 0.0 },
             }
         })
+    }
+
+    /// The distances along z from `start` (m, transducer frame), `0` and `length` included and in
+    /// increasing order, at which a line of `length` along z enters another voxel: each voxel
+    /// index changes where the continuous index crosses a half-integer. Into `out`.
+    fn column_crossings(&self, start: [f64; 3], length: f64, out: &mut Vec<f64>) {
+        out.clear();
+        out.push(0.0);
+        let q0 = affine_apply(&self.frame_to_voxel, start);
+        for (a, &q) in q0.iter().enumerate() {
+            let v = self.frame_to_voxel[a][2];
+            if v == 0.0 {
+                continue;
+            }
+            let q1 = q + v * length;
+            let (lo, hi) = (q.min(q1), q.max(q1));
+            // Half-integers m + 0.5 strictly inside (lo, hi).
+            let mut m = (lo - 0.5).floor() + 1.0;
+            while m + 0.5 < hi {
+                out.push((m + 0.5 - q) / v);
+                m += 1.0;
+            }
+        }
+        out.push(length);
+        out.sort_unstable_by(f64::total_cmp);
     }
 
     /// Whether the cell of `size` about `center` may reach into the CT's box.
@@ -440,6 +489,59 @@ mod tests {
         assert!((p.density * p.sound_speed - 1546.0 * 1040.0).abs() < 1e-6, "{}", p.density * p.sound_speed);
         // Wholly outside: the scenario's medium applies.
         assert_eq!(ct.cell_properties([0.02, 0.0, 0.0], [1e-3; 3], 1e6, water), None);
+    }
+
+    /// Each column of a cell takes each voxel it crosses by the length it runs in it: against a
+    /// slow reference that samples the column at 4000 points, on a CT of 0.3 mm voxels of random
+    /// bone and soft tissue turned about two axes (faces crossing the column at every angle).
+    /// Tolerance 1e-3 relative: the reference's points place each crossing to 1/4000 of the cell.
+    #[test]
+    fn a_column_takes_each_voxel_by_the_length_it_runs_in_it() {
+        let mut state = 12345u64;
+        let mut random = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) as f64 / (1u64 << 31) as f64
+        };
+        let n = 12;
+        let values =
+            (0..n * n * n).map(|_| if random() < 0.5 { 40.0 } else { 1000.0 + (1000.0 * random()).round() }).map(|h| h as f32).collect();
+        let v = Volume { shape: [n, n, n], values, affine: [[0.3, 0.0, 0.0, 0.0], [0.0, 0.3, 0.0, 0.0], [0.0, 0.0, 0.3, 0.0]] };
+        let (a, b) = (20f64.to_radians(), 10f64.to_radians());
+        let t = [
+            [b.cos(), -b.sin(), 0.0, 0.0],
+            [b.sin() * a.cos(), b.cos() * a.cos(), -a.sin(), 0.0],
+            [b.sin() * a.sin(), b.cos() * a.sin(), a.cos(), 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        let ct = CtMedium::new(v, t, HuConversion::named("aubry2003").unwrap(), "random.nii").unwrap();
+        let water = Properties { sound_speed: 1500.0, density: 1000.0, attenuation: 0.0, shear_sound_speed: 0.0, shear_attenuation: 0.0 };
+        let convert = |hu: f64| ct.conversion.properties(hu, 5e5);
+        let size = [0.7e-3, 0.6e-3, 0.75e-3];
+        let centre = affine_apply(&ct.voxel_to_frame, [5.5, 6.0, 6.5]);
+        let mut checked = 0;
+        for dz in [-1.1e-3, -0.4e-3, 0.0, 0.33e-3, 0.9e-3] {
+            let c = [centre[0] + 0.2 * dz, centre[1] - 0.3 * dz, centre[2] + dz];
+            let got = ct.cell_average(c, size, water, &convert).unwrap();
+            let samples = ct.samples(size);
+            let (mut slowness, mut attenuation, points) = (0.0, 0.0, 4000);
+            for j in 0..samples[1] {
+                for i in 0..samples[0] {
+                    let off = |s: usize, n: usize, d: f64| ((s as f64 + 0.5) / n as f64 - 0.5) * d;
+                    for k in 0..points {
+                        let p = [c[0] + off(i, samples[0], size[0]), c[1] + off(j, samples[1], size[1]), c[2] + off(k, points, size[2])];
+                        let q = ct.hu_at(p).and_then(convert).unwrap_or(water);
+                        slowness += 1.0 / q.sound_speed;
+                        attenuation += q.attenuation;
+                    }
+                }
+            }
+            let count = (samples[0] * samples[1] * points) as f64;
+            let (want_c, want_a) = (count / slowness, attenuation / count);
+            assert!((got.sound_speed / want_c - 1.0).abs() < 1e-3, "{} vs {want_c}", got.sound_speed);
+            assert!((got.attenuation - want_a).abs() < 1e-3 * want_a.max(1.0), "{} vs {want_a}", got.attenuation);
+            checked += usize::from(got.sound_speed > 1600.0 && got.sound_speed < 2800.0);
+        }
+        assert!(checked >= 3, "{checked} cells mix bone and tissue");
     }
 
     /// A slice of a CT of whole HU (converted once per value and looked up) holds, pixel by

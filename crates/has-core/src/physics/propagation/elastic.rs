@@ -30,6 +30,7 @@
 //! (`oblique_shear.rs`); a CT's other faces and a voxel map's convert nothing: they cross `ψ` as
 //! before and leave the SV field to the next slab's screen.
 
+use super::faces::segment_phase;
 use super::march::{zero, Real, Wave};
 use crate::physics::fft::{Fft2, FftWorkspace};
 use crate::physics::grid::Grid;
@@ -210,8 +211,10 @@ fn solve(mut a: Vec<Vec<C64>>, mut b: Vec<Vec<C64>>) -> Option<Vec<Vec<C64>>> {
 pub(super) type Filters<T> = [[[Option<Arc<Vec<Complex<T>>>>; 2]; 4]; 2];
 
 /// The filters of the face from `a` into `b` on grid `g` (see [`Filters`]): the scattering
-/// matrix of each component, flux-normalised (`sqrt(Z_in/Z_out)` of the waves' impedances).
-pub(super) fn filters(g: &Grid, a: &Side, b: &Side) -> Filters<f64> {
+/// matrix of each component, flux-normalised (`sqrt(Z_in/Z_out)` of the waves' impedances). A face
+/// lying `offset` (m) beyond the plane it is applied on (a CT's face inside a cell) gives each
+/// wave the phase of its true path ([`segment_phase`]); 0 for a face on the plane.
+pub(super) fn filters(g: &Grid, a: &Side, b: &Side, offset: f64) -> Filters<f64> {
     let norm = 1.0 / g.lateral_len() as f64;
     let sides = [a, b];
     // [direction][out][in] -> (index into scattering's out, its in; the sides and waves).
@@ -227,14 +230,17 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side) -> Filters<f64> {
         .into_par_iter()
         .map(|at| {
             let (kx, ky) = (Grid::wavenumber(at / g.ny, g.nx, g.dx), Grid::wavenumber(at % g.ny, g.ny, g.dy));
-            let m = scattering(a, b, (kx * kx + ky * ky).sqrt());
+            let xi = (kx * kx + ky * ky).sqrt();
+            let m = scattering(a, b, xi);
             std::array::from_fn(|dir| {
                 std::array::from_fn(|o| {
                     std::array::from_fn(|w| {
                         let (ko, ki) = (out_index(dir, o), in_index(dir, w));
                         let (zi, zo) = (side_of(ki).impedance[ki % 2], side_of(ko).impedance[ko % 2]);
                         if zi > 0.0 && zo > 0.0 {
-                            m[ko][ki] * (zi / zo).sqrt() * norm
+                            let out_side = if o < 2 { 1 - dir } else { dir };
+                            let shift = segment_phase([a, b], offset, xi, [(dir, w), (out_side, o % 2)]);
+                            m[ko][ki] * (zi / zo).sqrt() * norm * (C64::i() * shift).exp()
                         } else {
                             C64::new(0.0, 0.0)
                         }
@@ -269,6 +275,15 @@ pub(super) fn pack(values: &[Values]) -> Filters<f64> {
 pub(super) struct ElasticPair<T> {
     pub pixels: Option<Vec<u32>>,
     pub filters: Arc<Filters<T>>,
+}
+
+impl<T> ElasticPair<T> {
+    /// Whether it converts: an SV wave arrives or leaves (a solid on either side).
+    pub fn converts(&self) -> bool {
+        self.filters
+            .iter()
+            .any(|d| d.iter().enumerate().any(|(o, per_out)| per_out[1].is_some() || (o % 2 == 1 && per_out.iter().any(Option::is_some))))
+    }
 }
 
 /// The single-precision copy of `f`.
@@ -322,23 +337,22 @@ pub(super) fn cross<T: Real>(
 ) -> Option<Wave<T>> {
     let n = fft.nx * fft.ny;
     let dir = usize::from(sign < 0.0);
-    let spectra = spectra_of(fft, field, field.len() / n, work, ws);
+    // `[ψ | s]`, or `ψ` alone where the plan carries no SV wave (faces between fluids).
+    let halves = field.len() / n;
+    let spectra = spectra_of(fft, field, halves, work, ws);
     let mut transmitted = field.to_vec();
     for pair in pairs {
         match &pair.pixels {
             None => transmitted.fill(zero()),
-            Some(px) => px.iter().for_each(|&i| {
-                transmitted[i as usize] = zero();
-                transmitted[n + i as usize] = zero();
-            }),
+            Some(px) => px.iter().for_each(|&i| (0..halves).for_each(|h| transmitted[h * n + i as usize] = zero())),
         }
     }
-    let mut reflected = if keep { vec![zero(); 2 * n] } else { Vec::new() };
+    let mut reflected = if keep { vec![zero(); halves * n] } else { Vec::new() };
     work.resize(n, zero());
     for pair in pairs {
         for (o, inputs) in pair.filters[dir].iter().enumerate() {
             let target = if o < 2 { &mut transmitted } else { &mut reflected };
-            if target.is_empty() || inputs.iter().all(Option::is_none) {
+            if target.is_empty() || o % 2 >= halves || inputs.iter().all(Option::is_none) {
                 continue;
             }
             combine(ws, &spectra, inputs);
@@ -371,22 +385,20 @@ pub(super) fn cross_transposed(
     let n = fft.nx * fft.ny;
     let dir = usize::from(sign < 0.0);
     let zero = C64::new(0.0, 0.0);
+    let halves = adjoint.len() / n;
     let after = adjoint.to_vec();
     for pair in pairs {
         match &pair.pixels {
             None => adjoint.fill(zero),
-            Some(px) => px.iter().for_each(|&i| {
-                adjoint[i as usize] = zero;
-                adjoint[n + i as usize] = zero;
-            }),
+            Some(px) => px.iter().for_each(|&i| (0..halves).for_each(|h| adjoint[h * n + i as usize] = zero)),
         }
     }
-    let mut sums = [vec![zero; n], vec![zero; n]];
+    let mut sums = vec![vec![zero; n]; halves];
     work.resize(n, zero);
     for pair in pairs {
         for (o, inputs) in pair.filters[dir].iter().enumerate() {
             let Some(source) = (if o < 2 { Some(&after[..]) } else { kept }) else { continue };
-            if inputs.iter().all(Option::is_none) {
+            if o % 2 >= halves || inputs.iter().all(Option::is_none) {
                 continue;
             }
             let half = &source[(o % 2) * n..(o % 2 + 1) * n];

@@ -2,7 +2,8 @@
 //! which the reflected waves carry ([`face_phase`]), and whether it is a wall between two layers
 //! ([`is_wall`]), which oblique walls' filters and the treads' coefficients need.
 
-use super::interface::impedance;
+use super::elastic::Side;
+use super::interface::{axial_wavenumber, impedance};
 use crate::physics::medium::SliceProperties;
 use num_complex::Complex64 as C64;
 
@@ -17,18 +18,53 @@ use num_complex::Complex64 as C64;
 /// density alone leaves the fraction undefined), and held below one half (the centre decides the
 /// side).
 pub(super) fn face_phase(slabs: [&SliceProperties; 4], i: usize, omega: f64, dz: f64) -> C64 {
+    let (f, g) = fractions(slabs, i);
+    let kappa = |s: &SliceProperties| C64::new(omega / s.sound_speed[i], s.attenuation[i]);
+    2.0 * kappa(slabs[1]) * f * dz - 2.0 * kappa(slabs[2]) * g * dz
+}
+
+/// The fractions `(f, g)` of [`face_phase`]: of `C` in `P`'s material and of `P` in `C`'s (each 0
+/// where not taken).
+fn fractions(slabs: [&SliceProperties; 4], i: usize) -> (f64, f64) {
     let [a, p, c, n] = slabs.map(|s| 1.0 / s.sound_speed[i]);
-    let kappa = |s: &SliceProperties, slowness: f64| C64::new(omega * slowness, s.attenuation[i]);
     let (before_is_p, after_is_c) = layered_sides(slabs, i);
-    let mut phase = C64::new(0.0, 0.0);
     let differ = |x: f64, y: f64| (x - y).abs() > 1e-6 * x.abs().max(y.abs());
-    if after_is_c && differ(p, n) {
-        phase += 2.0 * kappa(slabs[1], p) * ((c - n) / (p - n)).clamp(0.0, 0.5) * dz;
+    let f = if after_is_c && differ(p, n) { ((c - n) / (p - n)).clamp(0.0, 0.5) } else { 0.0 };
+    let g = if before_is_p && differ(c, a) { ((p - a) / (c - a)).clamp(0.0, 0.5) } else { 0.0 };
+    (f, g)
+}
+
+/// The signed distance (m) from the plane to the face's true position at pixel `i` (`slabs` as
+/// in [`face_phase`]): `f·dz` into `C`, `-g·dz` into `P`.
+pub(super) fn face_offset(slabs: [&SliceProperties; 4], i: usize, dz: f64) -> f64 {
+    let (f, g) = fractions(slabs, i);
+    (f - g) * dz
+}
+
+/// The phase (complex: its imaginary part the loss) that a face's wave `(in, out)` lacks when the
+/// face, between media `sides = [a, b]`, is applied on the plane but lies `offset` (m) beyond it
+/// (`+`: inside the cell after the plane, a segment of `a`'s material there; `-`: a segment of
+/// `b`'s inside the cell before). `in` and `out` are `(side, wave)`, wave 0 P and 1 SV, at
+/// transverse wavenumber `xi`. The march carries any wave on the segment's side of the plane
+/// across the segment (P with the cell's averaged slowness, so with the segment's material's
+/// wavenumber; SV with the cell's centre material's shear); truly the segment holds the waves of
+/// its own material. So each of `in`, `out` adds `kz(segment's material, wave)·|offset|` where it
+/// lies on the segment's material's side and subtracts the march's where it lies on the cell's.
+/// For the P wave reflected at a fluid face this is [`face_phase`]'s `2·κ·δ`; transmitted P gets
+/// nothing (the averaged slowness keeps its delay); a wave converted to SV gets the difference of
+/// the P and SV paths over the segment.
+pub(super) fn segment_phase(sides: [&Side; 2], offset: f64, xi: f64, waves: [(usize, usize); 2]) -> C64 {
+    let zero = C64::new(0.0, 0.0);
+    if offset == 0.0 {
+        return zero;
     }
-    if before_is_p && differ(c, a) {
-        phase -= 2.0 * kappa(slabs[2], c) * ((p - a) / (c - a)).clamp(0.0, 0.5) * dz;
-    }
-    phase
+    let (material, cell) = if offset > 0.0 { (0, 1) } else { (1, 0) };
+    let kz = |s: &Side, wave: usize| {
+        let k = if wave == 0 { Some(s.kp) } else { s.ks };
+        k.map_or(zero, |k| axial_wavenumber(k, xi * xi))
+    };
+    let marched = |wave: usize| if wave == 0 { kz(sides[material], 0) } else { kz(sides[cell], 1) };
+    waves.iter().map(|&(side, wave)| if side == material { kz(sides[material], wave) } else { -marched(wave) }).sum::<C64>() * offset.abs()
 }
 
 /// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
@@ -94,6 +130,44 @@ mod tests {
             let phase = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
             assert!((phase - want).norm() < 1e-12, "offset {offset}: {phase} vs {want}");
         }
+    }
+
+    /// The segment's phase (water `a`, solid bone `b`): nothing on the plane; for P reflected
+    /// into water it is [`face_phase`]'s path there and back, `2·kz·δ` through water (face
+    /// beyond the plane) or `-2·kz·δ` through bone (face before it), with the waves' axial
+    /// wavenumbers at any incidence; P transmitted gets nothing (the averaged cell keeps its
+    /// delay); P converted to SV in bone gets the difference of its paths over the segment. To
+    /// rounding (1e-12 rad).
+    #[test]
+    fn a_misplaced_face_gives_each_wave_the_phase_of_its_true_path() {
+        let omega = 2.0 * PI * 5e5;
+        let water = Side { density: 1000.0, kp: C64::new(omega / 1500.0, 0.0), ks: None, impedance: [1.5e6, 0.0] };
+        let bone = Side {
+            density: 1850.0,
+            kp: C64::new(omega / 2800.0, 46.0),
+            ks: Some(C64::new(omega / 1500.0, 46.0)),
+            impedance: [1850.0 * 2800.0, 1850.0 * 1500.0],
+        };
+        let sides = [&water, &bone];
+        let (delta, zero) = (0.2e-3, C64::new(0.0, 0.0));
+        for xi in [0.0, 0.4 * omega / 1500.0] {
+            let kz = |k: C64| axial_wavenumber(k, xi * xi);
+            let (reflected, transmitted, converted) = ([(0, 0), (0, 0)], [(0, 0), (1, 0)], [(0, 0), (1, 1)]);
+            let close = |got: C64, want: C64| (got - want).norm() < 1e-12;
+            for waves in [reflected, transmitted, converted] {
+                assert!(close(segment_phase(sides, 0.0, xi, waves), zero));
+            }
+            assert!(close(segment_phase(sides, delta, xi, reflected), 2.0 * kz(water.kp) * delta));
+            assert!(close(segment_phase(sides, -delta, xi, reflected), -2.0 * kz(bone.kp) * delta));
+            assert!(close(segment_phase(sides, delta, xi, transmitted), zero));
+            assert!(close(segment_phase(sides, -delta, xi, transmitted), zero));
+            // Face before the plane: the SV wave runs the segment in bone, the march carries P.
+            let want = (kz(bone.ks.unwrap()) - kz(bone.kp)) * delta;
+            assert!(close(segment_phase(sides, -delta, xi, converted), want));
+        }
+        let at_normal = cells_about(30e-3 + delta, 0.75e-3, [28.875e-3, 29.625e-3, 30.375e-3, 31.125e-3]);
+        let fluid = face_phase([&at_normal[0], &at_normal[1], &at_normal[2], &at_normal[3]], 0, omega, 0.75e-3);
+        assert!((segment_phase(sides, delta, 0.0, [(0, 0), (0, 0)]) - fluid).norm() < 1e-12);
     }
 
     /// A face between a layer of water and one of bone is a wall wherever inside its cells it

@@ -280,7 +280,9 @@ impl HasPlan {
             let wall_normal = interface.as_ref().and_then(|i| i.wall_normal());
             // A slab an oblique wall crosses (the wall's plane, or the same slab again after it)
             // takes two reference media.
-            let crossed = wall_normal.is_some() || (interface.is_none() && plan.steps.last().is_some_and(|s| s.split.is_some()));
+            let crossed = wall_normal.is_some()
+                || interface.as_ref().is_some_and(|i| i.two_media)
+                || (interface.is_none() && plan.steps.last().is_some_and(|s| s.split.is_some()));
             let psi = &field[..n];
             let references = if crossed { References::of(psi, props, omega, quantum) } else { None };
             let (k_mean, a_mean) = match references {

@@ -136,7 +136,7 @@ mod tests {
         let mut dropped = 0;
         let mut zeroed = 0;
         for (a, b) in [(&water, &bone), (&bone, &water)] {
-            let (wall, planar) = (elastic_wall_filters(&g, a, b, [0.0, 0.0, 1.0]), super::super::elastic::filters(&g, a, b));
+            let (wall, planar) = (elastic_wall_filters(&g, a, b, [0.0, 0.0, 1.0]), super::super::elastic::filters(&g, a, b, 0.0));
             for dir in 0..2 {
                 for o in 0..4 {
                     for w in 0..2 {

@@ -50,6 +50,8 @@ use rustfft::FftNum;
 use std::collections::HashMap;
 use std::sync::Arc;
 
+mod layered_faces;
+use layered_faces::LayeredFaces;
 mod transposed;
 
 /// How a change of medium between slabs is applied.
@@ -112,6 +114,7 @@ pub(crate) struct Coefficients(
     HashMap<(Key, Key), Arc<Vec<C64>>>,
     pub(super) HashMap<WallKey, WallFilters>,
     HashMap<(Key, Key), Arc<Filters<f64>>>,
+    HashMap<layered_faces::FaceKey, Arc<Filters<f64>>>,
 );
 
 /// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one
@@ -119,6 +122,10 @@ pub(crate) struct Coefficients(
 pub(crate) struct Interface<T: FftNum = f64> {
     /// Largest normal-incidence `|R|` on the plane (how strongly it reflects).
     pub strength: f64,
+    /// Whether the slabs after it take two reference media (`references.rs`): a CT's solid
+    /// faces on the plane, between which the waves in bone run in every direction of the
+    /// spectrum (a plate, not a cap about the focus).
+    pub two_media: bool,
     kind: Kind<T>,
 }
 
@@ -213,7 +220,7 @@ impl Interface {
                 pairs.iter().map(|p| ElasticPair { pixels: p.pixels.clone(), filters: Arc::new(single_filters(&p.filters)) }).collect(),
             ),
         };
-        Interface { strength: self.strength, kind }
+        Interface { strength: self.strength, two_media: self.two_media, kind }
     }
 
     /// The interface from slab `from` into slab `to`, or `None` where they are equal. With
@@ -272,7 +279,7 @@ impl Interface {
                 phase.iter().any(|&p| p != C64::new(1.0, 0.0)).then_some(phase)
             });
             let walls = around.and_then(|a| walls(grid, omega, a, &pixels, &wall, shared));
-            Some(Interface { strength, kind: Kind::Pointwise { pixels: Arc::new(pixels), r, phase, walls } })
+            Some(Interface { strength, two_media: false, kind: Kind::Pointwise { pixels: Arc::new(pixels), r, phase, walls } })
         };
         if model == InterfaceModel::NormalIncidence {
             return pointwise(shared);
@@ -283,9 +290,18 @@ impl Interface {
         if made.as_ref().is_some_and(|i| i.as_ref().is_some_and(|i| i.walls().is_some())) {
             return made.flatten();
         }
+        // A CT's or voxel map's faces on the plane where a solid meets another medium convert,
+        // where they lie between layers (`layered_faces.rs`).
+        if let Some(a) = around {
+            match layered_faces::converting_faces(grid, (from, to), a, omega, strength, shared) {
+                LayeredFaces::Converting(i) => return Some(i),
+                LayeredFaces::Pass => return None,
+                LayeredFaces::No => {}
+            }
+        }
         let mut pointwise = |shared: &mut Coefficients| made.take().unwrap_or_else(|| pointwise(shared));
         // Faces of material regions (on planes between planar slabs) convert shear; a CT's or a
-        // voxel map's, whose treads may step across the planes, cross as between fluids.
+        // voxel map's others, whose treads may step across the planes, cross as between fluids.
         let shear = around.is_none();
         let mut pairs: HashMap<(Key, Key), PairPixels> = HashMap::new();
         for i in 0..n {
@@ -301,7 +317,7 @@ impl Interface {
         let elastic = shear && pairs.values().any(|&(first, _)| from.shear_speed(first) > 0.0 || to.shear_speed(first) > 0.0);
         if elastic {
             // Pairs with a solid hold 4-16 spectra each (`elastic::Filters`): bounded in bytes.
-            let held: usize = shared.2.values().map(|f| f.iter().flatten().flatten().flatten().count()).sum();
+            let held: usize = shared.2.values().chain(shared.3.values()).map(|f| f.iter().flatten().flatten().flatten().count()).sum();
             let new: usize =
                 pairs.iter().filter(|(k, _)| !shared.2.contains_key(*k)).map(|(_, &(first, _))| spectra(from, to, first)).sum();
             if ((held + new) * n * 16) as u64 > MAX_ELASTIC_BYTES {
@@ -320,12 +336,12 @@ impl Interface {
                     filters: shared
                         .2
                         .entry(k)
-                        .or_insert_with(|| Arc::new(filters(grid, &Side::of(from, first, omega), &Side::of(to, first, omega))))
+                        .or_insert_with(|| Arc::new(filters(grid, &Side::of(from, first, omega), &Side::of(to, first, omega), 0.0)))
                         .clone(),
                     pixels: (pixels.len() < n).then_some(pixels),
                 })
                 .collect();
-            return Some(Interface { strength, kind: Kind::Elastic(pairs) });
+            return Some(Interface { strength, two_media: false, kind: Kind::Elastic(pairs) });
         }
         let pairs = pairs
             .into_iter()
@@ -339,7 +355,7 @@ impl Interface {
                 pixels: (pixels.len() < n).then_some(pixels),
             })
             .collect();
-        Some(Interface { strength, kind: Kind::Spectral(pairs) })
+        Some(Interface { strength, two_media: false, kind: Kind::Spectral(pairs) })
     }
 }
 
@@ -394,7 +410,7 @@ impl<T: FftNum> Interface<T> {
     /// Whether it converts between compressional and shear waves: a solid meets another medium
     /// on the plane, or on an oblique wall among its pixels.
     pub(crate) fn converts_shear(&self) -> bool {
-        self.elastic().is_some() || self.walls().is_some_and(|w| w.converts())
+        self.elastic().is_some_and(|pairs| pairs.iter().any(|p| p.converts())) || self.walls().is_some_and(|w| w.converts())
     }
 
     /// The pairs of an interface where a solid meets another medium on a plane, if it is one.
