@@ -196,11 +196,12 @@ class Simulation:
         text += ", reflections towards the source added" if p["reflections"] else ""
         ct_shear = bool(((self.scenario.to_dict().get("ct") or {}).get("bone_shear_sound_speed_m_s") or 0) > 0)
         if p.get("shear"):
-            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions) "
-                     "or on planar walls tilted against them (a CT's), with mode conversion at each such face")
+            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions, "
+                     "and a CT's faces between layers) or on planar walls tilted against them (a CT's), with mode "
+                     "conversion at each such face")
         if self.has_shear and (ct_shear or not p.get("shear")):
-            text += ("; compressional waves only through a CT's other faces (curved, or along the planes), a voxel map's "
-                     "faces and faces crossed pixel by pixel: the shear speeds the scenario gives there are not carried "
+            text += ("; compressional waves only through a CT's other faces (curved, or on planes that also hold other "
+                     "jumps), a voxel map's other faces and faces crossed pixel by pixel: the shear speeds the scenario gives there are not carried "
                      "by the march (arfi field --engine fdtd carries them)")
         return text
 
@@ -208,7 +209,8 @@ class Simulation:
     def has_shear(self) -> bool:
         """Whether the scenario gives a solid a shear wave (a material's ``shear_sound_speed_m_s``
         or ``[ct] bone_shear_sound_speed_m_s`` above 0). The march carries it where the solid's faces
-        lie on its planes or on planar walls tilted against them (``propagation["shear"]``); the
+        lie on its planes (a CT's where they lie between layers) or on planar walls tilted against
+        them (``propagation["shear"]``); the
         full-wave engine everywhere."""
         d = self.scenario.to_dict()
         ct = d.get("ct") or {}
