@@ -108,7 +108,7 @@ pub fn plate_response(entry: Fluid, plate: Solid, thickness: f64, exit: Fluid, k
 
 /// Gaussian elimination with rows scaled to unit largest entry and partial pivoting (the system
 /// mixes displacements and stresses); a singular system gives NaN.
-fn solve6(m: &mut [[C64; 6]; 6], rhs: &mut [C64; 6]) -> [C64; 6] {
+pub(super) fn solve6(m: &mut [[C64; 6]; 6], rhs: &mut [C64; 6]) -> [C64; 6] {
     for (row, b) in m.iter_mut().zip(rhs.iter_mut()) {
         let s = row.iter().map(|v| v.norm()).fold(0.0, f64::max);
         if s > 0.0 {

@@ -1,8 +1,9 @@
 //! Exact solutions to check the propagation against, written independently of the marching code
 //! (they share no grid, FFT or medium sampling with it): O'Neil's bowl in water, the bowl through
 //! planar fluid layers ([`layered`], angular spectrum and transfer matrices), and the bowl through
-//! a spherical fluid shell ([`shell`], spherical-harmonic expansion); plane waves through a solid
-//! plate ([`elastic`]) and a stack of fluid and solid layers ([`stack`]) with P-SV conversion.
+//! a spherical fluid shell ([`shell`], spherical-harmonic expansion) or solid shell
+//! ([`solid_shell`]: P-SV conversion at both surfaces); plane waves through a solid plate
+//! ([`elastic`]) and a stack of fluid and solid layers ([`stack`]) with P-SV conversion.
 //!
 //! The source is the one every case shares: a spherical bowl with uniform normal velocity `u0`
 //! radiating as the Rayleigh integral `p(r) = -i·omega·rho·u0/(2π) ∫ exp(ik|r - r'|)/|r - r'| dS'`
@@ -14,6 +15,7 @@ pub mod elastic;
 pub mod layered;
 pub mod oblique;
 pub mod shell;
+pub mod solid_shell;
 pub mod special;
 pub mod stack;
 

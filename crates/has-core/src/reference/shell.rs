@@ -19,6 +19,7 @@
 //!   wall;
 //! - [`Passes::Closed`]: the closed shell with its cavity (every reflection from the far wall).
 
+use super::solid_shell::{self, SolidShell};
 use super::special::{derivatives, legendre, spherical_bessel};
 use super::{Bowl, Fluid};
 use crate::error::{require_positive, HasError, Result};
@@ -52,7 +53,10 @@ pub struct Shell {
 /// The bowl's field inside a shell, as the coefficients `T_n·c_n` of its expansion.
 #[derive(Debug, Clone)]
 pub struct ShellBowl {
-    shell: Shell,
+    /// z of the shell's centre, m.
+    centre: f64,
+    /// The interior's wavenumber, rad/m.
+    interior_k: C64,
     /// `T_n·c_n`, n = 0..=N.
     coefficients: Vec<C64>,
     /// The largest distance from the centre the expansion is kept accurate for, m.
@@ -63,39 +67,60 @@ impl ShellBowl {
     /// The expansion for points within `reach` (m) of the shell's centre; `reach` must lie inside
     /// the inner radius and inside every point of the cap.
     pub fn new(bowl: &Bowl, water: Fluid, shell: Shell, passes: Passes, reach: f64) -> Result<Self> {
-        require_positive("inner_radius", shell.inner_radius)?;
-        if !(shell.outer_radius > shell.inner_radius) {
+        let geometry = (shell.centre, shell.inner_radius, shell.outer_radius);
+        Self::expanded(bowl, water, geometry, shell.interior, reach, |n_max| transmissions(water, &shell, passes, n_max))
+    }
+
+    /// The same through a solid wall, P and SV converted at both surfaces
+    /// ([`super::solid_shell`]).
+    pub fn solid(bowl: &Bowl, water: Fluid, shell: SolidShell, passes: Passes, reach: f64) -> Result<Self> {
+        let geometry = (shell.centre, shell.inner_radius, shell.outer_radius);
+        Self::expanded(bowl, water, geometry, shell.interior, reach, |n_max| solid_shell::transmissions(water, &shell, passes, n_max))
+    }
+
+    /// The incident expansion about the centre of the shell `(centre, a, b)`, each order scaled
+    /// by `transmissions(n_max)`.
+    fn expanded(
+        bowl: &Bowl,
+        water: Fluid,
+        (centre, inner_radius, outer_radius): (f64, f64, f64),
+        interior: Fluid,
+        reach: f64,
+        transmissions: impl FnOnce(usize) -> Vec<C64>,
+    ) -> Result<Self> {
+        require_positive("inner_radius", inner_radius)?;
+        if !(outer_radius > inner_radius) {
             return Err(HasError::invalid("outer_radius", "must exceed the inner radius"));
         }
-        if !(reach > 0.0 && reach < shell.inner_radius) {
+        if !(reach > 0.0 && reach < inner_radius) {
             return Err(HasError::invalid("reach", "must lie between 0 and the inner radius"));
         }
         let rings = bowl.rings(40);
-        let nearest = rings.iter().map(|&(rho, z, _)| rho.hypot(z - shell.centre)).fold(f64::INFINITY, f64::min);
-        if !(nearest > shell.outer_radius) {
+        let nearest = rings.iter().map(|&(rho, z, _)| rho.hypot(z - centre)).fold(f64::INFINITY, f64::min);
+        if !(nearest > outer_radius) {
             return Err(HasError::invalid("outer_radius", "the bowl must lie outside the shell"));
         }
         // Orders: j_n(k·r) is negligible beyond n = k·reach + a margin of its turning region.
-        let kr = water.k.re.max(shell.interior.k.re) * reach;
+        let kr = water.k.re.max(interior.k.re) * reach;
         let n_max = (kr + 8.0 * kr.cbrt() + 30.0).ceil() as usize;
         let k = bowl.k;
         let incident = rings
             .par_iter()
             .map(|&(rho, z, w)| {
-                let r = rho.hypot(z - shell.centre);
+                let r = rho.hypot(z - centre);
                 let (j, y) = spherical_bessel(n_max, C64::new(k * r, 0.0));
-                let p = legendre(n_max, (z - shell.centre) / r);
+                let p = legendre(n_max, (z - centre) / r);
                 (0..=n_max).map(|n| w * (j[n] + C64::i() * y[n]) * p[n]).collect::<Vec<C64>>()
             })
             .reduce(|| vec![C64::new(0.0, 0.0); n_max + 1], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect());
-        let t = transmissions(water, &shell, passes, n_max);
+        let t = transmissions(n_max);
         let coefficients = (0..=n_max).map(|n| k * k * (2 * n + 1) as f64 * incident[n] * t[n]).collect();
-        Ok(ShellBowl { shell, coefficients, reach })
+        Ok(ShellBowl { centre, interior_k: interior.k, coefficients, reach })
     }
 
     /// `p/p0` at radius `rho` from the axis and depth `z` (m), within `reach` of the centre.
     pub fn pressure(&self, rho: f64, z: f64) -> Result<C64> {
-        let r = rho.hypot(z - self.shell.centre);
+        let r = rho.hypot(z - self.centre);
         if r > self.reach * (1.0 + 1e-12) {
             return Err(HasError::invalid(
                 "point",
@@ -106,8 +131,8 @@ impl ShellBowl {
         if r == 0.0 {
             return Ok(self.coefficients[0]);
         }
-        let (j, _) = spherical_bessel(n_max, self.shell.interior.k * r);
-        let p = legendre(n_max, (z - self.shell.centre) / r);
+        let (j, _) = spherical_bessel(n_max, self.interior_k * r);
+        let p = legendre(n_max, (z - self.centre) / r);
         Ok((0..=n_max).map(|n| self.coefficients[n] * j[n] * p[n]).sum())
     }
 }
@@ -119,7 +144,7 @@ impl ShellBowl {
 /// For one pass `e_in` is the incoming `(h^(2), Y0·h^(2)')` and `T_n = τ` times the ratio that
 /// completes the regular interior field (1, since `j = (h^(1) + h^(2))/2` both sides); closed, `e_in`
 /// is `(j, Y0·j')` itself.
-fn transmissions(water: Fluid, shell: &Shell, passes: Passes, n_max: usize) -> Vec<C64> {
+pub(super) fn transmissions(water: Fluid, shell: &Shell, passes: Passes, n_max: usize) -> Vec<C64> {
     let (a, b) = (shell.inner_radius, shell.outer_radius);
     let admittance = |f: &Fluid| f.k / (C64::i() * f.density);
     let (y0, y1, y2) = (admittance(&water), admittance(&shell.wall), admittance(&shell.interior));
