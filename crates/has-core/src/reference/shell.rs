@@ -19,8 +19,8 @@
 //!   wall;
 //! - [`Passes::Closed`]: the closed shell with its cavity (every reflection from the far wall).
 
-use super::solid_shell::{self, SolidShell};
-use super::special::{derivatives, legendre, spherical_bessel};
+use super::solid_shell::{self, kinds, SolidShell};
+use super::special::{derivatives, legendre, spherical_bessel, spherical_hankels};
 use super::{Bowl, Fluid};
 use crate::error::{require_positive, HasError, Result};
 use num_complex::Complex64 as C64;
@@ -137,8 +137,10 @@ impl ShellBowl {
     }
 }
 
-/// `T_n`, n = 0..=n_max: with `W(r) = [[j_n(k1 r), y_n(k1 r)], [Y1·j_n'(k1 r), Y1·y_n'(k1 r)]]`
-/// (`Y = k/(i·omega·rho)`, scaled by a common omega) carrying `(p, v)` across the wall,
+/// `T_n`, n = 0..=n_max: with `W(r) = [[f_n(k1 r), g_n(k1 r)], [Y1·f_n'(k1 r), Y1·g_n'(k1 r)]]`
+/// (`Y = k/(i·omega·rho)`, scaled by a common omega; `f, g` the wall's pair of
+/// [`super::solid_shell`]'s `kinds`: `h^(1), h^(2)` where the order propagates through the wall,
+/// `j, y` where it tunnels) carrying `(p, v)` across the wall,
 /// `q = W(b)·W(a)⁻¹·u` for the inside wave `u` (`h^(2)` for one pass, `j` closed), and outside
 /// `τ·q = e_in + s·e_1` with `e_1 = (h^(1), Y0·h^(1)')` at `k0·b`: `τ = det[e_in, e_1] / det[q, e_1]`.
 /// For one pass `e_in` is the incoming `(h^(2), Y0·h^(2)')` and `T_n = τ` times the ratio that
@@ -148,32 +150,39 @@ pub(super) fn transmissions(water: Fluid, shell: &Shell, passes: Passes, n_max: 
     let (a, b) = (shell.inner_radius, shell.outer_radius);
     let admittance = |f: &Fluid| f.k / (C64::i() * f.density);
     let (y0, y1, y2) = (admittance(&water), admittance(&shell.wall), admittance(&shell.interior));
-    // Each sequence one order beyond n_max for the derivatives.
+    // `[j, y, h^(1), h^(2)]` and their derivatives, each one order beyond n_max for them.
     let seq = |z: C64| {
         let (j, y) = spherical_bessel(n_max + 1, z);
-        let (dj, dy) = (derivatives(&j, z), derivatives(&y, z));
-        (j, y, dj, dy)
+        let (h1, h2) = spherical_hankels(n_max + 1, z);
+        [j, y, h1, h2].map(|f| {
+            let d = derivatives(&f, z);
+            (f, d)
+        })
     };
-    let (j0b, yy0b, dj0b, dy0b) = seq(water.k * b);
-    let (j1b, y1b, dj1b, dy1b) = seq(shell.wall.k * b);
-    let (j1a, y1a, dj1a, dy1a) = seq(shell.wall.k * a);
-    let (j2a, y2a, dj2a, dy2a) = seq(shell.interior.k * a);
+    let (outside, wall_b, wall_a, interior) = (seq(water.k * b), seq(shell.wall.k * b), seq(shell.wall.k * a), seq(shell.interior.k * a));
+    // `(value, admittance × derivative)` of kind `which` (0: j, 1: y, 2: h^(1), 3: h^(2)).
+    let state = |s: &[(Vec<C64>, Vec<C64>); 4], which: usize, adm: C64, n: usize| [s[which].0[n], adm * s[which].1[n]];
     let det = |u: [C64; 2], v: [C64; 2]| u[0] * v[1] - u[1] * v[0];
     (0..=n_max)
         .map(|n| {
             let inside = match passes {
-                Passes::One => [j2a[n] - C64::i() * y2a[n], y2 * (dj2a[n] - C64::i() * dy2a[n])],
-                Passes::Closed => [j2a[n], y2 * dj2a[n]],
+                Passes::One => state(&interior, 3, y2, n),
+                Passes::Closed => state(&interior, 0, y2, n),
             };
-            // W(a)⁻¹ = [[Y1·y', -y], [-Y1·j', j]] / (Y1·(j·y' - j'·y)).
-            let w_det = y1 * (j1a[n] * dy1a[n] - dj1a[n] * y1a[n]);
-            let alpha = (y1 * dy1a[n] * inside[0] - y1a[n] * inside[1]) / w_det;
-            let beta = (-y1 * dj1a[n] * inside[0] + j1a[n] * inside[1]) / w_det;
-            let q = [alpha * j1b[n] + beta * y1b[n], y1 * (alpha * dj1b[n] + beta * dy1b[n])];
-            let e1 = [j0b[n] + C64::i() * yy0b[n], y0 * (dj0b[n] + C64::i() * dy0b[n])];
+            // The wall's pair (`solid_shell::kinds`): travelling waves where the order
+            // propagates through the wall, j and y where it tunnels.
+            let [f, g] = kinds(shell.wall.k, a, n);
+            let (fa, ga) = (state(&wall_a, f, y1, n), state(&wall_a, g, y1, n));
+            // W(a)⁻¹ = [[Y1·g', -g], [-Y1·f', f]] / (Y1·(f·g' - f'·g)).
+            let w_det = det(fa, ga);
+            let alpha = (ga[1] * inside[0] - ga[0] * inside[1]) / w_det;
+            let beta = (-fa[1] * inside[0] + fa[0] * inside[1]) / w_det;
+            let (fb, gb) = (state(&wall_b, f, y1, n), state(&wall_b, g, y1, n));
+            let q = [alpha * fb[0] + beta * gb[0], alpha * fb[1] + beta * gb[1]];
+            let e1 = state(&outside, 2, y0, n);
             let e_in = match passes {
-                Passes::One => [j0b[n] - C64::i() * yy0b[n], y0 * (dj0b[n] - C64::i() * dy0b[n])],
-                Passes::Closed => [j0b[n], y0 * dj0b[n]],
+                Passes::One => state(&outside, 3, y0, n),
+                Passes::Closed => state(&outside, 0, y0, n),
             };
             let t = det(e_in, e1) / det(q, e1);
             // Where y_n overflows (orders well beyond k·r in the wall: waves past the critical

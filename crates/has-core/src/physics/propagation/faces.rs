@@ -52,7 +52,10 @@ pub(super) fn face_offset(slabs: [&SliceProperties; 4], i: usize, dz: f64) -> f6
 /// lies on the segment's material's side and subtracts the march's where it lies on the cell's.
 /// For the P wave reflected at a fluid face this is [`face_phase`]'s `2·κ·δ`; transmitted P gets
 /// nothing (the averaged slowness keeps its delay); a wave converted to SV gets the difference of
-/// the P and SV paths over the segment.
+/// the P and SV paths over the segment. Exact at normal incidence: the march steps the face cell
+/// with its averaged medium (`kz(k̄)·dz`, not the segment's `kz`), which differs obliquely and,
+/// beyond the segment's critical angle, turns its evanescent decay into a gain here; and a cell
+/// between two solids carries SV with their mean shear, not the centre's.
 pub(super) fn segment_phase(sides: [&Side; 2], offset: f64, xi: f64, waves: [(usize, usize); 2]) -> C64 {
     let zero = C64::new(0.0, 0.0);
     if offset == 0.0 {
