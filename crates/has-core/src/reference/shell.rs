@@ -20,7 +20,7 @@
 //! - [`Passes::Closed`]: the closed shell with its cavity (every reflection from the far wall).
 
 use super::solid_shell::{self, kinds, SolidShell};
-use super::special::{derivatives, legendre, spherical_bessel, spherical_hankels};
+use super::special::{derivatives, legendre, spherical_functions, spherical_hankels, spherical_j};
 use super::{Bowl, Fluid};
 use crate::error::{require_positive, HasError, Result};
 use num_complex::Complex64 as C64;
@@ -108,9 +108,9 @@ impl ShellBowl {
             .par_iter()
             .map(|&(rho, z, w)| {
                 let r = rho.hypot(z - centre);
-                let (j, y) = spherical_bessel(n_max, C64::new(k * r, 0.0));
+                let (h, _) = spherical_hankels(n_max, C64::new(k * r, 0.0));
                 let p = legendre(n_max, (z - centre) / r);
-                (0..=n_max).map(|n| w * (j[n] + C64::i() * y[n]) * p[n]).collect::<Vec<C64>>()
+                (0..=n_max).map(|n| w * h[n] * p[n]).collect::<Vec<C64>>()
             })
             .reduce(|| vec![C64::new(0.0, 0.0); n_max + 1], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect());
         let t = transmissions(n_max);
@@ -131,7 +131,7 @@ impl ShellBowl {
         if r == 0.0 {
             return Ok(self.coefficients[0]);
         }
-        let (j, _) = spherical_bessel(n_max, self.interior_k * r);
+        let j = spherical_j(n_max, self.interior_k * r);
         let p = legendre(n_max, (z - self.centre) / r);
         Ok((0..=n_max).map(|n| self.coefficients[n] * j[n] * p[n]).sum())
     }
@@ -152,9 +152,7 @@ pub(super) fn transmissions(water: Fluid, shell: &Shell, passes: Passes, n_max: 
     let (y0, y1, y2) = (admittance(&water), admittance(&shell.wall), admittance(&shell.interior));
     // `[j, y, h^(1), h^(2)]` and their derivatives, each one order beyond n_max for them.
     let seq = |z: C64| {
-        let (j, y) = spherical_bessel(n_max + 1, z);
-        let (h1, h2) = spherical_hankels(n_max + 1, z);
-        [j, y, h1, h2].map(|f| {
+        spherical_functions(n_max + 1, z).map(|f| {
             let d = derivatives(&f, z);
             (f, d)
         })

@@ -18,7 +18,7 @@
 
 use super::elastic::Solid;
 use super::shell::Passes;
-use super::special::{derivatives, spherical_bessel, spherical_hankels};
+use super::special::{derivatives, spherical_functions};
 use super::Fluid;
 use num_complex::Complex64 as C64;
 
@@ -47,8 +47,6 @@ struct Radial {
 impl Radial {
     fn at(k: C64, r: f64, n_max: usize) -> Radial {
         let x = k * r;
-        let (j, y) = spherical_bessel(n_max + 1, x);
-        let (h1, h2) = spherical_hankels(n_max + 1, x);
         let kind = |f: Vec<C64>| {
             let d = derivatives(&f, x);
             // f'' = -(2/x)·f' - (1 - n(n+1)/x²)·f (the spherical Bessel equation).
@@ -60,7 +58,7 @@ impl Radial {
                 .collect();
             [f[..=n_max].to_vec(), d[..=n_max].iter().map(|v| v * k).collect(), dd.iter().map(|v| v * k * k).collect()]
         };
-        Radial { kinds: [kind(j), kind(y), kind(h1), kind(h2)] }
+        Radial { kinds: spherical_functions(n_max + 1, x).map(kind) }
     }
 
     /// `[value, d/dr, d²/dr²]` of order `n` of kind `which` (0: j, 1: y, 2: h^(1), 3: h^(2)).

@@ -19,39 +19,42 @@ pub fn bessel_j0(x: f64) -> f64 {
 }
 
 /// Spherical Bessel functions `j_n(z)` and `y_n(z)` for `n = 0..=n_max` and complex `z`
-/// (`z != 0`): `j_n` by Miller's backward recurrence (as `bessel_j` below), `y_n` from it and the
-/// Hankel function that decays away from the real axis ([`spherical_hankels`]):
-/// `y = -i·(h^(1) - j)` for `Im z >= 0`, `y = i·(h^(2) - j)` below. Neither subtraction cancels:
-/// `y` by its own forward recurrence is unstable where `|Im z|` is large (it follows the Hankel
-/// function that grows away from the axis, which shrinks against the other as `n` rises).
+/// (`z != 0`), as [`spherical_functions`] gives them.
 pub fn spherical_bessel(n_max: usize, z: C64) -> (Vec<C64>, Vec<C64>) {
-    let (j, decaying) = bessel_and_decaying_hankel(n_max, z);
-    let i = C64::i();
-    let y = if z.im >= 0.0 {
-        decaying.iter().zip(&j).map(|(h, j)| -i * (h - j)).collect()
-    } else {
-        decaying.iter().zip(&j).map(|(h, j)| i * (h - j)).collect()
-    };
+    let [j, y, _, _] = spherical_functions(n_max, z);
     (j, y)
 }
 
-/// Spherical Hankel functions `h_n^(1)(z)` and `h_n^(2)(z)` for `n = 0..=n_max`: the one that
-/// decays away from the real axis (`h^(1)` for `Im z >= 0`) by the forward recurrence from its
-/// closed forms `h_0^(1) = -i·e^{iz}/z`, `h_1^(1) = -e^{iz}·(z + i)/z²` (DLMF 10.49.6; stable,
-/// it is the dominant solution there), the other as `2·j - h` with `j` from Miller's recurrence.
-/// Not as `j ± i·y`: where `|Im z|` is large (a lossy wall of many wavelengths' radius) the
-/// decaying one is `e^{-2|Im z|}` of the other and would be lost to cancellation.
+/// Spherical Hankel functions `h_n^(1)(z)` and `h_n^(2)(z)` for `n = 0..=n_max`, as
+/// [`spherical_functions`] gives them.
 pub fn spherical_hankels(n_max: usize, z: C64) -> (Vec<C64>, Vec<C64>) {
+    let [_, _, h1, h2] = spherical_functions(n_max, z);
+    (h1, h2)
+}
+
+/// `[j_n, y_n, h_n^(1), h_n^(2)](z)` for `n = 0..=n_max` and complex `z` (`z != 0`), from one
+/// run of each recurrence: `j` by Miller's backward recurrence ([`spherical_j`]), the Hankel
+/// function that decays away from the real axis (`h^(1)` for `Im z >= 0`) by the forward
+/// recurrence from its closed forms `h_0^(1) = -i·e^{iz}/z`, `h_1^(1) = -e^{iz}·(z + i)/z²`
+/// (DLMF 10.49.6; stable, it is the dominant solution there), and from those two the other
+/// Hankel function, `2·j - h`, and `y = -i·(h^(1) - j)` (`i·(h^(2) - j)` below the axis). None of
+/// these subtractions cancels; `y` or the other Hankel function by its own forward recurrence,
+/// or the Hankel functions as `j ± i·y`, would lose digits where `|Im z|` is large (a lossy wall
+/// of many wavelengths' radius: the decaying one is `e^{-2|Im z|}` of the other).
+pub fn spherical_functions(n_max: usize, z: C64) -> [Vec<C64>; 4] {
     let (j, decaying) = bessel_and_decaying_hankel(n_max, z);
+    let i = C64::i();
     let other: Vec<C64> = decaying.iter().zip(&j).map(|(h, j)| 2.0 * j - h).collect();
     if z.im >= 0.0 {
-        (decaying, other)
+        let y = decaying.iter().zip(&j).map(|(h, j)| -i * (h - j)).collect();
+        [j, y, decaying, other]
     } else {
-        (other, decaying)
+        let y = decaying.iter().zip(&j).map(|(h, j)| i * (h - j)).collect();
+        [j, y, other, decaying]
     }
 }
 
-/// `j_n(z)` ([`bessel_j`]) and the Hankel function that decays away from the real axis
+/// `j_n(z)` ([`spherical_j`]) and the Hankel function that decays away from the real axis
 /// (`h^(1)` for `Im z >= 0`, else `h^(2)`), `n = 0..=n_max`.
 fn bessel_and_decaying_hankel(n_max: usize, z: C64) -> (Vec<C64>, Vec<C64>) {
     let i = C64::i();
@@ -66,13 +69,13 @@ fn bessel_and_decaying_hankel(n_max: usize, z: C64) -> (Vec<C64>, Vec<C64>) {
         let next = (2 * n + 1) as f64 / z * h[n] - h[n - 1];
         h.push(next);
     }
-    (bessel_j(n_max, z), h)
+    (spherical_j(n_max, z), h)
 }
 
 /// `j_n(z)`, `n = 0..=n_max`, by Miller's backward recurrence from well above `max(n_max, |z|)`,
 /// normalised to the closed form of `j_0 = sin z / z` or `j_1 = sin z/z² - cos z/z`, whichever
 /// is larger (DLMF 10.49, 10.51).
-fn bessel_j(n_max: usize, z: C64) -> Vec<C64> {
+pub fn spherical_j(n_max: usize, z: C64) -> Vec<C64> {
     let (s, c) = (z.sin(), z.cos());
     let start = n_max.max(z.norm() as usize) + 40 + (z.norm().sqrt() * 4.0) as usize;
     let mut j = vec![C64::new(0.0, 0.0); n_max + 1];

@@ -322,7 +322,7 @@ fn shear_ct(shear: Option<f64>) -> String {
 /// [`shear_ct`] for a bone of `db_cm` (dB/cm at 500 kHz, linear in frequency).
 fn shear_ct_with(shear: Option<f64>, db_cm: f64) -> String {
     shear.map_or(String::new(), |cs| {
-        let db_cm_mhz = db_cm * 1e6 / FREQUENCY;
+        let db_cm_mhz = Tissue(CORTICAL.0, CORTICAL.1, CORTICAL.2, db_cm).db_cm_mhz();
         format!("bone_shear_sound_speed_m_s = {cs:.1}\nbone_shear_attenuation_db_cm_mhz = {db_cm_mhz}\n")
     })
 }

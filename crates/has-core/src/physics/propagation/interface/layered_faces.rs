@@ -96,8 +96,7 @@ pub(super) fn converting_faces(
     if faces.is_empty() {
         return LayeredFaces::Pass;
     }
-    let held: usize = shared.3.values().map(|f| f.iter().flatten().flatten().flatten().count()).sum::<usize>()
-        + shared.2.values().map(|f| f.iter().flatten().flatten().flatten().count()).sum::<usize>();
+    let held = shared.elastic_spectra();
     let new: usize =
         faces.iter().filter(|(k, _)| !shared.3.contains_key(*k)).map(|(_, &(first, _))| super::spectra(before, after, first)).sum();
     if ((held + new) * n * 16) as u64 > MAX_ELASTIC_BYTES {

@@ -117,6 +117,14 @@ pub(crate) struct Coefficients(
     HashMap<layered_faces::FaceKey, Arc<Filters<f64>>>,
 );
 
+impl Coefficients {
+    /// The spectra the plan's elastic filters hold (region pairs and a CT's faces between
+    /// layers), which [`MAX_ELASTIC_BYTES`] bounds.
+    fn elastic_spectra(&self) -> usize {
+        self.2.values().chain(self.3.values()).map(|f| f.iter().flatten().flatten().flatten().count()).sum()
+    }
+}
+
 /// One interface plane: the operator `p ↦ R ⊛ p` giving the reflected wave of an incident one
 /// (in double precision, or single for a single-precision march).
 pub(crate) struct Interface<T: FftNum = f64> {
@@ -323,7 +331,7 @@ impl Interface {
         let elastic = shear && pairs.values().any(|&(first, _)| from.shear_speed(first) > 0.0 || to.shear_speed(first) > 0.0);
         if elastic {
             // Pairs with a solid hold 4-16 spectra each (`elastic::Filters`): bounded in bytes.
-            let held: usize = shared.2.values().chain(shared.3.values()).map(|f| f.iter().flatten().flatten().flatten().count()).sum();
+            let held = shared.elastic_spectra();
             let new: usize =
                 pairs.iter().filter(|(k, _)| !shared.2.contains_key(*k)).map(|(_, &(first, _))| spectra(from, to, first)).sum();
             if ((held + new) * n * 16) as u64 > MAX_ELASTIC_BYTES {
