@@ -239,7 +239,7 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side, offset: f64) -> Filters<f64>
                         let (zi, zo) = (side_of(ki).impedance[ki % 2], side_of(ko).impedance[ko % 2]);
                         if zi > 0.0 && zo > 0.0 {
                             let out_side = if o < 2 { 1 - dir } else { dir };
-                            let shift = segment_phase([a, b], offset, xi, [(dir, w), (out_side, o % 2)]);
+                            let shift = segment_phase([a, b], offset, g.dz, xi, [(dir, w), (out_side, o % 2)]);
                             m[ko][ki] * (zi / zo).sqrt() * norm * (C64::i() * shift).exp()
                         } else {
                             C64::new(0.0, 0.0)

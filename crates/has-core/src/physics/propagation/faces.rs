@@ -45,29 +45,44 @@ pub(super) fn face_offset(slabs: [&SliceProperties; 4], i: usize, dz: f64) -> f6
 /// face, between media `sides = [a, b]`, is applied on the plane but lies `offset` (m) beyond it
 /// (`+`: inside the cell after the plane, a segment of `a`'s material there; `-`: a segment of
 /// `b`'s inside the cell before). `in` and `out` are `(side, wave)`, wave 0 P and 1 SV, at
-/// transverse wavenumber `xi`. The march carries any wave on the segment's side of the plane
-/// across the segment (P with the cell's averaged slowness, so with the segment's material's
-/// wavenumber; SV with the cell's centre material's shear); truly the segment holds the waves of
-/// its own material. So each of `in`, `out` adds `kz(segment's material, wave)·|offset|` where it
-/// lies on the segment's material's side and subtracts the march's where it lies on the cell's.
-/// For the P wave reflected at a fluid face this is [`face_phase`]'s `2·κ·δ`; transmitted P gets
-/// nothing (the averaged slowness keeps its delay); a wave converted to SV gets the difference of
-/// the P and SV paths over the segment. Exact at normal incidence: the march steps the face cell
-/// with its averaged medium (`kz(k̄)·dz`, not the segment's `kz`), which differs obliquely and,
-/// beyond the segment's critical angle, turns its evanescent decay into a gain here; and a cell
-/// between two solids carries SV with their mean shear, not the centre's.
-pub(super) fn segment_phase(sides: [&Side; 2], offset: f64, xi: f64, waves: [(usize, usize); 2]) -> C64 {
+/// transverse wavenumber `xi`; `dz` (m) is the step. Truly, a leg on the segment's side runs
+/// `kz(segment's wave)·|offset|` to the face, and a leg on the cell's side runs
+/// `kz(side's wave)·(dz - |offset|)` in its own material; the march gives the first nothing (the
+/// face sits on the plane) and carries the second across the whole cell in the cell's averaged
+/// medium, `kz(k̄)·dz`, with `k̄ = f·k_segment + (1 - f)·k_side` (`f = |offset|/dz`, complex: the
+/// slowness and the attenuation averaged by length as a CT's cell holds them; for SV the mean over
+/// the cell's solids, the side's own shear where the segment is a fluid). Each leg adds what the
+/// march lacks: `kz(segment)·|offset|`, or `kz(side)·(dz - |offset|) - kz(k̄)·dz`. At normal
+/// incidence this is [`face_phase`]'s `2·κ·δ` for P reflected at a fluid face and nothing for P
+/// transmitted; obliquely it is the exact path of every wave for a cell that the march steps in
+/// its averaged medium (a slab of one medium, or two references of which the cell is one,
+/// `references.rs`). Beyond a medium's critical angle a leg's factor may exceed one: it undoes the
+/// march's decay across the cell where the wave truly decays over the segment alone, and the
+/// product stays passive.
+pub(super) fn segment_phase(sides: [&Side; 2], offset: f64, dz: f64, xi: f64, waves: [(usize, usize); 2]) -> C64 {
     let zero = C64::new(0.0, 0.0);
     if offset == 0.0 {
         return zero;
     }
     let (material, cell) = if offset > 0.0 { (0, 1) } else { (1, 0) };
-    let kz = |s: &Side, wave: usize| {
-        let k = if wave == 0 { Some(s.kp) } else { s.ks };
-        k.map_or(zero, |k| axial_wavenumber(k, xi * xi))
+    let (delta, f) = (offset.abs(), (offset.abs() / dz).min(1.0));
+    let k = |s: &Side, wave: usize| if wave == 0 { Some(s.kp) } else { s.ks };
+    let kz = |k: C64| axial_wavenumber(k, xi * xi);
+    let averaged = |wave: usize| match (k(sides[material], wave), k(sides[cell], wave)) {
+        (Some(m), Some(c)) => Some(f * m + (1.0 - f) * c),
+        (_, c) => c,
     };
-    let marched = |wave: usize| if wave == 0 { kz(sides[material], 0) } else { kz(sides[cell], 1) };
-    waves.iter().map(|&(side, wave)| if side == material { kz(sides[material], wave) } else { -marched(wave) }).sum::<C64>() * offset.abs()
+    let leg = |(side, wave): (usize, usize)| {
+        if side == material {
+            k(sides[material], wave).map_or(zero, |k| kz(k) * delta)
+        } else {
+            match (k(sides[cell], wave), averaged(wave)) {
+                (Some(own), Some(mean)) => kz(own) * (dz - delta) - kz(mean) * dz,
+                _ => zero,
+            }
+        }
+    };
+    waves.iter().map(|&w| leg(w)).sum()
 }
 
 /// Whether the face between `P` and `C` at pixel `i` (`slabs` as in [`face_phase`]) is a wall
@@ -135,15 +150,18 @@ mod tests {
         }
     }
 
-    /// The segment's phase (water `a`, solid bone `b`): nothing on the plane; for P reflected
-    /// into water it is [`face_phase`]'s path there and back, `2·kz·δ` through water (face
-    /// beyond the plane) or `-2·kz·δ` through bone (face before it), with the waves' axial
-    /// wavenumbers at any incidence; P transmitted gets nothing (the averaged cell keeps its
-    /// delay); P converted to SV in bone gets the difference of its paths over the segment. To
-    /// rounding (1e-12 rad).
+    /// The segment's phase (water `a`, solid bone `b`, cells of 0.75 mm, the face 0.2 mm off the
+    /// plane). At normal incidence: nothing on the plane; for P reflected into water
+    /// [`face_phase`]'s path there and back, `2·k·δ` through water (face beyond the plane) or
+    /// `-2·κ·δ` through bone (face before it); nothing for P transmitted (the averaged cell keeps
+    /// its delay); for P converted to SV the difference of their paths in bone. At any incidence,
+    /// up to grazing in water (beyond bone's critical angles), the phase plus what the march gives
+    /// the cell-side legs (`kz(k̄)·dz`, the cell's averaged wavenumber) is each wave's true path
+    /// (the segment in its material, the rest of the cell in the side's), and so passive: the
+    /// reflected and transmitted waves' factors are at most one. To rounding (1e-12 rad).
     #[test]
     fn a_misplaced_face_gives_each_wave_the_phase_of_its_true_path() {
-        let omega = 2.0 * PI * 5e5;
+        let (omega, dz, delta) = (2.0 * PI * 5e5, 0.75e-3, 0.2e-3);
         let water = Side { density: 1000.0, kp: C64::new(omega / 1500.0, 0.0), ks: None, impedance: [1.5e6, 0.0] };
         let bone = Side {
             density: 1850.0,
@@ -152,25 +170,55 @@ mod tests {
             impedance: [1850.0 * 2800.0, 1850.0 * 1500.0],
         };
         let sides = [&water, &bone];
-        let (delta, zero) = (0.2e-3, C64::new(0.0, 0.0));
-        for xi in [0.0, 0.4 * omega / 1500.0] {
-            let kz = |k: C64| axial_wavenumber(k, xi * xi);
-            let (reflected, transmitted, converted) = ([(0, 0), (0, 0)], [(0, 0), (1, 0)], [(0, 0), (1, 1)]);
-            let close = |got: C64, want: C64| (got - want).norm() < 1e-12;
-            for waves in [reflected, transmitted, converted] {
-                assert!(close(segment_phase(sides, 0.0, xi, waves), zero));
-            }
-            assert!(close(segment_phase(sides, delta, xi, reflected), 2.0 * kz(water.kp) * delta));
-            assert!(close(segment_phase(sides, -delta, xi, reflected), -2.0 * kz(bone.kp) * delta));
-            assert!(close(segment_phase(sides, delta, xi, transmitted), zero));
-            assert!(close(segment_phase(sides, -delta, xi, transmitted), zero));
-            // Face before the plane: the SV wave runs the segment in bone, the march carries P.
-            let want = (kz(bone.ks.unwrap()) - kz(bone.kp)) * delta;
-            assert!(close(segment_phase(sides, -delta, xi, converted), want));
+        let zero = C64::new(0.0, 0.0);
+        let close = |got: C64, want: C64| (got - want).norm() < 1e-12;
+        let (reflected, transmitted, converted) = ([(0, 0), (0, 0)], [(0, 0), (1, 0)], [(0, 0), (1, 1)]);
+        for waves in [reflected, transmitted, converted] {
+            assert!(close(segment_phase(sides, 0.0, dz, 0.3 * omega / 1500.0, waves), zero));
         }
-        let at_normal = cells_about(30e-3 + delta, 0.75e-3, [28.875e-3, 29.625e-3, 30.375e-3, 31.125e-3]);
-        let fluid = face_phase([&at_normal[0], &at_normal[1], &at_normal[2], &at_normal[3]], 0, omega, 0.75e-3);
-        assert!((segment_phase(sides, delta, 0.0, [(0, 0), (0, 0)]) - fluid).norm() < 1e-12);
+        let at_normal = |offset: f64, waves| segment_phase(sides, offset, dz, 0.0, waves);
+        assert!(close(at_normal(delta, reflected), 2.0 * water.kp * delta));
+        assert!(close(at_normal(-delta, reflected), -2.0 * bone.kp * delta));
+        assert!(close(at_normal(delta, transmitted), zero));
+        assert!(close(at_normal(-delta, transmitted), zero));
+        assert!(close(at_normal(-delta, converted), (bone.ks.unwrap() - bone.kp) * delta));
+        let cells = cells_about(30e-3 + delta, dz, [28.875e-3, 29.625e-3, 30.375e-3, 31.125e-3]);
+        let fluid = face_phase([&cells[0], &cells[1], &cells[2], &cells[3]], 0, omega, dz);
+        assert!(close(at_normal(delta, reflected), fluid));
+        for xi in (0..=20).map(|j| j as f64 * 0.05 * omega / 1500.0) {
+            let kz = |k: C64| axial_wavenumber(k, xi * xi);
+            for offset in [delta, -delta] {
+                // The segment's material and the cell's side, and the cell's averaged wavenumbers.
+                let (seg, side) = if offset > 0.0 { (&water, &bone) } else { (&bone, &water) };
+                let f = delta / dz;
+                let mean_p = f * seg.kp + (1.0 - f) * side.kp;
+                let mean_s = side.ks.map(|s| seg.ks.map_or(s, |m| f * m + (1.0 - f) * s));
+                let on_segment = |s: &Side| std::ptr::eq(s, seg);
+                // (side, wave) -> (true path, what the march gives it).
+                let leg = |(k, wave): (usize, usize)| {
+                    let s = sides[k];
+                    let own = if wave == 0 { s.kp } else { s.ks.unwrap() };
+                    if on_segment(s) {
+                        (kz(own) * delta, zero)
+                    } else {
+                        let mean = if wave == 0 { mean_p } else { mean_s.unwrap() };
+                        (kz(own) * (dz - delta), kz(mean) * dz)
+                    }
+                };
+                let mut cases = vec![reflected, transmitted, [(1, 0), (1, 0)], [(1, 0), (0, 0)]];
+                if offset < 0.0 {
+                    cases.push(converted); // SV on the segment's side only (water's cell has none)
+                } else {
+                    cases.push([(1, 1), (1, 1)]); // SV reflected in bone's cell
+                }
+                for waves in cases {
+                    let (truth, marched) = waves.iter().map(|&w| leg(w)).fold((zero, zero), |(a, b), (t, m)| (a + t, b + m));
+                    let got = segment_phase(sides, offset, dz, xi, waves) + marched;
+                    assert!(close(got, truth), "xi {xi:.0}, offset {offset}, {waves:?}: {got} vs {truth}");
+                    assert!(got.im >= -1e-12, "xi {xi:.0}, offset {offset}, {waves:?}: gains {:.3}", (-got.im).exp());
+                }
+            }
+        }
     }
 
     /// A face between a layer of water and one of bone is a wall wherever inside its cells it
