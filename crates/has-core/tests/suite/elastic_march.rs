@@ -291,7 +291,11 @@ fn plane_waves_cross_a_ct_plate_with_faces_inside_cells_as_the_exact_plate() {
                     }
                 }
                 let deg = (kt.re / water.k.re).asin().to_degrees();
-                eprintln!("[ct plate] z1 {:.2} mm, {shear:?}, {deg:4.1}°: |T| {:.4}, error {worst:.1e}; back {worst_back:.1e}", z1 * 1e3, t.norm());
+                eprintln!(
+                    "[ct plate] z1 {:.2} mm, {shear:?}, {deg:4.1}°: |T| {:.4}, error {worst:.1e}; back {worst_back:.1e}",
+                    z1 * 1e3,
+                    t.norm()
+                );
                 worst_all = worst_all.max(worst).max(worst_back);
             }
         }
