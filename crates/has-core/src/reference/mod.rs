@@ -11,6 +11,7 @@
 //! Pressures are relative to `p0 = rho·c·u0` of the medium the bowl radiates into. Time
 //! dependence `exp(-i·omega·t)`.
 
+pub mod beam;
 pub mod elastic;
 pub mod layered;
 pub mod oblique;
