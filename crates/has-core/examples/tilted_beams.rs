@@ -8,12 +8,19 @@
 //! `cargo run --release -p has-core --example tilted_beams [-- 20 shear=1300 steer=-20,0,20]`
 //! (the plate's tilt in degrees; `steer=` the beams' angles to z, degrees, by default the tilt
 //! and ±10° about it; `shear=` the bone as a solid of that shear speed, m/s; `w=` the waist, mm,
-//! 8 by default; `dx=` and `step=` the grid, mm; `lossless=1` the bone without attenuation.)
+//! 8 by default; `dx=` and `step=` the grid, mm; `lossless=1` the bone without attenuation;
+//! `thick=` the plate's thickness, mm: a plate deeper than the grid, `thick=40 lossless=1`, leaves
+//! its first face alone, and the march's forward power beyond it is printed beside the face's
+//! exact transmission at the beam's central incidence, `4·Z1·Z2/(Z1 + Z2)²` with `Z = ρ·c/cos θ`
+//! on each side, in the same measure.)
 //!
 //! Printed per beam, on the plane z = 48 mm: the transmitted energy `Σ|p|²` of the march over the
 //! exact one's, the largest error where the exact beam is above a tenth of its peak (of that
 //! peak), the mean phase of the march against the exact beam (`arg Σ p·conj(p_exact)`) and the
 //! centroids' x.
+//!
+//! The march's forward power through a plane is `∫ |p|²/(2Z) dA` (`RecordSpec::power`; inside a
+//! reverberating layer its first pass).
 
 use has_core::physics::grid::Grid;
 use has_core::physics::propagation::{HasOptions, HasPlan, RecordSpec, Screen};
@@ -22,7 +29,7 @@ use has_core::reference::elastic::Solid;
 use has_core::reference::layered::Layer;
 use has_core::reference::oblique::Plate;
 use has_core::reference::Fluid;
-use has_core::validation::tilted_plate_from;
+use has_core::validation::tilted_slab_from;
 use has_core::{Complex64 as C64, HasError};
 use std::f64::consts::{LN_10, PI};
 
@@ -48,10 +55,12 @@ fn main() -> has_core::Result<()> {
     let dx = num("dx").unwrap_or(0.75) * 1e-3;
     let dz = num("step").unwrap_or(0.749) * 1e-3;
     let lossless = num("lossless").is_some_and(|v| v != 0.0);
+    let thick = num("thick").map(|mm| mm * 1e-3);
+    let thickness = thick.unwrap_or(THICKNESS);
 
     let dir = std::env::temp_dir().join(format!("arfi-tilted-beams-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| HasError::invalid("dir", e.to_string()))?;
-    let mut case = tilted_plate_from(&dir, tilt_deg, shear, Z1)?;
+    let mut case = tilted_slab_from(&dir, tilt_deg, shear, Z1, thickness)?;
     if lossless {
         let ct = case.scenario.ct.as_mut().expect("a tilted plate is read from a CT");
         ct.bone_attenuation_min_db_cm_mhz = Some(0.0);
@@ -65,8 +74,8 @@ fn main() -> has_core::Result<()> {
     let np_m = if lossless { 0.0 } else { 4.0 * 100.0 * LN_10 / 20.0 };
     let water = Fluid { k: C64::new(omega / 1500.0, 0.0), density: 1000.0 };
     let plate = match shear {
-        None => Plate::Fluid(vec![Layer { thickness: THICKNESS, fluid: Fluid { k: C64::new(omega / 2800.0, np_m), density: 1850.0 } }]),
-        Some(cs) => Plate::Solid(Solid::new(2800.0, cs, 1850.0, np_m, np_m, FREQUENCY)?, THICKNESS),
+        None => Plate::Fluid(vec![Layer { thickness, fluid: Fluid { k: C64::new(omega / 2800.0, np_m), density: 1850.0 } }]),
+        Some(cs) => Plate::Solid(Solid::new(2800.0, cs, 1850.0, np_m, np_m, FREQUENCY)?, thickness),
     };
     let k = water.k.re;
     let nx = (68e-3 / dx).round() as usize;
@@ -75,14 +84,18 @@ fn main() -> has_core::Result<()> {
     let z_record = grid.z(record);
     let kind = shear.map_or("fluid".to_string(), |cs| format!("solid, shear {cs:.0} m/s"));
     println!(
-        "plate {THICKNESS:.4} m turned {tilt_deg}° ({kind}{}), beams of waist {:.1} mm, dx {:.3} mm, step {:.3} mm, compared at z {:.2} mm",
+        "plate {thickness:.4} m turned {tilt_deg}° ({kind}{}), beams of waist {:.1} mm, dx {:.3} mm, step {:.3} mm, compared at z {:.2} mm",
         if lossless { ", lossless" } else { "" },
         waist * 1e3,
         dx * 1e3,
         dz * 1e3,
         z_record * 1e3
     );
-    println!("steer | incidence | energy march/exact | max error/peak | mean phase rad | centroid x march, exact mm");
+    if thick.is_some() {
+        println!("steer | incidence | march's forward power at z / source's | the same for the first face, exact (fluid, lossless)");
+    } else {
+        println!("steer | incidence | energy march/exact | max error/peak | mean phase rad | centroid x march, exact mm | march's power at z / source's");
+    }
     for &steer_deg in &steers {
         let steer = steer_deg.to_radians();
         // Centred where it crosses the plate's middle on the axis.
@@ -97,7 +110,25 @@ fn main() -> has_core::Result<()> {
         let toward = [xs + steer.sin(), 0.0, steer.cos()];
         let options = HasOptions { sponge_width: 0.0, screen: Screen::Oblique { toward }, ..HasOptions::default() };
         let (plan, _) = HasPlan::build(&grid, &medium, FREQUENCY, &source, &options, &RecordSpec::default())?;
-        let recorded = plan.propagate(&source, &RecordSpec { planes: vec![record], ..RecordSpec::default() })?;
+        let recorded = plan.propagate(&source, &RecordSpec { planes: vec![record], power: true, ..RecordSpec::default() })?;
+        let power = recorded.power[record] / recorded.power[0];
+        let incidence = (steer_deg - tilt_deg).to_radians();
+        if thick.is_some() {
+            // Snell's law across the face; none beyond the critical angle. The march's power
+            // (`|p|²/(2Z)` through a plane of z) of a plane wave is its flux along its own
+            // direction, so the face's flux transmission is divided by the ratio of the two
+            // waves' cosines to z.
+            let sin_b = 2800.0 / 1500.0 * incidence.sin();
+            let flux = if sin_b.abs() < 1.0 {
+                let (z1, z2) = (1000.0 * 1500.0 / incidence.cos(), 1850.0 * 2800.0 / (1.0 - sin_b * sin_b).sqrt());
+                let transmitted = tilt_deg.to_radians() + sin_b.asin();
+                4.0 * z1 * z2 / (z1 + z2).powi(2) * steer.cos() / transmitted.cos()
+            } else {
+                0.0
+            };
+            println!("{steer_deg:+5.0}° | {:+4.0}° | {power:.3} | {flux:.3}", incidence.to_degrees());
+            continue;
+        }
         let march = &recorded.planes[0][..nx];
         let beam = PlateBeam::new(&line, grid.x(0), dx, water, &plate, Z1, tilt_deg.to_radians())?;
         // Where the plane crosses the plate (its far edges at the larger tilts) holds no beam:
@@ -112,7 +143,7 @@ fn main() -> has_core::Result<()> {
         let dot: C64 = march.iter().zip(&exact).map(|(a, b)| a * b.conj()).sum();
         let centroid = |v: &[C64]| v.iter().zip(&xs_beyond).map(|(p, x)| p.norm_sqr() * x).sum::<f64>() / energy(v);
         println!(
-            "{steer_deg:+5.0}° | {:+4.0}° | {:.3} | {:.3} | {:+.2} | {:+.2}, {:+.2}",
+            "{steer_deg:+5.0}° | {:+4.0}° | {:.3} | {:.3} | {:+.2} | {:+.2}, {:+.2} | {power:.3}",
             steer_deg - tilt_deg,
             energy(&march) / energy(&exact),
             worst / peak,

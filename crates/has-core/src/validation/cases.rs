@@ -478,6 +478,15 @@ pub fn tilted_plate(dir: &Path, tilt_deg: f64, shear: Option<f64>) -> Result<Cas
 /// [`tilted_plate`] with its first face on the axis at `z1` (m) instead of 30 mm: the same plate
 /// where the march's planes cut it elsewhere.
 pub fn tilted_plate_from(dir: &Path, tilt_deg: f64, shear: Option<f64>, z1: f64) -> Result<Case> {
+    tilted_slab_from(dir, tilt_deg, shear, z1, 6.5e-3)
+}
+
+/// [`tilted_plate_from`] of another `thickness` (m, positive): a plate thicker than the grid is
+/// deep isolates its first face.
+pub fn tilted_slab_from(dir: &Path, tilt_deg: f64, shear: Option<f64>, z1: f64, thickness: f64) -> Result<Case> {
+    if !(thickness > 0.0) {
+        return Err(HasError::invalid("thickness", "must be positive"));
+    }
     let name = match shear {
         None => format!("tilt{tilt_deg:.0}"),
         Some(cs) => format!("tilt{tilt_deg:.0}_shear{cs:.0}"),
@@ -489,13 +498,17 @@ pub fn tilted_plate_from(dir: &Path, tilt_deg: f64, shear: Option<f64>, z1: f64)
     };
     Ok(Case {
         name: name.clone(),
-        description: format!("cortical plate 6.5 mm thick from {:.1} mm, turned {tilt_deg:.0}° about y, from a CT ({kind})", z1 * 1e3),
+        description: format!(
+            "cortical plate {:.1} mm thick from {:.1} mm, turned {tilt_deg:.0}° about y, from a CT ({kind})",
+            thickness * 1e3,
+            z1 * 1e3
+        ),
         scenario: scenario(&[], &(cortical_ct(&file) + &shear_ct(shear)), Some(dir))?,
         tolerances: match (tilt_deg == 0.0, shear) {
             (true, _) => Tolerances::default(),
             (false, Some(_)) => Tolerances::OBLIQUE_SOLID,
             (false, None) => Tolerances::OBLIQUE,
         },
-        geometry: Geometry::Tilted { z1, thickness: 6.5e-3, tilt_deg, shear, ct: dir.join(file) },
+        geometry: Geometry::Tilted { z1, thickness, tilt_deg, shear, ct: dir.join(file) },
     })
 }

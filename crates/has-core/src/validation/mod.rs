@@ -12,8 +12,8 @@ mod cases;
 mod oblique;
 
 pub use cases::{
-    lossy_shells, solid_plate, solid_shells, suite, thin_shells, tilted_plate, tilted_plate_from, tilted_plates, Case, Exact,
-    SOLID_TILT_SHEAR,
+    lossy_shells, solid_plate, solid_shells, suite, thin_shells, tilted_plate, tilted_plate_from, tilted_plates, tilted_slab_from, Case,
+    Exact, SOLID_TILT_SHEAR,
 };
 
 use crate::error::Result;
