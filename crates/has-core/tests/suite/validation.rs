@@ -253,3 +253,33 @@ fn ct_shells_of_other_bone_losses_match_their_exact_solutions() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A tilted plate of another thickness (`tilted_slab_from`) is that thick in its CT: along the
+/// normal of a 20° plate 10 mm thick, bone from 0.3 to 9.7 mm past its first face and water from
+/// 0.3 mm before to 0.3 mm beyond it (a voxel of 0.25 mm and the conversion's interpolation
+/// between voxel centres blur a face by less); the 6.5 mm plate ends at 6.5 mm; a thickness of
+/// zero or less is refused by name.
+#[test]
+fn a_tilted_slab_is_as_thick_as_it_is_asked() {
+    let dir = scratch("tilted-slab");
+    let (z1, tilt) = (30e-3, 20f64.to_radians());
+    let speed_at = |case: &Case, depth: f64| {
+        let medium = case.scenario.resolve().unwrap().medium;
+        let (s, c) = tilt.sin_cos();
+        // A point of the plate's frame `depth` along the normal from the first face's axis point.
+        medium.properties_at(depth * s, 0.0, z1 + depth * c, 5e5).sound_speed
+    };
+    for (thickness, tag) in [(10e-3, "thick"), (6.5e-3, "default")] {
+        let case = has_core::validation::tilted_slab_from(&dir.join(tag), 20.0, None, z1, thickness).unwrap();
+        std::fs::create_dir_all(dir.join(tag)).unwrap();
+        case.write_inputs().unwrap();
+        assert!((speed_at(&case, -0.3e-3) - 1500.0).abs() < 1.0, "{tag}: water before the plate");
+        for depth in [0.3e-3, 0.5 * thickness, thickness - 0.3e-3] {
+            assert!((speed_at(&case, depth) - 2800.0).abs() < 1.0, "{tag}: bone at {depth}");
+        }
+        assert!((speed_at(&case, thickness + 0.3e-3) - 1500.0).abs() < 1.0, "{tag}: water beyond the plate");
+    }
+    let err = has_core::validation::tilted_slab_from(&dir, 20.0, None, z1, 0.0).unwrap_err();
+    assert!(err.to_string().contains("thickness"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
