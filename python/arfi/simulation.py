@@ -446,7 +446,7 @@ class Simulation:
 
         With one group per element (``with_groups(n_elements)``, the CLI's ``--groups 1024``)
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
-        element, about 15 s for 1024), warm-started by the estimate on the default 16 groups (with a
+        element), warm-started by the estimate on the default 16 groups (with a
         prior it starts from the prediction, and ``ambiguous`` is judged on searches of the element posterior
         from draws of the prior: ``worst_recovery``);
         ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress`` prints the basis
@@ -503,8 +503,8 @@ class Simulation:
         intensity the correction is expected to leave. The expectation is over the linearised
         posterior: the images' Fisher information at the estimate plus the prior's spread (without
         a prior, phases as spread as uniform ones, correlated over 12 mm). It ignores distant
-        rivals such as twins, so it ranks acquisitions rather than predicts the focus. About 10 s
-        for 1024 elements; see ``next_acquisition``.
+        rivals such as twins, so it ranks acquisitions rather than predicts the focus; see
+        ``next_acquisition``.
 
         What to apply is ``recommended_phases_rad`` (``recommended`` names it, ``supported`` is
         True when it is the estimate): with a prior, the prediction when the model does not explain

@@ -230,6 +230,19 @@ def test_every_verb_has_help_with_an_example(capsys):
         assert e.value.code == 0 and f"example: arfi {verb} " in text and "--json" in text, verb
 
 
+def test_every_option_of_every_verb_says_what_it_does():
+    import argparse
+
+    from arfi.cli import build_parser
+
+    undocumented = []
+    for verb, parser in build_parser()._subparsers._group_actions[0].choices.items():  # type: ignore[union-attr]
+        for action in parser._actions:
+            if action.option_strings and not isinstance(action, argparse._HelpAction) and not (action.help or "").strip():
+                undocumented.append(f"{verb} {action.option_strings[0]}")
+    assert not undocumented, undocumented
+
+
 def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
     phases = tmp_path / "ab.npy"
     np.save(phases, np.random.default_rng(3).uniform(-2, 2, 16))

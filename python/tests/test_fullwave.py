@@ -8,6 +8,7 @@ engine run in water that agrees with it checks the source's amplitude (the kz/k 
 2·c·Δt/h scale), the time step and window, and the read-back onto the march's grid.
 """
 
+import importlib.util
 import json
 
 import numpy as np
@@ -124,7 +125,8 @@ def test_a_grid_beyond_the_memory_is_refused_before_running(tmp_path, monkeypatc
 
 
 def test_fdtd_in_water_agrees_with_the_exact_march_and_writes_the_same_outputs(tmp_path, capsys):
-    pytest.importorskip("BabelViscoFDTD")
+    # A test dependency (pyproject's [test]): missing, this fails rather than skips.
+    assert importlib.util.find_spec("BabelViscoFDTD") is not None, "pip install '.[test]' installs BabelViscoFDTD"
     sim, scenario = small_sim(tmp_path)
     out, js = tmp_path / "f.npz", tmp_path / "f.json"
     assert main(["field", "--scenario", scenario, "--out", str(tmp_path / "m.npz"), "--json", str(tmp_path / "m.json")]) == 0

@@ -6,11 +6,10 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip("distributed")
-from distributed import LocalCluster  # noqa: E402
+from distributed import LocalCluster  # a test dependency (pyproject's [test]): missing is a failure
 
-from arfi.cli import main  # noqa: E402
-from arfi.sweep import Trial, run_sweep, run_trial, summarise, trials  # noqa: E402
+from arfi.cli import main
+from arfi.sweep import Trial, run_sweep, run_trial, summarise, trials
 
 
 def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):

@@ -17,9 +17,9 @@ suite's 5 %.
 import numpy as np
 import pytest
 
-nib = pytest.importorskip("nibabel")
+import nibabel as nib
 
-from arfi.cli import main  # noqa: E402
+from arfi.cli import main
 
 VOXEL_MM = 0.25
 CENTRE_MM, CAP_DEG = 64.0, 80.0

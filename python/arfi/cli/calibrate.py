@@ -17,7 +17,8 @@ def register(sub: Any) -> None:
                        "to an MR-ARFI image taken with no aberration (known phases from its sidecar are honoured).",
                        epilog="example: arfi calibrate --image calibration.nii.gz --json cal.json")
     add_common(p)
-    p.add_argument("--image", required=True, metavar="C.nii.gz")
+    p.add_argument("--image", required=True, metavar="C.nii.gz",
+                   help="the MR-ARFI image of the uncorrected focus in a medium without aberration (NIfTI, rad)")
     p.add_argument("--max-width-mm", type=float, default=10.0, dest="max_width_mm", help="largest W searched (default 10)")
     add_report(p, "PNG figures (images in mm, colour bars in rad)")
     p.set_defaults(run=run)

@@ -31,7 +31,8 @@ def register(sub: Any) -> None:
                    "auto picks by Manufacturer (default)")
     p.add_argument("--known-phases", dest="known_phases", metavar="P",
                    help="phases (rad) added to the steering for this acquisition, stored in the sidecar (applied_phases_rad)")
-    p.add_argument("--out", required=True, metavar="M.nii.gz")
+    p.add_argument("--out", required=True, metavar="M.nii.gz",
+                   help="the MR-ARFI image (.nii or .nii.gz) and its JSON sidecar beside it")
     p.set_defaults(run=run)
 
 

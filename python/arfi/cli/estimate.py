@@ -38,16 +38,18 @@ def register(sub: Any) -> None:
                        epilog="example: arfi estimate --image aberrated.nii.gz --calibration cal.json --groups 16 "
                        "--method lbfgs --json estimate.json")
     add_common(p)
-    p.add_argument("--image", required=True, action="append", metavar="M.nii.gz")
+    p.add_argument("--image", required=True, action="append", metavar="M.nii.gz",
+                   help="a measured MR-ARFI image (NIfTI, rad, with its JSON sidecar); repeat for a joint fit of several")
     add_calibration(p)
     p.add_argument("--groups", type=int, default=16,
-                   help="number of contiguous element groups (default 16); the number of elements (1024) estimates one "
-                   "phase per element on the element field basis (lbfgs only): one march per element, through soft tissue and "
-                   "water on a grid of 3/8 of the shortest wavelength, at most 3/4 of an MR pixel (images within 1.5 %% of the "
-                   "peak of the scenario's grid's at 550-650 kHz)")
+                   help="number of contiguous element groups (default 16); the scenario's number of elements estimates "
+                   "one phase per element on the element field basis (lbfgs only): one march per element through soft "
+                   "tissue and water, on a grid of 3/8 of the shortest wavelength and at most 3/4 of an MR pixel (its "
+                   "images agree with those of the scenario's own grid within 1.5 %% of their peak at 550-650 kHz)")
     add_method(p, "lbfgs",
                "nelder-mead: the paper's (zero start, <= 8000 evaluations); pso; lbfgs: gradient multi-start (default)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="seeds the random starts (lbfgs) and the swarm (pso): the same seed, the same estimate (default 0)")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", metavar="S",
                    help="the images' noise standard deviation (rad) where it is known, e.g. the standard deviation of "
                    "the difference of two reference acquisitions over sqrt(2); default: each image's floor from its "
@@ -57,7 +59,8 @@ def register(sub: Any) -> None:
     p.add_argument("--max-evaluations", type=int, dest="max_evaluations",
                    help="evaluation limit (defaults: nelder-mead/pso 8000, lbfgs 40000 over all starts, per element 200, "
                    "or 120 when --fit-nuisance fits W or the shift)")
-    p.add_argument("--time-limit-s", type=float, dest="time_limit_s")
+    p.add_argument("--time-limit-s", type=float, dest="time_limit_s", metavar="S",
+                   help="stop the search after S seconds and report the best phases found (default: no limit)")
     p.add_argument("--starts", type=int, help="L-BFGS random starts (default 20)")
     p.add_argument("--fit-amplitude", action="store_true", dest="fit_amplitude",
                    help="fit a free amplitude scale too (absorbs a uniform focal loss)")
@@ -114,7 +117,7 @@ def register(sub: Any) -> None:
                    "group fit on its elements")
     p.add_argument("--suggest", metavar="F.npy", help="write the suggested diversity phases for the next acquisition (per "
                    "element: the known per-element phases of the focus shift whose image is expected to raise the "
-                   "corrected focus most, about 10 s more; image it with arfi simulate --focus-shift-mm or on the scanner)")
+                   "corrected focus most, one linearised posterior per candidate shift; image it with arfi simulate --focus-shift-mm or on the scanner)")
     add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
     p.set_defaults(run=run)
 

@@ -35,7 +35,8 @@ def register(sub: Any) -> None:
     p.add_argument("--correction", metavar="P", help="an estimate's or a prediction's phases_rad (.npy or text), "
                    "subtracted from the steering: the corrected beam (with --phases: both)")
     p.add_argument("--z-mm", type=float, dest="z_mm", help="plane z in mm (default: the focus)")
-    p.add_argument("--out", required=True, metavar="F.npz")
+    p.add_argument("--out", required=True, metavar="F.npz",
+                   help="write the complex pressure (Pa) on the plane and along the axis, with their coordinates (mm)")
     p.add_argument("--mi-limit", type=float, default=MI_LIMIT, metavar="MI",
                    help=f"mechanical index flagged when exceeded at the focal peak or at the hottest place of a tissue "
                    f"(default {MI_LIMIT:g})")

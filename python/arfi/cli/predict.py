@@ -44,7 +44,7 @@ def register(sub: Any) -> None:
                         "pose_sensitivity_rad_per_deg, rows x, y, z): the registration modes arfi estimate fits to the "
                         "images with the bone speed before its per-element fit. The moved head is the registered one seen "
                         "by the array moved the other way: six more transposed marches through the skull, side by side, no plan, "
-                        "about two thirds more time (650 kHz, 1024 elements: 71 s against 43 s). For a hemisphere or a "
+                        "about two thirds more time than the prediction alone. For a hemisphere or a "
                         "bowl of elements (a planar array's elements lie in the source plane, a single bowl has one "
                         "element). Off by default: on the head phantom three images do not determine a 1.5-2 mm "
                         "registration error from these modes")

@@ -18,9 +18,9 @@ def register(sub: Any) -> None:
                        epilog="example: arfi reproduce --case 16 --repeats 3 --out results")
     add_common(p)
     p.add_argument("--case", type=int, choices=[16, 1024], default=16, help="16 group aberrations or 1024 element ones")
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--repeats", type=int, default=3, help="aberrations drawn, each estimated and corrected (default 3)")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for table.csv, results.json, the figures and report.html")
+    p.add_argument("--seed", type=int, default=0, help="first seed: repeat k draws its aberration and noise from seed + k (default 0)")
     add_method(p, "nelder-mead", "estimator (default: the paper's Nelder-Mead)")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="ARFI noise (default: the scenario's, 0.02 rad)")
     p.add_argument("--diversity", type=int, default=0,

@@ -36,7 +36,8 @@ def register(sub: Any) -> None:
                    "CT, not from where the head really is. The JSON's target_mm must lie within 0.5 mm of the focus")
     p.add_argument("--noise-rad", type=float, dest="noise_rad", help="Gaussian noise sigma (rad; default: the scenario's noise_rad)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    p.add_argument("--out", required=True, metavar="M.nii.gz")
+    p.add_argument("--out", required=True, metavar="M.nii.gz",
+                   help="the simulated MR-ARFI image (.nii or .nii.gz) and its JSON sidecar beside it")
     add_report(p, "PNG figures (images in mm, colour bars in rad, element maps)")
     p.set_defaults(run=run)
 

@@ -31,7 +31,7 @@ def register(sub: Any) -> None:
     p.add_argument("--case", type=int, choices=[16, 1024], default=16, help="16 group or 1024 element aberrations (default 16)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
     p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per CPU)")
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for sweep.csv, summary.csv and sweep.png")
     p.set_defaults(run=run)
 
 
