@@ -30,8 +30,9 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -127,7 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     med = statistics.median
     res: dict[str, Any] = {
         "date": args.date,
-        "machine": {"cores": cores, "cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
+        "machine": {
+            "cores": cores,
+            "cpu": platform.processor() or platform.machine(),
+            "python": platform.python_version(),
+        },
         "arfi_version": getattr(arfi, "__version__", "?"),
         "grid": {k: g[k] for k in ("nx", "ny", "nz")},
         "repeats": repeats,
@@ -153,7 +158,12 @@ def main(argv: list[str] | None = None) -> int:
     rows = [
         ("`arfi.Simulation()` (plan build, one HAS march)", f"{med(build):.3f} s (first {build[0]:.3f} s)", "—", "—"),
         ("`sim.field()` (march of all planes, keeping the focal plane + axis)", f"{med(field):.3f} s", "—", "—"),
-        ("`sim.arfi_image()` (one HAS run to the focal slab)", f"{med(image_t):.3f} s", f"≤ {TARGET_RUN_S} s", ratio(med(image_t), TARGET_RUN_S)),
+        (
+            "`sim.arfi_image()` (one HAS run to the focal slab)",
+            f"{med(image_t):.3f} s",
+            f"≤ {TARGET_RUN_S} s",
+            ratio(med(image_t), TARGET_RUN_S),
+        ),
         (
             "16 group fields in one batch (Rust)",
             f"{gs:.3f} s" if gs is not None else f"not measured ({groups_error or 'skipped'})",
@@ -168,9 +178,8 @@ def main(argv: list[str] | None = None) -> int:
         ),
     ]
     print(
-        f"arfi {res['arfi_version']} core benchmarks — {args.date}, {cores} cores ({res['machine']['cpu']}), "
-        f"Python {res['machine']['python']}, default scenario, grid {g['nx']} x {g['ny']} x {g['nz']}; "
-        f"median of {repeats}\n"
+        f"arfi {res['arfi_version']} core benchmarks — {args.date}, {cores} cores ({res['machine']['cpu']}), Python "
+        f"{res['machine']['python']}, default scenario, grid {g['nx']} x {g['ny']} x {g['nz']}; median of {repeats}\n"
     )
     print("| operation | measured | target | ratio to target |")
     print("| --- | --- | --- | --- |")

@@ -101,8 +101,16 @@ def cap_patches(radius: float, aperture: float, patch: float) -> tuple[np.ndarra
         t = 0.5 * (t0 + t1)
         n_phi = max(1, int(np.ceil(2 * np.pi * radius * np.sin(t) / patch)))
         phi = 2 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
-        pos.append(np.stack([radius * np.sin(t) * np.cos(phi), radius * np.sin(t) * np.sin(phi),
-                             np.full(n_phi, radius * (1 - np.cos(t)))], axis=1))
+        pos.append(
+            np.stack(
+                [
+                    radius * np.sin(t) * np.cos(phi),
+                    radius * np.sin(t) * np.sin(phi),
+                    np.full(n_phi, radius * (1 - np.cos(t))),
+                ],
+                axis=1,
+            )
+        )
         area.append(np.full(n_phi, 2 * np.pi * radius**2 * (np.cos(t0) - np.cos(t1)) / n_phi))
     return np.concatenate(pos), np.concatenate(area)
 
@@ -128,13 +136,15 @@ def disc_patches(centres: np.ndarray, radius: float, diameter: float, patch: flo
     return np.concatenate(pos), np.full(len(uu) * len(centres), area)
 
 
-def rayleigh(targets: np.ndarray, pos: np.ndarray, area: np.ndarray, k: float, p_face: float, block: int = 256) -> np.ndarray:
+def rayleigh(
+    targets: np.ndarray, pos: np.ndarray, area: np.ndarray, k: float, p_face: float, block: int = 256
+) -> np.ndarray:
     """Direct Rayleigh sum at ``targets`` (n, 3), in blocks of targets."""
     out = np.empty(len(targets), dtype=np.complex128)
     for s in range(0, len(targets), block):
-        d = targets[s:s + block, None, :] - pos[None, :, :]
+        d = targets[s : s + block, None, :] - pos[None, :, :]
         r = np.sqrt(np.einsum("tpk,tpk->tp", d, d))
-        out[s:s + block] = (np.exp(1j * k * r) / r) @ area
+        out[s : s + block] = (np.exp(1j * k * r) / r) @ area
     return -1j * k / (2 * np.pi) * p_face * out
 
 
@@ -144,7 +154,9 @@ def timed(f: Any) -> tuple[float, Any]:
     return time.perf_counter() - t, v
 
 
-ELEMENTS = BOWL.replace('aperture_diameter_mm = 80.0', 'aperture_diameter_mm = 80.0\nelements = 256\nelement_size_mm = 5.0')
+ELEMENTS = BOWL.replace(
+    "aperture_diameter_mm = 80.0", "aperture_diameter_mm = 80.0\nelements = 256\nelement_size_mm = 5.0"
+)
 
 
 def bowl(patch_mm: float, elements: bool) -> dict[str, Any]:
@@ -164,17 +176,22 @@ def bowl(patch_mm: float, elements: bool) -> dict[str, Any]:
     source_targets = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, g["z0_mm"] * 1e-3)], axis=1)
     numpy_source_s, numpy_plane = timed(lambda: rayleigh(source_targets, pos, area, k, p_face).reshape(xx.shape))
     a, b = np.abs(plane).ravel(), np.abs(numpy_plane).ravel()
-    focal_targets = np.concatenate([
-        np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, field.z_mm * 1e-3)], axis=1),
-        np.stack([np.zeros_like(field.axis_z_mm), np.zeros_like(field.axis_z_mm), field.axis_z_mm * 1e-3], axis=1),
-    ])
+    focal_targets = np.concatenate(
+        [
+            np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, field.z_mm * 1e-3)], axis=1),
+            np.stack([np.zeros_like(field.axis_z_mm), np.zeros_like(field.axis_z_mm), field.axis_z_mm * 1e-3], axis=1),
+        ]
+    )
     numpy_focal_s, numpy_focal = timed(lambda: rayleigh(focal_targets, pos, area, k, p_face))
-    nf = np.abs(numpy_focal[:xx.size])
+    nf = np.abs(numpy_focal[: xx.size])
     return {
-        "case": "85 mm bowl, aperture 80 mm, 550 kHz, lossless water" + (", 256 disc elements of 5 mm" if elements else ""),
+        "case": "85 mm bowl, aperture 80 mm, 550 kHz, lossless water"
+        + (", 256 disc elements of 5 mm" if elements else ""),
         "grid": f"{g['nx']} x {g['ny']} x {g['nz']}, dx {g['dx_mm']:.3f} mm",
-        "patches": len(pos), "patch_mm": patch_mm,
-        "arfi_simulation_s": sim_s, "arfi_field_s": field_s,
+        "patches": len(pos),
+        "patch_mm": patch_mm,
+        "arfi_simulation_s": sim_s,
+        "arfi_field_s": field_s,
         "numpy_source_plane_s": numpy_source_s,
         "source_plane_correlation": float(np.corrcoef(a, b)[0, 1]),
         "source_plane_peak_ratio": float(a.max() / b.max()),
@@ -211,10 +228,14 @@ def main() -> None:
     for key, value in r.items():
         print(f"{key:32s} {value:.4g}" if isinstance(value, float) else f"{key:32s} {value}")
     if args.case != "plate":
-        print(f"{'projection: NumPy / arfi (upper bound: arfi simulation includes one march)':32s} "
-              f"{r['numpy_source_plane_s'] / r['arfi_simulation_s']:.1f}x")
-        print(f"{'field: NumPy to focal plane + axis / arfi simulation + field':32s} "
-              f"{r['numpy_focal_plane_and_axis_s'] / (r['arfi_simulation_s'] + r['arfi_field_s']):.1f}x")
+        print(
+            f"{'projection: NumPy / arfi (upper bound: arfi simulation includes one march)':32s} "
+            f"{r['numpy_source_plane_s'] / r['arfi_simulation_s']:.1f}x"
+        )
+        print(
+            f"{'field: NumPy to focal plane + axis / arfi simulation + field':32s} "
+            f"{r['numpy_focal_plane_and_axis_s'] / (r['arfi_simulation_s'] + r['arfi_field_s']):.1f}x"
+        )
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(r, fh, indent=2)

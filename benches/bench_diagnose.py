@@ -42,13 +42,27 @@ def cases(sim: arfi.Simulation) -> list[tuple[str, arfi.Simulation, list[np.ndar
     diversity = [None] + [rng.uniform(-1.5, 1.5, sim.n_groups) for _ in range(2)]
     return [
         ("noise only", sim, noisy(sim.effect_images({})), [None]),
-        ("paper story: model W = 0, image W = 2.7 mm", sim.with_calibration(0.0, sim.amplitude), noisy(sim.effect_images({})), [None]),
+        (
+            "paper story: model W = 0, image W = 2.7 mm",
+            sim.with_calibration(0.0, sim.amplitude),
+            noisy(sim.effect_images({})),
+            [None],
+        ),
         ("hidden shift (0.8, -0.6) mm", sim, noisy(sim.effect_images({"dx_mm": 0.8, "dy_mm": -0.6})), [None]),
         ("hidden slice offset 5 mm", sim, noisy(sim.effect_images({"dz_mm": 5.0})), [None]),
         ("hidden dead group 5", sim, noisy(sim.effect_images({"dead_groups": [5]})), [None]),
-        ("hidden 16-group aberration, 1 image", sim, noisy(sim.effect_images({"group_phases_rad": list(aberration)})), [None]),
-        ("hidden 16-group aberration, 3 images", sim,
-         noisy(sim.effect_images({"group_phases_rad": list(aberration)}, known=diversity)), diversity),
+        (
+            "hidden 16-group aberration, 1 image",
+            sim,
+            noisy(sim.effect_images({"group_phases_rad": list(aberration)})),
+            [None],
+        ),
+        (
+            "hidden 16-group aberration, 3 images",
+            sim,
+            noisy(sim.effect_images({"group_phases_rad": list(aberration)}, known=diversity)),
+            diversity,
+        ),
     ]
 
 
@@ -66,18 +80,28 @@ def main() -> None:
             d = model.diagnose(images, known)
             times.append(time.perf_counter() - t)
         best = min(times)
-        rows.append({"case": name, "images": len(images), "seconds": best, "named": d.names,
-                     "alternative": d.alternative.effects if d.alternative else None,
-                     "gap": d.residual_rms_final / d.noise_floor,
-                     "ratio_to_target": best / (TARGET_S * len(images))})
-    print(f"arfi diagnose, {_dt.date.today()}, {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} CPUs, RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}, "
-          f"best of {args.repeats}\n")
+        rows.append(
+            {
+                "case": name,
+                "images": len(images),
+                "seconds": best,
+                "named": d.names,
+                "alternative": d.alternative.effects if d.alternative else None,
+                "gap": d.residual_rms_final / d.noise_floor,
+                "ratio_to_target": best / (TARGET_S * len(images)),
+            }
+        )
+    print(
+        f"arfi diagnose, {_dt.date.today()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}, best of {args.repeats}\n"
+    )
     print("| case | images | seconds | named | alternative | gap | ratio to 30 s per image |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
-        print(f"| {r['case']} | {r['images']} | {r['seconds']:.1f} | {', '.join(r['named']) or '-'} | "
-              f"{', '.join(r['alternative'] or []) or '-'} | {r['gap']:.2f} | {r['ratio_to_target']:.2f} |")
+        print(
+            f"| {r['case']} | {r['images']} | {r['seconds']:.1f} | {', '.join(r['named']) or '-'} | "
+            f"{', '.join(r['alternative'] or []) or '-'} | {r['gap']:.2f} | {r['ratio_to_target']:.2f} |"
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"date": str(_dt.date.today()), "rows": rows}, f, indent=2)

@@ -110,8 +110,14 @@ def criterion_estimates() -> dict[str, float]:
     """Medians (s) of the criterion `estimation/*` benches, if they have been run."""
     out = {}
     base = ROOT / "target/criterion/estimation"
-    for name in ("cost_16_groups", "cost_and_gradient_16_groups", "build_model_16_groups", "nelder_mead_end_to_end",
-                 "nelder_mead_run", "lbfgs_run"):
+    for name in (
+        "cost_16_groups",
+        "cost_and_gradient_16_groups",
+        "build_model_16_groups",
+        "nelder_mead_end_to_end",
+        "nelder_mead_run",
+        "lbfgs_run",
+    ):
         f = base / name / "new/estimates.json"
         if f.exists():
             out[name] = json.loads(f.read_text())["median"]["point_estimate"] * 1e-9
@@ -124,8 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="seed of the skull-like aberration and of the noise")
     ap.add_argument("--reproduce-repeats", type=int, default=3, help="--repeats of `arfi reproduce`")
     ap.add_argument("--skip-reproduce", action="store_true", help="do not run `arfi reproduce`")
-    ap.add_argument("--criterion", choices=["auto", "skip"], default="auto",
-                    help="read the per-evaluation cost from target/criterion (cargo bench -p has-bench -- estimation)")
+    ap.add_argument(
+        "--criterion",
+        choices=["auto", "skip"],
+        default="auto",
+        help="read the per-evaluation cost from target/criterion (cargo bench -p has-bench -- estimation)",
+    )
     ap.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     ap.add_argument("--date", default=_dt.date.today().isoformat(), help="date printed in the table")
     args = ap.parse_args(argv)
@@ -152,7 +162,11 @@ def main(argv: list[str] | None = None) -> int:
 
     res: dict[str, Any] = {
         "date": args.date,
-        "machine": {"cores": cores(), "cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
+        "machine": {
+            "cores": cores(),
+            "cpu": platform.processor() or platform.machine(),
+            "python": platform.python_version(),
+        },
         "arfi_version": getattr(arfi, "__version__", "?"),
         "seed": args.seed,
         "noise_rad": NOISE_RAD,
@@ -163,8 +177,12 @@ def main(argv: list[str] | None = None) -> int:
         "reproduce": rep,
         "reproduce_error": rep_error,
         "criterion_s": crit,
-        "targets_s": {"cost": TARGET_COST_S, "nelder_mead_end_to_end": TARGET_NM_S, "lbfgs": TARGET_LBFGS_S,
-                      "reproduce": TARGET_REPRODUCE_S},
+        "targets_s": {
+            "cost": TARGET_COST_S,
+            "nelder_mead_end_to_end": TARGET_NM_S,
+            "lbfgs": TARGET_LBFGS_S,
+            "reproduce": TARGET_REPRODUCE_S,
+        },
     }
 
     def ratio(v: float | None, target: float) -> str:
@@ -175,50 +193,88 @@ def main(argv: list[str] | None = None) -> int:
     nm_wall, lb_wall = nm["wall_s"]["median"], lb["wall_s"]["median"]
     rows = []
     cost = crit.get("cost_16_groups")
-    rows.append((
-        "one cost evaluation, 16 groups (criterion `estimation/cost_16_groups`: seed 1, 119 masked pixels; "
-        f"this image: {nm['n_pixels']})",
-        f"{cost * 1e6:.1f} µs" if cost is not None else "not measured (run `cargo bench -p has-bench -- estimation`)",
-        "≤ 20 µs", ratio(cost, TARGET_COST_S),
-    ))
-    rows.append((
-        '`sim.estimate(image, method="nelder-mead")`, end to end (model + search + assessment)',
-        f"{nm_wall:.2f} s ({nm['evaluations']} evaluations, {nm['stop']}; range {nm['wall_s']['min']:.2f}–{nm['wall_s']['max']:.2f} s)",
-        f"≤ {TARGET_NM_S:g} s", ratio(nm_wall, TARGET_NM_S),
-    ))
+    rows.append(
+        (
+            "one cost evaluation, 16 groups (criterion `estimation/cost_16_groups`: seed 1, 119 masked pixels; this "
+            f"image: {nm['n_pixels']})",
+            f"{cost * 1e6:.1f} µs"
+            if cost is not None
+            else "not measured (run `cargo bench -p has-bench -- estimation`)",
+            "≤ 20 µs",
+            ratio(cost, TARGET_COST_S),
+        )
+    )
+    rows.append(
+        (
+            '`sim.estimate(image, method="nelder-mead")`, end to end (model + search + assessment)',
+            f"{nm_wall:.2f} s ({nm['evaluations']} evaluations, {nm['stop']}; range "
+            f"{nm['wall_s']['min']:.2f}–{nm['wall_s']['max']:.2f} s)",
+            f"≤ {TARGET_NM_S:g} s",
+            ratio(nm_wall, TARGET_NM_S),
+        )
+    )
     rows.append(("  of which the Nelder–Mead search (`Estimate.seconds`)", f"{nm['search_s']['median']:.3f} s", "", ""))
-    rows.append((
-        '`sim.estimate(image, method="lbfgs")`, end to end (model + 20+20 starts + assessment)',
-        f"{lb_wall:.2f} s ({lb['evaluations']} evaluations; range {lb['wall_s']['min']:.2f}–{lb['wall_s']['max']:.2f} s)",
-        f"≤ {TARGET_LBFGS_S:g} s", ratio(lb_wall, TARGET_LBFGS_S),
-    ))
-    rows.append(("  of which the L-BFGS search (`Estimate.seconds`)", f"{lb['search_s']['median']:.3f} s", f"≤ {TARGET_LBFGS_S:g} s",
-                 ratio(lb["search_s"]["median"], TARGET_LBFGS_S)))
+    rows.append(
+        (
+            '`sim.estimate(image, method="lbfgs")`, end to end (model + 20+20 starts + assessment)',
+            f"{lb_wall:.2f} s ({lb['evaluations']} evaluations; range "
+            f"{lb['wall_s']['min']:.2f}–{lb['wall_s']['max']:.2f} s)",
+            f"≤ {TARGET_LBFGS_S:g} s",
+            ratio(lb_wall, TARGET_LBFGS_S),
+        )
+    )
+    rows.append(
+        (
+            "  of which the L-BFGS search (`Estimate.seconds`)",
+            f"{lb['search_s']['median']:.3f} s",
+            f"≤ {TARGET_LBFGS_S:g} s",
+            ratio(lb["search_s"]["median"], TARGET_LBFGS_S),
+        )
+    )
     if rep is not None:
-        rows.append((
-            f"`arfi reproduce --case 16 --repeats {args.reproduce_repeats}` (subprocess, wall)",
-            f"{rep['wall_s']:.1f} s (study {rep['study_s']:.1f} s; searches {', '.join(f'{s:.2f}' for s in rep['search_s'])} s)",
-            f"≤ {TARGET_REPRODUCE_S:g} s", ratio(rep["wall_s"], TARGET_REPRODUCE_S),
-        ))
+        rows.append(
+            (
+                f"`arfi reproduce --case 16 --repeats {args.reproduce_repeats}` (subprocess, wall)",
+                f"{rep['wall_s']:.1f} s (study {rep['study_s']:.1f} s; searches "
+                f"{', '.join(f'{s:.2f}' for s in rep['search_s'])} s)",
+                f"≤ {TARGET_REPRODUCE_S:g} s",
+                ratio(rep["wall_s"], TARGET_REPRODUCE_S),
+            )
+        )
     else:
-        rows.append(("`arfi reproduce --case 16 --repeats 3`", f"not measured ({rep_error or 'skipped'})", f"≤ {TARGET_REPRODUCE_S:g} s", "—"))
+        rows.append(
+            (
+                "`arfi reproduce --case 16 --repeats 3`",
+                f"not measured ({rep_error or 'skipped'})",
+                f"≤ {TARGET_REPRODUCE_S:g} s",
+                "—",
+            )
+        )
 
     print(
         f"arfi {res['arfi_version']} estimation benchmarks — {args.date}, {res['machine']['cores']} cores "
-        f"({res['machine']['cpu']}), Python {res['machine']['python']}, default scenario, one image with the skull-like "
-        f"aberration of seed {args.seed} (16 groups) and {NOISE_RAD} rad noise; median of {repeats}\n"
+        f"({res['machine']['cpu']}), Python {res['machine']['python']}, default scenario, one image with the "
+        f"skull-like aberration of seed {args.seed} (16 groups) and {NOISE_RAD} rad noise; median of {repeats}\n"
     )
     print("| operation | measured | target | ratio to target |")
     print("| --- | --- | --- | --- |")
     for r in rows:
         print("| " + " | ".join(r) + " |")
     lo, hi = PAPER_ESTIMATE_S
-    print(f"\nPaper (Vyas et al. 2014): 2.3–3.6 h per Nelder–Mead estimation, about {PAPER_SIMULATION_S:g} s per simulation. "
-          f"Here: {lo / nm_wall:,.0f}–{hi / nm_wall:,.0f}x faster end to end (Nelder–Mead), "
-          f"{lo / lb_wall:,.0f}–{hi / lb_wall:,.0f}x (L-BFGS)"
-          + (f"; one cost evaluation {PAPER_SIMULATION_S / cost:,.0f}x cheaper than one paper simulation." if cost else "."))
-    print(f"\nPhase error against the applied aberration: Nelder–Mead {nm['phase_error_rad']:.2f} rad (ambiguous flag "
-          f"{nm['ambiguous']}), L-BFGS {lb['phase_error_rad']:.2f} rad (flag {lb['ambiguous']}).")
+    print(
+        f"\nPaper (Vyas et al. 2014): 2.3–3.6 h per Nelder–Mead estimation, about {PAPER_SIMULATION_S:g} s per "
+        f"simulation. Here: {lo / nm_wall:,.0f}–{hi / nm_wall:,.0f}x faster end to end (Nelder–Mead), "
+        f"{lo / lb_wall:,.0f}–{hi / lb_wall:,.0f}x (L-BFGS)"
+        + (
+            f"; one cost evaluation {PAPER_SIMULATION_S / cost:,.0f}x cheaper than one paper simulation."
+            if cost
+            else "."
+        )
+    )
+    print(
+        f"\nPhase error against the applied aberration: Nelder–Mead {nm['phase_error_rad']:.2f} rad (ambiguous flag "
+        f"{nm['ambiguous']}), L-BFGS {lb['phase_error_rad']:.2f} rad (flag {lb['ambiguous']})."
+    )
     if crit:
         print("\ncriterion medians: " + ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in crit.items()))
     if args.json:

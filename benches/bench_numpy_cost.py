@@ -41,9 +41,11 @@ TOLERANCE = 1e-9
 
 def per_call(fn, repeats: int) -> float:
     """Median seconds per call, timed in batches of 20 calls (one call is microseconds)."""
+
     def batch():
         for _ in range(20):
             fn()
+
     return median_time(batch, max(1, repeats // 20)) / 20
 
 
@@ -64,8 +66,11 @@ def measure(groups: int, repeats: int) -> dict[str, Any]:
         raise SystemExit(f"{groups} groups: arfi and NumPy disagree (J {cost_error:.2e}, gradient {grad_error:.2e})")
     core = model._core
     r = {
-        "groups": groups, "n_pixels": model.n_pixels, "model_build_s": build_s,
-        "cost_relative_difference": cost_error, "gradient_relative_difference": grad_error,
+        "groups": groups,
+        "n_pixels": model.n_pixels,
+        "model_build_s": build_s,
+        "cost_relative_difference": cost_error,
+        "gradient_relative_difference": grad_error,
         "arfi_cost_s": per_call(lambda: model.cost(phases), repeats),
         "arfi_core_cost_s": per_call(lambda: core.cost(phases), repeats),
         "numpy_cost_s": per_call(lambda: numpy_cost.cost(terms, phases), repeats),
@@ -83,18 +88,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     rows = [measure(g, args.repeats) for g in args.groups]
-    print(f"# arfi cost vs NumPy, {_dt.date.today()}, {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} CPUs, RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}\n")
-    print("| groups | pixels | agreement J / gradient | cost: arfi (core) / NumPy (µs) | ratio | "
-          "cost + gradient: arfi (core) / NumPy (µs) | ratio |")
+    print(
+        f"# arfi cost vs NumPy, {_dt.date.today()}, {platform.processor() or platform.machine()}, {os.cpu_count()} "
+        f"CPUs, RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}\n"
+    )
+    print(
+        "| groups | pixels | agreement J / gradient | cost: arfi (core) / NumPy (µs) | ratio | cost + gradient: arfi "
+        "(core) / NumPy (µs) | ratio |"
+    )
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         us = {k: v * 1e6 for k, v in r.items() if k.endswith("_s")}
-        print(f"| {r['groups']} | {r['n_pixels']} | {r['cost_relative_difference']:.1e} / {r['gradient_relative_difference']:.1e} "
-              f"| {us['arfi_cost_s']:.1f} ({us['arfi_core_cost_s']:.1f}) / {us['numpy_cost_s']:.1f} "
-              f"| {r['numpy_cost_s'] / r['arfi_cost_s']:.1f}x "
-              f"| {us['arfi_cost_and_gradient_s']:.1f} ({us['arfi_core_cost_and_gradient_s']:.1f}) / {us['numpy_cost_and_gradient_s']:.1f} "
-              f"| {r['numpy_cost_and_gradient_s'] / r['arfi_cost_and_gradient_s']:.1f}x |")
+        print(
+            f"| {r['groups']} | {r['n_pixels']} | {r['cost_relative_difference']:.1e} / "
+            f"{r['gradient_relative_difference']:.1e} | {us['arfi_cost_s']:.1f} ({us['arfi_core_cost_s']:.1f}) / "
+            f"{us['numpy_cost_s']:.1f} | {r['numpy_cost_s'] / r['arfi_cost_s']:.1f}x | "
+            f"{us['arfi_cost_and_gradient_s']:.1f} ({us['arfi_core_cost_and_gradient_s']:.1f}) / "
+            f"{us['numpy_cost_and_gradient_s']:.1f} | "
+            f"{r['numpy_cost_and_gradient_s'] / r['arfi_cost_and_gradient_s']:.1f}x |"
+        )
     if args.json:
         args.json.write_text(json.dumps({"date": str(_dt.date.today()), "rows": rows}, indent=2))
     return 0

@@ -63,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
 
     arfi_s = median_time(sim.field, args.repeats)
     numpy_s = median_time(lambda: plan.march(source, plane), args.repeats)
+
     def ffts_alone() -> None:
         field = source
         for _ in plan.steps:
@@ -72,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
 
     result = {
         "date": _dt.date.today().isoformat(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cpus, RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cpus, "
+        f"RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all')}",
         "grid": f"{grid.nx} x {grid.ny} x {grid.nz}",
         "focal_plane_relative_error": error,
         "axis_relative_error": axis_error,
@@ -85,8 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"HAS, default scenario ({result['grid']}, {len(plan.steps)} steps), {result['date']}, {result['machine']}")
     print(f"agreement: focal plane {error:.1e}, axis {axis_error:.1e} (bound {TOLERANCE:g})")
     print("| what | median (ms) |\n| --- | --- |")
-    for name, key in [("arfi `sim.field()` (source + march)", "arfi_field_s"), ("NumPy march", "numpy_march_s"),
-                      ("NumPy FFTs alone (fft2 + ifft2 per step)", "numpy_ffts_s"), ("NumPy plan (once)", "numpy_plan_s")]:
+    for name, key in [
+        ("arfi `sim.field()` (source + march)", "arfi_field_s"),
+        ("NumPy march", "numpy_march_s"),
+        ("NumPy FFTs alone (fft2 + ifft2 per step)", "numpy_ffts_s"),
+        ("NumPy plan (once)", "numpy_plan_s"),
+    ]:
         print(f"| {name} | {result[key] * 1e3:.1f} |")
     print(f"arfi is {result['ratio']:.2f}x faster than NumPy (target >= {TARGET_RATIO:g}x)")
     if args.json:

@@ -59,11 +59,20 @@ def run(seed: int) -> dict[str, float]:
     est = per_element.estimate(images, known, method="lbfgs", seed=seed)
     row.update(images_s=time.perf_counter() - t, images=focus(est.phases_rad))
     t = time.perf_counter()
-    est = per_element.estimate(images, known, method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD)
+    est = per_element.estimate(
+        images, known, method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD
+    )
     row.update(prior_s=time.perf_counter() - t, prior=focus(est.phases_rad))
     t = time.perf_counter()
-    est = per_element.estimate(images, known, method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD,
-                               prior_correlation_mm=PREDICTION_CORRELATION_MM)
+    est = per_element.estimate(
+        images,
+        known,
+        method="lbfgs",
+        seed=seed,
+        prior=prediction,
+        prior_std_rad=PREDICTION_STD_RAD,
+        prior_correlation_mm=PREDICTION_CORRELATION_MM,
+    )
     row.update(smooth_s=time.perf_counter() - t, smooth=focus(est.phases_rad))
     return row
 
@@ -75,13 +84,19 @@ def main() -> None:
     args = ap.parse_args()
     rows = [run(s) for s in args.seeds]
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"per-element estimation from 4 images, 1024 elements, {_dt.date.today()} (target <= {TARGET_S:.0f} s each)\n")
-    print("| seed | aberrated | prediction alone | 4 images: focus | s (basis included) | prediction + 4 images, independent: focus | s "
-          "| prediction + 4 images, smooth: focus | s |")
+    print(
+        f"per-element estimation from 4 images, 1024 elements, {_dt.date.today()} (target <= {TARGET_S:.0f} s each)\n"
+    )
+    print(
+        "| seed | aberrated | prediction alone | 4 images: focus | s (basis included) | prediction + 4 images, "
+        "independent: focus | s | prediction + 4 images, smooth: focus | s |"
+    )
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
-        print(f"| {r['seed']} | {r['aberrated']:.3f} | {r['prediction']:.3f} | {r['images']:.3f} | {r['images_s']:.1f} | "
-              f"{r['prior']:.3f} | {r['prior_s']:.1f} | {r['smooth']:.3f} | {r['smooth_s']:.1f} |")
+        print(
+            f"| {r['seed']} | {r['aberrated']:.3f} | {r['prediction']:.3f} | {r['images']:.3f} | {r['images_s']:.1f} | "
+            f"{r['prior']:.3f} | {r['prior_s']:.1f} | {r['smooth']:.3f} | {r['smooth_s']:.1f} |"
+        )
     print(f"\npeak memory {peak_mib:.0f} MiB")
     if args.json:
         with open(args.json, "w") as f:

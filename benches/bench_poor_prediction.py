@@ -59,19 +59,37 @@ def run(sim: arfi.Simulation, seed: int, n_images: int) -> dict:
     row: dict = {"seed": seed, "prior": focus(prior), "steps": []}
     for k in range(n_images):
         t = time.perf_counter()
-        e = el.estimate(images, known, prior=prior, prior_std_rad=PRIOR_STD_RAD, prior_correlation_mm=PRIOR_CORRELATION_MM,
-                        suggest=True, seed=seed)
+        e = el.estimate(
+            images,
+            known,
+            prior=prior,
+            prior_std_rad=PRIOR_STD_RAD,
+            prior_correlation_mm=PRIOR_CORRELATION_MM,
+            suggest=True,
+            seed=seed,
+        )
         seconds = time.perf_counter() - t
         n = e.next_acquisition
-        step = {"images": len(images), "focus": focus(e.recommended_phases_rad), "estimate": focus(e.phases_rad),
-                "misfit": e.misfit, "seconds": seconds,
-                "recommended": e.recommended, "kept_prediction": e.kept_prediction, "evaluations": e.evaluations,
-                "next": None if n is None else n.to_dict(), "design": design(n)}
+        step = {
+            "images": len(images),
+            "focus": focus(e.recommended_phases_rad),
+            "estimate": focus(e.phases_rad),
+            "misfit": e.misfit,
+            "seconds": seconds,
+            "recommended": e.recommended,
+            "kept_prediction": e.kept_prediction,
+            "evaluations": e.evaluations,
+            "next": None if n is None else n.to_dict(),
+            "design": design(n),
+        }
         row["steps"].append(step)
-        print(f"seed {seed}: {len(images)} image(s): focus {step['focus']:.3f} ({seconds:.1f} s, {e.evaluations} evaluations"
-              f"{', prediction kept' if e.kept_prediction else ''}; recommends {e.recommended}, the estimate's own "
-              f"{step['estimate']:.3f}, misfit {e.misfit:.2f}); next {step['design']}"
-              + ("" if n is None else f" (expected {n.expected_focus_now:.3f} -> {n.expected_focus:.3f})"), flush=True)
+        print(
+            f"seed {seed}: {len(images)} image(s): focus {step['focus']:.3f} ({seconds:.1f} s, {e.evaluations} "
+            f"evaluations{', prediction kept' if e.kept_prediction else ''}; recommends {e.recommended}, the "
+            f"estimate's own {step['estimate']:.3f}, misfit {e.misfit:.2f}); next {step['design']}"
+            + ("" if n is None else f" (expected {n.expected_focus_now:.3f} -> {n.expected_focus:.3f})"),
+            flush=True,
+        )
         if k + 1 == n_images or n is None:
             break
         images.append(sim.arfi_image(truth + e.suggested_phases_rad, noise_rad=NOISE_RAD, seed=100 * seed + k))
@@ -89,7 +107,9 @@ def main() -> None:
     t = time.perf_counter()
     rows = [run(sim, s, args.images) for s in args.seeds]
     total = time.perf_counter() - t
-    print(f"\npoor prediction raised by suggested acquisitions, 1024 elements, {_dt.date.today()}, {total:.0f} s in all\n")
+    print(
+        f"\npoor prediction raised by suggested acquisitions, 1024 elements, {_dt.date.today()}, {total:.0f} s in all\n"
+    )
     heads = " | ".join(f"{k} image{'s' if k > 1 else ''}" for k in range(1, args.images + 1))
     print(f"| seed | prior alone | {heads} | designs suggested |")
     print("| --- | --- |" + " --- |" * args.images + " --- |")

@@ -36,8 +36,22 @@ from arfi.simulation import Simulation
 def run(frequency_hz: float, elements: int, voxel_mm: float) -> dict[str, float | int | str]:
     with tempfile.TemporaryDirectory() as d:
         ct, toml = Path(d) / "head.nii.gz", Path(d) / "head.toml"
-        assert arfi_main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", str(voxel_mm),
-                          "--array", "hemisphere"]) == 0
+        assert (
+            arfi_main(
+                [
+                    "phantom",
+                    "--out",
+                    str(ct),
+                    "--scenario-out",
+                    str(toml),
+                    "--voxel-mm",
+                    str(voxel_mm),
+                    "--array",
+                    "hemisphere",
+                ]
+            )
+            == 0
+        )
         text = toml.read_text().replace("frequency_hz = 650000.0", f"frequency_hz = {frequency_hz!r}")
         toml.write_text(text.replace("elements = 1024", f"elements = {elements}"))
         scenario = Scenario.load(toml)
@@ -77,11 +91,18 @@ def main() -> None:
     ap.add_argument("--json")
     a = ap.parse_args()
     r = run(a.frequency_hz, a.elements, a.voxel_mm)
-    print(f"{r['date']}: {r['elements']} elements at {r['frequency_hz'] / 1e3:.0f} kHz, CT {r['voxel_mm']} mm, grid {r['grid']}")
-    print(f"  arfi.predict: {r['predict_s']:.1f} s, peak RSS {r['predict_peak_gib']:.2f} GiB "
-          f"(the process's: the prediction runs first)")
-    print(f"  naive: build {r['simulation_build_s']:.1f} s + 2 x {r['elements']} marches of {r['one_march_s']:.2f} s "
-          f"= {r['naive_estimate_s']:.0f} s (estimated); ratio {r['ratio']:.0f}x")
+    print(
+        f"{r['date']}: {r['elements']} elements at {r['frequency_hz'] / 1e3:.0f} kHz, CT {r['voxel_mm']} mm, grid "
+        f"{r['grid']}"
+    )
+    print(
+        f"  arfi.predict: {r['predict_s']:.1f} s, peak RSS {r['predict_peak_gib']:.2f} GiB (the process's: the "
+        "prediction runs first)"
+    )
+    print(
+        f"  naive: build {r['simulation_build_s']:.1f} s + 2 x {r['elements']} marches of {r['one_march_s']:.2f} s = "
+        f"{r['naive_estimate_s']:.0f} s (estimated); ratio {r['ratio']:.0f}x"
+    )
     if a.json:
         Path(a.json).write_text(json.dumps(r, indent=2) + "\n")
 

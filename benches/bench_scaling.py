@@ -151,37 +151,59 @@ def main(argv: list[str] | None = None) -> int:
     for part in args.parts:
         results.setdefault("dates", {})[part] = _dt.date.today().isoformat()
     if "lateral" in args.parts:
-        results["lateral"] = [run({"kind": "lateral", "repeats": rep, "grid": {"lateral_size_mm": n * SPACING_MM}})
-                              for n in (128, 256, 512, 1024)]
+        results["lateral"] = [
+            run({"kind": "lateral", "repeats": rep, "grid": {"lateral_size_mm": n * SPACING_MM}})
+            for n in (128, 256, 512, 1024)
+        ]
     if "slices" in args.parts:
-        results["slices"] = [run({"kind": "slices", "repeats": rep, "grid": {"step_mm": dz}}) for dz in (0.68, 0.34, 0.17)]
+        results["slices"] = [
+            run({"kind": "slices", "repeats": rep, "grid": {"step_mm": dz}}) for dz in (0.68, 0.34, 0.17)
+        ]
     if "groups" in args.parts:
         groups = (16, 32, 64, 128, 256) + ((1024,) if args.elements else ())
         results["groups"] = [run({"kind": "groups", "repeats": 1, "groups": g, "evaluations": 400}) for g in groups]
     if "threads" in args.parts:
-        results["threads"] = [run({"kind": kind, "repeats": rep, "groups": 16, "evaluations": 400}, threads=t)
-                              for kind in ("threads_field", "threads_estimate") for t in (1, 2)]
+        results["threads"] = [
+            run({"kind": kind, "repeats": rep, "groups": 16, "evaluations": 400}, threads=t)
+            for kind in ("threads_field", "threads_estimate")
+            for t in (1, 2)
+        ]
     results["date"] = max(results["dates"].values()) if "dates" in results else _dt.date.today().isoformat()
 
     print(f"Scaling, {results['date']}, {results['machine']}\n")
-    print("| lateral grid | planes | `Simulation()` (s) | `sim.field()` (s) | field / N²logN from 128² | peak memory (MiB) |")
+    print(
+        "| lateral grid | planes | `Simulation()` (s) | `sim.field()` (s) | field / N²logN from 128² | peak memory "
+        "(MiB) |"
+    )
     print("| --- | --- | --- | --- | --- | --- |")
     lat = results["lateral"]
     n0 = lat[0]["nx"]
     for r in lat:
-        model = lat[0]["field_s"] * (r["nx"] ** 2 * math.log(r["nx"])) / (n0 ** 2 * math.log(n0))
-        print(f"| {r['nx']} x {r['ny']} | {r['nz']} | {r['build_s']:.2f} | {r['field_s']:.3f} | {r['field_s'] / model:.2f} "
-              f"| {r['peak_rss_mib']:.0f} |")
-    print("\n| step (mm) | planes | `sim.field()` (s) | per plane (ms) | peak memory (MiB) |\n| --- | --- | --- | --- | --- |")
+        model = lat[0]["field_s"] * (r["nx"] ** 2 * math.log(r["nx"])) / (n0**2 * math.log(n0))
+        print(
+            f"| {r['nx']} x {r['ny']} | {r['nz']} | {r['build_s']:.2f} | {r['field_s']:.3f} | "
+            f"{r['field_s'] / model:.2f} | {r['peak_rss_mib']:.0f} |"
+        )
+    print(
+        "\n| step (mm) | planes | `sim.field()` (s) | per plane (ms) | peak memory (MiB) |\n| --- | --- | --- | --- | "
+        "--- |"
+    )
     for r in results["slices"]:
-        print(f"| {r['grid']['step_mm']} | {r['nz']} | {r['field_s']:.3f} | {r['field_s'] / (r['nz'] - 1) * 1e3:.3f} "
-              f"| {r['peak_rss_mib']:.0f} |")
-    print("\n| groups | group fields + model (s) | cost (µs) | cost + gradient (µs) | L-BFGS estimate (s) | peak memory (MiB) |")
+        print(
+            f"| {r['grid']['step_mm']} | {r['nz']} | {r['field_s']:.3f} | {r['field_s'] / (r['nz'] - 1) * 1e3:.3f} | "
+            f"{r['peak_rss_mib']:.0f} |"
+        )
+    print(
+        "\n| groups | group fields + model (s) | cost (µs) | cost + gradient (µs) | L-BFGS estimate (s) | peak memory "
+        "(MiB) |"
+    )
     print("| --- | --- | --- | --- | --- | --- |")
     for r in results["groups"]:
         cost = f"{r['cost_per_evaluation_s'] * 1e6:.0f}" if "cost_per_evaluation_s" in r else "-"
-        print(f"| {r['groups']} | {r['model_s']:.2f} | {cost} "
-              f"| {r['gradient_per_evaluation_s'] * 1e6:.0f} | {r['gradient_estimate_s']:.2f} | {r['peak_rss_mib']:.0f} |")
+        print(
+            f"| {r['groups']} | {r['model_s']:.2f} | {cost} | {r['gradient_per_evaluation_s'] * 1e6:.0f} | "
+            f"{r['gradient_estimate_s']:.2f} | {r['peak_rss_mib']:.0f} |"
+        )
     th = {(r["kind"], r["threads"]): r for r in results["threads"]}
     f1, f2 = th[("threads_field", 1)]["field_s"], th[("threads_field", 2)]["field_s"]
     e1, e2 = th[("threads_estimate", 1)]["gradient_estimate_s"], th[("threads_estimate", 2)]["gradient_estimate_s"]

@@ -9,14 +9,14 @@ with ``R = Σ_i r_i·K_i`` (Hermitian), ``r = s·d - m``.
 
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Sequence
+from collections.abc import Sequence
+from functools import cache
 
 import numpy as np
 from numpy.typing import NDArray
 
 
-@lru_cache(maxsize=None)
+@cache
 def _pairs(g: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """The pairs ``g < h`` in the kernels' row order."""
     return np.triu_indices(g, 1)
@@ -51,7 +51,9 @@ def cost(terms: Sequence, phases: NDArray[np.float64], fit_amplitude: bool = Fal
     return float(sum(np.sum((s * d - t.measured_rad) ** 2) for d, t in zip(model, terms)))
 
 
-def cost_and_gradient(terms: Sequence, phases: NDArray[np.float64], fit_amplitude: bool = False) -> tuple[float, NDArray[np.float64]]:
+def cost_and_gradient(
+    terms: Sequence, phases: NDArray[np.float64], fit_amplitude: bool = False
+) -> tuple[float, NDArray[np.float64]]:
     """``J`` and ``∂J/∂phi`` (the fitted scale drops out of the gradient: envelope theorem)."""
     g = len(phases)
     a, b = _pairs(g)

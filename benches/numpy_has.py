@@ -73,7 +73,9 @@ class Grid:
     @classmethod
     def from_simulation(cls, sim) -> Grid:
         g = sim._core.grid
-        return cls(g["nx"], g["ny"], g["nz"], g["dx_mm"] * 1e-3, g["dy_mm"] * 1e-3, g["dz_mm"] * 1e-3, g["z0_mm"] * 1e-3)
+        return cls(
+            g["nx"], g["ny"], g["nz"], g["dx_mm"] * 1e-3, g["dy_mm"] * 1e-3, g["dz_mm"] * 1e-3, g["z0_mm"] * 1e-3
+        )
 
     def x(self) -> np.ndarray:
         return (np.arange(self.nx) - self.nx // 2) * self.dx
@@ -95,7 +97,8 @@ class Slice:
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Slice) and all(
-            np.array_equal(u, v) for u, v in ((self.c, other.c), (self.rho, other.rho), (self.alpha, other.alpha)))
+            np.array_equal(u, v) for u, v in ((self.c, other.c), (self.rho, other.rho), (self.alpha, other.alpha))
+        )
 
     def impedance(self) -> np.ndarray:
         return self.rho * self.c
@@ -253,8 +256,9 @@ def propagator(g: Grid, k: float, alpha: float) -> np.ndarray:
     return np.exp(1j * axial_wavenumber(k + 1j * alpha, kt2) * g.dz + alpha * g.dz)
 
 
-def screen(g: Grid, s: Slice, sigma: np.ndarray, omega: float, k_mean: float, a_mean: float,
-           sin2: np.ndarray | None) -> np.ndarray:
+def screen(
+    g: Grid, s: Slice, sigma: np.ndarray, omega: float, k_mean: float, a_mean: float, sin2: np.ndarray | None
+) -> np.ndarray:
     k = omega / s.c
     if sin2 is None:
         phase, absorption = k - k_mean, s.alpha

@@ -121,7 +121,7 @@ def python_command(lines: list[str], begin: int, end: int) -> Command:
     last = end - 1
     while last >= begin and is_output(lines[last]):
         last -= 1
-    return Command("python", "\n".join(lines[begin:last + 1]), begin, last, output_after(lines, last + 1))
+    return Command("python", "\n".join(lines[begin : last + 1]), begin, last, output_after(lines, last + 1))
 
 
 def bash_commands(lines: list[str], begin: int, end: int, where: str) -> list[Command]:

@@ -16,11 +16,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import tomllib
 from pathlib import Path
 
 import nibabel as nib
 import numpy as np
+import tomllib
 from scipy.ndimage import gaussian_filter, map_coordinates
 
 from arfi.scenario import Scenario
@@ -63,8 +63,8 @@ def main() -> None:
     a = ap.parse_args()
     for surface, v in incidence_angles(a.scenario, None if a.target_mm is None else np.array(a.target_mm)).items():
         print(
-            f"{surface}: {len(v)} rays, median {np.median(v):.0f}°, 90th percentile {np.percentile(v, 90):.0f}°, "
-            f"max {v.max():.0f}°, beyond 25°: {100 * (v > 25).mean():.0f} %, beyond 32°: {100 * (v > 32).mean():.0f} %"
+            f"{surface}: {len(v)} rays, median {np.median(v):.0f}°, 90th percentile {np.percentile(v, 90):.0f}°, max "
+            f"{v.max():.0f}°, beyond 25°: {100 * (v > 25).mean():.0f} %, beyond 32°: {100 * (v > 32).mean():.0f} %"
         )
 
 

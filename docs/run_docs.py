@@ -50,8 +50,17 @@ ROOT = DOCS.parent
 if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
     sys.path.insert(0, str(DOCS))
 
-from docblocks import (Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402
-                       fenced_blocks, run_command)
+from docblocks import (  # noqa: E402 (after the path is set)
+    Command,
+    CommandError,
+    Parser,
+    Run,
+    UsageError,
+    block_commands,
+    exit_status,
+    fenced_blocks,
+    run_command,
+)
 
 DOCUMENTS = (
     # The documents with command blocks, relative to the repository (docs/physics.md has none).
@@ -67,8 +76,10 @@ ELSEWHERE = {
     # document: (heading of a section whose blocks another script runs, which one)
     "docs/tutorial.md": ("## 10. ", "docs/step10.py (python/tests/test_tutorial.py)"),
 }
-SHRINK_SCENARIO = ("sed 's/elements_per_side = 16/elements_per_side = 8/; s/pitch_mm = 2.5/pitch_mm = 5.0/; "
-                   "s/element_size_mm = 2.3/element_size_mm = 4.6/'")
+SHRINK_SCENARIO = (
+    "sed 's/elements_per_side = 16/elements_per_side = 8/; s/pitch_mm = 2.5/pitch_mm = 5.0/; s/element_size_mm = "
+    "2.3/element_size_mm = 4.6/'"
+)
 """The default scenario with 256 elements of twice the pitch (the same aperture) instead of 1024."""
 # a verb on the embedded default: none of --scenario on the command's first line
 VERBS_ON_THE_DEFAULT = re.compile(r"^arfi (simulate|calibrate|estimate|field|diagnose)\b(?!.*--scenario)", re.M)
@@ -77,34 +88,94 @@ SMALL = (
     # re.sub), replacement, times it occurs, why). The replacement keeps each command's verb,
     # inputs and options, and what it shows; only the size changes. A replacement None leaves out
     # the whole command that holds the text.
-    ("README.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
-     "one of the nine validation cases (about 30 s for all nine; python/tests/test_validate.py runs the suite)"),
-    ("docs/validation.md", "arfi validate --out validation", "arfi validate --case water --out validation", 1,
-     "as in the README"),
-    ("docs/tutorial.md", "arfi scenario --default > phantom.toml",
-     f"arfi scenario --default | {SHRINK_SCENARIO} > phantom.toml && cp phantom.toml small.toml", 1,
-     "the default scenario with 256 elements instead of 1024 (a quarter of the element fields a "
-     "per-element estimate marches): phantom.toml, and small.toml for the commands below"),
-    ("docs/tutorial.md", VERBS_ON_THE_DEFAULT, r"arfi \1 --scenario small.toml", 18,
-     "the verbs that use the embedded default use the 256-element one instead"),
-    ("docs/tutorial.md", "arfi.Simulation()", 'arfi.Simulation(arfi.Scenario.load("small.toml"))', 1,
-     "the Python likewise"),
+    (
+        "README.md",
+        "arfi validate --out validation",
+        "arfi validate --case water --out validation",
+        1,
+        "one of the nine validation cases (about 30 s for all nine; python/tests/test_validate.py runs the suite)",
+    ),
+    (
+        "docs/validation.md",
+        "arfi validate --out validation",
+        "arfi validate --case water --out validation",
+        1,
+        "as in the README",
+    ),
+    (
+        "docs/tutorial.md",
+        "arfi scenario --default > phantom.toml",
+        f"arfi scenario --default | {SHRINK_SCENARIO} > phantom.toml && cp phantom.toml small.toml",
+        1,
+        "the default scenario with 256 elements instead of 1024 (a quarter of the element fields a per-element "
+        "estimate marches): phantom.toml, and small.toml for the commands below",
+    ),
+    (
+        "docs/tutorial.md",
+        VERBS_ON_THE_DEFAULT,
+        r"arfi \1 --scenario small.toml",
+        18,
+        "the verbs that use the embedded default use the 256-element one instead",
+    ),
+    (
+        "docs/tutorial.md",
+        "arfi.Simulation()",
+        'arfi.Simulation(arfi.Scenario.load("small.toml"))',
+        1,
+        "the Python likewise",
+    ),
     ("docs/tutorial.md", "--groups 1024", "--groups 256", 5, "per element: 256 elements"),
-    ("docs/tutorial.md", "--json diagnosis.json", "--json diagnosis.json --effects amplitude,broadening", 1,
-     "only the two effects it names at full size (the whole library: 85 s on 2 loaded cores; "
-     "python/tests/test_diagnose.py runs it)"),
-    ("docs/tutorial.md", "spacing_mm = 0.375", "spacing_mm = 0.75", 1,
-     "plate.toml's grid at λ/4 in water instead of λ/8 (the plate's field takes a quarter of the time)"),
-    ("docs/diagnose.md", ".diagnose(image)", ".diagnose(image, effects=[\"amplitude\", \"broadening\"])", 1,
-     "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)"),
-    ("docs/head.md", "arfi phantom --out", "arfi phantom --voxel-mm 2 --out", 2,
-     "the head CT in 2 mm voxels instead of 0.5 mm (as tutorial step 10 at its small size)"),
-    ("docs/head.md", "arfi field --scenario head_hemi.toml", None, 1,
-     "not run: the 1024-element hemisphere at 650 kHz marches a 540 x 540 x 256 grid (tutorial step 10 runs "
-     "a hemisphere through a head at a small size: python/tests/test_tutorial.py)"),
-    ("docs/head.md", "arfi predict --scenario head_hemi.toml", None, 1, "not run: as the hemisphere's field (80-330 s, 3.8 GiB)"),
-    ("docs/tutorial.md", "arfi sweep --noise-rad 0.01 0.02 0.05 --images 1 2 3 --methods lbfgs nelder-mead --seeds 5 --out sweep",
-     None, 1, "not run: 90 trials on a local dask cluster, 258 s on 2 loaded cores (python/tests/test_sweep.py runs sweeps)"),
+    (
+        "docs/tutorial.md",
+        "--json diagnosis.json",
+        "--json diagnosis.json --effects amplitude,broadening",
+        1,
+        "only the two effects it names at full size (the whole library: 85 s on 2 loaded cores; "
+        "python/tests/test_diagnose.py runs it)",
+    ),
+    (
+        "docs/tutorial.md",
+        "spacing_mm = 0.375",
+        "spacing_mm = 0.75",
+        1,
+        "plate.toml's grid at λ/4 in water instead of λ/8 (the plate's field takes a quarter of the time)",
+    ),
+    (
+        "docs/diagnose.md",
+        ".diagnose(image)",
+        '.diagnose(image, effects=["amplitude", "broadening"])',
+        1,
+        "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)",
+    ),
+    (
+        "docs/head.md",
+        "arfi phantom --out",
+        "arfi phantom --voxel-mm 2 --out",
+        2,
+        "the head CT in 2 mm voxels instead of 0.5 mm (as tutorial step 10 at its small size)",
+    ),
+    (
+        "docs/head.md",
+        "arfi field --scenario head_hemi.toml",
+        None,
+        1,
+        "not run: the 1024-element hemisphere at 650 kHz marches a 540 x 540 x 256 grid (tutorial step 10 runs a "
+        "hemisphere through a head at a small size: python/tests/test_tutorial.py)",
+    ),
+    (
+        "docs/head.md",
+        "arfi predict --scenario head_hemi.toml",
+        None,
+        1,
+        "not run: as the hemisphere's field (80-330 s, 3.8 GiB)",
+    ),
+    (
+        "docs/tutorial.md",
+        "arfi sweep --noise-rad 0.01 0.02 0.05 --images 1 2 3 --methods lbfgs nelder-mead --seeds 5 --out sweep",
+        None,
+        1,
+        "not run: 90 trials on a local dask cluster, 258 s on 2 loaded cores (python/tests/test_sweep.py runs sweeps)",
+    ),
 )
 ANNOTATION = re.compile(r"^<!-- docs-run: (skip|file) (.*\S) -->$")
 CONTINUES = re.compile(r"^# continues\b")
@@ -158,7 +229,7 @@ def steps(document: str) -> list[Step]:
     for block in fenced_blocks(lines, 0, end, document):
         before = next((lines[i].strip() for i in range(block.open - 1, -1, -1) if lines[i].strip()), "")
         annotation = ANNOTATION.match(before)
-        text = "\n".join(lines[block.open + 1:block.close])
+        text = "\n".join(lines[block.open + 1 : block.close])
         step = Step(document, block.open + 1, "run", block.language, text=text)
         if annotation:
             step.action, step.note = annotation.groups()
@@ -229,8 +300,10 @@ def undefined(document_steps: list[Step]) -> list[str]:
             continue
         missing = sorted(used - mine - defined - known)
         if missing:
-            bad.append(f"{step.where()}: uses {', '.join(missing)}, defined by no earlier block it continues"
-                       " (define it, or start the block with '# continues ...')")
+            bad.append(
+                f"{step.where()}: uses {', '.join(missing)}, defined by no earlier block it continues (define it, or "
+                "start the block with '# continues ...')"
+            )
         defined |= mine
     return bad
 
@@ -248,7 +321,9 @@ def substitutions(document: str) -> list[tuple[str, str, int, str]]:
 
 def texts(document_steps: list[Step]) -> dict[tuple[int, int], str]:
     """The commands by (step, command) index, and each file a step writes by (step, -1)."""
-    codes = {(i, j): c.code for i, s in enumerate(document_steps) if s.action == "run" for j, c in enumerate(s.commands)}
+    codes = {
+        (i, j): c.code for i, s in enumerate(document_steps) if s.action == "run" for j, c in enumerate(s.commands)
+    }
     return codes | {(i, -1): s.text for i, s in enumerate(document_steps) if s.action == "file"}
 
 
@@ -262,12 +337,15 @@ def shrink(document: str, document_steps: list[Step]) -> dict[tuple[int, int], s
             found, codes = sum(n for _, n in done.values()), {k: code for k, (code, _) in done.items()}
         else:
             found = sum(code.count(old) for code in codes.values() if code is not None)
-            codes = {k: code if code is None or old not in code else None if new is None else code.replace(old, new)
-                     for k, code in codes.items()}
+            codes = {
+                k: code if code is None or old not in code else None if new is None else code.replace(old, new)
+                for k, code in codes.items()
+            }
         if found != times:
             shown = old.pattern if isinstance(old, re.Pattern) else old
-            raise CommandError(f"{document}: its commands hold {shown!r} {found} times, not {times}: "
-                               "update SMALL in docs/run_docs.py")
+            raise CommandError(
+                f"{document}: its commands hold {shown!r} {found} times, not {times}: update SMALL in docs/run_docs.py"
+            )
     return codes
 
 

@@ -41,9 +41,19 @@ DOCS = Path(__file__).resolve().parent
 if str(DOCS) not in sys.path:  # docs/ is no package: its shared module is imported from beside this file
     sys.path.insert(0, str(DOCS))
 
-# TIME and is_output are used by python/tests/test_tutorial.py through this module
-from docblocks import (TIME, Command, CommandError, Parser, Run, UsageError, block_commands, exit_status,  # noqa: E402, F401
-                       fenced_blocks, is_output, run_command)
+from docblocks import TIME as TIME  # noqa: E402 (read through this module by python/tests/test_tutorial.py)
+from docblocks import (  # noqa: E402 (after the path is set)
+    Command,
+    CommandError,
+    Parser,
+    Run,
+    UsageError,
+    block_commands,
+    exit_status,
+    fenced_blocks,
+    run_command,
+)
+from docblocks import is_output as is_output  # noqa: E402 (read through this module by python/tests/test_tutorial.py)
 
 TUTORIAL = DOCS / "tutorial.md"
 HEADING = "## 10. "
@@ -93,8 +103,11 @@ def section(lines: list[str]) -> tuple[int, int]:
 def parse(lines: list[str]) -> list[Command]:
     """Step 10's commands in order: every command of its ``bash`` blocks and its ``python`` blocks."""
     start, end = section(lines)
-    commands = [c for block in fenced_blocks(lines, start, end, str(TUTORIAL))
-                for c in block_commands(lines, block, str(TUTORIAL))]
+    commands = [
+        c
+        for block in fenced_blocks(lines, start, end, str(TUTORIAL))
+        for c in block_commands(lines, block, str(TUTORIAL))
+    ]
     if not commands:
         raise StepError(f"{TUTORIAL}: step 10 has no commands")
     return commands
@@ -106,8 +119,10 @@ def shrink(codes: list[str]) -> list[str]:
     for old, new in SMALL:
         where = [k for k, code in enumerate(codes) if old in code]
         if len(where) != 1 or codes[where[0]].count(old) != 1:
-            raise StepError(f"{TUTORIAL}: step 10's commands hold {old!r} {sum(c.count(old) for c in codes)} times, "
-                            "not once: update SMALL in docs/step10.py")
+            raise StepError(
+                f"{TUTORIAL}: step 10's commands hold {old!r} {sum(c.count(old) for c in codes)} times, not once: "
+                "update SMALL in docs/step10.py"
+            )
         codes[where[0]] = codes[where[0]].replace(old, new)
     return codes
 
@@ -207,9 +222,11 @@ def form(line: str) -> str:
 
 #: Lines a command prints only in some cases (an estimate's warnings, a hotter place than the
 #: focus): the size may change whether they appear, so the form comparison leaves them out.
-CONDITIONAL = re.compile(r"^(estimate: (AMBIGUOUS|MODEL MISMATCH|KEPT THE PREDICTION|next acquisition|PRIOR NOT MOVED|prior moved"
-                         r"|NOT CONVERGED|NOT SUPPORTED)"
-                         r"|field: hottest)")
+CONDITIONAL = re.compile(
+    r"^(estimate: (AMBIGUOUS|MODEL MISMATCH|KEPT THE PREDICTION|next acquisition|PRIOR NOT MOVED|prior moved"
+    r"|NOT CONVERGED|NOT SUPPORTED)"
+    r"|field: hottest)"
+)
 
 
 def form_mismatches(step: StepRun) -> list[str]:
@@ -217,10 +234,16 @@ def form_mismatches(step: StepRun) -> list[str]:
     :data:`CONDITIONAL` ones aside)."""
     bad = []
     for command, run in zip(step.commands, step.runs):
-        shown, printed = ([form(x) for x in lines if not CONDITIONAL.match(x)] for lines in (command.output, run.printed))
+        shown, printed = (
+            [form(x) for x in lines if not CONDITIONAL.match(x)] for lines in (command.output, run.printed)
+        )
         if shown != printed:
-            bad.append(f"`{command.code.splitlines()[0]}`:\n  tutorial: " + "\n            ".join(shown)
-                       + "\n  printed:  " + "\n            ".join(printed))
+            bad.append(
+                f"`{command.code.splitlines()[0]}`:\n  tutorial: "
+                + "\n            ".join(shown)
+                + "\n  printed:  "
+                + "\n            ".join(printed)
+            )
     return bad
 
 
@@ -231,8 +254,11 @@ def untimed(text: str) -> str:
 
 def stale_figures(lines: list[str], folder: Path) -> list[str]:
     """The embedded figures whose file differs from what the commands wrote."""
-    return [target for source, target in figures(lines)
-            if not (DOCS / target).exists() or (DOCS / target).read_bytes() != (folder / source).read_bytes()]
+    return [
+        target
+        for source, target in figures(lines)
+        if not (DOCS / target).exists() or (DOCS / target).read_bytes() != (folder / source).read_bytes()
+    ]
 
 
 def write(lines: list[str], new: list[str], folder: Path) -> None:
@@ -253,8 +279,10 @@ def check(lines: list[str], new: list[str], step: StepRun, folder: Path, small: 
     old, now = untimed("\n".join(lines)).splitlines(), untimed("\n".join(new)).splitlines()
     diff = list(difflib.unified_diff(old, now, "tutorial.md", "printed", lineterm=""))
     stale = stale_figures(lines, folder)
-    print("\n".join(diff + [f"step10: docs/{t} differs from what the commands draw" for t in stale])
-          or "step10: the tutorial shows what the commands print")
+    print(
+        "\n".join(diff + [f"step10: docs/{t} differs from what the commands draw" for t in stale])
+        or "step10: the tutorial shows what the commands print"
+    )
     return 1 if diff or stale else 0
 
 

@@ -40,16 +40,31 @@ def run(name: str, ppw: float, solid: bool) -> dict:
         f = sim.field_from_volume(r.plane, r.z_mm, r.axis, r.magnitude)
     fdtd, marched = stored_parts(f), stored_parts(march)
     return {
-        "case": name, "description": cap.description, "correlation_mm": cap.correlation_mm, "seed": cap.seed,
+        "case": name,
+        "description": cap.description,
+        "correlation_mm": cap.correlation_mm,
+        "seed": cap.seed,
         "ct_sha256": fingerprint,
-        "solid": {"shear_sound_speed_m_s": textured_caps.SHEAR_M_S, "shear_attenuation_db_cm_mhz": textured_caps.SHEAR_DB_CM_MHZ}
-        if solid else None,
+        "solid": {
+            "shear_sound_speed_m_s": textured_caps.SHEAR_M_S,
+            "shear_attenuation_db_cm_mhz": textured_caps.SHEAR_DB_CM_MHZ,
+        }
+        if solid
+        else None,
         "points_per_wavelength": ppw,
         "fdtd": fdtd,
         "march_when_made": {k: marched[k] for k in ("focal_pressure_p0", "focal_point_mm")},
-        "engine": {"engine": fullwave.ENGINE, "engine_version": fullwave.ENGINE_VERSION, "voxel_mm": r.plan.h_m * 1e3,
-                   "shape_xyz": list(r.plan.shape), "steps": r.plan.steps, "time_step_s": r.plan.dt_s, "materials": r.materials,
-                   "steady_change": r.steady_change, "seconds": round(r.seconds, 1)},
+        "engine": {
+            "engine": fullwave.ENGINE,
+            "engine_version": fullwave.ENGINE_VERSION,
+            "voxel_mm": r.plan.h_m * 1e3,
+            "shape_xyz": list(r.plan.shape),
+            "steps": r.plan.steps,
+            "time_step_s": r.plan.dt_s,
+            "materials": r.materials,
+            "steady_change": r.steady_change,
+            "seconds": round(r.seconds, 1),
+        },
         "date": datetime.date.today().isoformat(),
     }
 
@@ -66,26 +81,41 @@ def calibration(ppw: float) -> dict:
     found = [r for r in rows if (r["case"], r["points_per_wavelength"]) == ("shell", ppw)]
     r = found[0] if found else scenario_fdtd.run("shell", ppw)
     return {
-        "case": "shell", "description": r["description"], "points_per_wavelength": ppw,
-        "exact_focal_pressure_p0": r["exact_focal_pressure_p0"], "exact_focal_point_mm": r["exact_focal_point_mm"],
+        "case": "shell",
+        "description": r["description"],
+        "points_per_wavelength": ppw,
+        "exact_focal_pressure_p0": r["exact_focal_pressure_p0"],
+        "exact_focal_point_mm": r["exact_focal_point_mm"],
         "fdtd": {"focal_pressure_p0": r["fdtd_focal_pressure_p0"], "focal_point_mm": r["fdtd_focal_point_mm"]},
-        "march_when_made": {"focal_pressure_p0": r["march_focal_pressure_p0"], "focal_point_mm": r["march_focal_point_mm"]},
-        "engine": r["fdtd"], "date": r["date"],
+        "march_when_made": {
+            "focal_pressure_p0": r["march_focal_pressure_p0"],
+            "focal_point_mm": r["march_focal_point_mm"],
+        },
+        "engine": r["fdtd"],
+        "date": r["date"],
     }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--case", nargs="+", default=[c.name for c in textured_caps.CAPS] + ["shell"],
-                    help="the caps, and shell: the calibration (the engine's error where the exact answer is known)")
+    ap.add_argument(
+        "--case",
+        nargs="+",
+        default=[c.name for c in textured_caps.CAPS] + ["shell"],
+        help="the caps, and shell: the calibration (the engine's error where the exact answer is known)",
+    )
     ap.add_argument("--ppw", type=float, default=6.0)
     ap.add_argument("--solid", action="store_true", help="bone as a solid (see above); default a fluid")
     args = ap.parse_args()
     for name in args.case:
         row = calibration(args.ppw) if name == "shell" else run(name, args.ppw, args.solid)
         rows = json.loads(OUT.read_text()) if OUT.exists() else []
-        print(json.dumps({k: v for k, v in row.items() if k != "fdtd"} | {"fdtd_focus": row["fdtd"]["focal_pressure_p0"],
-                                                                         "fdtd_point": row["fdtd"]["focal_point_mm"]}))
+        print(
+            json.dumps(
+                {k: v for k, v in row.items() if k != "fdtd"}
+                | {"fdtd_focus": row["fdtd"]["focal_pressure_p0"], "fdtd_point": row["fdtd"]["focal_point_mm"]}
+            )
+        )
         rows = [r for r in rows if (r["case"], r["points_per_wavelength"]) != (name, args.ppw)] + [row]
         OUT.parent.mkdir(exist_ok=True)
         OUT.write_text(json.dumps(rows, indent=1) + "\n")

@@ -18,12 +18,12 @@ as an independent full-wave check of the plate's plane-wave transmission.
   exactly w/c + i alpha (the exact solution's), for P and S; the DFT at f0 then
   compares like with like.  cs = 0 gives the fluid plate.
 """
+
 from __future__ import annotations
 
 import time
 
 import numpy as np
-
 import plate_exact as pe
 
 F0 = pe.F0_HZ
@@ -38,8 +38,20 @@ def kv_moduli(rho, c, alpha_np_m, f=F0):
     return M.real, -M.imag / w
 
 
-def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho"], d_m=pe.D_M,
-             n_env_cycles=10, t_record=160e-6, lossy=False, dt=None, verbose=True):
+def simulate(
+    angle_deg,
+    dx,
+    cs,
+    with_plate,
+    cp=pe.BONE["cp"],
+    rho_b=pe.BONE["rho"],
+    d_m=pe.D_M,
+    n_env_cycles=10,
+    t_record=160e-6,
+    lossy=False,
+    dt=None,
+    verbose=True,
+):
     lam = C_W / F0
     th = np.deg2rad(angle_deg)
     if angle_deg == 0:
@@ -91,17 +103,22 @@ def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho
     dt_own = min(dt_cfl, 0.08 * dx**2 / nu)
     if lossy:
         # the water run shares the time step of a lossy plate run
-        dt_own = min(dt_own, 0.08 * dx**2 / (kv_moduli(rho_b, cp, pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]))[1] / rho_b))
+        dt_own = min(
+            dt_own, 0.08 * dx**2 / (kv_moduli(rho_b, cp, pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]))[1] / rho_b)
+        )
     dt = dt_own if dt_given is None else dt_given
     nt = int(np.ceil(t_record / dt))
     # sponge profile (applied as exp(-sigma dt) to all fields)
     zz = np.arange(nz)
     prof = np.zeros(nz)
     prof[:n_sponge] = ((n_sponge - zz[:n_sponge]) / n_sponge) ** 2
-    prof[nz - n_sponge:] = ((zz[nz - n_sponge:] - (nz - n_sponge - 1)) / n_sponge) ** 2
+    prof[nz - n_sponge :] = ((zz[nz - n_sponge :] - (nz - n_sponge - 1)) / n_sponge) ** 2
     damp = np.exp(-prof * 3.0 * C_W / (n_sponge * dx) * 4.0 * dt)[None, :]
-    vx = np.zeros((nx, nz)); vz = np.zeros((nx, nz))
-    sxx = np.zeros((nx, nz)); szz = np.zeros((nx, nz)); sxz = np.zeros((nx, nz))
+    vx = np.zeros((nx, nz))
+    vz = np.zeros((nx, nz))
+    sxx = np.zeros((nx, nz))
+    szz = np.zeros((nx, nz))
+    sxz = np.zeros((nx, nz))
     xs = np.arange(nx) * dx
     w = 2 * np.pi * F0
     T_env = n_env_cycles / F0
@@ -111,21 +128,27 @@ def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho
     t0 = time.time()
     idt = dt / dx
     viscous = lossy and with_plate
-    r_xx = np.zeros((nx, nz)); r_zz = np.zeros((nx, nz)); r_xz = np.zeros((nx, nz))
+    r_xx = np.zeros((nx, nz))
+    r_zz = np.zeros((nx, nz))
+    r_xz = np.zeros((nx, nz))
     for n in range(nt):
-        t = n * dt
         # velocities (at t + dt/2)
         dsxx_dx = np.roll(sxx, -1, 0) - sxx
-        dsxz_dz = sxz.copy(); dsxz_dz[:, 1:] -= sxz[:, :-1]
+        dsxz_dz = sxz.copy()
+        dsxz_dz[:, 1:] -= sxz[:, :-1]
         dsxz_dx = sxz - np.roll(sxz, 1, 0)
-        dszz_dz = np.zeros_like(szz); dszz_dz[:, :-1] = szz[:, 1:] - szz[:, :-1]
+        dszz_dz = np.zeros_like(szz)
+        dszz_dz[:, :-1] = szz[:, 1:] - szz[:, :-1]
         vx += idt * bx * (dsxx_dx + dsxz_dz)
         vz += idt * bz * (dsxz_dx + dszz_dz)
-        vx *= damp; vz *= damp
+        vx *= damp
+        vz *= damp
         # stresses (at t + dt)
         dvx_dx = vx - np.roll(vx, 1, 0)
-        dvz_dz = vz.copy(); dvz_dz[:, 1:] -= vz[:, :-1]
-        dvx_dz = np.zeros_like(vx); dvx_dz[:, :-1] = vx[:, 1:] - vx[:, :-1]
+        dvz_dz = vz.copy()
+        dvz_dz[:, 1:] -= vz[:, :-1]
+        dvx_dz = np.zeros_like(vx)
+        dvx_dz[:, :-1] = vx[:, 1:] - vx[:, :-1]
         dvz_dx = np.roll(vz, -1, 0) - vz
         sxx += idt * (lam2mu * dvx_dx + lam_ * dvz_dz)
         szz += idt * (lam_ * dvx_dx + lam2mu * dvz_dz)
@@ -136,7 +159,9 @@ def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho
             szz += etal * (exx - r_xx) + eta_p * (ezz - r_zz)
             sxz += eta_xz * (exz - r_xz)
             r_xx, r_zz, r_xz = exx, ezz, exz
-        sxx *= damp; szz *= damp; sxz *= damp
+        sxx *= damp
+        szz *= damp
+        sxz *= damp
         ts = (n + 1) * dt
         if ts < T_env:
             env = np.sin(np.pi * ts / T_env) ** 2
@@ -152,11 +177,14 @@ def simulate(angle_deg, dx, cs, with_plate, cp=pe.BONE["cp"], rho_b=pe.BONE["rho
     P = (acc * np.exp(-1j * kx * xs)).mean()
     wall = time.time() - t0
     if verbose:
-        print(f"[fdtd2d] angle {angle_deg} (sim {th_sim:.3f}) deg, cs {cs}, plate={with_plate}, dx {dx*1e3} mm,"
-              f" grid {nx}x{nz}, dt {dt*1e9:.2f} ns, {nt} steps, {wall:.1f} s, tail energy {e_tail/e_tot:.1e}",
-              flush=True)
-    return dict(P=P, dt=dt, nt=nt, wall=wall, grid=[nx, nz], d_m=d_cells * dx, th_sim=th_sim, kx=kx,
-                tail=e_tail / e_tot)
+        print(
+            f"[fdtd2d] angle {angle_deg} (sim {th_sim:.3f}) deg, cs {cs}, plate={with_plate}, dx {dx * 1e3} mm, grid "
+            f"{nx}x{nz}, dt {dt * 1e9:.2f} ns, {nt} steps, {wall:.1f} s, tail energy {e_tail / e_tot:.1e}",
+            flush=True,
+        )
+    return dict(
+        P=P, dt=dt, nt=nt, wall=wall, grid=[nx, nz], d_m=d_cells * dx, th_sim=th_sim, kx=kx, tail=e_tail / e_tot
+    )
 
 
 def run(args, compare_spectra, save):
@@ -170,25 +198,60 @@ def run(args, compare_spectra, save):
         fluid = args.cs == 0
         T = pe.bench_plate_T_kx(np.array([p["kx"]]), cs=max(args.cs, 1.0), lossy=lossy, d_m=p["d_m"], fluid=fluid)[0]
         Tf = pe.bench_plate_T_kx(np.array([p["kx"]]), lossy=lossy, d_m=p["d_m"], fluid=True)[0]
-        row = dict(angle_deg=ang, angle_simulated_deg=p["th_sim"], power_ratio_engine=abs(Te) ** 2,
-                   power_ratio_exact=abs(T) ** 2, power_ratio_exact_fluid_plate=abs(Tf) ** 2,
-                   ratio_engine_over_exact=abs(Te) ** 2 / abs(T) ** 2,
-                   amp_engine_re=Te.real, amp_engine_im=Te.imag, amp_exact_re=T.real, amp_exact_im=T.imag,
-                   phase_diff_deg=float(np.angle(Te / T, deg=True)),
-                   grid=p["grid"], dt_s=p["dt"], n_steps=p["nt"], runtime_s=w["wall"] + p["wall"],
-                   plate_thickness_grid_mm=p["d_m"] * 1e3, record_tail_energy_fraction=p["tail"])
+        row = dict(
+            angle_deg=ang,
+            angle_simulated_deg=p["th_sim"],
+            power_ratio_engine=abs(Te) ** 2,
+            power_ratio_exact=abs(T) ** 2,
+            power_ratio_exact_fluid_plate=abs(Tf) ** 2,
+            ratio_engine_over_exact=abs(Te) ** 2 / abs(T) ** 2,
+            amp_engine_re=Te.real,
+            amp_engine_im=Te.imag,
+            amp_exact_re=T.real,
+            amp_exact_im=T.imag,
+            phase_diff_deg=float(np.angle(Te / T, deg=True)),
+            grid=p["grid"],
+            dt_s=p["dt"],
+            n_steps=p["nt"],
+            runtime_s=w["wall"] + p["wall"],
+            plate_thickness_grid_mm=p["d_m"] * 1e3,
+            record_tail_energy_fraction=p["tail"],
+        )
         rows.append(row)
-        print(f"angle {p['th_sim']:6.2f}: engine |T|^2 {abs(Te)**2:.4f}  exact {abs(T)**2:.4f}"
-              f"  (fluid plate {abs(Tf)**2:.4f})  ratio {row['ratio_engine_over_exact']:.3f}"
-              f"  phase diff {row['phase_diff_deg']:.1f} deg", flush=True)
-        save(args, rows, dict(engine="fdtd2d (this bench, NumPy P-SV staggered grid, periodic x)",
-                              source="additive stress row, periodic cos(kx x - w t), 10-cycle Hann envelope",
-                              absorbing="30 mm quadratic sponges", precision="double"))
+        print(
+            f"angle {p['th_sim']:6.2f}: engine |T|^2 {abs(Te) ** 2:.4f}  exact {abs(T) ** 2:.4f}  (fluid plate "
+            f"{abs(Tf) ** 2:.4f})  ratio {row['ratio_engine_over_exact']:.3f}  phase diff {row['phase_diff_deg']:.1f} "
+            "deg",
+            flush=True,
+        )
+        save(
+            args,
+            rows,
+            dict(
+                engine="fdtd2d (this bench, NumPy P-SV staggered grid, periodic x)",
+                source="additive stress row, periodic cos(kx x - w t), 10-cycle Hann envelope",
+                absorbing="30 mm quadratic sponges",
+                precision="double",
+            ),
+        )
 
 
 # ---------------------------------------------------------------- tilted, staircased plate
-def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp=pe.BONE["cp"],
-                    rho_b=pe.BONE["rho"], d_m=pe.D_M, n_env_cycles=4, t_record=70e-6, dt=None, verbose=True):
+def simulate_tilted(
+    angle_deg,
+    dx,
+    cs,
+    with_plate,
+    lossy=True,
+    waist_m=12e-3,
+    cp=pe.BONE["cp"],
+    rho_b=pe.BONE["rho"],
+    d_m=pe.D_M,
+    n_env_cycles=4,
+    t_record=70e-6,
+    dt=None,
+    verbose=True,
+):
     """Gaussian beam along z onto a plate tilted by angle_deg in the x-z plane (staircased:
     a cell is bone if its centre is inside the plate).  Sponges on all four sides.
     Returns the 500 kHz pressure along a row behind the plate."""
@@ -227,8 +290,10 @@ def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp
         m4 = [a, np.roll(a, -1, 0)]
         m4 += [np.concatenate([m[:, 1:], m[:, -1:]], axis=1) for m in m4]
         with np.errstate(divide="ignore"):
-            return np.where(np.all([m > 0 for m in m4], axis=0),
-                            4.0 / sum(1.0 / np.where(m > 0, m, 1) for m in m4), 0.0)
+            return np.where(
+                np.all([m > 0 for m in m4], axis=0), 4.0 / sum(1.0 / np.where(m > 0, m, 1) for m in m4), 0.0
+            )
+
     mu_xz, eta_xz = hm4(mu), hm4(eta_s)
     if dt is None:
         dt = 0.5 * dx / (cp * np.sqrt(2.0))
@@ -240,14 +305,20 @@ def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp
         i = np.arange(n)
         p = np.zeros(n)
         p[:n_sp] = ((n_sp - i[:n_sp]) / n_sp) ** 2
-        p[n - n_sp:] = ((i[n - n_sp:] - (n - n_sp - 1)) / n_sp) ** 2
+        p[n - n_sp :] = ((i[n - n_sp :] - (n - n_sp - 1)) / n_sp) ** 2
         return p
+
     sig = (prof(nx, n_sp)[:, None] + prof(nz, n_sp)[None, :]) * 3.0 * C_W / (n_sp * dx) * 4.0
     damp = np.exp(-sig * dt)
-    vx = np.zeros((nx, nz)); vz = np.zeros((nx, nz))
-    sxx = np.zeros((nx, nz)); szz = np.zeros((nx, nz)); sxz = np.zeros((nx, nz))
-    r_xx = np.zeros((nx, nz)); r_zz = np.zeros((nx, nz)); r_xz = np.zeros((nx, nz))
-    apod = np.exp(-(x / waist_m) ** 2)
+    vx = np.zeros((nx, nz))
+    vz = np.zeros((nx, nz))
+    sxx = np.zeros((nx, nz))
+    szz = np.zeros((nx, nz))
+    sxz = np.zeros((nx, nz))
+    r_xx = np.zeros((nx, nz))
+    r_zz = np.zeros((nx, nz))
+    r_xz = np.zeros((nx, nz))
+    apod = np.exp(-((x / waist_m) ** 2))
     w = 2 * np.pi * F0
     T_env = n_env_cycles / F0
     acc = np.zeros(nx, complex)
@@ -256,15 +327,20 @@ def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp
     t0 = time.time()
     for n in range(nt):
         dsxx_dx = np.roll(sxx, -1, 0) - sxx
-        dsxz_dz = sxz.copy(); dsxz_dz[:, 1:] -= sxz[:, :-1]
+        dsxz_dz = sxz.copy()
+        dsxz_dz[:, 1:] -= sxz[:, :-1]
         dsxz_dx = sxz - np.roll(sxz, 1, 0)
-        dszz_dz = np.zeros_like(szz); dszz_dz[:, :-1] = szz[:, 1:] - szz[:, :-1]
+        dszz_dz = np.zeros_like(szz)
+        dszz_dz[:, :-1] = szz[:, 1:] - szz[:, :-1]
         vx += idt * bx * (dsxx_dx + dsxz_dz)
         vz += idt * bz * (dsxz_dx + dszz_dz)
-        vx *= damp; vz *= damp
+        vx *= damp
+        vz *= damp
         dvx_dx = vx - np.roll(vx, 1, 0)
-        dvz_dz = vz.copy(); dvz_dz[:, 1:] -= vz[:, :-1]
-        dvx_dz = np.zeros_like(vx); dvx_dz[:, :-1] = vx[:, 1:] - vx[:, :-1]
+        dvz_dz = vz.copy()
+        dvz_dz[:, 1:] -= vz[:, :-1]
+        dvx_dz = np.zeros_like(vx)
+        dvx_dz[:, :-1] = vx[:, 1:] - vx[:, :-1]
         dvz_dx = np.roll(vz, -1, 0) - vz
         sxx += idt * (lam2mu * dvx_dx + lam_ * dvz_dz)
         szz += idt * (lam_ * dvx_dx + lam2mu * dvz_dz)
@@ -275,7 +351,9 @@ def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp
             szz += etal * (exx - r_xx) + eta_p * (ezz - r_zz)
             sxz += eta_xz * (exz - r_xz)
             r_xx, r_zz, r_xz = exx, ezz, exz
-        sxx *= damp; szz *= damp; sxz *= damp
+        sxx *= damp
+        szz *= damp
+        sxz *= damp
         ts = (n + 1) * dt
         if ts < T_env:
             sv = np.sin(np.pi * ts / T_env) ** 2 * np.sin(w * ts) * apod
@@ -286,10 +364,12 @@ def simulate_tilted(angle_deg, dx, cs, with_plate, lossy=True, waist_m=12e-3, cp
     wall = time.time() - t0
     i0, i1 = n_sp, nx - n_sp
     if verbose:
-        print(f"[fdtd2d tilted] angle {angle_deg} deg, cs {cs}, plate={with_plate}, dx {dx*1e3} mm, grid {nx}x{nz},"
-              f" dt {dt*1e9:.2f} ns, {nt} steps, {wall:.1f} s", flush=True)
-    return dict(P=acc[i0:i1], dt=dt, nt=nt, wall=wall, grid=[nx, nz], d_m=d_m,
-                normal=(np.sin(th), 0.0, np.cos(th)))
+        print(
+            f"[fdtd2d tilted] angle {angle_deg} deg, cs {cs}, plate={with_plate}, dx {dx * 1e3} mm, grid {nx}x{nz}, dt "
+            f"{dt * 1e9:.2f} ns, {nt} steps, {wall:.1f} s",
+            flush=True,
+        )
+    return dict(P=acc[i0:i1], dt=dt, nt=nt, wall=wall, grid=[nx, nz], d_m=d_m, normal=(np.sin(th), 0.0, np.cos(th)))
 
 
 def run_tilted(args, compare_spectra, save):
@@ -299,17 +379,35 @@ def run_tilted(args, compare_spectra, save):
     for ang in args.angles_deg:
         w = simulate_tilted(ang, dx, args.cs, False, lossy=lossy, waist_m=args.waist_mm * 1e-3)
         p = simulate_tilted(ang, dx, args.cs, True, lossy=lossy, waist_m=args.waist_mm * 1e-3, dt=w["dt"])
-        c = compare_spectra(p["P"], w["P"], dx, p["normal"], cs=max(args.cs, 1.0), lossy=lossy,
-                            fluid=args.cs == 0)
-        row = dict(angle_deg=ang, **{k: v for k, v in c.items() if not isinstance(v, complex)},
-                   amp_engine_re=c["amp_engine"].real, amp_engine_im=c["amp_engine"].imag,
-                   amp_exact_re=c["amp_exact"].real, amp_exact_im=c["amp_exact"].imag,
-                   ratio_engine_over_exact=c["power_ratio_engine"] / c["power_ratio_exact"],
-                   grid=p["grid"], dt_s=p["dt"], n_steps=p["nt"], runtime_s=w["wall"] + p["wall"],
-                   plate_thickness_grid_mm=p["d_m"] * 1e3)
+        c = compare_spectra(p["P"], w["P"], dx, p["normal"], cs=max(args.cs, 1.0), lossy=lossy, fluid=args.cs == 0)
+        row = dict(
+            angle_deg=ang,
+            **{k: v for k, v in c.items() if not isinstance(v, complex)},
+            amp_engine_re=c["amp_engine"].real,
+            amp_engine_im=c["amp_engine"].imag,
+            amp_exact_re=c["amp_exact"].real,
+            amp_exact_im=c["amp_exact"].imag,
+            ratio_engine_over_exact=c["power_ratio_engine"] / c["power_ratio_exact"],
+            grid=p["grid"],
+            dt_s=p["dt"],
+            n_steps=p["nt"],
+            runtime_s=w["wall"] + p["wall"],
+            plate_thickness_grid_mm=p["d_m"] * 1e3,
+        )
         rows.append(row)
-        print(f"angle {ang:5.1f} (tilted plate): engine |T|^2 {row['power_ratio_engine']:.4f}"
-              f"  exact {row['power_ratio_exact']:.4f} (fluid plate {row['power_ratio_exact_fluid_plate']:.4f})"
-              f"  ratio {row['ratio_engine_over_exact']:.3f}", flush=True)
-        save(args, rows, dict(engine="fdtd2d (this bench), Gaussian beam, staircased tilted plate",
-                              waist_mm=args.waist_mm, absorbing="20 mm quadratic sponges", precision="double"))
+        print(
+            f"angle {ang:5.1f} (tilted plate): engine |T|^2 {row['power_ratio_engine']:.4f}  exact "
+            f"{row['power_ratio_exact']:.4f} (fluid plate {row['power_ratio_exact_fluid_plate']:.4f})  ratio "
+            f"{row['ratio_engine_over_exact']:.3f}",
+            flush=True,
+        )
+        save(
+            args,
+            rows,
+            dict(
+                engine="fdtd2d (this bench), Gaussian beam, staircased tilted plate",
+                waist_mm=args.waist_mm,
+                absorbing="20 mm quadratic sponges",
+                precision="double",
+            ),
+        )

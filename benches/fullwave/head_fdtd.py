@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from arfi import fullwave, validation_head as vh
+from arfi import fullwave
+from arfi import validation_head as vh
 
 PPW = (6.0, 5.0)
 
@@ -48,14 +49,28 @@ def run(work: Path, scenario: Path, engine: str, ppw: float | None = None) -> tu
 
 def parts(f: Any, j: dict[str, Any], cut: bool = True) -> dict[str, Any]:
     """:func:`arfi.validation_head.parts` of a run's npz ``f`` and JSON ``j``."""
-    return vh.parts(f["pressure"], f["x_mm"], f["y_mm"], float(f["z_mm"]), f["axis_z_mm"], f["axis_pressure"], j["focal_peak_pa"],
-                    j["focal_peak_mm"], float(f["surface_pressure_pa"]), cut=cut)
+    return vh.parts(
+        f["pressure"],
+        f["x_mm"],
+        f["y_mm"],
+        float(f["z_mm"]),
+        f["axis_z_mm"],
+        f["axis_pressure"],
+        j["focal_peak_pa"],
+        j["focal_peak_mm"],
+        float(f["surface_pressure_pa"]),
+        cut=cut,
+    )
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", type=Path, default=None, help="folder for the CT, the scenario and the engines' outputs "
-                                                             "(default: a temporary one)")
+    ap.add_argument(
+        "--work",
+        type=Path,
+        default=None,
+        help="folder for the CT, the scenario and the engines' outputs (default: a temporary one)",
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
@@ -76,19 +91,31 @@ def main() -> None:
         ref = vh.scaled(fine["parts"], coarse["parts"], fine["fdtd"]["voxel_mm"], coarse["fdtd"]["voxel_mm"])
         m = vh.metrics(march_whole, ref)
         out = {
-            "case": vh.NAME, "frequency_hz": vh.FREQUENCY_HZ, "elements": vh.ELEMENTS, "seed": vh.SEED, "ct_voxel_mm": vh.VOXEL_MM,
-            "ct_sha256": sha, "engine": fullwave.ENGINE, "engine_version": fullwave.ENGINE_VERSION,
-            "reference": ref, "runs": runs, "march": march,
-            "march_against_reference": {k: m[k] for k in ("focal_pressure", "focal_point_mm", "focal_position_error_mm",
-                                                          "axial_error", "correlation")},
+            "case": vh.NAME,
+            "frequency_hz": vh.FREQUENCY_HZ,
+            "elements": vh.ELEMENTS,
+            "seed": vh.SEED,
+            "ct_voxel_mm": vh.VOXEL_MM,
+            "ct_sha256": sha,
+            "engine": fullwave.ENGINE,
+            "engine_version": fullwave.ENGINE_VERSION,
+            "reference": ref,
+            "runs": runs,
+            "march": march,
+            "march_against_reference": {
+                k: m[k]
+                for k in ("focal_pressure", "focal_point_mm", "focal_position_error_mm", "axial_error", "correlation")
+            },
             "date": datetime.date.today().isoformat(),
         }
         vh.REFERENCE.write_text(json.dumps(out, indent=1) + "\n")
         print(json.dumps(out["march_against_reference"], indent=1))
         for r in runs:
-            print(f"{r['points_per_wavelength']:g} points per wavelength: {r['parts']['focal_pressure_p0']:.4f} p0 at "
-                  f"{np.round(r['parts']['focal_point_mm'], 2).tolist()} mm, {r['fdtd']['seconds']:.0f} s; "
-                  f"limit {ref['focal_pressure_p0']:.4f} at {np.round(ref['extrapolated_focal_point_mm'], 2).tolist()} mm")
+            print(
+                f"{r['points_per_wavelength']:g} points per wavelength: {r['parts']['focal_pressure_p0']:.4f} p0 at "
+                f"{np.round(r['parts']['focal_point_mm'], 2).tolist()} mm, {r['fdtd']['seconds']:.0f} s; limit "
+                f"{ref['focal_pressure_p0']:.4f} at {np.round(ref['extrapolated_focal_point_mm'], 2).tolist()} mm"
+            )
 
 
 if __name__ == "__main__":

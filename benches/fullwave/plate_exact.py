@@ -25,6 +25,7 @@ Conventions
   on a plane behind it) is T * exp(-i kz_water d), see `insertion_T`.
   For the same fluid on both sides and no loss, |R|^2 + |T|^2 = 1.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -128,8 +129,9 @@ def solid_layer_RT(
     M[:, 5, 3] = -g * Es
     M[:, 5, 4] = -g
     # row scaling (stress rows ~ rho w^2, displacement rows ~ k) for conditioning
-    scale = np.array([1 / abs(k1), 1 / (rho1 * w**2), 1 / (rho1 * w**2),
-                      1 / abs(k1), 1 / (rho1 * w**2), 1 / (rho1 * w**2)])
+    scale = np.array(
+        [1 / abs(k1), 1 / (rho1 * w**2), 1 / (rho1 * w**2), 1 / abs(k1), 1 / (rho1 * w**2), 1 / (rho1 * w**2)]
+    )
     M *= scale[None, :, None]
     rhs *= scale[None, :]
     x = np.linalg.solve(M, rhs[..., None])[..., 0]
@@ -211,7 +213,10 @@ def lamb_phase_velocities(f_hz, d_m, cp, cs, c_min, c_max, n=200001):
     out = {}
     s = np.linspace(1 / c_max, 1 / c_min, n)[1:-1]
     for j, name in enumerate(("S", "A")):
-        f = lambda sl: rayleigh_lamb(f_hz, 1 / sl, d_m, cp, cs)[j]  # noqa: E731
+
+        def f(sl, j=j):
+            return rayleigh_lamb(f_hz, 1 / sl, d_m, cp, cs)[j]
+
         v = f(s)
         idx = np.nonzero(np.sign(v[:-1]) * np.sign(v[1:]) < 0)[0]
         roots = []
@@ -245,11 +250,13 @@ def bench_plate_T(angles_deg, cs=BONE["cs"], lossy=True, fluid=False, f_hz=F0_HZ
     ap = alpha_np_per_m(BONE["alpha_p_db_cm"]) if lossy else 0.0
     as_ = alpha_np_per_m(BONE["alpha_s_db_cm"]) if lossy else 0.0
     if fluid:
-        _, T = fluid_layer_RT(f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"],
-                              WATER["rho"], WATER["c"], alpha2_np_m=ap)
+        _, T = fluid_layer_RT(
+            f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], WATER["rho"], WATER["c"], alpha2_np_m=ap
+        )
     else:
-        _, T = solid_layer_RT(f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], cs,
-                              WATER["rho"], WATER["c"], ap, as_)
+        _, T = solid_layer_RT(
+            f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], cs, WATER["rho"], WATER["c"], ap, as_
+        )
     return insertion_T(T, f_hz, kx, d_m, WATER["c"])
 
 
@@ -259,28 +266,34 @@ def bench_plate_T_kx(kx, cs=BONE["cs"], lossy=True, fluid=False, f_hz=F0_HZ, d_m
     ap = alpha_np_per_m(BONE["alpha_p_db_cm"]) if lossy else 0.0
     as_ = alpha_np_per_m(BONE["alpha_s_db_cm"]) if lossy else 0.0
     if fluid:
-        _, T = fluid_layer_RT(f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"],
-                              WATER["rho"], WATER["c"], alpha2_np_m=ap)
+        _, T = fluid_layer_RT(
+            f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], WATER["rho"], WATER["c"], alpha2_np_m=ap
+        )
     else:
-        _, T = solid_layer_RT(f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], cs,
-                              WATER["rho"], WATER["c"], ap, as_)
+        _, T = solid_layer_RT(
+            f_hz, kx, d_m, WATER["rho"], WATER["c"], BONE["rho"], BONE["cp"], cs, WATER["rho"], WATER["c"], ap, as_
+        )
     return insertion_T(T, f_hz, kx, d_m, WATER["c"])
 
 
 def main():
     import argparse
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--angles-deg", type=float, nargs="*",
-                    default=[0, 5, 10, 15, 20, 25, 30, 32, 35, 40, 45, 50, 60])
+    ap.add_argument("--angles-deg", type=float, nargs="*", default=[0, 5, 10, 15, 20, 25, 30, 32, 35, 40, 45, 50, 60])
     args = ap.parse_args()
     a = np.array(args.angles_deg)
-    cols = [("fluid", dict(fluid=True)), ("solid cs1500", dict()),
-            ("solid lossless", dict(lossy=False)), ("solid cs1300", dict(cs=1300.0)),
-            ("solid cs1700", dict(cs=1700.0))]
+    cols = [
+        ("fluid", dict(fluid=True)),
+        ("solid cs1500", dict()),
+        ("solid lossless", dict(lossy=False)),
+        ("solid cs1300", dict(cs=1300.0)),
+        ("solid cs1700", dict(cs=1700.0)),
+    ]
     print("angle_deg | " + " | ".join(f"|T|^2 {n}" for n, _ in cols))
     res = {n: bench_plate_T(a, **kw) for n, kw in cols}
     for i, th in enumerate(a):
-        print(f"{th:6.1f} | " + " | ".join(f"{abs(res[n][i])**2:.4f}" for n, _ in cols))
+        print(f"{th:6.1f} | " + " | ".join(f"{abs(res[n][i]) ** 2:.4f}" for n, _ in cols))
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ Reported per angle:
   amp_engine = sum P_plate conj(P_water) cos / sum |P_water|^2 cos  (complex)
   amp_exact  = sum T_ins |P_water|^2 cos / sum |P_water|^2 cos
 """
+
 from __future__ import annotations
 
 import argparse
@@ -60,8 +61,7 @@ def dft_at(sig, t, f=F0):
     return (sig * np.exp(2j * np.pi * f * t)[None, :]).sum(axis=-1)
 
 
-def compare_spectra(Pp, Pw, dx, plate_normal=(0.0, 0.0, 1.0), cs=1500.0, lossy=True, d_m=pe.D_M,
-                    fluid=False):
+def compare_spectra(Pp, Pw, dx, plate_normal=(0.0, 0.0, 1.0), cs=1500.0, lossy=True, d_m=pe.D_M, fluid=False):
     """Angular-spectrum comparison on a measurement plane (2-D array x,y or 1-D x)."""
     k = 2 * np.pi * F0 / C_W
     if Pp.ndim == 1:
@@ -85,9 +85,19 @@ def compare_spectra(Pp, Pw, dx, plate_normal=(0.0, 0.0, 1.0), cs=1500.0, lossy=T
         power_ratio_engine=float((np.abs(Sp) ** 2 * wgt).sum() / den),
         power_ratio_exact=float((np.abs(Tins) ** 2 * np.abs(Sw) ** 2 * wgt).sum() / den),
         power_ratio_exact_fluid_plate=float(
-            (np.abs(np.nan_to_num(pe.bench_plate_T_kx(ktp.ravel(), lossy=lossy, d_m=d_m, fluid=True)
-                                  .reshape(ktp.shape) * (wgt > 0))) ** 2
-             * np.abs(Sw) ** 2 * wgt).sum() / den),
+            (
+                np.abs(
+                    np.nan_to_num(
+                        pe.bench_plate_T_kx(ktp.ravel(), lossy=lossy, d_m=d_m, fluid=True).reshape(ktp.shape)
+                        * (wgt > 0)
+                    )
+                )
+                ** 2
+                * np.abs(Sw) ** 2
+                * wgt
+            ).sum()
+            / den
+        ),
         amp_engine=complex((Sp * np.conj(Sw) * wgt).sum() / den),
         amp_exact=complex((Tins * np.abs(Sw) ** 2 * wgt).sum() / den),
         evanescent_power_fraction_water=float((np.abs(Sw[~prop]) ** 2).sum() / (np.abs(Sw) ** 2).sum()),
@@ -97,12 +107,14 @@ def compare_spectra(Pp, Pw, dx, plate_normal=(0.0, 0.0, 1.0), cs=1500.0, lossy=T
 # ============================================================== BabelViscoFDTD
 def babel_import():
     import importlib.util
+
     spec = importlib.util.find_spec("BabelViscoFDTD")
     pkg_dir = os.path.dirname(spec.origin)
     if pkg_dir not in sys.path:
         sys.path.insert(0, pkg_dir)  # its CPU module imports the extension by top-level name
-    from BabelViscoFDTD.PropagationModel import PropagationModel
     import BabelViscoFDTD
+    from BabelViscoFDTD.PropagationModel import PropagationModel
+
     return PropagationModel(), getattr(BabelViscoFDTD, "__version__", "1.2.7")
 
 
@@ -157,8 +169,7 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
     # materials: rho, cp, cs, alpha_p (Np/m), alpha_s (Np/m)
     ap = pe.alpha_np_per_m(pe.BONE["alpha_p_db_cm"]) if lossy else 0.0
     as_ = pe.alpha_np_per_m(pe.BONE["alpha_s_db_cm"]) if (lossy and cs > 0) else 0.0
-    props = np.array([[RHO_W, C_W, 0.0, 0.0, 0.0],
-                      [pe.BONE["rho"], pe.BONE["cp"], cs, ap, as_]])
+    props = np.array([[RHO_W, C_W, 0.0, 0.0, 0.0], [pe.BONE["rho"], pe.BONE["cp"], cs, ap, as_]])
     # source: plane z = iz_src, Gaussian apodization, per-column delay for the tilt
     src = np.zeros((nx, ny, nz), np.uint32)
     wts = np.zeros((nx, ny, nz), np.float32)
@@ -174,14 +185,31 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
     duration = n_cyc / F0 + delays.max() + t_travel + 25e-6
     # dt: Babel's own (CFL) for the bone, unless given (to share dt between runs)
     if dt is None:
-        props_dt = np.array([[RHO_W, C_W, 0.0, 0.0, 0.0],
-                             [pe.BONE["rho"], pe.BONE["cp"], 1500.0, pe.alpha_np_per_m(4.0), pe.alpha_np_per_m(4.0)]])
+        props_dt = np.array(
+            [
+                [RHO_W, C_W, 0.0, 0.0, 0.0],
+                [pe.BONE["rho"], pe.BONE["cp"], 1500.0, pe.alpha_np_per_m(4.0), pe.alpha_np_per_m(4.0)],
+            ]
+        )
         mat_dt = mat.copy()
         mat_dt[nx // 2, ny // 2, nz // 2] = 1
         _, dt = PM.StaggeredFDTD_3D_with_relaxation(
-            mat_dt, props_dt, F0, src, np.zeros((cols.size, 10)), dx, duration, np.ones_like(src),
-            Ox=wts, Oy=np.array([1]), Oz=np.array([1]), TypeSource=2, CheckOnlyParams=True,
-            USE_SINGLE=True, COMPUTING_BACKEND=0)
+            mat_dt,
+            props_dt,
+            F0,
+            src,
+            np.zeros((cols.size, 10)),
+            dx,
+            duration,
+            np.ones_like(src),
+            Ox=wts,
+            Oy=np.array([1]),
+            Oz=np.array([1]),
+            TypeSource=2,
+            CheckOnlyParams=True,
+            USE_SINGLE=True,
+            COMPUTING_BACKEND=0,
+        )
         dt = float(dt)
     nt = int(np.ceil(duration / dt)) + 1
     t = np.arange(nt) * dt
@@ -192,15 +220,35 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
     sens[i0:i1, j0:j1, iz_sens] = 1
     nvox = nx * ny * nz
     if verbose:
-        print(f"[babel] angle {angle_deg} deg, {geometry}, plate={with_plate}, dx {dx*1e3} mm, grid {nx}x{ny}x{nz}"
-              f" = {nvox/1e6:.2f} M voxels, dt {dt*1e9:.2f} ns, {nt} steps, est {nvox*nt*80e-9:.0f} s",
-              flush=True)
+        print(
+            f"[babel] angle {angle_deg} deg, {geometry}, plate={with_plate}, dx {dx * 1e3} mm, grid {nx}x{ny}x{nz} = "
+            f"{nvox / 1e6:.2f} M voxels, dt {dt * 1e9:.2f} ns, {nt} steps, est {nvox * nt * 80e-9:.0f} s",
+            flush=True,
+        )
     t0 = time.time()
     out = PM.StaggeredFDTD_3D_with_relaxation(
-        mat, props, F0, src, sf, dx, duration, sens, Ox=wts, Oy=np.array([1]), Oz=np.array([1]),
-        NDelta=npml, DT=dt, TypeSource=2, USE_SINGLE=True, COMPUTING_BACKEND=0,
-        SelRMSorPeak=1, SelMapsRMSPeakList=["Pressure"], SelMapsSensorsList=["Pressure"],
-        SensorSubSampling=1, SILENT=1)
+        mat,
+        props,
+        F0,
+        src,
+        sf,
+        dx,
+        duration,
+        sens,
+        Ox=wts,
+        Oy=np.array([1]),
+        Oz=np.array([1]),
+        NDelta=npml,
+        DT=dt,
+        TypeSource=2,
+        USE_SINGLE=True,
+        COMPUTING_BACKEND=0,
+        SelRMSorPeak=1,
+        SelMapsRMSPeakList=["Pressure"],
+        SelMapsSensorsList=["Pressure"],
+        SensorSubSampling=1,
+        SILENT=1,
+    )
     wall = time.time() - t0
     sensor = out[0]
     p = sensor["Pressure"]
@@ -210,11 +258,20 @@ def babel_run(angle_deg, dx, geometry, cs, lossy, waist_m, with_plate, dt=None, 
     P = np.zeros((i1 - i0, j1 - j0), complex)
     P[ii - i0, jj - j0] = dft_at(p.astype(float), ts)
     e = (p.astype(float) ** 2).sum(axis=0)
-    tail = float(e[int(0.9 * e.size):].sum() / e.sum())
+    tail = float(e[int(0.9 * e.size) :].sum() / e.sum())
     if verbose:
         print(f"[babel]   run time {wall:.1f} s; energy fraction in last 10 % of record {tail:.2e}", flush=True)
-    return dict(P=P, dt=dt, nt=nt, wall=wall, grid=[nx, ny, nz], d_m=d_m, normal=normal, tail=tail,
-                iz=[int(iz_src), int(iz_sens)])
+    return dict(
+        P=P,
+        dt=dt,
+        nt=nt,
+        wall=wall,
+        grid=[nx, ny, nz],
+        d_m=d_m,
+        normal=normal,
+        tail=tail,
+        iz=[int(iz_src), int(iz_sens)],
+    )
 
 
 CACHE = os.environ.get("FW_CACHE", "/tmp/fw_cache")
@@ -223,7 +280,7 @@ CACHE = os.environ.get("FW_CACHE", "/tmp/fw_cache")
 def babel_water(ang, dx, geometry, waist_m):
     """Water-only run (cached on disk: it depends only on angle, grid, geometry, beam)."""
     os.makedirs(CACHE, exist_ok=True)
-    path = os.path.join(CACHE, f"babel_water_{ang:g}_{dx*1e3:g}_{geometry}_{waist_m*1e3:g}.npz")
+    path = os.path.join(CACHE, f"babel_water_{ang:g}_{dx * 1e3:g}_{geometry}_{waist_m * 1e3:g}.npz")
     if os.path.exists(path):
         z = np.load(path, allow_pickle=True)
         print(f"[babel] water run from cache {path}", flush=True)
@@ -240,22 +297,52 @@ def run_babel(args):
     for ang in args.angles_deg:
         w = babel_water(ang, dx, args.geometry, args.waist_mm * 1e-3)
         p = babel_run(ang, dx, args.geometry, args.cs, not args.lossless, args.waist_mm * 1e-3, True, dt=w["dt"])
-        c = compare_spectra(p["P"], w["P"], dx, p["normal"], cs=max(args.cs, 1.0), lossy=not args.lossless,
-                            d_m=p["d_m"], fluid=args.cs == 0)
-        row = dict(angle_deg=ang, **{k: v for k, v in c.items() if not isinstance(v, complex)},
-                   amp_engine_re=c["amp_engine"].real, amp_engine_im=c["amp_engine"].imag,
-                   amp_exact_re=c["amp_exact"].real, amp_exact_im=c["amp_exact"].imag,
-                   ratio_engine_over_exact=c["power_ratio_engine"] / c["power_ratio_exact"],
-                   grid=p["grid"], dt_s=p["dt"], n_steps=p["nt"], runtime_s=w["wall"] + p["wall"],
-                   plate_thickness_grid_mm=p["d_m"] * 1e3, record_tail_energy_fraction=p["tail"])
+        c = compare_spectra(
+            p["P"],
+            w["P"],
+            dx,
+            p["normal"],
+            cs=max(args.cs, 1.0),
+            lossy=not args.lossless,
+            d_m=p["d_m"],
+            fluid=args.cs == 0,
+        )
+        row = dict(
+            angle_deg=ang,
+            **{k: v for k, v in c.items() if not isinstance(v, complex)},
+            amp_engine_re=c["amp_engine"].real,
+            amp_engine_im=c["amp_engine"].imag,
+            amp_exact_re=c["amp_exact"].real,
+            amp_exact_im=c["amp_exact"].imag,
+            ratio_engine_over_exact=c["power_ratio_engine"] / c["power_ratio_exact"],
+            grid=p["grid"],
+            dt_s=p["dt"],
+            n_steps=p["nt"],
+            runtime_s=w["wall"] + p["wall"],
+            plate_thickness_grid_mm=p["d_m"] * 1e3,
+            record_tail_energy_fraction=p["tail"],
+        )
         rows.append(row)
-        print(f"angle {ang:5.1f}: engine |T|^2 {row['power_ratio_engine']:.4f}  exact {row['power_ratio_exact']:.4f}"
-              f"  (fluid plate {row['power_ratio_exact_fluid_plate']:.4f})  ratio {row['ratio_engine_over_exact']:.3f}"
-              f"  amp engine {abs(c['amp_engine']):.3f}<{np.angle(c['amp_engine'], True):.0f}"
-              f"  exact {abs(c['amp_exact']):.3f}<{np.angle(c['amp_exact'], True):.0f}", flush=True)
-        save(args, rows, dict(engine="BabelViscoFDTD", engine_version=ver, geometry=args.geometry,
-                              waist_mm=args.waist_mm, source="additive stress, Hann 4-cycle burst",
-                              pml_cells=12, precision="single"))
+        print(
+            f"angle {ang:5.1f}: engine |T|^2 {row['power_ratio_engine']:.4f}  exact {row['power_ratio_exact']:.4f}  "
+            f"(fluid plate {row['power_ratio_exact_fluid_plate']:.4f})  ratio {row['ratio_engine_over_exact']:.3f}  "
+            f"amp engine {abs(c['amp_engine']):.3f}<{np.angle(c['amp_engine'], True):.0f}  exact "
+            f"{abs(c['amp_exact']):.3f}<{np.angle(c['amp_exact'], True):.0f}",
+            flush=True,
+        )
+        save(
+            args,
+            rows,
+            dict(
+                engine="BabelViscoFDTD",
+                engine_version=ver,
+                geometry=args.geometry,
+                waist_mm=args.waist_mm,
+                source="additive stress, Hann 4-cycle burst",
+                pml_cells=12,
+                precision="single",
+            ),
+        )
 
 
 def save(args, rows, meta):
@@ -271,14 +358,25 @@ def save(args, rows, meta):
     if os.path.exists(path):  # merge with earlier invocations (other angles)
         old = json.load(open(path)).get("rows", [])
         new_angles = {round(r["angle_deg"], 6) for r in rows}
-        rows = sorted([r for r in old if round(r["angle_deg"], 6) not in new_angles] + list(rows),
-                      key=lambda r: r["angle_deg"])
-    doc = dict(meta, dx_mm=args.dx_mm, f0_hz=F0, plate_thickness_nominal_mm=pe.D_M * 1e3,
-               water=dict(c_m_s=C_W, rho_kg_m3=RHO_W),
-               plate=dict(cp_m_s=pe.BONE["cp"], cs_m_s=args.cs, rho_kg_m3=pe.BONE["rho"],
-                          alpha_p_db_cm=0.0 if args.lossless else pe.BONE["alpha_p_db_cm"],
-                          alpha_s_db_cm=0.0 if args.lossless else pe.BONE["alpha_s_db_cm"]),
-               numpy_version=np.__version__, rows=rows)
+        rows = sorted(
+            [r for r in old if round(r["angle_deg"], 6) not in new_angles] + list(rows), key=lambda r: r["angle_deg"]
+        )
+    doc = dict(
+        meta,
+        dx_mm=args.dx_mm,
+        f0_hz=F0,
+        plate_thickness_nominal_mm=pe.D_M * 1e3,
+        water=dict(c_m_s=C_W, rho_kg_m3=RHO_W),
+        plate=dict(
+            cp_m_s=pe.BONE["cp"],
+            cs_m_s=args.cs,
+            rho_kg_m3=pe.BONE["rho"],
+            alpha_p_db_cm=0.0 if args.lossless else pe.BONE["alpha_p_db_cm"],
+            alpha_s_db_cm=0.0 if args.lossless else pe.BONE["alpha_s_db_cm"],
+        ),
+        numpy_version=np.__version__,
+        rows=rows,
+    )
     with open(path, "w") as fh:
         json.dump(doc, fh, indent=1)
     print(f"wrote {path}", flush=True)
@@ -293,13 +391,16 @@ def main():
     ap.add_argument("--cs", type=float, default=1500.0, help="plate shear speed, m/s")
     ap.add_argument("--lossless", action="store_true", help="no attenuation in the plate")
     ap.add_argument("--record-us", type=float, default=160.0, help="record length (fdtd2d)")
-    ap.add_argument("--waist-mm", type=float, default=12.0, help="Gaussian beam waist (babel; fdtd2d --geometry tilted)")
+    ap.add_argument(
+        "--waist-mm", type=float, default=12.0, help="Gaussian beam waist (babel; fdtd2d --geometry tilted)"
+    )
     args = ap.parse_args()
     t0 = time.time()
     if args.engine == "babel":
         run_babel(args)
     else:
         import fdtd2d
+
         if args.geometry == "tilted":
             fdtd2d.run_tilted(args, compare_spectra, save)
         else:

@@ -49,7 +49,7 @@ def solid(toml: str) -> str:
     assert marker in toml
     i = toml.index("attenuation_power", toml.index(marker))
     j = toml.index("\n", i)
-    return toml[:j + 1] + f"shear_sound_speed_m_s = {SHEAR_M_S}\nshear_attenuation_db_cm_mhz = 8.0\n" + toml[j + 1:]
+    return toml[: j + 1] + f"shear_sound_speed_m_s = {SHEAR_M_S}\nshear_attenuation_db_cm_mhz = 8.0\n" + toml[j + 1 :]
 
 
 def run(name: str, ppw: float) -> dict:
@@ -68,24 +68,38 @@ def run(name: str, ppw: float) -> dict:
     col = int(np.argmin(np.abs(np.asarray(f.x_mm) - cmp.focal_point_mm[1][0])))
     row = int(np.argmin(np.abs(np.asarray(f.y_mm))))
     line = np.c_[np.asarray(f.axis_z_mm), volume[:, row, col] / p0]
-    axis = np.c_[np.asarray(f.axis_z_mm), abs(np.asarray(march.axis_pressure)) / p0, abs(np.asarray(f.axis_pressure)) / p0]
+    axis = np.c_[
+        np.asarray(f.axis_z_mm), abs(np.asarray(march.axis_pressure)) / p0, abs(np.asarray(f.axis_pressure)) / p0
+    ]
     keep = (axis[:, 0] > 40) & (axis[:, 0] < 75)
     return {
-        "case": name, "description": case.description + (f" (a solid: shear {SHEAR_M_S:g} m/s)" if name == "bm3_solid" else ""),
+        "case": name,
+        "description": case.description + (f" (a solid: shear {SHEAR_M_S:g} m/s)" if name == "bm3_solid" else ""),
         "points_per_wavelength": ppw,
-        "exact_focal_pressure_p0": cmp.focal_pressure[1], "exact_focal_point_mm": list(cmp.focal_point_mm[1]),
+        "exact_focal_pressure_p0": cmp.focal_pressure[1],
+        "exact_focal_point_mm": list(cmp.focal_point_mm[1]),
         "march_focal_pressure_p0": mm["focal_peak_pa"] / p0 if mm["focal_peak_pa"] else None,
         "march_focal_point_mm": mm["focal_peak_mm"],
         "fdtd_focal_pressure_p0": fm["focal_peak_pa"] / p0 if fm["focal_peak_pa"] else None,
         "fdtd_focal_point_mm": fm["focal_peak_mm"],
-        "fdtd_axis_peak_p0": fm["axis_peak_pa"] / p0, "fdtd_axis_peak_z_mm": fm["axis_peak_z_mm"],
-        "march_axis_peak_p0": mm["axis_peak_pa"] / p0, "march_axis_peak_z_mm": mm["axis_peak_z_mm"],
+        "fdtd_axis_peak_p0": fm["axis_peak_pa"] / p0,
+        "fdtd_axis_peak_z_mm": fm["axis_peak_z_mm"],
+        "march_axis_peak_p0": mm["axis_peak_pa"] / p0,
+        "march_axis_peak_z_mm": mm["axis_peak_z_mm"],
         "axis_z_mm_march_fdtd_p0": np.round(axis[keep], 4).tolist(),
         "axis_read": "rms",
         "exact_line_z_mm_fdtd_p0": np.round(line[keep], 4).tolist(),
-        "fdtd": {"engine": fullwave.ENGINE, "engine_version": fullwave.ENGINE_VERSION, "voxel_mm": r.plan.h_m * 1e3,
-                 "shape_xyz": list(r.plan.shape), "steps": r.plan.steps, "time_step_s": r.plan.dt_s, "materials": r.materials,
-                 "steady_change": r.steady_change, "seconds": round(r.seconds, 1)},
+        "fdtd": {
+            "engine": fullwave.ENGINE,
+            "engine_version": fullwave.ENGINE_VERSION,
+            "voxel_mm": r.plan.h_m * 1e3,
+            "shape_xyz": list(r.plan.shape),
+            "steps": r.plan.steps,
+            "time_step_s": r.plan.dt_s,
+            "materials": r.materials,
+            "steady_change": r.steady_change,
+            "seconds": round(r.seconds, 1),
+        },
         "date": datetime.date.today().isoformat(),
     }
 

@@ -1,4 +1,5 @@
 """Checks of plate_exact.py (fast: < 2 s)."""
+
 import os
 import sys
 
@@ -41,8 +42,9 @@ def test_shear_to_zero_gives_fluid_layer():
     Rf, Tf = pe.fluid_layer_RT(F, KX, D, RHO_W, C_W, RHO_B, CP, RHO_W, C_W)
     errs = []
     for cs in (10.0, 1.0, 0.1):
-        R, T = pe.solid_layer_RT(F, KX, D, RHO_W, C_W, RHO_B, CP, cs, RHO_W, C_W,
-                                 alpha_s_np_m=1.0)  # a little shear loss, as a limit
+        R, T = pe.solid_layer_RT(
+            F, KX, D, RHO_W, C_W, RHO_B, CP, cs, RHO_W, C_W, alpha_s_np_m=1.0
+        )  # a little shear loss, as a limit
         errs.append(max(np.abs(T - Tf).max(), np.abs(R - Rf).max()))
     # converges like mu ~ cs^2
     assert errs[-1] < 1e-5, errs

@@ -13,19 +13,41 @@ Quick start::
     p = arfi.predict(arfi.Scenario.load("head.toml"))  # a CT's per-element aberration (needs [ct])
 """
 
-from arfi.scenario import Scenario
+from arfi._core import MemoryLimitError, ModeFit, ModesFit
 from arfi.cost import CostModel, CostTerm
-from arfi.simulation import Field, Section, Simulation
-from arfi.volume import IntensityVolume, PressureVolume
+from arfi.estimation import Calibration, Estimate, EstimateSupport, NextAcquisition, NuisanceFit
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
-from arfi.estimation import Calibration, Estimate, EstimateSupport, NextAcquisition, NuisanceFit
-from arfi._core import MemoryLimitError, ModeFit, ModesFit
+from arfi.scenario import Scenario
+from arfi.simulation import Field, Section, Simulation
+from arfi.volume import IntensityVolume, PressureVolume
 
-__all__ = ["Scenario", "Simulation", "Field", "Section", "PressureVolume", "IntensityVolume", "read_arfi_image", "write_arfi_image", "read_phases", "loop2", "LoopResult", "CostModel", "CostTerm",
-           "predict", "Prediction", "ModeFit", "ModesFit", "MemoryLimitError", "Calibration", "Estimate", "EstimateSupport",
-           "NuisanceFit", "NextAcquisition"]
+__all__ = [
+    "Scenario",
+    "Simulation",
+    "Field",
+    "Section",
+    "PressureVolume",
+    "IntensityVolume",
+    "read_arfi_image",
+    "write_arfi_image",
+    "read_phases",
+    "loop2",
+    "LoopResult",
+    "CostModel",
+    "CostTerm",
+    "predict",
+    "Prediction",
+    "ModeFit",
+    "ModesFit",
+    "MemoryLimitError",
+    "Calibration",
+    "Estimate",
+    "EstimateSupport",
+    "NuisanceFit",
+    "NextAcquisition",
+]
 
 try:
     from importlib.metadata import version as _version

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import html
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,7 +57,13 @@ def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     figures: list[tuple[str, str]] = []
-    stages = [("model as given", diagnosis.models_initial, diagnosis.effects[0].candidates if diagnosis.effects else diagnosis.rejected)]
+    stages = [
+        (
+            "model as given",
+            diagnosis.models_initial,
+            diagnosis.effects[0].candidates if diagnosis.effects else diagnosis.rejected,
+        )
+    ]
     for k, e in enumerate(diagnosis.effects):
         nxt = diagnosis.effects[k + 1].candidates if k + 1 < len(diagnosis.effects) else diagnosis.rejected
         stages.append((f"after adding {e.name}", e.models, nxt))
@@ -68,15 +75,20 @@ def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.
         fig = plt.figure(figsize=(15, 8.5), layout="constrained")
         top, bottom = fig.subfigures(2, 1, height_ratios=[1.15, 1.0])
         ax = top.subplots(1, 3)
-        for a, img, name, vmax in ((ax[0], images[0], "measured", lim), (ax[1], models[0], "model", lim),
-                                   (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12))):
+        for a, img, name, vmax in (
+            (ax[0], images[0], "measured", lim),
+            (ax[1], models[0], "model", lim),
+            (ax[2], residual, "residual", max(float(np.max(np.abs(residual))), 1e-12)),
+        ):
             im = a.imshow(img.T, origin="lower", extent=ext, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
             a.set(title=name, xlim=(u0, u1), ylim=(v0, v1), **axis_labels(sim))
             top.colorbar(im, ax=a, label="ARFI phase (rad)", shrink=0.9)
-        rms = float(np.sqrt(np.mean(residual ** 2)))
+        rms = float(np.sqrt(np.mean(residual**2)))
         ax[2].set_title(f"residual: RMS {rms:.4f} rad\n(noise {diagnosis.noise_floor:.4f} rad)")
         top.suptitle(f"step {k}: {title}", fontsize="x-large")
-        evidence_bars(bottom.subplots(), candidates, "next candidates" if k < len(stages) - 1 else "rejected candidates")
+        evidence_bars(
+            bottom.subplots(), candidates, "next candidates" if k < len(stages) - 1 else "rejected candidates"
+        )
         figures.append((f"step {k}: {title}", save_figure(fig, out / f"diagnose_step{k}.png")))
     fig, ax = plt.subplots(figsize=(6, 3.8))
     gap = [diagnosis.residual_rms_initial] + [e.residual_rms_after for e in diagnosis.effects]
@@ -90,16 +102,23 @@ def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.
         f"<tr><td>{k}</td><td>{html.escape(e.name)}</td><td>{html.escape(params_text(e.params))}</td>"
         f"<td>{e.cost_before:.4g}</td><td>{e.cost_after:.4g}</td><td>{e.evidence:.1f}</td>"
         f"<td>{e.residual_rms_after:.4f}</td><td>{html.escape(', '.join(e.equivalent) or '-')}</td></tr>"
-        for k, e in enumerate(diagnosis.effects, 1))
+        for k, e in enumerate(diagnosis.effects, 1)
+    )
     imgs = figure_html(out, figures)
-    verdict = ("no effect missing: the residual is consistent with the noise" if not diagnosis.effects
-               else "effects added: " + ", ".join(diagnosis.names))
+    verdict = (
+        "no effect missing: the residual is consistent with the noise"
+        if not diagnosis.effects
+        else "effects added: " + ", ".join(diagnosis.names)
+    )
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi diagnose</title>
-<style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
+<style>body{{font-family:sans-serif;max-width:1300px;margin:auto}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
 <body><h1>Model discrepancy: {html.escape(verdict)}</h1>
 <p>{len(images)} image(s), {diagnosis.n_pixels} pixels; noise floor {diagnosis.noise_floor:.4f} rad (image background).
-Residual RMS {diagnosis.residual_rms_initial:.4f} → {diagnosis.residual_rms_final:.4f} rad; cost {diagnosis.cost_initial:.4g} →
-{diagnosis.cost_final:.4g}. An effect is added when its evidence, (J<sub>before</sub> − J<sub>after</sub>)/σ² − k·ln n, is
+Residual RMS {diagnosis.residual_rms_initial:.4f} → {diagnosis.residual_rms_final:.4f} rad; cost
+{diagnosis.cost_initial:.4g} →
+{diagnosis.cost_final:.4g}. An effect is added when its evidence, (J<sub>before</sub> − J<sub>after</sub>)/σ² − k·ln n,
+is
 positive; effects listed as equivalent explain the data as well (within 2).</p>
 {_alternative(diagnosis)}
 <table><tr><th>step</th><th>effect</th><th>parameters</th><th>cost before</th><th>cost after</th><th>evidence</th>
@@ -115,13 +134,17 @@ def _alternative(d: Diagnosis) -> str:
     if not a:
         return ""
     margin = d.total_evidence - a.total_evidence
-    return (f"<p>Also fitted in full: {html.escape(', '.join(a.effects))} (total evidence {a.total_evidence:.1f}, "
-            f"{margin:.1f} below the reported {d.total_evidence:.1f}"
-            + ("; the data do not decide between them" if margin < 10 else "") + ").</p>")
+    return (
+        f"<p>Also fitted in full: {html.escape(', '.join(a.effects))} (total evidence {a.total_evidence:.1f}, "
+        f"{margin:.1f} below the reported {d.total_evidence:.1f}"
+        + ("; the data do not decide between them" if margin < 10 else "")
+        + ").</p>"
+    )
 
 
 def params_text(params: dict[str, Any]) -> str:
     """An effect's fitted parameters as one line, ``name value, ...`` (4 significant digits)."""
+
     def fmt(v: Any) -> str:
         if isinstance(v, list):
             return "[" + ", ".join(fmt(x) for x in v) + "]"

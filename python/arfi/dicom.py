@@ -75,9 +75,11 @@ class DicomArfi:
         """The ``[mr]`` section as TOML, to paste into a scenario file."""
         m = self.mr
         fmt = ", ".join
-        return (f"[mr]\nplane = \"{m['plane']}\"\ncenter_mm = [{fmt(f'{v:.6g}' for v in m['center_mm'])}]\n"
-                f"fov_mm = [{fmt(f'{v:.6g}' for v in m['fov_mm'])}]\nmatrix = [{fmt(str(v) for v in m['matrix'])}]\n"
-                f"slice_thickness_mm = {m['slice_thickness_mm']:.6g}\n")
+        return (
+            f'[mr]\nplane = "{m["plane"]}"\ncenter_mm = [{fmt(f"{v:.6g}" for v in m["center_mm"])}]\n'
+            f"fov_mm = [{fmt(f'{v:.6g}' for v in m['fov_mm'])}]\nmatrix = "
+            f"[{fmt(str(v) for v in m['matrix'])}]\nslice_thickness_mm = {m['slice_thickness_mm']:.6g}\n"
+        )
 
 
 def _dicom_files(path: Path, name: str) -> list[Path]:
@@ -112,8 +114,10 @@ def _to_radians(values: NDArray[np.float64], ds: Any, units: str, where: str) ->
     phase = values * scale
     lo, hi = float(phase.min()), float(phase.max())
     if lo < -math.pi * 1.001 or hi > math.pi * 1.001:
-        raise ValueError(f"{where}: values span [{lo:.4g}, {hi:.4g}] rad with phase units '{units}', beyond ±π: "
-                         "not a phase image (a magnitude image?), or pass --phase-units")
+        raise ValueError(
+            f"{where}: values span [{lo:.4g}, {hi:.4g}] rad with phase units '{units}', beyond ±π: not a phase image "
+            "(a magnitude image?), or pass --phase-units"
+        )
     return phase
 
 
@@ -150,7 +154,11 @@ def read_phase_image(path: str | os.PathLike[str], name: str = "phase", units: s
     intercept = float(ds.get("RescaleIntercept", 0.0))
     orientation = _number(ds, "ImageOrientationPatient", where, 6)
     row_dir, col_dir = orientation[:3], orientation[3:]
-    if abs(np.linalg.norm(row_dir) - 1) > 1e-3 or abs(np.linalg.norm(col_dir) - 1) > 1e-3 or abs(row_dir @ col_dir) > 1e-3:
+    if (
+        abs(np.linalg.norm(row_dir) - 1) > 1e-3
+        or abs(np.linalg.norm(col_dir) - 1) > 1e-3
+        or abs(row_dir @ col_dir) > 1e-3
+    ):
         raise ValueError(f"{where}: ImageOrientationPatient is not two orthonormal directions ({orientation.tolist()})")
     spacing = _number(ds, "PixelSpacing", where, 2)
     if np.any(spacing <= 0):
@@ -178,17 +186,23 @@ def _check_pair(plus: PhaseImage, minus: PhaseImage) -> None:
         raise ValueError(f"{where}: size {minus.phase_rad.shape} differs from the plus series' {plus.phase_rad.shape}")
     geometry = {
         "position (ImagePositionPatient)": (plus.position_mm, minus.position_mm),
-        "orientation (ImageOrientationPatient)": (np.r_[plus.row_direction, plus.column_direction],
-                                                  np.r_[minus.row_direction, minus.column_direction]),
+        "orientation (ImageOrientationPatient)": (
+            np.r_[plus.row_direction, plus.column_direction],
+            np.r_[minus.row_direction, minus.column_direction],
+        ),
         "pixel spacing": (np.array(plus.spacing_mm), np.array(minus.spacing_mm)),
         "slice thickness": (np.array([plus.slice_thickness_mm]), np.array([minus.slice_thickness_mm])),
     }
     for what, (a, b) in geometry.items():
         if not np.allclose(a, b, rtol=0, atol=_TOL_MM):
             raise ValueError(f"{where}: {what} {b.tolist()} differs from the plus series' {a.tolist()}")
-    if (plus.echo_time_ms is None) != (minus.echo_time_ms is None) or (
-            plus.echo_time_ms is not None and abs(plus.echo_time_ms - minus.echo_time_ms) > 1e-6):  # type: ignore[operator]
-        raise ValueError(f"{where}: echo time {minus.echo_time_ms} ms differs from the plus series' {plus.echo_time_ms} ms")
+    te_plus, te_minus = plus.echo_time_ms, minus.echo_time_ms
+    if (te_plus is None) != (te_minus is None) or (
+        te_plus is not None and te_minus is not None and abs(te_plus - te_minus) > 1e-6
+    ):
+        raise ValueError(
+            f"{where}: echo time {minus.echo_time_ms} ms differs from the plus series' {plus.echo_time_ms} ms"
+        )
 
 
 def read_transform(path: str | os.PathLike[str]) -> NDArray[np.float64]:
@@ -216,7 +230,11 @@ def check_rigid(matrix: ArrayLike, name: str = "transform") -> NDArray[np.float6
     if m.shape != (4, 4) or not np.all(np.isfinite(m)):
         raise ValueError(f"{name}: must be a finite 4x4 matrix, got shape {m.shape}")
     r = m[:3, :3]
-    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or abs(np.linalg.det(r) - 1) > 1e-6 or not np.allclose(m[3], [0, 0, 0, 1]):
+    if (
+        not np.allclose(r @ r.T, np.eye(3), atol=1e-6)
+        or abs(np.linalg.det(r) - 1) > 1e-6
+        or not np.allclose(m[3], [0, 0, 0, 1])
+    ):
         raise ValueError(f"{name}: must be rigid (a rotation and a translation; last row 0 0 0 1)")
     return m
 
@@ -237,9 +255,10 @@ def arfi_from_phase_images(plus: PhaseImage, minus: PhaseImage, transform: Array
         # Aligned when the off-axis drift over the whole image stays under half a pixel.
         drift = np.linalg.norm(np.delete(step, axis)) * (image.shape[k] - 1)
         if drift > 0.5 * abs(step[axis]):
-            raise ValueError(f"plus: {plus.path}: after the transform the image is oblique to the transducer frame "
-                             f"(array axis {k} along {np.round(step / np.linalg.norm(step), 4).tolist()}); arfi's MR "
-                             "planes are xy, xz and yz")
+            raise ValueError(
+                f"plus: {plus.path}: after the transform the image is oblique to the transducer frame (array axis {k} "
+                f"along {np.round(step / np.linalg.norm(step), 4).tolist()}); arfi's MR planes are xy, xz and yz"
+            )
         if step[axis] < 0:  # flip so that indices increase along the frame axis
             origin = origin + step * (image.shape[k] - 1)
             image = np.flip(image, axis=k)
@@ -267,16 +286,32 @@ def arfi_from_phase_images(plus: PhaseImage, minus: PhaseImage, transform: Array
         affine[ax, 3] = origin[ax]
     affine[normal, normal] = plus.slice_thickness_mm
     affine[normal, 3] = origin[normal]
-    mr = {"plane": plane, "center_mm": [float(c) for c in center], "fov_mm": fov, "matrix": matrix,
-          "slice_thickness_mm": plus.slice_thickness_mm}
-    return DicomArfi(image_rad=np.ascontiguousarray(image), affine_mm=affine, volume_shape=(shape[0], shape[1], shape[2]), mr=mr,
-                     echo_time_ms=plus.echo_time_ms, sources=(str(plus.path), str(minus.path)))
+    mr = {
+        "plane": plane,
+        "center_mm": [float(c) for c in center],
+        "fov_mm": fov,
+        "matrix": matrix,
+        "slice_thickness_mm": plus.slice_thickness_mm,
+    }
+    return DicomArfi(
+        image_rad=np.ascontiguousarray(image),
+        affine_mm=affine,
+        volume_shape=(shape[0], shape[1], shape[2]),
+        mr=mr,
+        echo_time_ms=plus.echo_time_ms,
+        sources=(str(plus.path), str(minus.path)),
+    )
 
 
-def read_dicom_arfi(plus: str | os.PathLike[str], minus: str | os.PathLike[str], transform: ArrayLike | None = None,
-                    phase_units: str = "auto") -> DicomArfi:
+def read_dicom_arfi(
+    plus: str | os.PathLike[str],
+    minus: str | os.PathLike[str],
+    transform: ArrayLike | None = None,
+    phase_units: str = "auto",
+) -> DicomArfi:
     """Reads the φ+ and φ− phase slices (files, or directories of one image each) and returns the
     MR-ARFI image in the transducer frame (``transform``: 4x4 patient → transducer, mm; None =
     identity)."""
-    return arfi_from_phase_images(read_phase_image(plus, "plus", phase_units), read_phase_image(minus, "minus", phase_units),
-                                  transform)
+    return arfi_from_phase_images(
+        read_phase_image(plus, "plus", phase_units), read_phase_image(minus, "minus", phase_units), transform
+    )

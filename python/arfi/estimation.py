@@ -6,12 +6,33 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._core import METHODS, Calibration, Estimate, EstimatePriorCheck, EstimateSupport, NextAcquisition, NuisanceFit, ShiftCandidate
+from ._core import (
+    METHODS,
+    Calibration,
+    Estimate,
+    EstimatePriorCheck,
+    EstimateSupport,
+    NextAcquisition,
+    NuisanceFit,
+    ShiftCandidate,
+)
 from ._core import phase_error as _phase_error
 from ._core import wrap_phases as _wrap_phases
 
-__all__ = ["METHODS", "Calibration", "Estimate", "EstimatePriorCheck", "EstimateSupport", "NextAcquisition", "NuisanceFit", "ShiftCandidate",
-           "gain", "phase_error", "recovered_fraction", "wrap"]
+__all__ = [
+    "METHODS",
+    "Calibration",
+    "Estimate",
+    "EstimatePriorCheck",
+    "EstimateSupport",
+    "NextAcquisition",
+    "NuisanceFit",
+    "ShiftCandidate",
+    "gain",
+    "phase_error",
+    "recovered_fraction",
+    "wrap",
+]
 
 
 def recovered_fraction(focal_corrected: float, focal_ideal: float) -> float:
@@ -33,5 +54,6 @@ def wrap(p: ArrayLike) -> NDArray[np.float64]:
 def phase_error(estimate: ArrayLike, truth: ArrayLike) -> float:
     """RMS of the wrapped difference estimate − truth after removing the best common offset (paper:
     0.42 rad for 16 aberrations, 2.10 rad for 1024)."""
-    return _phase_error(np.ascontiguousarray(estimate, dtype=np.float64).ravel(),
-                        np.ascontiguousarray(truth, dtype=np.float64).ravel())
+    return _phase_error(
+        np.ascontiguousarray(estimate, dtype=np.float64).ravel(), np.ascontiguousarray(truth, dtype=np.float64).ravel()
+    )

@@ -20,7 +20,9 @@ def metrics_text(focus: dict[str, Any]) -> str:
         return "no closed -6 dB focal region around the target inside the grid (no focal metrics)"
     p = [round(v, 2) + 0.0 for v in focus["focal_peak_mm"]]  # + 0.0: no "-0.00" for a peak on the axis
     along, across = focus["fwhm_6db_mm"]
-    return (f"focus in 3-D: {focus['focal_peak_pa'] / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
-            f"{focus['peak_to_target_mm']:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
-            f"across, {focus['focal_volume_6db_mm3']:.1f} mm³; in {focus['focal_tissue']}: I_SPPA "
-            f"{focus['isppa_w_cm2']:.1f} W/cm², MI {focus['mechanical_index']:.2f}")
+    return (
+        f"focus in 3-D: {focus['focal_peak_pa'] / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
+        f"{focus['peak_to_target_mm']:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
+        f"across, {focus['focal_volume_6db_mm3']:.1f} mm³; in {focus['focal_tissue']}: I_SPPA "
+        f"{focus['isppa_w_cm2']:.1f} W/cm², MI {focus['mechanical_index']:.2f}"
+    )

@@ -21,7 +21,8 @@ What the engine is given, and why:
   order: at 6 points per wavelength a cortical cap's focal pressure comes out about 9 % high,
   hence the default of 8.
 - **The box**: the march's grid cut laterally to the square about its axis that holds all but
-  :data:`BOX_OUTSIDE` of every plane's power in the march's field, a wavelength wider; along z from the source plane to the
+  :data:`BOX_OUTSIDE` of every plane's power in the march's field, a wavelength wider; along z from the source plane to
+  the
   grid's last plane; an absorbing layer of ``pml_cells`` around it (water: the engine makes it
   so). Outside the box the field is reported as zero.
 - **A continuous drive** with a three-period raised-cosine onset, the time step made a whole
@@ -45,8 +46,10 @@ import multiprocessing
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, TimeoutError as FutureTimeout
-from typing import Any, Callable
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -96,8 +99,10 @@ def engine_available() -> bool:
 def require_engine() -> None:
     """Raises ValueError (one line) when the ``fullwave`` extra is not installed."""
     if not engine_available():
-        raise ValueError("--engine fdtd: needs the full-wave engine, which is not installed: pip install 'arfi[fullwave]' "
-                         f"(BabelViscoFDTD {ENGINE_VERSION})")
+        raise ValueError(
+            "--engine fdtd: needs the full-wave engine, which is not installed: pip install 'arfi[fullwave]' "
+            f"(BabelViscoFDTD {ENGINE_VERSION})"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,10 +145,12 @@ class FdtdPlan:
 
     def describe(self) -> str:
         nx, ny, nz = self.shape
-        return (f"{ENGINE} {ENGINE_VERSION}: {nx} x {ny} x {nz} voxels of {self.h_m * 1e3:.3f} mm "
-                f"({self.voxels / 1e6:.1f} M, about {self.memory_bytes / 2**30:.1f} GiB), {self.steps} steps of "
-                f"{self.dt_s * 1e9:.1f} ns ({self.settle_periods} periods to settle, 2 x {self.record_periods} recorded); "
-                f"about {_duration(self.seconds)}")
+        return (
+            f"{ENGINE} {ENGINE_VERSION}: {nx} x {ny} x {nz} voxels of {self.h_m * 1e3:.3f} mm ({self.voxels / 1e6:.1f} "
+            f"M, about {self.memory_bytes / 2**30:.1f} GiB), {self.steps} steps of {self.dt_s * 1e9:.1f} ns "
+            f"({self.settle_periods} periods to settle, 2 x {self.record_periods} recorded); about "
+            f"{_duration(self.seconds)}"
+        )
 
     def fractional(self, points_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points (m, (n, 3)) in node units: node (i, j, k) at (i, j, k)."""
@@ -186,10 +193,10 @@ def _medium(sim: Any, points_m: NDArray[np.float64]) -> dict[str, NDArray[np.flo
     keys = ("density_kg_m3", "sound_speed_m_s", "attenuation_np_m", "shear_sound_speed_m_s", "shear_attenuation_np_m")
     out = {k: np.zeros(len(points_m)) for k in keys}
     for a in range(0, len(points_m), 1 << 20):
-        props = sim.properties_at(points_m[a:a + (1 << 20)] * 1e3)
+        props = sim.properties_at(points_m[a : a + (1 << 20)] * 1e3)
         for k in keys:
             if k in props:
-                out[k][a:a + (1 << 20)] = props[k]
+                out[k][a : a + (1 << 20)] = props[k]
     return out
 
 
@@ -204,7 +211,7 @@ def _lateral_box(magnitude: NDArray[np.float32]) -> tuple[tuple[int, int], tuple
     for half in range(1, max(nx, ny)):
         i0, i1 = max(0, math.floor(ci - half)), min(nx - 1, math.ceil(ci + half))
         j0, j1 = max(0, math.floor(cj - half)), min(ny - 1, math.ceil(cj + half))
-        inside = power[:, j0:j1 + 1, i0:i1 + 1].sum(axis=(1, 2))
+        inside = power[:, j0 : j1 + 1, i0 : i1 + 1].sum(axis=(1, 2))
         if (total - inside <= BOX_OUTSIDE * total).all():
             return (i0, i1), (j0, j1)
     return (0, nx - 1), (0, ny - 1)
@@ -220,7 +227,9 @@ def plan(sim: Any, march: Any, options: FdtdOptions | None = None) -> FdtdPlan:
     dx, dy = float(x[1] - x[0]), float(y[1] - y[0])
     # The shortest wavelength along the march's axis and over the box's medium: sampled coarsely.
     ii, jj = _lateral_box(march_magnitude)
-    probe = np.stack(np.meshgrid(x[ii[0]:ii[1] + 1:4], y[jj[0]:jj[1] + 1:4], z[::4], indexing="ij"), -1).reshape(-1, 3)
+    probe = np.stack(
+        np.meshgrid(x[ii[0] : ii[1] + 1 : 4], y[jj[0] : jj[1] + 1 : 4], z[::4], indexing="ij"), -1
+    ).reshape(-1, 3)
     m = _medium(sim, probe)
     speeds = np.concatenate([m["sound_speed_m_s"], m["shear_sound_speed_m_s"][m["shear_sound_speed_m_s"] > 0]])
     c_min, c_max = float(speeds.min()), float(m["sound_speed_m_s"].max())
@@ -230,11 +239,20 @@ def plan(sim: Any, march: Any, options: FdtdOptions | None = None) -> FdtdPlan:
     if min(dx, dy) / n >= 0.9 * h:  # the march's samples on voxels, when that costs little
         h = min(dx, dy) / n
     reach = wavelength
-    cols = (max(0, int(np.searchsorted(x, x[ii[0]] - reach))), min(len(x) - 1, int(np.searchsorted(x, x[ii[1]] + reach))))
-    rows = (max(0, int(np.searchsorted(y, y[jj[0]] - reach))), min(len(y) - 1, int(np.searchsorted(y, y[jj[1]] + reach))))
+    cols = (
+        max(0, int(np.searchsorted(x, x[ii[0]] - reach))),
+        min(len(x) - 1, int(np.searchsorted(x, x[ii[1]] + reach))),
+    )
+    rows = (
+        max(0, int(np.searchsorted(y, y[jj[0]] - reach))),
+        min(len(y) - 1, int(np.searchsorted(y, y[jj[1]] + reach))),
+    )
     edge = options.pml_cells + 2
-    n_in = [math.ceil((x[cols[1]] - x[cols[0]]) / h - 1e-9) + 1, math.ceil((y[rows[1]] - y[rows[0]]) / h - 1e-9) + 1,
-            math.ceil((z[-1] - z[0]) / h - 1e-9) + 3]
+    n_in = [
+        math.ceil((x[cols[1]] - x[cols[0]]) / h - 1e-9) + 1,
+        math.ceil((y[rows[1]] - y[rows[0]]) / h - 1e-9) + 1,
+        math.ceil((z[-1] - z[0]) / h - 1e-9) + 3,
+    ]
     shape = (n_in[0] + 2 * edge, n_in[1] + 2 * edge, n_in[2] + 2 * edge)
     origin = (float(x[cols[0]] - edge * h), float(y[rows[0]] - edge * h), float(z[0] - edge * h))
     # The time step: a whole fraction of the period within the engine's stability bound.
@@ -244,9 +262,20 @@ def plan(sim: Any, march: Any, options: FdtdOptions | None = None) -> FdtdPlan:
     lengths = np.array(n_in, float) * h
     crossing = math.hypot(lengths[2], 0.5 * math.hypot(lengths[0], lengths[1])) / c_min
     settle = 3 + math.ceil(crossing / period) + 8
-    return FdtdPlan(h_m=h, cols=cols, rows=rows, shape=shape, origin_m=origin, k_source=edge, dt_s=period / steps_per_period,
-                    steps_per_period=steps_per_period, settle_periods=settle, record_periods=options.record_periods,
-                    pml_cells=options.pml_cells, frequency_hz=f0)
+    return FdtdPlan(
+        h_m=h,
+        cols=cols,
+        rows=rows,
+        shape=shape,
+        origin_m=origin,
+        k_source=edge,
+        dt_s=period / steps_per_period,
+        steps_per_period=steps_per_period,
+        settle_periods=settle,
+        record_periods=options.record_periods,
+        pml_cells=options.pml_cells,
+        frequency_hz=f0,
+    )
 
 
 def check_memory(p: FdtdPlan) -> None:
@@ -254,8 +283,10 @@ def check_memory(p: FdtdPlan) -> None:
     avail = available_memory_bytes()
     if avail is not None and p.memory_bytes > 0.8 * avail:
         nx, ny, nz = p.shape
-        raise ValueError(f"--engine fdtd: {nx} x {ny} x {nz} voxels need about {p.memory_bytes / 2**30:.1f} GiB, more than "
-                         f"the {avail / 2**30:.1f} GiB available: use fewer points per wavelength or a smaller grid")
+        raise ValueError(
+            f"--engine fdtd: {nx} x {ny} x {nz} voxels need about {p.memory_bytes / 2**30:.1f} GiB, more than the "
+            f"{avail / 2**30:.1f} GiB available: use fewer points per wavelength or a smaller grid"
+        )
 
 
 def _materials(sim: Any, p: FdtdPlan, background: dict[str, float]) -> tuple[NDArray[np.uint32], NDArray[np.float64]]:
@@ -292,7 +323,15 @@ def _lagrange(t: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.flo
     base = np.floor(t).astype(np.int64) - 1
     u = t - (base + 1)
     near = np.abs(u) < 1e-9  # on a node: that node alone
-    w = np.stack([-u * (u - 1) * (u - 2) / 6, (u + 1) * (u - 1) * (u - 2) / 2, -(u + 1) * u * (u - 2) / 2, (u + 1) * u * (u - 1) / 6], -1)
+    w = np.stack(
+        [
+            -u * (u - 1) * (u - 2) / 6,
+            (u + 1) * (u - 1) * (u - 2) / 2,
+            -(u + 1) * u * (u - 2) / 2,
+            (u + 1) * u * (u - 1) / 6,
+        ],
+        -1,
+    )
     w[near] = [0.0, 1.0, 0.0, 0.0]
     return base, w
 
@@ -317,7 +356,9 @@ def _stencils(p: FdtdPlan, points_m: NDArray[np.float64]) -> _Stencils:
     return _Stencils(nodes=nodes, weights=w.reshape(len(points_m), 64))
 
 
-def _source(sim: Any, march: Any, p: FdtdPlan, phases: NDArray[np.float64] | None, c_source: float) -> NDArray[np.complex128]:
+def _source(
+    sim: Any, march: Any, p: FdtdPlan, phases: NDArray[np.float64] | None, c_source: float
+) -> NDArray[np.complex128]:
     """The stress added per step on the source plane's interior nodes, (nx, ny) of the box:
     ``2·c·(Δt/h)·(kz/k)·P`` with P the march's source plane (its band-limited series evaluated at
     the engine's nodes)."""
@@ -341,7 +382,7 @@ def _source(sim: Any, march: Any, p: FdtdPlan, phases: NDArray[np.float64] | Non
     s = ex @ f.T @ ey.T  # (nx, ny)
     inside = np.zeros((nx, ny), bool)
     e = p.pml_cells + 2
-    inside[e:nx - e, e:ny - e] = True
+    inside[e : nx - e, e : ny - e] = True
     scaled: NDArray[np.complex128] = np.where(inside, s, 0.0).astype(np.complex128) * (2 * c_source * p.dt_s / p.h_m)
     return scaled
 
@@ -367,8 +408,20 @@ def engine_time_step(material_map: NDArray[np.uint32], props: NDArray[np.float64
     src = np.zeros(material_map.shape, np.uint32)
     with _quiet():
         _, dt = model.StaggeredFDTD_3D_with_relaxation(
-            material_map, props, p.frequency_hz, src, np.zeros((1, 4), np.float32), p.h_m, 10 * p.dt_s, src,
-            Ox=np.ones(material_map.shape, np.float32), TypeSource=2, CheckOnlyParams=True, USE_SINGLE=True, COMPUTING_BACKEND=0)
+            material_map,
+            props,
+            p.frequency_hz,
+            src,
+            np.zeros((1, 4), np.float32),
+            p.h_m,
+            10 * p.dt_s,
+            src,
+            Ox=np.ones(material_map.shape, np.float32),
+            TypeSource=2,
+            CheckOnlyParams=True,
+            USE_SINGLE=True,
+            COMPUTING_BACKEND=0,
+        )
     return float(dt)
 
 
@@ -394,13 +447,33 @@ def _engine_run(job: dict[str, Any]) -> dict[str, Any]:
     model = _babel()
     with _quiet():
         out = model.StaggeredFDTD_3D_with_relaxation(
-            job["material_map"], job["props"], job["frequency_hz"], job["source_map"], job["source_functions"], job["h_m"],
-            job["duration_s"], job["sensor_map"], Ox=job["weights"], NDelta=job["pml_cells"], DT=job["dt_s"], TypeSource=2,
-            USE_SINGLE=True, COMPUTING_BACKEND=0, SelRMSorPeak=1, SelMapsRMSPeakList=["Pressure"],
-            SelMapsSensorsList=["Pressure"], SensorSubSampling=job["sub"], SensorStart=job["sensor_start"], SILENT=1)
+            job["material_map"],
+            job["props"],
+            job["frequency_hz"],
+            job["source_map"],
+            job["source_functions"],
+            job["h_m"],
+            job["duration_s"],
+            job["sensor_map"],
+            Ox=job["weights"],
+            NDelta=job["pml_cells"],
+            DT=job["dt_s"],
+            TypeSource=2,
+            USE_SINGLE=True,
+            COMPUTING_BACKEND=0,
+            SelRMSorPeak=1,
+            SelMapsRMSPeakList=["Pressure"],
+            SelMapsSensorsList=["Pressure"],
+            SensorSubSampling=job["sub"],
+            SensorStart=job["sensor_start"],
+            SILENT=1,
+        )
     sensors, rms = out[0], out[2]
-    return {"pressure": np.asarray(sensors["Pressure"], np.float64), "time": np.asarray(sensors["time"], np.float64),
-            "rms": np.asarray(rms["Pressure"], np.float32)}
+    return {
+        "pressure": np.asarray(sensors["Pressure"], np.float64),
+        "time": np.asarray(sensors["time"], np.float64),
+        "rms": np.asarray(rms["Pressure"], np.float32),
+    }
 
 
 def _sub_sampling(steps_per_period: int) -> int:
@@ -425,8 +498,13 @@ class FdtdResult:
     materials: int
 
 
-def run(sim: Any, march: Any, phases: NDArray[np.float64] | None, options: FdtdOptions | None = None,
-        progress: Progress | None = None) -> FdtdResult:
+def run(
+    sim: Any,
+    march: Any,
+    phases: NDArray[np.float64] | None,
+    options: FdtdOptions | None = None,
+    progress: Progress | None = None,
+) -> FdtdResult:
     """The beam of ``sim`` driven with ``phases`` (added per element, as ``Simulation.field``'s)
     computed by the full-wave engine; ``march`` is the march's field of the same drive with its
     volume (it bounds the box and gives the plane's z). ``progress`` receives one-line messages:
@@ -466,7 +544,7 @@ def run(sim: Any, march: Any, phases: NDArray[np.float64] | None, options: FdtdO
     c0, c1 = p.cols
     r0, r1 = p.rows
     zp = float(march.z_mm) * 1e-3
-    X, Y = np.meshgrid(x[c0:c1 + 1], y[r0:r1 + 1], indexing="xy")
+    X, Y = np.meshgrid(x[c0 : c1 + 1], y[r0 : r1 + 1], indexing="xy")
     plane_pts = np.stack([X.ravel(), Y.ravel(), np.full(X.size, zp)], -1)
     ax = np.stack([np.asarray(march.axis_x_mm) * 1e-3, np.asarray(march.axis_y_mm) * 1e-3, z], -1)
     inside = _inside(p, ax)
@@ -478,16 +556,28 @@ def run(sim: Any, march: Any, phases: NDArray[np.float64] | None, options: FdtdO
     sensor_map[np.unravel_index(used, p.shape, order="F")] = 1  # the engine orders its sensors so
     assert (st.nodes >= 0).all() and (st.nodes < shape).all()
     sub = _sub_sampling(p.steps_per_period)
-    job = dict(material_map=material_map, props=props, frequency_hz=p.frequency_hz, source_map=source_map,
-               source_functions=functions, h_m=p.h_m, duration_s=(n_t - 0.5) * p.dt_s, sensor_map=sensor_map, weights=weights,
-               pml_cells=p.pml_cells, dt_s=p.dt_s, sub=sub, sensor_start=p.settle_periods * p.steps_per_period // sub)
+    job = dict(
+        material_map=material_map,
+        props=props,
+        frequency_hz=p.frequency_hz,
+        source_map=source_map,
+        source_functions=functions,
+        h_m=p.h_m,
+        duration_s=(n_t - 0.5) * p.dt_s,
+        sensor_map=sensor_map,
+        weights=weights,
+        pml_cells=p.pml_cells,
+        dt_s=p.dt_s,
+        sub=sub,
+        sensor_start=p.settle_periods * p.steps_per_period // sub,
+    )
     out = _run_child(job, p, say)
     # The complex amplitude per sensor over each window: P = (2/N)·Σ p(t)·e^{iωt}.
     per = p.record_periods * p.steps_per_period // sub
     ts, ps = out["time"], -out["pressure"]  # the engine's "Pressure" integrates +ρc²·div v: it is -p
     phasor = np.exp(1j * w * ts)
     first = 2.0 / per * (ps[:, :per] @ phasor[:per])
-    second = 2.0 / per * (ps[:, per:2 * per] @ phasor[per:2 * per])
+    second = 2.0 / per * (ps[:, per : 2 * per] @ phasor[per : 2 * per])
     row = np.searchsorted(used, flat)
     row = np.minimum(row, len(used) - 1)
     values = np.where(st.weights != 0, second[row], 0.0)
@@ -501,12 +591,20 @@ def run(sim: Any, march: Any, phases: NDArray[np.float64] | None, options: FdtdO
     rms = np.sqrt(2.0) * out["rms"]
     magnitude = _magnitude_on_march(p, rms, x, y, z)
     plane = np.zeros((len(y), len(x)), complex)
-    box = magnitude[int(np.argmin(np.abs(z - zp))), r0:r1 + 1, c0:c1 + 1]
-    plane[r0:r1 + 1, c0:c1 + 1] = box * np.exp(1j * np.angle(read[:n_plane].reshape(r1 - r0 + 1, c1 - c0 + 1)))
+    box = magnitude[int(np.argmin(np.abs(z - zp))), r0 : r1 + 1, c0 : c1 + 1]
+    plane[r0 : r1 + 1, c0 : c1 + 1] = box * np.exp(1j * np.angle(read[:n_plane].reshape(r1 - r0 + 1, c1 - c0 + 1)))
     axis = np.zeros(len(z), complex)
     axis[inside] = _trilinear(p, rms, ax[inside]) * np.exp(1j * np.angle(read[n_plane:]))
-    return FdtdResult(plane=plane, z_mm=zp * 1e3, axis=axis, magnitude=magnitude, steady_change=steady, plan=p,
-                      seconds=time.perf_counter() - t0, materials=len(props))
+    return FdtdResult(
+        plane=plane,
+        z_mm=zp * 1e3,
+        axis=axis,
+        magnitude=magnitude,
+        steady_change=steady,
+        plan=p,
+        seconds=time.perf_counter() - t0,
+        materials=len(props),
+    )
 
 
 def _inside(p: FdtdPlan, pts: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -545,15 +643,16 @@ def _trilinear(p: FdtdPlan, values: NDArray[np.float32], pts: NDArray[np.float64
     return out
 
 
-def _magnitude_on_march(p: FdtdPlan, mag: NDArray[np.float32], x: NDArray[np.float64], y: NDArray[np.float64],
-                        z: NDArray[np.float64]) -> NDArray[np.float32]:
+def _magnitude_on_march(
+    p: FdtdPlan, mag: NDArray[np.float32], x: NDArray[np.float64], y: NDArray[np.float64], z: NDArray[np.float64]
+) -> NDArray[np.float32]:
     """|p| at the march's samples (nz, ny, nx), trilinear between the engine's nodes (the
     envelope is smooth on the voxel's scale); zero outside the box."""
     out = np.zeros((len(z), len(y), len(x)), np.float32)
     c0, c1 = p.cols
     r0, r1 = p.rows
-    X, Y = np.meshgrid(x[c0:c1 + 1], y[r0:r1 + 1], indexing="xy")
+    X, Y = np.meshgrid(x[c0 : c1 + 1], y[r0 : r1 + 1], indexing="xy")
     for n in range(len(z)):
         pts = np.stack([X.ravel(), Y.ravel(), np.full(X.size, z[n])], -1)
-        out[n, r0:r1 + 1, c0:c1 + 1] = _trilinear(p, mag, pts).reshape(X.shape)
+        out[n, r0 : r1 + 1, c0 : c1 + 1] = _trilinear(p, mag, pts).reshape(X.shape)
     return out

@@ -16,9 +16,10 @@ import os
 import tempfile
 import zlib
 from collections import deque
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -184,8 +185,8 @@ class ParallelGzip(io.RawIOBase):
         self.buffer += view
         while len(self.buffer) >= self.BLOCK:
             with memoryview(self.buffer) as whole:
-                block = bytes(whole[:self.BLOCK])
-            del self.buffer[:self.BLOCK]
+                block = bytes(whole[: self.BLOCK])
+            del self.buffer[: self.BLOCK]
             self._submit(block)
         return view.nbytes
 
@@ -246,7 +247,12 @@ def write_arfi_image(
     """Writes an MR-ARFI phase image (rad) as NIfTI with its affine (mm, transducer frame), and
     the sidecar JSON when given; pixels without MR signal are NaN."""
     p = arfi_image_path(path)
-    save_nifti(p, np.asarray(image, dtype=np.float32).reshape(volume_shape), affine_mm, "arfi: MR-ARFI displacement phase (rad)")
+    save_nifti(
+        p,
+        np.asarray(image, dtype=np.float32).reshape(volume_shape),
+        affine_mm,
+        "arfi: MR-ARFI displacement phase (rad)",
+    )
     if sidecar is not None:
         write_json(sidecar_path(p), sidecar)
 
@@ -271,7 +277,9 @@ def read_arfi_image(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], 
     if squeezed.ndim != 2:
         raise ValueError(f"image: {p}: must hold one 2-D slice, got shape {data.shape}")
     if np.any(np.isinf(squeezed)):
-        raise ValueError(f"image: {p}: contains infinite pixels (NaN marks a pixel without MR signal; infinity is no phase)")
+        raise ValueError(
+            f"image: {p}: contains infinite pixels (NaN marks a pixel without MR signal; infinity is no phase)"
+        )
     if not np.any(np.isfinite(squeezed)):
         raise ValueError(f"image: {p}: every pixel is NaN (no MR signal anywhere)")
     side: dict[str, Any] = {}
@@ -324,5 +332,3 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, Any]) -> None:
     with atomic_path(npz_path(path)) as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
-
-

@@ -21,8 +21,9 @@ on noise-free images), how many estimates the method flagged ambiguous, and the 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,8 +74,14 @@ class Rung:
         return float(np.mean(self.recovered_fractions))
 
     def as_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "what": self.what, "recovered_fractions": self.recovered_fractions,
-                "mean_recovered_fraction": self.mean_recovered_fraction, "ambiguous": self.ambiguous, "seconds": self.seconds}
+        return {
+            "name": self.name,
+            "what": self.what,
+            "recovered_fractions": self.recovered_fractions,
+            "mean_recovered_fraction": self.mean_recovered_fraction,
+            "ambiguous": self.ambiguous,
+            "seconds": self.seconds,
+        }
 
 
 def predicted_aberration(sim: Simulation, applied: NDArray[np.float64], seed: int) -> NDArray[np.float64]:
@@ -91,14 +98,21 @@ class Ladder:
         self.what = {
             RUNGS[0]: "16 group phases, 1 image",
             RUNGS[1]: f"16 group phases, 1 + {EXTRA_IMAGES} loop-2 images",
-            RUNGS[2]: (f"1024 element phases, 1 + {len(DEFOCUS_MM)} images with the focus moved by "
-                       f"{', '.join(f'{z:+g}' for z in DEFOCUS_MM)} mm along the axis" if per_element
-                       else f"16 group phases, 1 + {EXTRA_IMAGES} images with known random phases"),
+            RUNGS[2]: (
+                f"1024 element phases, 1 + {len(DEFOCUS_MM)} images with the focus moved by "
+                f"{', '.join(f'{z:+g}' for z in DEFOCUS_MM)} mm along the axis"
+                if per_element
+                else f"16 group phases, 1 + {EXTRA_IMAGES} images with known random phases"
+            ),
             RUNGS[3]: f"prediction error {PREDICTION_ERROR['peak_to_peak_rad']:g} rad peak to peak over "
-                      f"{PREDICTION_ERROR['correlation_length_mm']:g} mm + {PREDICTION_ERROR['jitter_rad']:g} rad jitter",
-            RUNGS[4]: (f"1024 element phases, smooth prior ({PREDICTION_STD_RAD} rad over {PREDICTION_CORRELATION_MM:g} mm) + 1 + "
-                       f"{len(DEFOCUS_MM)} defocused images" if per_element
-                       else f"16 group phases, prior ({PREDICTION_STD_RAD} rad) + 1 image"),
+            f"{PREDICTION_ERROR['correlation_length_mm']:g} mm + {PREDICTION_ERROR['jitter_rad']:g} rad jitter",
+            RUNGS[4]: (
+                f"1024 element phases, smooth prior ({PREDICTION_STD_RAD} rad over {PREDICTION_CORRELATION_MM:g} mm) + "
+                "1 + "
+                f"{len(DEFOCUS_MM)} defocused images"
+                if per_element
+                else f"16 group phases, prior ({PREDICTION_STD_RAD} rad) + 1 image"
+            ),
         }
         self.values: dict[str, list[float]] = {n: [] for n in RUNGS}
         self.flags = {n: 0 for n in RUNGS}
@@ -113,8 +127,9 @@ class Ladder:
         return [Rung(n, self.what[n], self.values[n], self.flags[n], self.seconds[n]) for n in RUNGS]
 
 
-def defocused_images(sim: Simulation, applied: NDArray[np.float64], aberrated: NDArray[np.float64], noise: float,
-                     seed: int) -> tuple[list[NDArray[np.float64]], list[Any]]:
+def defocused_images(
+    sim: Simulation, applied: NDArray[np.float64], aberrated: NDArray[np.float64], noise: float, seed: int
+) -> tuple[list[NDArray[np.float64]], list[Any]]:
     """The aberrated image and one noisy image per :data:`DEFOCUS_MM` step (noise seeds
     ``70_000 + 100·seed + k``), with their known per-element phases (None for the first)."""
     images, known = [aberrated], [None]  # type: list[NDArray[np.float64]], list[NDArray[np.float64] | None]
@@ -125,10 +140,19 @@ def defocused_images(sim: Simulation, applied: NDArray[np.float64], aberrated: N
     return images, known
 
 
-def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.float64], images: list[NDArray[np.float64]],
-          known: list[Any], acquire: Callable[[NDArray[np.float64]], NDArray[np.float64]], seed: int,
-          focus: Callable[[NDArray[np.float64]], float], rungs: Ladder,
-          paper: tuple[float, bool, float] | None = None) -> None:
+def climb(
+    sim: Simulation,
+    model: Simulation,
+    case: int,
+    applied: NDArray[np.float64],
+    images: list[NDArray[np.float64]],
+    known: list[Any],
+    acquire: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    seed: int,
+    focus: Callable[[NDArray[np.float64]], float],
+    rungs: Ladder,
+    paper: tuple[float, bool, float] | None = None,
+) -> None:
     """Runs the rungs for one repeat and adds them to ``rungs``. ``images``/``known``: the
     aberrated image and the diversity images with their known group phases; ``acquire(added)``:
     a new noisy image with per-group phases added; ``focus(correction)``: the recovered fraction
@@ -143,7 +167,12 @@ def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.flo
     t = time.perf_counter()
     loop = loop2(model, images[0], acquire, iterations=EXTRA_IMAGES, method="lbfgs", seed=seed)
     last = loop.steps[-1].estimate
-    rungs.add(RUNGS[1], focus(loop.correction_rad[model.groups]), bool(last is not None and last.ambiguous), time.perf_counter() - t)
+    rungs.add(
+        RUNGS[1],
+        focus(loop.correction_rad[model.groups]),
+        bool(last is not None and last.ambiguous),
+        time.perf_counter() - t,
+    )
 
     fitted = model.with_groups(sim.n_elements) if case == 1024 else model
     t = time.perf_counter()
@@ -155,8 +184,15 @@ def climb(sim: Simulation, model: Simulation, case: int, applied: NDArray[np.flo
 
     t = time.perf_counter()
     data, data_known, length = (images, known, PREDICTION_CORRELATION_MM) if case == 1024 else (images[:1], None, None)
-    est = fitted.estimate(data, data_known, method="lbfgs", seed=seed, prior=prediction, prior_std_rad=PREDICTION_STD_RAD,
-                          prior_correlation_mm=length)
+    est = fitted.estimate(
+        data,
+        data_known,
+        method="lbfgs",
+        seed=seed,
+        prior=prediction,
+        prior_std_rad=PREDICTION_STD_RAD,
+        prior_correlation_mm=length,
+    )
     rungs.add(RUNGS[4], focus(est.phases_rad[fitted.groups]), est.ambiguous, time.perf_counter() - t)
 
 
@@ -166,8 +202,11 @@ def summary_line(ladder: list[dict[str, Any]], paper: float) -> str:
     return f"recovered fraction by path: {parts} (paper {paper})"
 
 
-def focus_of(sim: Simulation, applied: NDArray[np.float64], ideal_peak: float) -> Callable[[NDArray[np.float64]], float]:
+def focus_of(
+    sim: Simulation, applied: NDArray[np.float64], ideal_peak: float
+) -> Callable[[NDArray[np.float64]], float]:
     """The recovered fraction of a per-element correction of the aberration ``applied``."""
+
     def focus(correction: NDArray[np.float64]) -> float:
         return recovered_fraction(sim.focal_arfi(sim.arfi_image(applied - np.asarray(correction)))[0], ideal_peak)
 

@@ -4,9 +4,9 @@ focus is highest, so a correction that the scanner shows to be worse is never ke
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,7 +62,7 @@ def robust_focal(image: NDArray[np.float64], region: NDArray[np.bool_] | None = 
     ``Simulation.focal_region``; pixels without signal (NaN) are left out of each mean."""
     padded = np.pad(np.asarray(image, dtype=np.float64), 1, mode="edge")
     n0, n1 = image.shape
-    boxes = np.stack([padded[a:a + n0, b:b + n1] for a in range(3) for b in range(3)])
+    boxes = np.stack([padded[a : a + n0, b : b + n1] for a in range(3) for b in range(3)])
     counts = np.sum(np.isfinite(boxes), axis=0)
     smooth = np.where(counts > 0, np.nansum(boxes, axis=0) / np.maximum(counts, 1), np.nan)
     if region is not None:
@@ -70,10 +70,17 @@ def robust_focal(image: NDArray[np.float64], region: NDArray[np.bool_] | None = 
     return float(np.nanmax(smooth))
 
 
-def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float64]], ArrayLike], iterations: int = 2,
-          known: ArrayLike | None = None, extra_images: Sequence[ArrayLike] | None = None,
-          extra_known: Sequence[ArrayLike | None] | None = None, margin_sigma: float = 2.0,
-          **estimate_options: Any) -> LoopResult:
+def loop2(
+    sim: Simulation,
+    image: ArrayLike,
+    acquire: Callable[[NDArray[np.float64]], ArrayLike],
+    iterations: int = 2,
+    known: ArrayLike | None = None,
+    extra_images: Sequence[ArrayLike] | None = None,
+    extra_known: Sequence[ArrayLike | None] | None = None,
+    margin_sigma: float = 2.0,
+    **estimate_options: Any,
+) -> LoopResult:
     """Runs loop 2 from a first (aberrated) ``image`` taken with ``known`` phases added.
 
     Each iteration estimates the aberration jointly from every image so far (``sim.estimate``
@@ -81,7 +88,8 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
     -correction`` (rad, per group or element, added to the steering: an image sidecar's
     ``applied_phases_rad``)
     and measures its focal ARFI. A correction replaces the kept one only if its measured focus is
-    higher (:func:`robust_focal`, noise ``σ/3`` for noise floor ``σ``) by ``margin_sigma·√2·σ/3``, so noise alone rarely makes it
+    higher (:func:`robust_focal`, noise ``σ/3`` for noise floor ``σ``) by ``margin_sigma·√2·σ/3``, so noise alone
+    rarely makes it
     switch; the loop ends early when a new estimate repeats the last correction (within 0.05 rad).
     ``extra_images`` (with ``extra_known``) are further images for the joint fit, e.g. diversity
     acquisitions."""
@@ -97,10 +105,17 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
         raise ValueError(f"extra_known: has {len(extra_k)} entries for {len(extra)} extra images")
     first = np.asarray(image, dtype=np.float64)
     images: list[NDArray[np.float64]] = [first, *[np.asarray(e, dtype=np.float64) for e in extra]]
-    knowns: list[NDArray[np.float64] | None] = [as_phases(known, "known")] + [as_phases(k, f"extra_known[{i}]") for i, k in enumerate(extra_k)]
+    knowns: list[NDArray[np.float64] | None] = [as_phases(known, "known")] + [
+        as_phases(k, f"extra_known[{i}]") for i, k in enumerate(extra_k)
+    ]
     region = sim.focal_region
-    steps = [LoopStep(correction_rad=np.zeros(sim.n_groups), focal_measured_rad=sim.focal_arfi(first)[0],
-                      focal_robust_rad=robust_focal(first, region))]
+    steps = [
+        LoopStep(
+            correction_rad=np.zeros(sim.n_groups),
+            focal_measured_rad=sim.focal_arfi(first)[0],
+            focal_robust_rad=robust_focal(first, region),
+        )
+    ]
     kept, margin = 0, 0.0
     for _ in range(int(iterations)):
         est = sim.estimate(images, knowns, **estimate_options)
@@ -110,14 +125,28 @@ def loop2(sim: Simulation, image: ArrayLike, acquire: Callable[[NDArray[np.float
         added = -correction
         new = np.asarray(acquire(added), dtype=np.float64)
         if new.shape != first.shape or np.any(np.isinf(new)) or not np.any(np.isfinite(new)):
-            raise ValueError(f"acquire: returned an image of shape {new.shape} (or with infinite values, or all NaN); "
-                             f"expected {first.shape}")
+            raise ValueError(
+                f"acquire: returned an image of shape {new.shape} (or with infinite values, or all NaN); expected "
+                f"{first.shape}"
+            )
         images.append(new)
         knowns.append(added)
-        steps.append(LoopStep(correction_rad=correction, focal_measured_rad=sim.focal_arfi(new)[0],
-                              focal_robust_rad=robust_focal(new, region), estimate=est))
+        steps.append(
+            LoopStep(
+                correction_rad=correction,
+                focal_measured_rad=sim.focal_arfi(new)[0],
+                focal_robust_rad=robust_focal(new, region),
+                estimate=est,
+            )
+        )
         margin = margin_sigma * np.sqrt(2.0) * est.noise_floor / 3.0
         if steps[-1].focal_robust_rad > steps[kept].focal_robust_rad + margin:
             kept = len(steps) - 1
-    return LoopResult(correction_rad=steps[kept].correction_rad, kept=kept, steps=steps, margin_rad=float(margin),
-                      images=images, known=knowns)
+    return LoopResult(
+        correction_rad=steps[kept].correction_rad,
+        kept=kept,
+        steps=steps,
+        margin_rad=float(margin),
+        images=images,
+        known=knowns,
+    )

@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -68,8 +69,12 @@ def _draw_smooth(rng: np.random.Generator, terms: int = 8) -> _Smooth:
     """A smooth random field on the unit sphere: ``terms`` cosines of the angle to random axes
     (wavelengths of a quarter to a half of the head)."""
     axes = rng.normal(size=(terms, 3))
-    return (axes / np.linalg.norm(axes, axis=1, keepdims=True), rng.uniform(1.5, 4.0, terms),
-            rng.uniform(0, 2 * np.pi, terms), rng.uniform(0.5, 1.0, terms))
+    return (
+        axes / np.linalg.norm(axes, axis=1, keepdims=True),
+        rng.uniform(1.5, 4.0, terms),
+        rng.uniform(0, 2 * np.pi, terms),
+        rng.uniform(0.5, 1.0, terms),
+    )
 
 
 def _smooth(directions: NDArray[np.float64], field: _Smooth) -> NDArray[np.float64]:
@@ -81,8 +86,9 @@ def _smooth(directions: NDArray[np.float64], field: _Smooth) -> NDArray[np.float
     return out / weight.sum()
 
 
-def head_phantom(seed: int = 0, voxel_mm: float = 0.5, thickness_mm: tuple[float, float] = (4.0, 9.0),
-                 noise_hu: float = 20.0) -> HeadPhantom:
+def head_phantom(
+    seed: int = 0, voxel_mm: float = 0.5, thickness_mm: tuple[float, float] = (4.0, 9.0), noise_hu: float = 20.0
+) -> HeadPhantom:
     """The seeded head CT (see the module docs). ``voxel_mm``: isotropic voxel size (0.2–2 mm);
     ``thickness_mm``: the skull's thinnest and thickest (1–15 mm); ``noise_hu`` ≥ 0."""
     if not (np.isfinite(voxel_mm) and 0.2 <= voxel_mm <= 2.0):
@@ -133,8 +139,10 @@ def head_phantom(seed: int = 0, voxel_mm: float = 0.5, thickness_mm: tuple[float
 
 #: The hemisphere's focus (its centre) in the transducer frame, mm, and its scenario lines.
 HEMISPHERE_FOCUS_MM = (0.0, 0.0, 150.0)
-HEMISPHERE_TOML = ("frequency_hz = 650000.0\n\n[transducer]\nkind = \"hemisphere\"\nradius_of_curvature_mm = 150.0\n"
-                   "polar_angle_max_deg = 60.0\nelements = 1024\n\n[focus]\nposition_mm = [0.0, 0.0, 150.0]\n")
+HEMISPHERE_TOML = (
+    'frequency_hz = 650000.0\n\n[transducer]\nkind = "hemisphere"\nradius_of_curvature_mm = 150.0\n'
+    "polar_angle_max_deg = 60.0\nelements = 1024\n\n[focus]\nposition_mm = [0.0, 0.0, 150.0]\n"
+)
 
 
 def array_focus_mm(array: str) -> tuple[float, float, float]:
@@ -148,12 +156,16 @@ def scenario_for(ct_path: str, seed: int, array: str) -> str:
     relative to its folder) with ``array`` focused at :func:`array_focus_mm`: the head placed by
     :func:`placement`, conversion ``aubry2003``, water around it."""
     rows = ", ".join("[" + ", ".join(f"{v:g}" for v in row) + "]" for row in placement(focus_mm=array_focus_mm(array)))
-    return (f"name = \"head-phantom-seed{seed}\"\n" + (HEMISPHERE_TOML if array == "hemisphere" else "")
-            + f"\n[ct]\nfile = \"{ct_path}\"\nconversion = \"aubry2003\"\npatient_to_transducer_mm = [{rows}]\n")
+    return (
+        f'name = "head-phantom-seed{seed}"\n'
+        + (HEMISPHERE_TOML if array == "hemisphere" else "")
+        + f'\n[ct]\nfile = "{ct_path}"\nconversion = "aubry2003"\npatient_to_transducer_mm = [{rows}]\n'
+    )
 
 
-def placement(target_mm: tuple[float, float, float] = (0.0, 0.0, 20.0),
-              focus_mm: tuple[float, float, float] = (0.0, 0.0, 85.0)) -> NDArray[np.float64]:
+def placement(
+    target_mm: tuple[float, float, float] = (0.0, 0.0, 20.0), focus_mm: tuple[float, float, float] = (0.0, 0.0, 85.0)
+) -> NDArray[np.float64]:
     """The rigid ``patient_to_transducer_mm`` putting the head's point ``target_mm`` (patient frame,
     LPS mm: x and y negated from the NIfTI's RAS) at ``focus_mm`` with the crown facing the array
     (a half turn about x: the patient's up is the beam's −z)."""

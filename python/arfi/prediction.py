@@ -12,15 +12,19 @@ from arfi.scenario import Scenario
 from arfi.simulation import Section, Simulation
 from arfi.validate import as_point_mm
 
-
 #: What the scenario's CT bone does to each element's wave at the target (the extension's typed
 #: result: ``phases_rad``, ``transmission``, the focal pressures ``*_pa``, ``pressure_with``,
 #: ``correction_rad``; ``to_dict()`` is the JSON of ``arfi predict``).
 Prediction = _core.Prediction
 
 
-def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_sensitivity: bool = False,
-            keep_simulation: bool = False, pose_sensitivity: bool = False) -> Prediction:
+def predict(
+    scenario: Scenario,
+    target_mm: ArrayLike | None = None,
+    bone_speed_sensitivity: bool = False,
+    keep_simulation: bool = False,
+    pose_sensitivity: bool = False,
+) -> Prediction:
     """Simulates ``scenario`` (which needs a ``[ct]``) and predicts each element's aberration at
     ``target_mm`` (transducer frame, mm; default: the focus): see :class:`Prediction`. Costs two
     plans (the head without bone, then the skull's), two transposed marches and one transposed
@@ -35,8 +39,15 @@ def predict(scenario: Scenario, target_mm: ArrayLike | None = None, bone_speed_s
     through the skull, side by side, no plan; needs a curved array). ``keep_simulation`` keeps the skull's simulation as
     :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
-    prediction, core = _core.predict(scenario.to_toml(), "toml", scenario.base_dir, target,
-                                     bool(bone_speed_sensitivity), bool(keep_simulation), bool(pose_sensitivity))
+    prediction, core = _core.predict(
+        scenario.to_toml(),
+        "toml",
+        scenario.base_dir,
+        target,
+        bool(bone_speed_sensitivity),
+        bool(keep_simulation),
+        bool(pose_sensitivity),
+    )
     if core is None:
         return prediction
     fields_only = scenario.to_dict()
@@ -74,6 +85,7 @@ def compared_section(prediction: Prediction) -> tuple[Section, dict[str, dict[st
     its focal metrics there (as :func:`focal_metrics` gives them), from one batch march of the
     three through the kept skull (what ``arfi predict --report`` draws and prints)."""
     drives = compared_drives(prediction)
-    section = prediction.kept_simulation().section(list(drives.values()), y_mm=prediction.target_mm[1],
-                                                  target_mm=prediction.target_mm)
+    section = prediction.kept_simulation().section(
+        list(drives.values()), y_mm=prediction.target_mm[1], target_mm=prediction.target_mm
+    )
     return section, dict(zip(drives, cast(list, section.focal_metrics)))

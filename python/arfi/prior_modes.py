@@ -108,12 +108,28 @@ class ModesResult:
     def to_dict(self) -> dict[str, Any]:
         """The JSON of ``arfi estimate``'s ``prior_modes_fit``."""
         d: dict[str, Any] = {
-            "modes": [{"name": m.name, "unit": m.unit, "value": float(v), "std": float(s), "prior_std": m.std,
-                       "at_bound": bool(b)} for m, v, s, b in zip(self.modes, self.values, self.std, self.at_bound)],
-            "scale": self.scale, "misfit": self.misfit, "misfit_at_zero": self.misfit_at_zero, "n_pixels": self.n_pixels,
-            "iterations": self.iterations, "converged": self.converged, "evidence_chi2": self.evidence,
+            "modes": [
+                {
+                    "name": m.name,
+                    "unit": m.unit,
+                    "value": float(v),
+                    "std": float(s),
+                    "prior_std": m.std,
+                    "at_bound": bool(b),
+                }
+                for m, v, s, b in zip(self.modes, self.values, self.std, self.at_bound)
+            ],
+            "scale": self.scale,
+            "misfit": self.misfit,
+            "misfit_at_zero": self.misfit_at_zero,
+            "n_pixels": self.n_pixels,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "evidence_chi2": self.evidence,
             "threshold_chi2": self.threshold,
-            "supported": self.supported, "prior_moved": self.prior_moved, "seconds": self.seconds,
+            "supported": self.supported,
+            "prior_moved": self.prior_moved,
+            "seconds": self.seconds,
         }
         pose = self.pose()
         if pose is not None:
@@ -121,9 +137,13 @@ class ModesResult:
         return d
 
 
-def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: float | None = None,
-                     pose_std_deg: float | None = None,
-                     bone_speed_std_percent: float | None = BONE_SPEED_STD_PERCENT) -> list[PriorMode]:
+def prediction_modes(
+    prediction: dict[str, Any],
+    n_elements: int,
+    pose_std_mm: float | None = None,
+    pose_std_deg: float | None = None,
+    bone_speed_std_percent: float | None = BONE_SPEED_STD_PERCENT,
+) -> list[PriorMode]:
     """The modes a prediction's JSON (``arfi predict --json``, or :meth:`Prediction.to_dict`)
     holds: its pose modes (``pose_sensitivity_rad_per_mm``/``_per_deg``) with the priors
     ``pose_std_mm`` and ``pose_std_deg``, and its bone-speed mode
@@ -132,8 +152,10 @@ def prediction_modes(prediction: dict[str, Any], n_elements: int, pose_std_mm: f
     :data:`POSE_STD_MM` and :data:`POSE_STD_DEG` are typical values); a kind the JSON lacks is
     left out. Raises ValueError for malformed values."""
     modes: list[PriorMode] = []
-    for key, std, names, unit in (("pose_sensitivity_rad_per_mm", pose_std_mm, POSE_NAMES[:3], "mm"),
-                                  ("pose_sensitivity_rad_per_deg", pose_std_deg, POSE_NAMES[3:], "deg")):
+    for key, std, names, unit in (
+        ("pose_sensitivity_rad_per_mm", pose_std_mm, POSE_NAMES[:3], "mm"),
+        ("pose_sensitivity_rad_per_deg", pose_std_deg, POSE_NAMES[3:], "deg"),
+    ):
         if std is not None and not (np.isfinite(std) and std >= 0):
             raise ValueError(f"the prior std of {key}: must be a finite number >= 0, got {std}")
         if not std or key not in prediction:
@@ -173,7 +195,9 @@ def read_modes(path: str | Path, n_elements: int) -> list[PriorMode]:
     except (OSError, ValueError, TypeError, zipfile.BadZipFile, EOFError) as e:
         raise ValueError(str(e) if str(p) in str(e) else f"{p}: not a NumPy .npz of modes ({e})") from None
     if std.shape != (len(rows),) or not np.all(np.isfinite(std)) or np.any(std <= 0):
-        raise ValueError(f"{p}: 'std' must hold {len(rows)} finite numbers > 0 (one prior std per mode), got {std.tolist()}")
+        raise ValueError(
+            f"{p}: 'std' must hold {len(rows)} finite numbers > 0 (one prior std per mode), got {std.tolist()}"
+        )
     if len(names) != len(rows) or len(units) != len(rows):
         raise ValueError(f"{p}: 'names' and 'units' must hold one string per mode ({len(rows)})")
     return [PriorMode(n, u, r, float(s)) for n, u, r, s in zip(names, units, rows, std)]
@@ -188,14 +212,22 @@ def _matrix(values: Any, name: str, n_elements: int) -> NDArray[np.float64]:
     if a.ndim == 1:
         a = a[None, :]
     if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] != n_elements:
-        raise ValueError(f"{name}: must hold {n_elements} finite numbers per row (one per element), got shape {a.shape}")
+        raise ValueError(
+            f"{name}: must hold {n_elements} finite numbers per row (one per element), got shape {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or infinite values")
     return a
 
 
-def fit_prior_modes(skull: Simulation, images: list[NDArray[np.float64]], known: list[NDArray[np.float64] | None],
-                    prior: NDArray[np.float64], modes: list[PriorMode], noise_rad: float | None = None) -> ModesResult:
+def fit_prior_modes(
+    skull: Simulation,
+    images: list[NDArray[np.float64]],
+    known: list[NDArray[np.float64] | None],
+    prior: NDArray[np.float64],
+    modes: list[PriorMode],
+    noise_rad: float | None = None,
+) -> ModesResult:
     """Fits the coefficients of ``modes`` to ``images`` (each with its ``known`` phases) on
     ``skull``, the head with the CT's bone driven with the reference steering
     (``Simulation(scenario.with_ct_bone())``), and moves ``prior`` (the prediction, rad per
@@ -212,8 +244,20 @@ def fit_prior_modes(skull: Simulation, images: list[NDArray[np.float64]], known:
     coefficients = np.asarray(fit.coefficients)
     prior_std = np.array([m.std for m in modes])
     moved = wrap(prior + coefficients @ scaled)
-    return ModesResult(modes=modes, values=coefficients * prior_std, std=np.asarray(fit.std) * prior_std, prior=moved,
-                       scale=fit.scale, misfit=fit.misfit, misfit_at_zero=fit.misfit_at_zero, n_pixels=fit.n_pixels,
-                       iterations=fit.iterations, converged=fit.converged, at_bound=list(fit.at_bound),
-                       evidence=fit.evidence, threshold=fit.threshold, supported=fit.supported,
-                       seconds=time.perf_counter() - t)
+    return ModesResult(
+        modes=modes,
+        values=coefficients * prior_std,
+        std=np.asarray(fit.std) * prior_std,
+        prior=moved,
+        scale=fit.scale,
+        misfit=fit.misfit,
+        misfit_at_zero=fit.misfit_at_zero,
+        n_pixels=fit.n_pixels,
+        iterations=fit.iterations,
+        converged=fit.converged,
+        at_bound=list(fit.at_bound),
+        evidence=fit.evidence,
+        threshold=fit.threshold,
+        supported=fit.supported,
+        seconds=time.perf_counter() - t,
+    )

@@ -15,7 +15,9 @@ class Progress:
 
     WIDTH = 30
 
-    def __init__(self, label: str, total: int, unit: str = "", enabled: bool | None = None, stream: TextIO | None = None):
+    def __init__(
+        self, label: str, total: int, unit: str = "", enabled: bool | None = None, stream: TextIO | None = None
+    ):
         self.label, self.total, self.unit = label, max(int(total), 0), unit
         self.stream = sys.stderr if stream is None else stream
         self.enabled = self.stream.isatty() if enabled is None else bool(enabled)
@@ -31,7 +33,9 @@ class Progress:
         bar = "#" * filled + "." * (self.WIDTH - filled)
         unit = f" {self.unit}" if self.unit else ""
         end = "\n" if self.done >= self.total else ""
-        self.stream.write(f"\r{self.label} [{bar}] {self.done}/{self.total}{unit}, {time.perf_counter() - self.start:.0f} s{end}")
+        self.stream.write(
+            f"\r{self.label} [{bar}] {self.done}/{self.total}{unit}, {time.perf_counter() - self.start:.0f} s{end}"
+        )
         self.stream.flush()
 
     def advance(self, n: int = 1) -> None:

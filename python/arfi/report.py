@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import base64
 import html
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -15,8 +16,10 @@ from numpy.typing import ArrayLike, NDArray
 from arfi._core import connected_region, image_noise_rad
 from arfi.io import atomic_path, atomic_write_text
 
-STYLE = ("body{font-family:sans-serif;max-width:1300px;margin:auto}table{border-collapse:collapse}"
-         "td,th{border:1px solid #999;padding:3px 6px}img{max-width:100%}")
+STYLE = (
+    "body{font-family:sans-serif;max-width:1300px;margin:auto}table{border-collapse:collapse}td,th{border:1px solid "
+    "#999;padding:3px 6px}img{max-width:100%}"
+)
 
 
 def pyplot() -> Any:
@@ -55,8 +58,15 @@ def axis_labels(sim: Any) -> dict[str, str]:
     return {"xlabel": f"{sim.mr_plane[0]} (mm)", "ylabel": f"{sim.mr_plane[1]} (mm)"}
 
 
-def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: str, signed: bool = False,
-               limits: tuple[float, float] | None = None) -> None:
+def show_image(
+    fig: Any,
+    ax: Any,
+    sim: Any,
+    image: NDArray[np.float64],
+    title: str,
+    signed: bool = False,
+    limits: tuple[float, float] | None = None,
+) -> None:
     """An MR-ARFI phase image (rad) on its plane, axes in mm, with a colour bar in rad;
     ``signed`` centres the colour map on zero (residuals); ``limits`` (rad) shares one colour
     scale between images."""
@@ -64,14 +74,21 @@ def show_image(fig: Any, ax: Any, sim: Any, image: NDArray[np.float64], title: s
     vmin, vmax = (-lim, lim) if signed else (None, None)
     if limits is not None:
         vmin, vmax = limits
-    im = ax.imshow(image.T, origin="lower", extent=image_extent_mm(sim, image), cmap="RdBu_r" if signed else "viridis",
-                   vmin=vmin, vmax=vmax)
+    im = ax.imshow(
+        image.T,
+        origin="lower",
+        extent=image_extent_mm(sim, image),
+        cmap="RdBu_r" if signed else "viridis",
+        vmin=vmin,
+        vmax=vmax,
+    )
     ax.set(title=title, **axis_labels(sim))
     fig.colorbar(im, ax=ax, label="ARFI phase (rad)")
 
 
-def focal_box_mm(sim: Any, images: Sequence[NDArray[np.float64]], margin_mm: float = 5.0,
-                 least_mm: float = 20.0) -> list[float]:
+def focal_box_mm(
+    sim: Any, images: Sequence[NDArray[np.float64]], margin_mm: float = 5.0, least_mm: float = 20.0
+) -> list[float]:
     """``[u0, u1, v0, v1]`` (mm) around the focal spot of ``images`` (on the scenario's MR plane):
     the pixels above 10 % of the largest |value| and 5 noise deviations (each image's noise from
     its background, :func:`arfi._core.image_noise_rad`), with ``margin_mm`` around them, widened
@@ -96,8 +113,17 @@ def element_map(fig: Any, ax: Any, sim: Any, phases: ArrayLike, title: str) -> N
     """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π]);
     ``phases`` per element or per group."""
     per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
-    element_values(fig, ax, sim, np.angle(np.exp(1j * per_element)), title, "phase (rad)", cmap="twilight_shifted",
-                   vmin=-np.pi, vmax=np.pi)
+    element_values(
+        fig,
+        ax,
+        sim,
+        np.angle(np.exp(1j * per_element)),
+        title,
+        "phase (rad)",
+        cmap="twilight_shifted",
+        vmin=-np.pi,
+        vmax=np.pi,
+    )
 
 
 def element_values(fig: Any, ax: Any, sim: Any, values: NDArray[np.float64], title: str, label: str, **kw: Any) -> None:
@@ -119,8 +145,15 @@ def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, 
     c = section.sound_speed_m_s[:, columns]
     bg = ax.imshow(c, origin="lower", extent=extent, cmap="Greys", vmin=1300.0, vmax=max(3000.0, float(c.max())))
     p = np.abs(section.pressure[drive][:, columns]) / 1e6
-    im = ax.imshow(np.ma.masked_less(p, 0.1 * vmax_pa / 1e6), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
-                   vmax=vmax_pa / 1e6, alpha=0.9)
+    im = ax.imshow(
+        np.ma.masked_less(p, 0.1 * vmax_pa / 1e6),
+        origin="lower",
+        extent=extent,
+        cmap="inferno",
+        vmin=0.0,
+        vmax=vmax_pa / 1e6,
+        alpha=0.9,
+    )
     ax.set(title=title, xlabel="x (mm)", ylabel="z (mm)")
     return bg, im
 
@@ -150,13 +183,18 @@ def figure_html(out: Path, figures: Sequence[tuple[str, str]]) -> str:
     """``<figure>`` elements with the PNGs (``(caption, file name in out)``) embedded."""
     return "".join(
         f"<figure><img src='data:image/png;base64,{base64.b64encode((out / name).read_bytes()).decode()}' "
-        f"alt='{html.escape(cap)}'><figcaption>{html.escape(cap)}</figcaption></figure>" for cap, name in figures)
+        f"alt='{html.escape(cap)}'><figcaption>{html.escape(cap)}</figcaption></figure>"
+        for cap, name in figures
+    )
 
 
 def write_html(path: Path, title: str, body: str) -> Path:
     """One self-contained HTML page."""
-    atomic_write_text(path, f"<!doctype html><html><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
-                            f"<style>{STYLE}</style></head>\n<body><h1>{html.escape(title)}</h1>\n{body}</body></html>\n")
+    atomic_write_text(
+        path,
+        f'<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+        f"<style>{STYLE}</style></head>\n<body><h1>{html.escape(title)}</h1>\n{body}</body></html>\n",
+    )
     return path
 
 
@@ -166,13 +204,22 @@ def _cell(v: Any) -> str:
 
 def table_html(rows: dict[str, Any]) -> str:
     """A two-column table of named values."""
-    return "<table>" + "".join(f"<tr><th>{html.escape(k)}</th><td>{_cell(v)}</td></tr>" for k, v in rows.items()) + "</table>"
+    return (
+        "<table>"
+        + "".join(f"<tr><th>{html.escape(k)}</th><td>{_cell(v)}</td></tr>" for k, v in rows.items())
+        + "</table>"
+    )
 
 
 def rows_table_html(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
     """A table with one row per dict and the given columns."""
     head = "<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in columns) + "</tr>\n"
-    return "<table>" + head + "\n".join("<tr>" + "".join(f"<td>{_cell(r[c])}</td>" for c in columns) + "</tr>" for r in rows) + "</table>"
+    return (
+        "<table>"
+        + head
+        + "\n".join("<tr>" + "".join(f"<td>{_cell(r[c])}</td>" for c in columns) + "</tr>" for r in rows)
+        + "</table>"
+    )
 
 
 def _report_dir(out: str | Path) -> Path:
@@ -181,16 +228,25 @@ def _report_dir(out: str | Path) -> Path:
     return out
 
 
-def _verb_page(out: Path, verb: str, values: dict[str, Any], figures: Sequence[tuple[str, str]],
-               warning: str | None = None) -> Path:
+def _verb_page(
+    out: Path, verb: str, values: dict[str, Any], figures: Sequence[tuple[str, str]], warning: str | None = None
+) -> Path:
     """``out/report.html`` for a verb: the ``warning`` in red if any, its values as a table, then
     its figures."""
     head = f"<p style='color:red'><b>{html.escape(warning)}</b></p>" if warning else ""
     return write_html(out / "report.html", f"arfi {verb}", head + table_html(values) + figure_html(out, figures))
 
 
-def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float64], model: NDArray[np.float64],
-               values: dict[str, Any], phases: ArrayLike | None = None, warning: str | None = None) -> Path:
+def fit_report(
+    out: str | Path,
+    sim: Any,
+    verb: str,
+    measured: NDArray[np.float64],
+    model: NDArray[np.float64],
+    values: dict[str, Any],
+    phases: ArrayLike | None = None,
+    warning: str | None = None,
+) -> Path:
     """Report of a fit (``calibrate``, ``estimate``, ``simulate``): the measured image, the model
     (one colour scale) and their residual, cropped to the focal spot (:func:`focal_box_mm`), and,
     with ``phases`` (rad, the estimated aberration), the element maps of the aberration and of its
@@ -204,13 +260,18 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
     show_image(fig, ax[0], sim, measured, "measured", limits=(lo, hi))
     show_image(fig, ax[1], sim, model, "model", limits=(lo, hi))
     residual = measured - model
-    show_image(fig, ax[2], sim, residual, f"residual (RMS {float(np.sqrt(np.mean(residual ** 2))):.4f} rad)", signed=True)
+    show_image(fig, ax[2], sim, residual, f"residual (RMS {float(np.sqrt(np.mean(residual**2))):.4f} rad)", signed=True)
     u0, u1, v0, v1 = focal_box_mm(sim, [measured, model])
     for a in ax:
         a.set(xlim=(u0, u1), ylim=(v0, v1))
     if warning:
         fig.suptitle(warning, color="red")
-    figures = [("measured, model and residual MR-ARFI images around the focal spot", save_figure(fig, out / f"{verb}_images.png"))]
+    figures = [
+        (
+            "measured, model and residual MR-ARFI images around the focal spot",
+            save_figure(fig, out / f"{verb}_images.png"),
+        )
+    ]
     if phases is not None:
         fig, ax = plt.subplots(1, 2, figsize=(11, 4.6))
         element_map(fig, ax[0], sim, phases, "estimated aberration")
@@ -221,12 +282,20 @@ def fit_report(out: str | Path, sim: Any, verb: str, measured: NDArray[np.float6
     return _verb_page(out, verb, values, figures, warning)
 
 
-def image_report(out: str | Path, sim: Any, verb: str, image: NDArray[np.float64], values: dict[str, Any],
-                 phases: ArrayLike | None = None) -> Path:
+def image_report(
+    out: str | Path,
+    sim: Any,
+    verb: str,
+    image: NDArray[np.float64],
+    values: dict[str, Any],
+    phases: ArrayLike | None = None,
+) -> Path:
     """Report of a simulated image, with the element map of the phases added to the steering."""
     plt = pyplot()
     out = _report_dir(out)
-    fig, ax = plt.subplots(1, 2 if phases is not None else 1, figsize=(11 if phases is not None else 6, 4.4), squeeze=False)
+    fig, ax = plt.subplots(
+        1, 2 if phases is not None else 1, figsize=(11 if phases is not None else 6, 4.4), squeeze=False
+    )
     show_image(fig, ax[0][0], sim, image, "MR-ARFI image")
     if phases is not None:
         element_map(fig, ax[0][1], sim, phases, "phases added to the steering")
@@ -250,38 +319,63 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
     peak = (field.focal_peak_pa or float(volume.pressure_pa.max())) / 1e6
     along, across = field.fwhm_6db_mm or (20.0, 5.0)
     reach = {"x": max(10.0, 3.0 * across), "y": max(10.0, 3.0 * across), "z": max(10.0, 1.5 * along)}
-    sections = [("x", "z", p[:, j, :], (axes[0], axes[1][j], axes[2])), ("y", "z", p[:, :, i], (axes[0][i], axes[1], axes[2])),
-                ("x", "y", p[k], (axes[0], axes[1], axes[2][k]))]
+    sections = [
+        ("x", "z", p[:, j, :], (axes[0], axes[1][j], axes[2])),
+        ("y", "z", p[:, :, i], (axes[0][i], axes[1], axes[2])),
+        ("x", "y", p[k], (axes[0], axes[1], axes[2][k])),
+    ]
     fig, ax = plt.subplots(2, 3, figsize=(17, 10), layout="constrained")
     background = "hu" if sim.has_ct else "sound_speed_m_s"
     hu = background == "hu"
     for n, (u, w, plane, (xs, ys, zs)) in enumerate(sections):
         grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1)  # one axis of length 1
-        medium = sim.properties_at(grid.reshape(-1, 3))[background].reshape(grid.shape[:3]).squeeze().T  # (w, u) as plane
+        medium = (
+            sim.properties_at(grid.reshape(-1, 3))[background].reshape(grid.shape[:3]).squeeze().T
+        )  # (w, u) as plane
         uu, ww = axes["xyz".index(u)], axes["xyz".index(w)]
         du, dw = uu[1] - uu[0], ww[1] - ww[0]
         extent = [uu[0] - du / 2, uu[-1] + du / 2, ww[0] - dw / 2, ww[-1] + dw / 2]
         start = tuple(int(np.argmin(np.abs(axis - t["xyz".index(c)]))) for axis, c in ((ww, w), (uu, u)))
-        focal = np.where(connected_region(np.ascontiguousarray(plane, dtype=np.float64), list(start), peak / 2), plane, 0.0)
+        focal = np.where(
+            connected_region(np.ascontiguousarray(plane, dtype=np.float64), list(start), peak / 2), plane, 0.0
+        )
         at = next(c for c in "xyz" if c not in (u, w))
         for row in (0, 1):
             axis = ax[row][n]
-            bg = axis.imshow(np.nan_to_num(medium, nan=-1000.0) if hu else medium, origin="lower", extent=extent, cmap="gray",
-                             vmin=-200.0 if hu else 1300.0, vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))))
-            im = axis.imshow(np.ma.masked_less(plane, 0.1 * peak), origin="lower", extent=extent, cmap="inferno", vmin=0.0,
-                             vmax=peak, alpha=0.85)
+            bg = axis.imshow(
+                np.nan_to_num(medium, nan=-1000.0) if hu else medium,
+                origin="lower",
+                extent=extent,
+                cmap="gray",
+                vmin=-200.0 if hu else 1300.0,
+                vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))),
+            )
+            im = axis.imshow(
+                np.ma.masked_less(plane, 0.1 * peak),
+                origin="lower",
+                extent=extent,
+                cmap="inferno",
+                vmin=0.0,
+                vmax=peak,
+                alpha=0.85,
+            )
             axis.contour(uu, ww, focal, levels=[peak / 2], colors="c", linewidths=0.8)
             axis.plot(t["xyz".index(u)], t["xyz".index(w)], "c+", ms=10)
             axis.set(xlabel=f"{u} (mm)", ylabel=f"{w} (mm)", aspect="equal")
         ax[0][n].set_title(f"{u}–{w} plane through the target ({at} = {t['xyz'.index(at)]:.1f} mm)")
-        ax[1][n].set(title="around the target", xlim=(t["xyz".index(u)] - reach[u], t["xyz".index(u)] + reach[u]),
-                     ylim=(t["xyz".index(w)] - reach[w], t["xyz".index(w)] + reach[w]))
+        ax[1][n].set(
+            title="around the target",
+            xlim=(t["xyz".index(u)] - reach[u], t["xyz".index(u)] + reach[u]),
+            ylim=(t["xyz".index(w)] - reach[w], t["xyz".index(w)] + reach[w]),
+        )
     fig.colorbar(im, ax=ax.ravel().tolist(), label="pressure amplitude (MPa)", shrink=0.6, extend="max")
     fig.colorbar(bg, ax=ax.ravel().tolist(), label="CT (HU)" if hu else "sound speed (m/s)", shrink=0.6)
     return fig
 
 
-def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None) -> Path:
+def field_report(
+    out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None
+) -> Path:
     """Report of a simulated field made with ``volume=True``: |p| (MPa) on the plane, axes in
     mm, its colour scale set by the focal peak near the target (hotter places saturate); |p| along
     the beam's axis (the line from the array's centre through the target) with the target's depth
@@ -293,21 +387,34 @@ def field_report(out: str | Path, sim: Any, field: Any, values: dict[str, Any], 
     fig, ax = plt.subplots(1, 3 if phases is not None else 2, figsize=(17 if phases is not None else 11, 4.4))
     x, y = field.x_mm, field.y_mm
     dx, dy = x[1] - x[0], y[1] - y[0]
-    im = ax[0].imshow(np.abs(field.pressure) / 1e6, origin="lower", cmap="inferno", vmin=0.0, vmax=focus["plane_peak_pa"] / 1e6,
-                      extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2])
+    im = ax[0].imshow(
+        np.abs(field.pressure) / 1e6,
+        origin="lower",
+        cmap="inferno",
+        vmin=0.0,
+        vmax=focus["plane_peak_pa"] / 1e6,
+        extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2],
+    )
     ax[0].plot(focus["plane_peak_x_mm"], focus["plane_peak_y_mm"], "c+", ms=10)
     ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm (+: focal peak)", xlabel="x (mm)", ylabel="y (mm)")
     fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)", extend="max")
     ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)
     ax[1].axvline(field.target_mm[2], color="0.5", ls="--", lw=0.8)
     t = field.target_mm
-    ax[1].set(title=f"|p| on the line from the array's centre to ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}) mm (--: target)",
-              xlabel="z (mm)", ylabel="pressure amplitude (MPa)")
+    ax[1].set(
+        title=f"|p| on the line from the array's centre to ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}) mm (--: target)",
+        xlabel="z (mm)",
+        ylabel="pressure amplitude (MPa)",
+    )
     if phases is not None:
         element_map(fig, ax[2], sim, phases, "phases added to the steering")
     figures = [("pressure amplitude", save_figure(fig, out / "field.png"))]
-    figures.append(("the beam on the three planes through the target (cyan: -6 dB of the focal peak)",
-                    save_figure(orthogonal_sections(sim, field), out / "field_sections.png")))
+    figures.append(
+        (
+            "the beam on the three planes through the target (cyan: -6 dB of the focal peak)",
+            save_figure(orthogonal_sections(sim, field), out / "field_sections.png"),
+        )
+    )
     return _verb_page(out, "field", values, figures)
 
 
@@ -323,13 +430,33 @@ def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], sec
     plt = pyplot()
     out = _report_dir(out)
     best = prediction.optimal_pa
-    pressures = {"uncorrected": prediction.uncorrected_pa, "ray_steering": prediction.ray_steering_pa, "corrected": prediction.corrected_pa}
-    fig = section_figure(section, [f"{label}: {pressures[name] / best:.2f} of the best focus" for name, label in DRIVE_LABELS.items()],
-                         prediction.target_mm)
-    figures = [(f"the beam through the skull on the section y = {section.y_mm:.1f} mm", save_figure(fig, out / "predict_section.png"))]
+    pressures = {
+        "uncorrected": prediction.uncorrected_pa,
+        "ray_steering": prediction.ray_steering_pa,
+        "corrected": prediction.corrected_pa,
+    }
+    fig = section_figure(
+        section,
+        [f"{label}: {pressures[name] / best:.2f} of the best focus" for name, label in DRIVE_LABELS.items()],
+        prediction.target_mm,
+    )
+    figures = [
+        (
+            f"the beam through the skull on the section y = {section.y_mm:.1f} mm",
+            save_figure(fig, out / "predict_section.png"),
+        )
+    ]
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.8))
     element_map(fig, ax[0], sim, prediction.phases_rad, "predicted aberration (subtract to correct)")
-    element_values(fig, ax[1], sim, prediction.transmission, "transmission through the skull", "|h skull| / |h reference|",
-                   cmap="viridis", vmin=0.0)
+    element_values(
+        fig,
+        ax[1],
+        sim,
+        prediction.transmission,
+        "transmission through the skull",
+        "|h skull| / |h reference|",
+        cmap="viridis",
+        vmin=0.0,
+    )
     figures.append(("element maps of the prediction", save_figure(fig, out / "predict_elements.png")))
     return _verb_page(out, "predict", values, figures)

@@ -14,9 +14,10 @@ import datetime as _dt
 import html
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -34,8 +35,10 @@ from arfi.validate import as_count, as_number
 MAX_STUDY_SEED = 10**17
 
 #: The paper's results per case (Vyas et al. 2014, Table 1 and text).
-PAPER = {16: {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
-         1024: {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10}}
+PAPER = {
+    16: {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
+    1024: {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10},
+}
 
 
 @dataclass
@@ -78,7 +81,9 @@ def study_aberration(sim: Simulation, case: int, seed: int) -> tuple[np.ndarray,
     return elements, groups_truth, groups_truth[sim.groups] if case == 16 else elements
 
 
-def study_images(sim: Simulation, applied: np.ndarray, noise: float, seed: int, diversity: int) -> tuple[list[np.ndarray], list[Any]]:
+def study_images(
+    sim: Simulation, applied: np.ndarray, noise: float, seed: int, diversity: int
+) -> tuple[list[np.ndarray], list[Any]]:
     """The noisy aberrated image of one repeat and ``diversity`` more, each with seeded random
     known group phases added; returns (images, known phases or None per image)."""
     images: list[np.ndarray] = [sim.arfi_image(applied, noise_rad=noise, seed=20_000 + seed)]
@@ -91,9 +96,18 @@ def study_images(sim: Simulation, applied: np.ndarray, noise: float, seed: int, 
     return images, known
 
 
-def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: str = "nelder-mead",
-              noise_rad: float | None = None, diversity: int = 0, loop2_iterations: int = 0,
-              progress: bool | None = None, ladder: bool = True) -> dict[str, Any]:
+def run_study(
+    case: int,
+    repeats: int,
+    out: Path | str,
+    seed: int = 0,
+    method: str = "nelder-mead",
+    noise_rad: float | None = None,
+    diversity: int = 0,
+    loop2_iterations: int = 0,
+    progress: bool | None = None,
+    ladder: bool = True,
+) -> dict[str, Any]:
     """Runs the study and writes figures, ``table.csv``, ``results.json`` and ``report.html`` to
     ``out``. Returns the results (``table`` rows as in the paper plus the recovered fraction, gain
     and phase error).
@@ -138,8 +152,16 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         measured = images[0]
         if loop2_iterations:
             say(f"repeat {r + 1}/{repeats}: loop 2 ({loop2_iterations} acquisitions)")
-            loop = loop2(model, measured, _acquirer(sim, applied, noise, s), iterations=loop2_iterations, extra_images=images[1:],
-                         extra_known=known[1:], method=method, seed=s)
+            loop = loop2(
+                model,
+                measured,
+                _acquirer(sim, applied, noise, s),
+                iterations=loop2_iterations,
+                extra_images=images[1:],
+                extra_known=known[1:],
+                method=method,
+                seed=s,
+            )
             # The table reports the last fit (all images); the correction is the one measured best.
             est = loop.steps[-1].estimate
             assert est is not None
@@ -151,17 +173,40 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
         aberrated = sim.arfi_image(applied)
         corrected = sim.arfi_image(corrected_phases)
         f_i, f_a, f_c = (sim.focal_arfi(img)[0] for img in (ideal, aberrated, corrected))
-        rows.append(Row(
-            experiment=f"{case}-aberration", repeat=r + 1, seed=s, evaluations=est.evaluations, seconds=est.seconds,
-            final_cost=est.cost, broadening_width_mm=cal.broadening_width_mm, focal_ideal_rad=f_i,
-            focal_aberrated_rad=f_a, focal_corrected_rad=f_c, recovered_fraction=recovered_fraction(f_c, f_i),
-            gain=gain(f_c, f_a), phase_error_rad=phase_error(correction, groups_truth), ambiguous=est.ambiguous,
-            images=n_images, loop2_kept=kept,
-        ))
-        runs.append({"estimate": est, "correction": correction, "calibration": cal, "elements": elements, "groups_truth": groups_truth,
-                     "measured": measured, "aberrated": aberrated, "corrected": corrected,
-                     "corrected_measured": sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
-                     "calibration_image": sim.arfi_image(noise_rad=noise, seed=10_000 + s)})
+        rows.append(
+            Row(
+                experiment=f"{case}-aberration",
+                repeat=r + 1,
+                seed=s,
+                evaluations=est.evaluations,
+                seconds=est.seconds,
+                final_cost=est.cost,
+                broadening_width_mm=cal.broadening_width_mm,
+                focal_ideal_rad=f_i,
+                focal_aberrated_rad=f_a,
+                focal_corrected_rad=f_c,
+                recovered_fraction=recovered_fraction(f_c, f_i),
+                gain=gain(f_c, f_a),
+                phase_error_rad=phase_error(correction, groups_truth),
+                ambiguous=est.ambiguous,
+                images=n_images,
+                loop2_kept=kept,
+            )
+        )
+        runs.append(
+            {
+                "estimate": est,
+                "correction": correction,
+                "calibration": cal,
+                "elements": elements,
+                "groups_truth": groups_truth,
+                "measured": measured,
+                "aberrated": aberrated,
+                "corrected": corrected,
+                "corrected_measured": sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
+                "calibration_image": sim.arfi_image(noise_rad=noise, seed=10_000 + s),
+            }
+        )
         if ladder:
             say(f"repeat {r + 1}/{repeats}: the ladder (loop 2, diversity, prediction, prediction + MR-ARFI)")
             paper = (rows[-1].recovered_fraction, rows[-1].ambiguous, rows[-1].seconds) if paper_faithful else None
@@ -170,8 +215,19 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
                 images, known = defocused_images(sim, applied, measured, noise, s)
             elif diversity != EXTRA_IMAGES:
                 images, known = study_images(sim, applied, noise, s, EXTRA_IMAGES)
-            climb(sim, model, case, applied, images, known, _acquirer(sim, applied, noise, s),
-                  s, focus_of(sim, applied, float(ideal.max())), rungs, paper)
+            climb(
+                sim,
+                model,
+                case,
+                applied,
+                images,
+                known,
+                _acquirer(sim, applied, noise, s),
+                s,
+                focus_of(sim, applied, float(ideal.max())),
+                rungs,
+                paper,
+            )
     say("drawing figures")
     out.mkdir(parents=True, exist_ok=True)
     figures = _figures(sim, case, rows, runs, ideal, out, method)
@@ -179,7 +235,13 @@ def run_study(case: int, repeats: int, out: Path | str, seed: int = 0, method: s
     if ladder_rungs:
         figures["fig11"] = _ladder_figure(ladder_rungs, case, out)
     summary = {
-        "case": case, "repeats": repeats, "method": method, "noise_rad": noise, "seed": seed, "diversity_images": diversity, "loop2_iterations": loop2_iterations,
+        "case": case,
+        "repeats": repeats,
+        "method": method,
+        "noise_rad": noise,
+        "seed": seed,
+        "diversity_images": diversity,
+        "loop2_iterations": loop2_iterations,
         "date": _dt.date.today().isoformat(),
         "table": [asdict(r) for r in rows],
         "mean_recovered_fraction": float(np.mean([r.recovered_fraction for r in rows])),
@@ -203,7 +265,9 @@ def _acquirer(sim: Simulation, applied: np.ndarray, noise: float, seed: int) -> 
 
     def acquire(added: np.ndarray) -> np.ndarray:
         count[0] += 1
-        return sim.arfi_image(applied + np.asarray(added)[sim.groups], noise_rad=noise, seed=60_000 + 100 * seed + count[0])
+        return sim.arfi_image(
+            applied + np.asarray(added)[sim.groups], noise_rad=noise, seed=60_000 + 100 * seed + count[0]
+        )
 
     return acquire
 
@@ -217,8 +281,14 @@ def _ladder_figure(rungs: list[Rung], case: int, out: Path) -> str:
     for i, r in enumerate(rungs):
         ax.plot([i] * len(r.recovered_fractions), r.recovered_fractions, "k.")
     ax.axhline(PAPER[case]["recovered_fraction"], color="r", ls="--", label="paper")
-    ax.set_xticks(x, [r.name.replace(" + ", "\n+ ").replace(" alone", "\nalone").replace(" (paper)", "\n(paper)") for r in rungs], fontsize=8)
-    ax.set(ylabel="recovered fraction of the ideal focus", ylim=(0, 1.1), title=f"{case}-aberration: paths to a correction")
+    ax.set_xticks(
+        x,
+        [r.name.replace(" + ", "\n+ ").replace(" alone", "\nalone").replace(" (paper)", "\n(paper)") for r in rungs],
+        fontsize=8,
+    )
+    ax.set(
+        ylabel="recovered fraction of the ideal focus", ylim=(0, 1.1), title=f"{case}-aberration: paths to a correction"
+    )
     ax.legend()
     fig.tight_layout()
     return save_figure(fig, out / "fig11_ladder.png")
@@ -228,21 +298,33 @@ def _ladder_html(ladder: list[dict[str, Any]], paper: float) -> str:
     """The ladder as a table (empty without one)."""
     if not ladder:
         return ""
-    rows = [{"path": r["name"], "what": r["what"], "recovered_fraction": r["mean_recovered_fraction"],
-             "per_repeat": " ".join(f"{v:.2f}" for v in r["recovered_fractions"]), "ambiguous": r["ambiguous"],
-             "seconds": r["seconds"]} for r in ladder]
-    return (f"<h2>Paths to a correction</h2><p>The same seeded aberrations, calibrations and noisy images for every path "
-            f"(paper's recovered fraction: {paper}). The prediction is a CT-like stand-in: the true aberration plus a seeded "
-            f"smooth error field and per-element jitter; its expected error is given to the posterior as the prior's width.</p>"
-            + rows_table_html(rows, ["path", "what", "recovered_fraction", "per_repeat", "ambiguous", "seconds"]))
+    rows = [
+        {
+            "path": r["name"],
+            "what": r["what"],
+            "recovered_fraction": r["mean_recovered_fraction"],
+            "per_repeat": " ".join(f"{v:.2f}" for v in r["recovered_fractions"]),
+            "ambiguous": r["ambiguous"],
+            "seconds": r["seconds"],
+        }
+        for r in ladder
+    ]
+    return (
+        "<h2>Paths to a correction</h2><p>The same seeded aberrations, calibrations and noisy images for every path "
+        f"(paper's recovered fraction: {paper}). The prediction is a CT-like stand-in: the true aberration plus a "
+        "seeded smooth error field and per-element jitter; its expected error is given to the posterior as the "
+        "prior's width.</p>"
+        + rows_table_html(rows, ["path", "what", "recovered_fraction", "per_repeat", "ambiguous", "seconds"])
+    )
 
 
 def _write_table(path: Path, rows: list[Row]) -> None:
     atomic_write_text(path, csv_text([asdict(r) for r in rows]))
 
 
-def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, Any]], ideal: np.ndarray,
-             out: Path, method: str) -> dict[str, str]:
+def _figures(
+    sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, Any]], ideal: np.ndarray, out: Path, method: str
+) -> dict[str, str]:
     plt = pyplot()
     figs: dict[str, str] = {}
     run0 = runs[0]
@@ -257,8 +339,12 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     cal_img = run0["calibration_image"]
     model = sim.with_calibration(run0["calibration"].broadening_width_mm, run0["calibration"].amplitude).arfi_image()
     fig, ax = plt.subplots(2, 2, figsize=(10, 8))
-    for k, (img, title) in enumerate([(force / force.max(), "(a) simulated radiation force (normalised)"),
-                                      (cal_img / cal_img.max(), "(b) calibration MR-ARFI image (normalised)")]):
+    for k, (img, title) in enumerate(
+        [
+            (force / force.max(), "(a) simulated radiation force (normalised)"),
+            (cal_img / cal_img.max(), "(b) calibration MR-ARFI image (normalised)"),
+        ]
+    ):
         im = ax[0, k].imshow(img.T, origin="lower", extent=ext, cmap="viridis")
         ax[0, k].set(xlim=(-zoom, zoom), ylim=(-zoom, zoom), xlabel="x (mm)", ylabel="y (mm)", title=title)
         fig.colorbar(im, ax=ax[0, k], label="normalised")
@@ -266,7 +352,9 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     ax[1, 0].plot(xs, force[:, jy] / force.max(), "k:", label="simulated force")
     ax[1, 0].set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="normalised", title="(c) without Gaussian filtering")
     ax[1, 1].plot(xs, cal_img[:, jy] / cal_img.max(), "k-", label="MR-ARFI (calibration)")
-    ax[1, 1].plot(xs, model[:, jy] / model.max(), "k:", label=f"simulated, W = {run0['calibration'].broadening_width_mm:.2f} mm")
+    ax[1, 1].plot(
+        xs, model[:, jy] / model.max(), "k:", label=f"simulated, W = {run0['calibration'].broadening_width_mm:.2f} mm"
+    )
     ax[1, 1].set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="normalised", title="(d) with Gaussian filtering")
     for k in range(2):
         ax[1, k].legend()
@@ -278,20 +366,28 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     off = np.angle(np.sum(np.exp(1j * (truth - ex.phases_rad))))
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     im = ax[0].imshow(sim.arfi_image(truth).T, origin="lower", extent=ext, cmap="viridis")
-    ax[0].set(xlim=(-zoom, zoom), ylim=(-zoom, zoom), xlabel="x (mm)", ylabel="y (mm)", title="(a) aberrated, noise-free")
+    ax[0].set(
+        xlim=(-zoom, zoom), ylim=(-zoom, zoom), xlabel="x (mm)", ylabel="y (mm)", title="(a) aberrated, noise-free"
+    )
     fig.colorbar(im, ax=ax[0], label="ARFI phase (rad)")
     g = np.arange(len(truth))
     ax[1].plot(g, np.angle(np.exp(1j * (truth - off))), "ko-", label="applied")
     ax[1].plot(g, ex.phases_rad, "rx--", label=f"estimated ({method})")
-    ax[1].set(xlabel="group", ylabel="phase (rad)", title=f"(b) phase error {phase_error(ex.phases_rad, truth):.3f} rad")
+    ax[1].set(
+        xlabel="group", ylabel="phase (rad)", title=f"(b) phase error {phase_error(ex.phases_rad, truth):.3f} rad"
+    )
     ax[1].legend()
     figs["fig3"] = save_figure(fig, out / "fig3_optimisation_example.png")
 
     # Figure 4c/d: the applied aberration on the element map.
     pos = sim.element_positions_mm
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.5))
-    for k, (ph, title) in enumerate([(run0["groups_truth"][sim.groups], "(c) 16-aberration"), (run0["elements"], "(d) 1024-aberration")]):
-        sc = ax[k].scatter(pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s")
+    for k, (ph, title) in enumerate(
+        [(run0["groups_truth"][sim.groups], "(c) 16-aberration"), (run0["elements"], "(d) 1024-aberration")]
+    ):
+        sc = ax[k].scatter(
+            pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s"
+        )
         ax[k].set(aspect="equal", xlabel="x (mm)", ylabel="y (mm)", title=title)
         fig.colorbar(sc, ax=ax[k], label="phase (rad)")
     figs["fig4"] = save_figure(fig, out / "fig4_aberrations.png")
@@ -304,7 +400,12 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     pats = [sxz.arfi_image(), sxz.arfi_image(run0["groups_truth"][sim.groups]), sxz.arfi_image(run0["elements"])]
     fig, ax = plt.subplots(1, 3, figsize=(14, 4), layout="constrained")
     az = sxz.mr_affine_mm
-    zext = [az[2, 3] - az[2, 2] / 2, az[2, 3] + (pats[0].shape[1] - 0.5) * az[2, 2], az[0, 3] - az[0, 0] / 2, az[0, 3] + (pats[0].shape[0] - 0.5) * az[0, 0]]
+    zext = [
+        az[2, 3] - az[2, 2] / 2,
+        az[2, 3] + (pats[0].shape[1] - 0.5) * az[2, 2],
+        az[0, 3] - az[0, 0] / 2,
+        az[0, 3] + (pats[0].shape[0] - 0.5) * az[0, 0],
+    ]
     for k, (p, title) in enumerate(zip(pats, ["(a) ideal", "(b) 16-aberration", "(c) 1024-aberration"])):
         cs = ax[k].contourf(p / pats[0].max(), levels=np.linspace(0, 1, 11), extent=zext, cmap="viridis")
         ax[k].set(xlabel="z, along the beam (mm)", ylabel="x (mm)", title=title)
@@ -314,8 +415,13 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     # Figure 6: ideal, aberrated and corrected MR-ARFI images (what the scanner would show).
     vmax = float(ideal.max())
     fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-    for k, (img, title) in enumerate([(sim.arfi_image(noise_rad=sim.noise_rad, seed=1), "ideal"),
-                                      (run0["measured"], f"aberrated ({case})"), (run0["corrected_measured"], "corrected")]):
+    for k, (img, title) in enumerate(
+        [
+            (sim.arfi_image(noise_rad=sim.noise_rad, seed=1), "ideal"),
+            (run0["measured"], f"aberrated ({case})"),
+            (run0["corrected_measured"], "corrected"),
+        ]
+    ):
         im = ax[k].imshow(img.T, origin="lower", extent=ext, cmap="viridis", vmin=-0.05, vmax=vmax)
         ax[k].set(xlim=(-zoom, zoom), ylim=(-zoom, zoom), xlabel="x (mm)", ylabel="y (mm)", title=title)
         fig.colorbar(im, ax=ax[k], label="ARFI phase (rad)")
@@ -356,7 +462,13 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
     # Figure 10: focal ARFI, mean ± s.d. over repeats.
     vals = np.array([[r.focal_ideal_rad, r.focal_aberrated_rad, r.focal_corrected_rad] for r in rows])
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.bar(["ideal", "aberrated", "corrected"], vals.mean(axis=0), yerr=vals.std(axis=0), color=["0.8", "0.5", "0.2"], capsize=5)
+    ax.bar(
+        ["ideal", "aberrated", "corrected"],
+        vals.mean(axis=0),
+        yerr=vals.std(axis=0),
+        color=["0.8", "0.5", "0.2"],
+        capsize=5,
+    )
     ax.set(ylabel="focal ARFI phase (rad)", title=f"{case}-aberration, {len(rows)} repeats")
     figs["fig10"] = save_figure(fig, out / "fig10_focal.png")
     return figs
@@ -364,24 +476,42 @@ def _figures(sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, A
 
 def _html(summary: dict[str, Any], out: Path) -> str:
     rows = summary["table"]
-    cols = ["experiment", "repeat", "evaluations", "seconds", "final_cost", "broadening_width_mm", "focal_ideal_rad",
-            "focal_aberrated_rad", "focal_corrected_rad", "recovered_fraction", "gain", "phase_error_rad", "ambiguous",
-            "images", "loop2_kept"]
+    cols = [
+        "experiment",
+        "repeat",
+        "evaluations",
+        "seconds",
+        "final_cost",
+        "broadening_width_mm",
+        "focal_ideal_rad",
+        "focal_aberrated_rad",
+        "focal_corrected_rad",
+        "recovered_fraction",
+        "gain",
+        "phase_error_rad",
+        "ambiguous",
+        "images",
+        "loop2_kept",
+    ]
 
     table = rows_table_html(rows, cols)
     imgs = figure_html(out, [(name, name) for name in summary["figures"].values()])
     p = summary["paper"]
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>arfi reproduce: {summary['case']}-aberration</title>
-<style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}table{{border-collapse:collapse}}td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
-<body><h1>Hybrid simulation–MR-ARFI correction: {summary['case']}-aberration case</h1>
+    return f"""<!doctype html><html><head><meta charset="utf-8">
+<title>arfi reproduce: {summary["case"]}-aberration</title>
+<style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
+<body><h1>Hybrid simulation–MR-ARFI correction: {summary["case"]}-aberration case</h1>
 <p>Vyas, Kaye &amp; Butts Pauly, Med Phys 41(3):032901 (2014), re-run in simulation with arfi on the embedded phantom
-scenario; method {html.escape(summary['method'])}, ARFI noise {summary['noise_rad']} rad, {summary['repeats']} repeats,
-{summary['diversity_images']} added diversity images and {summary['loop2_iterations']} loop-2 acquisitions per repeat
-(loop2_kept: which acquisition's correction was kept, 0 = none measured better than no correction), {summary['date']}. Rows marked ambiguous are estimates the
+scenario; method {html.escape(summary["method"])}, ARFI noise {summary["noise_rad"]} rad, {summary["repeats"]} repeats,
+{summary["diversity_images"]} added diversity images and {summary["loop2_iterations"]} loop-2 acquisitions per repeat
+(loop2_kept: which acquisition's correction was kept, 0 = none measured better than no correction), {summary["date"]}.
+Rows marked ambiguous are estimates the
 method itself flags: clearly different solutions fit that image within the noise (one in-focus image hardly tells
 phi(u) from -phi(-u); images with known added phases tell them apart).</p>
-<p>Mean recovered fraction <b>{summary['mean_recovered_fraction']:.2f}</b> (paper {p['recovered_fraction']}), mean gain
-<b>{summary['mean_gain']:+.0%}</b> (paper {p['gain']:+.0%}), mean phase error <b>{summary['mean_phase_error_rad']:.2f} rad</b>
-(paper {p['phase_error_rad']} rad). Focal values are taken on noise-free simulated images.</p>
-{_ladder_html(summary['ladder'], p['recovered_fraction'])}<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
+<p>Mean recovered fraction <b>{summary["mean_recovered_fraction"]:.2f}</b> (paper {p["recovered_fraction"]}), mean gain
+<b>{summary["mean_gain"]:+.0%}</b> (paper {p["gain"]:+.0%}), mean phase error <b>{summary["mean_phase_error_rad"]:.2f}
+rad</b>
+(paper {p["phase_error_rad"]} rad). Focal values are taken on noise-free simulated images.</p>
+{_ladder_html(summary["ladder"], p["recovered_fraction"])}<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
 """

@@ -26,8 +26,9 @@ def check_limit(value: float, name: str) -> float:
     return float(value)
 
 
-def exceeded(focus: dict[str, Any], mi_limit: float = MI_LIMIT,
-             isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2) -> list[dict[str, Any]]:
+def exceeded(
+    focus: dict[str, Any], mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2
+) -> list[dict[str, Any]]:
     """The exposures above the limits, one entry each (``where``, ``tissue``, ``quantity``,
     ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak, and at the hottest
     place of each tissue class (``focus["hottest"]``) unless that place is the focal peak's own
@@ -39,7 +40,15 @@ def exceeded(focus: dict[str, Any], mi_limit: float = MI_LIMIT,
     def flag(where: str, tissue: str | None, exposure: dict[str, Any]) -> None:
         for quantity, limit in (("mechanical_index", mi_limit), ("isppa_w_cm2", isppa_limit_w_cm2)):
             if exposure[quantity] > limit:
-                rows.append({"where": where, "tissue": tissue, "quantity": quantity, "value": exposure[quantity], "limit": limit})
+                rows.append(
+                    {
+                        "where": where,
+                        "tissue": tissue,
+                        "quantity": quantity,
+                        "value": exposure[quantity],
+                        "limit": limit,
+                    }
+                )
 
     peak = focus.get("focal_peak_pa")
     if peak is not None:
@@ -56,6 +65,9 @@ def summary(rows: list[dict[str, Any]]) -> str:
     """One line naming each exposure above its limit (``rows`` from :func:`exceeded`, not empty)."""
     name = {"mechanical_index": "MI", "isppa_w_cm2": "I_SPPA"}
     value = {"mechanical_index": "{:.2f}", "isppa_w_cm2": "{:.1f} W/cm²"}
-    parts = [f"{name[r['quantity']]} {value[r['quantity']].format(r['value'])} at the {r['where']} ({r['tissue']}) > {r['limit']:g}"
-             for r in rows]
+    parts = [
+        f"{name[r['quantity']]} {value[r['quantity']].format(r['value'])} at the {r['where']} ({r['tissue']}) > "
+        f"{r['limit']:g}"
+        for r in rows
+    ]
     return "above the safety lines: " + "; ".join(parts)

@@ -24,13 +24,13 @@ class Scenario:
         self._toml = _core.normalize_scenario(toml_text, "toml", self._base_dir)
 
     @classmethod
-    def default(cls) -> "Scenario":
+    def default(cls) -> Scenario:
         """The embedded default: the paper's phantom experiment (550 kHz planar quadrant array of
         1024 elements focused at (0, 0, 85) mm into a cylindrical phantom in water)."""
         return cls(_core.default_scenario_toml())
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> "Scenario":
+    def load(cls, path: str | os.PathLike[str]) -> Scenario:
         """Reads a TOML scenario file; relative paths inside resolve against its folder."""
         p = Path(path)
         if not p.is_file():
@@ -45,12 +45,12 @@ class Scenario:
             raise ValueError(f"scenario file {p}: {e}") from None
 
     @classmethod
-    def from_toml(cls, text: str, base_dir: str | os.PathLike[str] | None = None) -> "Scenario":
+    def from_toml(cls, text: str, base_dir: str | os.PathLike[str] | None = None) -> Scenario:
         """Parses TOML text."""
         return cls(text, base_dir)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] | None = None) -> "Scenario":
+    def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] | None = None) -> Scenario:
         """Builds a scenario from a dict with the file's keys (e.g. from :meth:`to_dict`)."""
         try:
             text = json.dumps(data, allow_nan=False)
@@ -73,7 +73,7 @@ class Scenario:
         """The scenario as a dict with every default written out."""
         return json.loads(_core.scenario_json(self._toml, "toml", self._base_dir))
 
-    def with_ct_bone(self) -> "Scenario":
+    def with_ct_bone(self) -> Scenario:
         """The head of this ``[ct]`` scenario with the CT's bone (``without_bone = false``) driven
         with the reference steering (``steer_without_bone = true``): the skull ``arfi predict``
         marches, steered as the estimation's model (``without_bone = true``) is. A scenario
@@ -83,6 +83,13 @@ class Scenario:
             raise ValueError(f"scenario {self.name!r}: has no [ct]: a model with the CT's bone needs a CT of the head")
         d["ct"] = {**d["ct"], "without_bone": False, "steer_without_bone": True}
         return Scenario.from_dict(d, self._base_dir)
+
+    def outline(self) -> _core.ScenarioOutline:
+        """What the scenario fixes before a simulation is built: the array's elements and default
+        groups, the focus and the MR geometry, with the simulation's own rules for phases
+        (``element_phases``, ``known_per_element``) and image files (``check_image``). Read in
+        milliseconds (no CT, no grid), so inputs are refused before a build of tens of seconds."""
+        return _core.scenario_outline(self._toml, "toml", self._base_dir)
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the TOML (atomically: a failed write leaves no partial file)."""

@@ -14,9 +14,8 @@ from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.scenario import Scenario
-from arfi.volume import PressureVolume
 from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
-
+from arfi.volume import PressureVolume
 
 #: One MR-ARFI image (2-D, or a list of rows) or several (a sequence of 2-D arrays, or a 3-D stack).
 Images = ArrayLike | Sequence[ArrayLike]
@@ -24,14 +23,24 @@ Images = ArrayLike | Sequence[ArrayLike]
 Known = ArrayLike | Sequence[ArrayLike | None] | None
 
 
-def images_and_known(images: Images, known: Known) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64] | None]]:
+def images_and_known(
+    images: Images, known: Known
+) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64] | None]]:
     """The images as 2-D float64 arrays and their known phases (one entry, or None, per image;
     a single image also takes its vector in a one-entry list). The core checks that the counts
     agree."""
     single = (isinstance(images, np.ndarray) and images.ndim != 3) or (
-        isinstance(images, (list, tuple)) and len(images) > 0 and not hasattr(images[0], "shape") and np.ndim(images[0]) == 1)
+        isinstance(images, (list, tuple))
+        and len(images) > 0
+        and not hasattr(images[0], "shape")
+        and np.ndim(images[0]) == 1
+    )
     several = cast(Sequence[ArrayLike], images)
-    imgs = [as_image(cast(ArrayLike, images), "images[0]")] if single else [as_image(m, f"images[{i}]") for i, m in enumerate(several)]
+    imgs = (
+        [as_image(cast(ArrayLike, images), "images[0]")]
+        if single
+        else [as_image(m, f"images[{i}]") for i, m in enumerate(several)]
+    )
     if not imgs:
         raise ValueError("images: need at least one image")
     if known is None:
@@ -69,8 +78,13 @@ class Simulation:
     (rad; a positive phase ``phi`` delays that element's emission by ``phi / (2*pi*f)``).
     """
 
-    def __init__(self, scenario: Scenario | None = None, groups: int | ArrayLike | None = None, *,
-                 source: _core.CoreSourceModel | None = None):
+    def __init__(
+        self,
+        scenario: Scenario | None = None,
+        groups: int | ArrayLike | None = None,
+        *,
+        source: _core.CoreSourceModel | None = None,
+    ):
         """``source``: another simulation's :meth:`source_model`, reused where this scenario has
         the same array, grid, acoustic power and coupling medium (its projected elements are
         then not projected again: seconds for a 1024-element hemisphere); otherwise ignored.
@@ -89,18 +103,18 @@ class Simulation:
         return self._core.source_model()
 
     @classmethod
-    def _wrap(cls, scenario: Scenario, core: Any) -> "Simulation":
+    def _wrap(cls, scenario: Scenario, core: Any) -> Simulation:
         s = cls.__new__(cls)
         s.scenario = scenario
         s._core = core
         return s
 
-    def with_calibration(self, broadening_width_mm: float, amplitude: float) -> "Simulation":
+    def with_calibration(self, broadening_width_mm: float, amplitude: float) -> Simulation:
         """The same simulation with a fitted broadening width (mm) and amplitude; the HAS plan
         is shared, so this is cheap."""
         return self._wrap(self.scenario, self._core.with_calibration(float(broadening_width_mm), float(amplitude)))
 
-    def with_element_amplitudes(self, amplitudes: ArrayLike) -> "Simulation":
+    def with_element_amplitudes(self, amplitudes: ArrayLike) -> Simulation:
         """The same simulation with each element driven at ``amplitudes`` (one per element, >= 0)
         times the scenario's amplitude: e.g. a CT prediction's ``transmission``, so that a model of
         the head without its skull loses at each element what the skull loses there. The HAS plan
@@ -115,7 +129,7 @@ class Simulation:
         :meth:`with_element_amplitudes`)."""
         return np.asarray(self._core.element_amplitudes)
 
-    def with_groups(self, groups: int | ArrayLike) -> "Simulation":
+    def with_groups(self, groups: int | ArrayLike) -> Simulation:
         """The same simulation with ``groups`` contiguous groups (or an element → group array)."""
         return self._wrap(self.scenario, self._core.with_groups(_group_map(groups, self.n_elements)))
 
@@ -170,7 +184,8 @@ class Simulation:
         coefficients of every angular-spectrum component, exact at planar interfaces, with total
         reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
         pixel), ``screen`` (``"oblique"``: each pixel's wave crosses its slab along the line to the
-        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source added),
+        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source
+        added),
         ``shear`` (shear waves carried through solids whose faces lie on the planes or on planar walls
         tilted against them, with mode conversion at each such face) and ``reverberation``
         (``None``, or the z of the first and last interface between which the waves bouncing
@@ -185,24 +200,33 @@ class Simulation:
     def propagation_summary(self) -> str:
         """:attr:`propagation` in one sentence, for reports."""
         p = self.propagation
-        text = ("angle-dependent interface transmission (plane-wave coefficients on the angular spectrum)"
-                if p["interfaces"] == "angular" else "normal-incidence interface transmission (T = 2·Z2/(Z1+Z2) per pixel)")
+        text = (
+            "angle-dependent interface transmission (plane-wave coefficients on the angular spectrum)"
+            if p["interfaces"] == "angular"
+            else "normal-incidence interface transmission (T = 2·Z2/(Z1+Z2) per pixel)"
+        )
         if p["screen"] == "vertical":
             text += ", vertical phase screen (original HAS)"
         r = p["reverberation"]
         if r is not None:
-            text += (f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
-                     f"({r['round_trips']} round trips)")
+            text += (
+                f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
+                f"({r['round_trips']} round trips)"
+            )
         text += ", reflections towards the source added" if p["reflections"] else ""
         ct_shear = bool(((self.scenario.to_dict().get("ct") or {}).get("bone_shear_sound_speed_m_s") or 0) > 0)
         if p.get("shear"):
-            text += ("; shear waves carried through solids whose faces lie on the march's planes (material regions, "
-                     "and a CT's faces between layers) or on planar walls tilted against them (a CT's), with mode "
-                     "conversion at each such face")
+            text += (
+                "; shear waves carried through solids whose faces lie on the march's planes (material regions, and a "
+                "CT's faces between layers) or on planar walls tilted against them (a CT's), with mode conversion at "
+                "each such face"
+            )
         if self.has_shear and (ct_shear or not p.get("shear")):
-            text += ("; compressional waves only through a CT's other faces (curved, or on planes that also hold other "
-                     "jumps), a voxel map's other faces and faces crossed pixel by pixel: the shear speeds the scenario gives there are not carried "
-                     "by the march (arfi field --engine fdtd carries them)")
+            text += (
+                "; compressional waves only through a CT's other faces (curved, or on planes that also hold other "
+                "jumps), a voxel map's other faces and faces crossed pixel by pixel: the shear speeds the scenario "
+                "gives there are not carried by the march (arfi field --engine fdtd carries them)"
+            )
         return text
 
     @property
@@ -214,8 +238,10 @@ class Simulation:
         full-wave engine everywhere."""
         d = self.scenario.to_dict()
         ct = d.get("ct") or {}
-        return bool((ct.get("bone_shear_sound_speed_m_s") or 0) > 0
-                    or any((m.get("shear_sound_speed_m_s") or 0) > 0 for m in d.get("material") or []))
+        return bool(
+            (ct.get("bone_shear_sound_speed_m_s") or 0) > 0
+            or any((m.get("shear_sound_speed_m_s") or 0) > 0 for m in d.get("material") or [])
+        )
 
     @property
     def noise_rad(self) -> float:
@@ -255,9 +281,12 @@ class Simulation:
         ``z_mm``, ``axis`` (complex Pa, one per grid plane, on the beam's axis) and ``magnitude``
         (``|p|`` in Pa, (nz, ny, nx)); its focal metrics and hottest places are found exactly as
         for a march. Wrong sizes or values that are not finite: ValueError naming the array."""
-        return self._core.field_from_volume(np.ascontiguousarray(plane, dtype=np.complex128), float(z_mm),
-                                            np.ascontiguousarray(axis, dtype=np.complex128),
-                                            np.ascontiguousarray(magnitude, dtype=np.float32))
+        return self._core.field_from_volume(
+            np.ascontiguousarray(plane, dtype=np.complex128),
+            float(z_mm),
+            np.ascontiguousarray(axis, dtype=np.complex128),
+            np.ascontiguousarray(magnitude, dtype=np.float32),
+        )
 
     def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> dict[str, Any]:
         """The focal metrics in 3-D of the beam driven with ``phases`` (as for :meth:`field`)
@@ -271,8 +300,9 @@ class Simulation:
         target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
         return self._core.focal_metrics(as_phases(phases), target)
 
-    def pressure_volume(self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None,
-                        in_ct: bool = False) -> PressureVolume:
+    def pressure_volume(
+        self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None, in_ct: bool = False
+    ) -> PressureVolume:
         """``|p|`` (Pa) of the beam in 3-D from one march, on the whole grid or on the box
         ``box_mm`` (x0, x1, y0, y1, z0, z1 in mm, transducer frame): a :class:`PressureVolume`
         (``to_nifti(path)`` writes it). With ``in_ct`` (a ``[ct]`` scenario), resampled into the
@@ -316,8 +346,12 @@ class Simulation:
         p = np.atleast_2d(np.asarray(points_mm, dtype=np.float64))
         return self._core.properties_at(np.ascontiguousarray(p))
 
-    def section(self, phases: ArrayLike | Sequence[ArrayLike] | None = None, y_mm: float | None = None,
-                target_mm: ArrayLike | None = None) -> Section:
+    def section(
+        self,
+        phases: ArrayLike | Sequence[ArrayLike] | None = None,
+        y_mm: float | None = None,
+        target_mm: ArrayLike | None = None,
+    ) -> Section:
         """Pressure on the x–z plane nearest ``y_mm`` (default: the focus's) with the sound speed
         there. ``phases``: one drive (phases added to the steering, per element or per group;
         None: the steering alone) or a sequence (None entries: the steering alone) or 2-D array of
@@ -327,7 +361,11 @@ class Simulation:
         none = np.zeros(0)
         if phases is None:
             drives = [none]
-        elif isinstance(phases, (Sequence, np.ndarray)) and len(phases) > 0 and all(p is None or np.ndim(p) == 1 for p in phases):
+        elif (
+            isinstance(phases, (Sequence, np.ndarray))
+            and len(phases) > 0
+            and all(p is None or np.ndim(p) == 1 for p in phases)
+        ):
             drives = [none if p is None else as_phases(p, f"phases[{k}]") for k, p in enumerate(phases)]
         else:
             drives = [as_phases(cast(ArrayLike, phases))]
@@ -363,12 +401,15 @@ class Simulation:
         (over the slice) is tissue with MR signal (not bone)."""
         return self._core.imaged()
 
-    def skull_phases(self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0,
-                     jitter_rad: float = 0.5) -> NDArray[np.float64]:
+    def skull_phases(
+        self, seed: int, correlation_length_mm: float = 12.0, peak_to_peak_rad: float = 6.0, jitter_rad: float = 0.5
+    ) -> NDArray[np.float64]:
         """Seeded skull-like per-element aberration (rad): a smooth random screen over the
         aperture plus per-element jitter; condensed to the 16 default groups (:meth:`condense`) it is
         the paper's 16-aberration case."""
-        return self._core.skull_phases(int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad))
+        return self._core.skull_phases(
+            int(seed), float(correlation_length_mm), float(peak_to_peak_rad), float(jitter_rad)
+        )
 
     def focus_shift_phases(self, shift_mm: ArrayLike, name: str = "shift_mm") -> NDArray[np.float64]:
         """Known per-element phases (rad) that move the focus by ``shift_mm`` (x, y, z in the
@@ -408,8 +449,9 @@ class Simulation:
 
     def calibrate(self, image: ArrayLike, known: ArrayLike | None = None, max_width_mm: float = 10.0) -> Calibration:
         """Fits the broadening width and amplitude to a no-aberration image (paper Eq. 2)."""
-        return self._core.calibrate(as_image(image, "image"), as_phases(known, "known"), None,
-                                    as_number(max_width_mm, "max_width_mm"))
+        return self._core.calibrate(
+            as_image(image, "image"), as_phases(known, "known"), None, as_number(max_width_mm, "max_width_mm")
+        )
 
     def estimate(
         self,
@@ -449,7 +491,8 @@ class Simulation:
         element), warm-started by the estimate on the default 16 groups (with a
         prior it starts from the prediction, and ``ambiguous`` is judged on searches of the element posterior
         from draws of the prior: ``worst_recovery``);
-        ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress`` prints the basis
+        ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress``
+        prints the basis
         marching to stderr.
 
         ``prior``: a predicted aberration (e.g. from a CT-based skull simulation), one phase per
@@ -528,14 +571,26 @@ class Simulation:
         length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm")
         nuisance = nuisance_names(fit_nuisance)
         modes = None if prior_modes is None else as_modes(prior_modes, self.n_elements)
-        return self._core.estimate(arrays, kn_arrays, method, evaluations, limit, as_count(seed, "seed"), n_starts, bool(fit_amplitude),
-                                progress=bool(progress), prior=prior_array, prior_std_rad=std,
-                                prior_correlation_mm=length, fit_nuisance=nuisance, suggest=bool(suggest),
-                                prior_modes=modes,
-                                noise_rad=None if noise_rad is None else as_number(noise_rad, "noise_rad"))
+        return self._core.estimate(
+            arrays,
+            kn_arrays,
+            method,
+            evaluations,
+            limit,
+            as_count(seed, "seed"),
+            n_starts,
+            bool(fit_amplitude),
+            progress=bool(progress),
+            prior=prior_array,
+            prior_std_rad=std,
+            prior_correlation_mm=length,
+            fit_nuisance=nuisance,
+            suggest=bool(suggest),
+            prior_modes=modes,
+            noise_rad=None if noise_rad is None else as_number(noise_rad, "noise_rad"),
+        )
 
-    def cost_model(self, images: Images, known: Known = None,
-                   fit_amplitude: bool = False) -> CostModel:
+    def cost_model(self, images: Images, known: Known = None, fit_amplitude: bool = False) -> CostModel:
         """The hybrid cost (paper Eq. 4) that ``estimate`` minimises, for one MR-ARFI image or a
         list of them, each taken with its ``known`` added phases (rad, per element or group; None
         = none): the same masks (``mask_fraction`` of each image's maximum, connected to it) and
@@ -544,8 +599,7 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         return CostModel(self._core.cost_model(imgs, knowns, bool(fit_amplitude)))
 
-    def fit_mode(self, images: Images, known: Known,
-                 mode: ArrayLike) -> "_core.ModeFit":
+    def fit_mode(self, images: Images, known: Known, mode: ArrayLike) -> _core.ModeFit:
         """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
         priori) that best explains the images, each taken with its ``known`` phases added: image
         ``k`` is this model's with ``c * mode + known_k`` added, one image scale fitted, ``c``
@@ -560,7 +614,9 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         return self._core.fit_mode(imgs, knowns, as_phases(mode, "mode"))
 
-    def fit_modes(self, images: Images, known: Known, modes: ArrayLike, noise_rad: float | None = None) -> "_core.ModesFit":
+    def fit_modes(
+        self, images: Images, known: Known, modes: ArrayLike, noise_rad: float | None = None
+    ) -> _core.ModesFit:
         """The coefficients ``c`` of several prior ``modes`` (rows: rad per element for c_m = 1;
         each standard normal a priori) that best explain the images jointly, each taken with its
         ``known`` phases: image ``k`` is this model's with ``sum_m c_m * modes[m] + known_k``
@@ -580,9 +636,15 @@ class Simulation:
         noise = None if noise_rad is None else as_number(noise_rad, "noise_rad")
         return self._core.fit_modes(imgs, knowns, np.ascontiguousarray(rows), noise_rad=noise)
 
-    def diagnose(self, images: Images, known: Known = None,
-                 threshold: float = 0.0, effects: list[str] | None = None, max_iterations: int = 1500,
-                 time_limit_s: float | None = None) -> Diagnosis:
+    def diagnose(
+        self,
+        images: Images,
+        known: Known = None,
+        threshold: float = 0.0,
+        effects: list[str] | None = None,
+        max_iterations: int = 1500,
+        time_limit_s: float | None = None,
+    ) -> Diagnosis:
         """The model-discrepancy workflow (fit each candidate effect, add the best while the BIC
         favours it, repeat) on one MR-ARFI image or a list of them (e.g. a
         calibration image and an aberrated one), each taken with its ``known`` added phases (rad,
@@ -596,11 +658,18 @@ class Simulation:
         imgs, knowns = images_and_known(images, known)
         if effects is not None and (isinstance(effects, str) or not all(isinstance(e, str) for e in effects)):
             raise ValueError(f"effects: must be a list of effect names, got {effects!r}")
-        return self._core.diagnose(imgs, knowns, as_number(threshold, "threshold"), as_count(max_iterations, "max_iterations"),
-                                None if effects is None else list(effects),
-                                None if time_limit_s is None else as_number(time_limit_s, "time_limit_s"))
+        return self._core.diagnose(
+            imgs,
+            knowns,
+            as_number(threshold, "threshold"),
+            as_count(max_iterations, "max_iterations"),
+            None if effects is None else list(effects),
+            None if time_limit_s is None else as_number(time_limit_s, "time_limit_s"),
+        )
 
-    def effect_images(self, effects: dict[str, Any], known: Sequence[ArrayLike | None] | None = None) -> list[NDArray[np.float64]]:
+    def effect_images(
+        self, effects: dict[str, Any], known: Sequence[ArrayLike | None] | None = None
+    ) -> list[NDArray[np.float64]]:
         """The model's MR-ARFI images (rad) with effects of the diagnosis library applied:
         ``effects`` maps parameter names, exactly as ``diagnose`` reports them, to values
         (``arfi.diagnose.PARAMETERS`` lists them with their meaning: ``scale``,
@@ -610,8 +679,12 @@ class Simulation:
         knowns = [as_phases(k, f"known[{i}]") for i, k in enumerate(known or [None])]
         effects = dict(effects)
         if "sound_speed_m_per_s" in effects:
-            warnings.warn("effects: 'sound_speed_m_per_s' is now 'sound_speed_m_s' (the scenario's name); the old name "
-                          "goes in the next release", DeprecationWarning, stacklevel=2)
+            warnings.warn(
+                "effects: 'sound_speed_m_per_s' is now 'sound_speed_m_s' (the scenario's name); the old name goes in "
+                "the next release",
+                DeprecationWarning,
+                stacklevel=2,
+            )
             effects["sound_speed_m_s"] = effects.pop("sound_speed_m_per_s")
         for key, value in effects.items():
             if key != "dead_groups":

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import itertools
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -72,8 +73,14 @@ def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
     }
 
 
-def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: Sequence[str], seeds: int, case: int = 16,
-           first_seed: int = 0) -> list[Trial]:
+def trials(
+    noise_levels: Sequence[float],
+    image_counts: Sequence[int],
+    methods: Sequence[str],
+    seeds: int,
+    case: int = 16,
+    first_seed: int = 0,
+) -> list[Trial]:
     """Every combination, checked (ValueError naming the parameter); the trials' seeds are
     ``first_seed``, ``first_seed + 1``, ... (``first_seed`` at most ``MAX_STUDY_SEED``)."""
     if not noise_levels or any(not (np.isfinite(n) and n >= 0) for n in noise_levels):
@@ -87,8 +94,10 @@ def trials(noise_levels: Sequence[float], image_counts: Sequence[int], methods: 
     if case not in (16, 1024):
         raise ValueError(f"case: must be 16 or 1024, got {case}")
     first_seed = as_count(first_seed, "first_seed", 0, MAX_STUDY_SEED)
-    return [Trial(float(n), int(k), m, first_seed + s, case)
-            for n, k, m, s in itertools.product(noise_levels, image_counts, methods, range(seeds))]
+    return [
+        Trial(float(n), int(k), m, first_seed + s, case)
+        for n, k, m, s in itertools.product(noise_levels, image_counts, methods, range(seeds))
+    ]
 
 
 def _distributed() -> Any:
@@ -96,7 +105,9 @@ def _distributed() -> Any:
     try:
         import dask.distributed
     except ImportError:
-        raise ValueError("sweep: needs dask.distributed, which arfi installs as an extra: pip install \"arfi[cluster]\"") from None
+        raise ValueError(
+            'sweep: needs dask.distributed, which arfi installs as an extra: pip install "arfi[cluster]"'
+        ) from None
     return dask.distributed
 
 
@@ -129,13 +140,19 @@ def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
             raise ValueError(f"scheduler: cannot connect to {scheduler} ({e})") from None
     if not 1 <= workers <= 256:
         raise ValueError(f"workers: must be between 1 and 256, got {workers}")
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           env={"RAYON_NUM_THREADS": "1"})
+    cluster = LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, env={"RAYON_NUM_THREADS": "1"}
+    )
     return Client(cluster), cluster
 
 
-def run_sweep(points: Sequence[Trial], scenario: Scenario | None = None, scheduler: str | None = None, workers: int | None = None,
-              progress: bool | None = None) -> list[dict[str, Any]]:
+def run_sweep(
+    points: Sequence[Trial],
+    scenario: Scenario | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool | None = None,
+) -> list[dict[str, Any]]:
     """Runs the trials on dask.distributed (an existing cluster at ``scheduler``, or a local one)
     and returns their rows in the order of ``points``."""
     as_completed = _distributed().as_completed
@@ -164,11 +181,19 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for (method, images, noise), rs in sorted(groups.items()):
         rec = np.array([r["recovered_fraction"] for r in rs])
-        out.append({"method": method, "images": images, "noise_rad": noise, "trials": len(rs),
-                    "recovered_fraction_mean": float(rec.mean()), "recovered_fraction_std": float(rec.std()),
-                    "gain_mean": float(np.mean([r["gain"] for r in rs])),
-                    "phase_error_rad_mean": float(np.mean([r["phase_error_rad"] for r in rs])),
-                    "ambiguous_fraction": float(np.mean([r["ambiguous"] for r in rs]))})
+        out.append(
+            {
+                "method": method,
+                "images": images,
+                "noise_rad": noise,
+                "trials": len(rs),
+                "recovered_fraction_mean": float(rec.mean()),
+                "recovered_fraction_std": float(rec.std()),
+                "gain_mean": float(np.mean([r["gain"] for r in rs])),
+                "phase_error_rad_mean": float(np.mean([r["phase_error_rad"] for r in rs])),
+                "ambiguous_fraction": float(np.mean([r["ambiguous"] for r in rs])),
+            }
+        )
     return out
 
 
@@ -179,8 +204,11 @@ def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
     fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), squeeze=False, sharey=True)
     for ax, method in zip(axes[0], methods):
         for images in sorted({s["images"] for s in summary}):
-            pts = sorted((s["noise_rad"], s["recovered_fraction_mean"], s["recovered_fraction_std"]) for s in summary
-                         if s["method"] == method and s["images"] == images)
+            pts = sorted(
+                (s["noise_rad"], s["recovered_fraction_mean"], s["recovered_fraction_std"])
+                for s in summary
+                if s["method"] == method and s["images"] == images
+            )
             x, y, e = (np.array(v) for v in zip(*pts))
             ax.errorbar(x, y, yerr=e, marker="o", capsize=3, label=f"{images} image{'s' if images > 1 else ''}")
         ax.set(title=method, xlabel="ARFI noise σ (rad)", ylim=(0, 1.05))
@@ -199,9 +227,17 @@ def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
     atomic_write_text(out / "summary.csv", csv_text(summary))
     plot(summary, out / "sweep.png")
     table = rows_table_html(summary, list(summary[0]))
-    write_html(out / "report.html", "arfi sweep", f"<p>{len(rows)} trials; recovered fraction of the ideal focus (corrected over ideal focal ARFI) per "
-               f"method, number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
-               + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]))
-    result = {"trials": list(rows), "summary": summary, "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"]}
+    write_html(
+        out / "report.html",
+        "arfi sweep",
+        f"<p>{len(rows)} trials; recovered fraction of the ideal focus (corrected over ideal focal ARFI) per method, "
+        f"number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
+        + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]),
+    )
+    result = {
+        "trials": list(rows),
+        "summary": summary,
+        "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"],
+    }
     write_json(out / "sweep.json", result)
     return result

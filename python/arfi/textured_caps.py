@@ -66,10 +66,15 @@ class TexturedCap:
 
     @property
     def description(self) -> str:
-        texture = ("uniform diploë (porosity 0.5)" if self.correlation_mm is None else
-                   f"diploë textured over {self.correlation_mm:g} mm (porosity 0.5 +- 0.15, seed {self.seed})")
-        return (f"three-layer cap about the focus from a CT (cortical 1.5 mm, diploë 4 mm, cortical 1 mm; radii 30-36.5 mm), "
-                f"{texture}")
+        texture = (
+            "uniform diploë (porosity 0.5)"
+            if self.correlation_mm is None
+            else f"diploë textured over {self.correlation_mm:g} mm (porosity 0.5 +- 0.15, seed {self.seed})"
+        )
+        return (
+            "three-layer cap about the focus from a CT (cortical 1.5 mm, diploë 4 mm, cortical 1 mm; radii 30-36.5 "
+            f"mm), {texture}"
+        )
 
 
 #: The cases, in the order they run.
@@ -109,7 +114,9 @@ def white_noise(shape: tuple[int, ...], seed: int) -> NDArray[np.float64]:
     return (np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)).reshape(shape)
 
 
-def gaussian_field(shape: tuple[int, int, int], voxel_mm: float, correlation_mm: float, seed: int) -> NDArray[np.float64]:
+def gaussian_field(
+    shape: tuple[int, int, int], voxel_mm: float, correlation_mm: float, seed: int
+) -> NDArray[np.float64]:
     """A Gaussian random field of unit variance on ``shape`` whose correlation is
     ``exp(-r²/ℓ²)`` (``ℓ = correlation_mm``): white noise smoothed by a Gaussian kernel of standard
     deviation ``ℓ/2`` (periodic, by FFT), rescaled to unit variance by the kernel's norm."""
@@ -172,12 +179,18 @@ def scenario_toml(cap: TexturedCap, ct_file: str, solid: bool = True) -> str:
     """The scenario through the case's CT ``ct_file`` (a path relative to the scenario's folder):
     the suite's source and medium, the porosity conversion with the benchmark's cortical bone and,
     ``solid``, the dense bone's shear (:data:`SHEAR_M_S`, :data:`SHEAR_DB_CM_MHZ`)."""
-    shear = (f"bone_shear_sound_speed_m_s = {SHEAR_M_S}\nbone_shear_attenuation_db_cm_mhz = {SHEAR_DB_CM_MHZ}\n"
-             if solid else "")
-    return (f'name = "{cap.name}"\nfrequency_hz = 500000.0\nacoustic_power_w = 70.0\n\n[transducer]\nkind = "bowl"\n'
-            f"radius_of_curvature_mm = 64.0\naperture_diameter_mm = 64.0\n\n[focus]\nposition_mm = [0.0, 0.0, {CENTRE_MM}]\n\n"
-            '[[material]]\nname = "water"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\nattenuation_db_cm_mhz = 0.0\n'
-            'attenuation_power = 1.0\n\n[medium]\nbackground = "water"\n\n'
-            f'[ct]\nfile = "{ct_file}"\nconversion = "aubry2003"\nhu_max = {BONE_HU}\nbone_sound_speed_m_s = 2800.0\n'
-            "bone_density_kg_m3 = 1850.0\nwater_sound_speed_m_s = 1500.0\nwater_density_kg_m3 = 1000.0\n"
-            f"bone_attenuation_min_db_cm_mhz = 8.0\n{shear}")
+    shear = (
+        f"bone_shear_sound_speed_m_s = {SHEAR_M_S}\nbone_shear_attenuation_db_cm_mhz = {SHEAR_DB_CM_MHZ}\n"
+        if solid
+        else ""
+    )
+    return (
+        f'name = "{cap.name}"\nfrequency_hz = 500000.0\nacoustic_power_w = 70.0\n\n[transducer]\nkind = "bowl"\n'
+        "radius_of_curvature_mm = 64.0\naperture_diameter_mm = 64.0\n\n[focus]\nposition_mm = [0.0, 0.0, "
+        f"{CENTRE_MM}]\n\n"
+        '[[material]]\nname = "water"\nsound_speed_m_s = 1500.0\ndensity_kg_m3 = 1000.0\nattenuation_db_cm_mhz = 0.0\n'
+        'attenuation_power = 1.0\n\n[medium]\nbackground = "water"\n\n'
+        f'[ct]\nfile = "{ct_file}"\nconversion = "aubry2003"\nhu_max = {BONE_HU}\nbone_sound_speed_m_s = 2800.0\n'
+        "bone_density_kg_m3 = 1850.0\nwater_sound_speed_m_s = 1500.0\nwater_density_kg_m3 = "
+        f"1000.0\nbone_attenuation_min_db_cm_mhz = 8.0\n{shear}"
+    )

@@ -15,7 +15,9 @@ def real_array(value: Any, name: str) -> NDArray[np.float64]:
     imaginary part). Raises ValueError naming `name`."""
     try:
         mixed = not isinstance(value, np.ndarray) or value.dtype == object  # a list may hold one complex
-        if np.iscomplexobj(value) or (mixed and any(np.iscomplexobj(v) for v in np.ravel(np.asarray(value, dtype=object)))):
+        if np.iscomplexobj(value) or (
+            mixed and any(np.iscomplexobj(v) for v in np.ravel(np.asarray(value, dtype=object)))
+        ):
             raise ValueError(f"{name}: must be real, got complex values")
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as e:
@@ -55,7 +57,9 @@ def as_modes(modes: ArrayLike, n: int, name: str = "prior_modes") -> NDArray[np.
     if a.ndim == 1:
         a = a[None, :]
     if a.ndim != 2 or a.shape[1] != n or a.shape[0] == 0:
-        raise ValueError(f"{name}: must have shape (modes, {n}) (one value per element in each mode), got shape {a.shape}")
+        raise ValueError(
+            f"{name}: must have shape (modes, {n}) (one value per element in each mode), got shape {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or infinite values")
     return np.ascontiguousarray(a)
@@ -98,5 +102,7 @@ def nuisance_names(value: str | Sequence[str] | None) -> list[str] | None:
     if isinstance(value, str):
         return [n.strip() for n in value.split(",") if n.strip()]
     if not isinstance(value, (list, tuple)) or not all(isinstance(n, str) for n in value):
-        raise ValueError(f"fit_nuisance: must be names (a list of strings or one comma-separated string), got {value!r}")
+        raise ValueError(
+            f"fit_nuisance: must be names (a list of strings or one comma-separated string), got {value!r}"
+        )
     return list(value)

@@ -37,8 +37,9 @@ from __future__ import annotations
 
 import json
 import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from arfi import _core
 from arfi.io import atomic_write_text
@@ -48,12 +49,20 @@ from arfi.textured_caps import CAPS
 #: (relative to the exact peak) and the smallest focal-plane correlation. Half the spread of the
 #: eleven codes of the ITRUSST benchmark (10 % and 1 mm). A tilted plate has its own (a result's
 #: ``tolerances``).
-TOLERANCES: dict[str, float] = dict(zip(("focal_pressure", "focal_position_mm", "axial_profile", "focal_plane_correlation"),
-                                        _core.validation_tolerances()))
+TOLERANCES: dict[str, float] = dict(
+    zip(
+        ("focal_pressure", "focal_position_mm", "axial_profile", "focal_plane_correlation"),
+        _core.validation_tolerances(),
+    )
+)
 
 #: The cases, in the order they run.
-CASES = (("water", "bm3", "bm4", "bm3_solid", "shell", "bm5", "tilt0", "tilt10", "tilt20", "tilt30")
-         + ("tilt0_shear1500", "tilt10_shear1500", "tilt20_shear1500", "tilt30_shear1500") + tuple(c.name for c in CAPS) + ("head220",))
+CASES = (
+    ("water", "bm3", "bm4", "bm3_solid", "shell", "bm5", "tilt0", "tilt10", "tilt20", "tilt30")
+    + ("tilt0_shear1500", "tilt10_shear1500", "tilt20_shear1500", "tilt30_shear1500")
+    + tuple(c.name for c in CAPS)
+    + ("head220",)
+)
 
 
 def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
@@ -78,8 +87,10 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
     if caps:  # before any case runs: a missing reference is one line, not a lost run
         missing = [c for c in caps + [CALIBRATION] if REFERENCE_PPW not in stored.get(c, {})]
         if missing:
-            raise ValueError(f"validate: no stored full-wave run of {', '.join(missing)} at {REFERENCE_PPW:g} points per "
-                             "wavelength (benches/fullwave/caps_fdtd.py makes them)")
+            raise ValueError(
+                f"validate: no stored full-wave run of {', '.join(missing)} at {REFERENCE_PPW:g} points per wavelength "
+                "(benches/fullwave/caps_fdtd.py makes them)"
+            )
     from arfi import validation_head
 
     # Read before any case runs: a missing reference is one line, not a lost run.
@@ -128,10 +139,10 @@ def table(results: Sequence[Any]) -> str:
     in brackets in its row, explained below the table)."""
     t = TOLERANCES
     lines = [
-        f"| case | focal pressure, simulated / exact (p/p0) | error (tol ±{100 * t['focal_pressure']:.0f} %) "
-        f"| focal depth, simulated / exact (mm) | error (tol ±{t['focal_position_mm']:.1f} mm) "
-        f"| axial profile (tol {100 * t['axial_profile']:.0f} %) | focal-plane correlation (tol ≥ {t['focal_plane_correlation']}) "
-        "| step (mm) | result |",
+        f"| case | focal pressure, simulated / exact (p/p0) | error (tol ±{100 * t['focal_pressure']:.0f} %) | focal "
+        f"depth, simulated / exact (mm) | error (tol ±{t['focal_position_mm']:.1f} mm) | axial profile (tol "
+        f"{100 * t['axial_profile']:.0f} %) | focal-plane correlation (tol ≥ {t['focal_plane_correlation']}) | step "
+        "(mm) | result |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for r in results:
@@ -140,25 +151,39 @@ def table(results: Sequence[Any]) -> str:
         o = _tolerances(r)
         own = o != t
         # The case's own tolerances, in brackets after each metric, where they are not the suite's.
-        p_tol, z_tol, a_tol, c_tol = ((f" ({v})" if own else "") for v in (
-            f"±{100 * o['focal_pressure']:.0f} %", f"±{o['focal_position_mm']:g} mm",
-            f"{100 * o['axial_profile']:.0f} %", f"≥ {o['focal_plane_correlation']}"))
-        lines.append(f"| {r.name} | {ps:.3f} / {pe:.3f} | {100 * r.focal_pressure_error:+.1f} %{p_tol} | {zs:.2f} / {ze:.2f} "
-                     f"| {r.focal_position_error_mm:+.2f}{z_tol} | {100 * r.axial_error:.1f} %{a_tol} "
-                     f"| {r.correlation:.4f}{c_tol} | {r.step_mm:.3f} | {'pass' if r.passed else 'FAIL'} |")
+        p_tol, z_tol, a_tol, c_tol = (
+            (f" ({v})" if own else "")
+            for v in (
+                f"±{100 * o['focal_pressure']:.0f} %",
+                f"±{o['focal_position_mm']:g} mm",
+                f"{100 * o['axial_profile']:.0f} %",
+                f"≥ {o['focal_plane_correlation']}",
+            )
+        )
+        lines.append(
+            f"| {r.name} | {ps:.3f} / {pe:.3f} | {100 * r.focal_pressure_error:+.1f} %{p_tol} | {zs:.2f} / {ze:.2f} | "
+            f"{r.focal_position_error_mm:+.2f}{z_tol} | {100 * r.axial_error:.1f} %{a_tol} | "
+            f"{r.correlation:.4f}{c_tol} | {r.step_mm:.3f} | {'pass' if r.passed else 'FAIL'} |"
+        )
     if any(_tolerances(r) != t and _reference(r) == "exact" for r in results):
-        lines += ["", "A tolerance in brackets is the case's own: a plate tilted against the march's planes is held to "
-                      "the march's measured accuracy there, not to the suite's (its focal position error is the 3-D "
-                      "distance between the peaks, negative when the simulated one lies short); as a solid (tiltN_shear*, "
-                      "against the exact elastic plate) its focal pressure is held to the ITRUSST spread, 10 %."]
+        lines += [
+            "",
+            "A tolerance in brackets is the case's own: a plate tilted against the march's planes is held to the "
+            "march's measured accuracy there, not to the suite's (its focal position error is the 3-D distance between "
+            "the peaks, negative when the simulated one lies short); as a solid (tiltN_shear*, against the exact "
+            "elastic plate) its focal pressure is held to the ITRUSST spread, 10 %.",
+        ]
     engines = sorted({_reference(r) for r in results} - {"exact"})
     if engines:
-        lines += ["", f"The cap_* and head rows have no exact solution: their reference (the second value) is a stored "
-                      f"full-wave result ({', '.join(engines)}, scaled by its error on the shell, for the head by its "
-                      "error measured from two voxel sizes), the uniform cap held to the spread of the ITRUSST "
-                      "benchmark's full-wave codes, the textured caps where the march is (it leaves out the loss to the "
-                      "wave a fine texture scatters), the head to that spread in focal pressure and its own in position "
-                      "and axial profile; their focal position error is the 3-D distance between the peaks."]
+        lines += [
+            "",
+            "The cap_* and head rows have no exact solution: their reference (the second value) is a stored full-wave "
+            f"result ({', '.join(engines)}, scaled by its error on the shell, for the head by its error measured from "
+            "two voxel sizes), the uniform cap held to the spread of the ITRUSST benchmark's full-wave codes, the "
+            "textured caps where the march is (it leaves out the loss to the wave a fine texture scatters), the head "
+            "to that spread in focal pressure and its own in position and axial profile; their focal position error "
+            "is the 3-D distance between the peaks.",
+        ]
     return "\n".join(lines)
 
 
@@ -202,8 +227,10 @@ def write_report(out: str | Path, results: Sequence[Any]) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     md = table(results)
     atomic_write_text(out / "validation.md", md + "\n")
-    atomic_write_text(out / "validation.json",
-                      json.dumps({"tolerances": TOLERANCES, "cases": [summary(r) for r in results]}, indent=2) + "\n")
+    atomic_write_text(
+        out / "validation.json",
+        json.dumps({"tolerances": TOLERANCES, "cases": [summary(r) for r in results]}, indent=2) + "\n",
+    )
     figures = [(f"{r.name}: {r.description}", figure(r, out / f"{r.name}.png")) for r in results]
     body = _markdown_table_html(md) + figure_html(out, figures)
     return write_html(out / "report.html", "arfi validate", body)

@@ -5,7 +5,8 @@ The references were computed once by BabelViscoFDTD (a viscoelastic staggered-gr
 did not write; ``benches/fullwave/caps_fdtd.py``, through ``arfi field --engine fdtd``'s code) and
 stored small in ``arfi/data/fullwave_caps.json``: the focal peak, ``|p|/p0`` along z through it and
 on the focal plane about it. ``arfi validate`` writes each case's CT again (the same HU: the
-texture comes from a hash, not a random generator, and the CT's fingerprint is checked), marches it on the scenario's default grid
+texture comes from a hash, not a random generator, and the CT's fingerprint is checked), marches it on the scenario's
+default grid
 and compares, as the exact cases are compared: focal pressure, 3-D focal position (negative when
 the march's peak lies short along z), the axial profile (largest difference over 10 mm either side
 of the reference focus, relative to its peak) and the focal plane's correlation within 10 mm of
@@ -86,8 +87,12 @@ class FullWaveResult:
     @property
     def passed(self) -> bool:
         p, z, a, c = self.tolerances
-        return (abs(self.focal_pressure_error) <= p and abs(self.focal_position_error_mm) <= z and self.axial_error <= a
-                and self.correlation >= c)
+        return (
+            abs(self.focal_pressure_error) <= p
+            and abs(self.focal_position_error_mm) <= z
+            and self.axial_error <= a
+            and self.correlation >= c
+        )
 
 
 #: Half-width (mm) of the focal plane stored about the focus, and half-length of the line along z.
@@ -136,8 +141,10 @@ def grid_correction(stored: dict[str, dict[float, dict[str, Any]]]) -> float:
     the engine's. ValueError when that run is not stored."""
     row = stored.get(CALIBRATION, {}).get(REFERENCE_PPW)
     if row is None:
-        raise ValueError(f"{REFERENCES}: no stored run of the calibration case {CALIBRATION} at {REFERENCE_PPW:g} points "
-                         "per wavelength (benches/fullwave/caps_fdtd.py --case shell makes it)")
+        raise ValueError(
+            f"{REFERENCES}: no stored run of the calibration case {CALIBRATION} at {REFERENCE_PPW:g} points per "
+            "wavelength (benches/fullwave/caps_fdtd.py --case shell makes it)"
+        )
     return float(row["exact_focal_pressure_p0"] / row["fdtd"]["focal_pressure_p0"])
 
 
@@ -151,8 +158,10 @@ def reference(name: str, stored: dict[str, dict[float, dict[str, Any]]] | None =
     stored = references() if stored is None else stored
     runs = stored.get(name, {})
     if REFERENCE_PPW not in runs:
-        raise ValueError(f"{name}: no stored full-wave reference at {REFERENCE_PPW:g} points per wavelength in "
-                         f"{REFERENCES} (benches/fullwave/caps_fdtd.py makes it)")
+        raise ValueError(
+            f"{name}: no stored full-wave reference at {REFERENCE_PPW:g} points per wavelength in {REFERENCES} "
+            "(benches/fullwave/caps_fdtd.py makes it)"
+        )
     factor = grid_correction(stored)
     row = json.loads(json.dumps(runs[REFERENCE_PPW]))
     fdtd = row["fdtd"]
@@ -172,8 +181,13 @@ def _linear(axis: NDArray[np.float64], at: float, name: str) -> tuple[int, float
     return i, float((at - axis[i]) / (axis[i + 1] - axis[i]))
 
 
-def _bilinear(plane: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64], xs: NDArray[np.float64],
-              ys: NDArray[np.float64]) -> NDArray[np.float64]:
+def _bilinear(
+    plane: NDArray[np.float64],
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    xs: NDArray[np.float64],
+    ys: NDArray[np.float64],
+) -> NDArray[np.float64]:
     """``plane`` (indexed y, x on the axes ``y``, ``x``) at every point of the grid ``ys`` x ``xs``."""
     out = np.empty((len(ys), len(xs)))
     for c, xv in enumerate(xs):
@@ -200,8 +214,12 @@ def compare_fields(field: Any, ref: dict[str, Any]) -> dict[str, Any]:
     lx, ly = ref["line_xy_mm"]
     i, u = _linear(x, lx, "the reference's line, x")
     j, v = _linear(y, ly, "the reference's line, y")
-    line = ((1 - u) * (1 - v) * volume[:, j, i] + u * (1 - v) * volume[:, j, i + 1] + (1 - u) * v * volume[:, j + 1, i]
-            + u * v * volume[:, j + 1, i + 1])
+    line = (
+        (1 - u) * (1 - v) * volume[:, j, i]
+        + u * (1 - v) * volume[:, j, i + 1]
+        + (1 - u) * v * volume[:, j + 1, i]
+        + u * v * volume[:, j + 1, i + 1]
+    )
     lz, lp = np.asarray(ref["line_z_mm"]), np.asarray(ref["line_p0"])
     near = np.abs(lz - ref_point[2]) <= PROFILE_MM
     _linear(z, float(lz[near].min()), "the reference's line, z")
@@ -237,8 +255,10 @@ def compare(name: str, row: dict[str, Any] | None = None) -> FullWaveResult:
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as d:
         written = textured_caps.write_ct(cap, Path(d) / "cap.nii")
         if ref.get("ct_sha256") not in (None, written):
-            raise ValueError(f"{name}: the stored full-wave reference was made on another CT than the one written now "
-                             "(re-run benches/fullwave/caps_fdtd.py)")
+            raise ValueError(
+                f"{name}: the stored full-wave reference was made on another CT than the one written now (re-run "
+                "benches/fullwave/caps_fdtd.py)"
+            )
         toml = textured_caps.scenario_toml(cap, "cap.nii", solid=ref.get("solid") is not None)
         sim = arfi.Simulation(arfi.Scenario.from_toml(toml, base_dir=d))
         march = sim.field(volume=True)
@@ -247,11 +267,21 @@ def compare(name: str, row: dict[str, Any] | None = None) -> FullWaveResult:
     grid = sim.grid
     engine = ref["engine"]
     return FullWaveResult(
-        name=name, description=f"{cap.description}; against {engine['engine']} ({engine['voxel_mm']:g} mm voxels"
-                               + (f", x{ref['grid_factor']:.3f} for its grid error)" if "grid_factor" in ref else ")"),
-        focal_pressure=(ps, pe), focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
-        focal_point_mm=m["focal_point_mm"], focal_pressure_error=ps / pe - 1.0,
-        focal_position_error_mm=m["focal_position_error_mm"], axial_error=m["axial_error"], correlation=m["correlation"],
-        axis=m["axis"], focal_line=m["focal_line"], step_mm=float(grid["dz_mm"]), spacing_mm=float(grid["dx_mm"]),
-        seconds=time.perf_counter() - t0, tolerances=TOLERANCES if cap.correlation_mm is None else TEXTURED_TOLERANCES,
-        engine=f"{engine['engine']} {engine['engine_version']}")
+        name=name,
+        description=f"{cap.description}; against {engine['engine']} ({engine['voxel_mm']:g} mm voxels"
+        + (f", x{ref['grid_factor']:.3f} for its grid error)" if "grid_factor" in ref else ")"),
+        focal_pressure=(ps, pe),
+        focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
+        focal_point_mm=m["focal_point_mm"],
+        focal_pressure_error=ps / pe - 1.0,
+        focal_position_error_mm=m["focal_position_error_mm"],
+        axial_error=m["axial_error"],
+        correlation=m["correlation"],
+        axis=m["axis"],
+        focal_line=m["focal_line"],
+        step_mm=float(grid["dz_mm"]),
+        spacing_mm=float(grid["dx_mm"]),
+        seconds=time.perf_counter() - t0,
+        tolerances=TOLERANCES if cap.correlation_mm is None else TEXTURED_TOLERANCES,
+        engine=f"{engine['engine']} {engine['engine_version']}",
+    )

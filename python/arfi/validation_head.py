@@ -61,7 +61,10 @@ def write_inputs(folder: Path) -> tuple[Path, str]:
     head = head_phantom(SEED, VOXEL_MM)
     head.save(folder / "ct.nii.gz")
     toml = scenario_for("ct.nii.gz", SEED, "hemisphere")
-    for old, new in (("frequency_hz = 650000.0", f"frequency_hz = {FREQUENCY_HZ}"), ("elements = 1024", f"elements = {ELEMENTS}")):
+    for old, new in (
+        ("frequency_hz = 650000.0", f"frequency_hz = {FREQUENCY_HZ}"),
+        ("elements = 1024", f"elements = {ELEMENTS}"),
+    ):
         if old not in toml:
             raise RuntimeError(f"the phantom's scenario no longer holds {old!r}")
         toml = toml.replace(old, new)
@@ -70,8 +73,18 @@ def write_inputs(folder: Path) -> tuple[Path, str]:
     return path, hashlib.sha256(np.ascontiguousarray(head.hu).tobytes()).hexdigest()
 
 
-def parts(plane: Any, x_mm: Any, y_mm: Any, plane_z_mm: float, axis_z_mm: Any, axis: Any, peak_pa: float, peak_mm: Any,
-          p0: float, cut: bool = True) -> dict[str, Any]:
+def parts(
+    plane: Any,
+    x_mm: Any,
+    y_mm: Any,
+    plane_z_mm: float,
+    axis_z_mm: Any,
+    axis: Any,
+    peak_pa: float,
+    peak_mm: Any,
+    p0: float,
+    cut: bool = True,
+) -> dict[str, Any]:
     """What is compared of a field: ``|p|/p0`` at the focal peak, along the axis and on the plane
     z = ``plane_z_mm`` (on the field's samples); with ``cut`` (what is stored) only within
     :data:`LINE_MM` of the peak along the axis and :data:`WINDOW_MM` of it across."""
@@ -81,9 +94,13 @@ def parts(plane: Any, x_mm: Any, y_mm: Any, plane_z_mm: float, axis_z_mm: Any, a
     if not cut:
         along, cols, rows = np.ones_like(along), np.ones_like(cols), np.ones_like(rows)
     return {
-        "focal_pressure_p0": peak_pa / p0, "focal_point_mm": [fx, fy, fz],
-        "axis_z_mm": z[along].tolist(), "axis_p0": (np.abs(np.asarray(axis))[along] / p0).tolist(),
-        "plane_z_mm": float(plane_z_mm), "plane_x_mm": x[cols].tolist(), "plane_y_mm": y[rows].tolist(),
+        "focal_pressure_p0": peak_pa / p0,
+        "focal_point_mm": [fx, fy, fz],
+        "axis_z_mm": z[along].tolist(),
+        "axis_p0": (np.abs(np.asarray(axis))[along] / p0).tolist(),
+        "plane_z_mm": float(plane_z_mm),
+        "plane_x_mm": x[cols].tolist(),
+        "plane_y_mm": y[rows].tolist(),
         "plane_p0": (np.abs(np.asarray(plane))[np.ix_(rows, cols)] / p0).tolist(),
     }
 
@@ -98,16 +115,27 @@ def scaled(fine: dict[str, Any], coarse: dict[str, Any], h_fine: float, h_coarse
     w = h_fine**2 / (h_coarse**2 - h_fine**2)
     peak = fine["focal_pressure_p0"] + (fine["focal_pressure_p0"] - coarse["focal_pressure_p0"]) * w
     factor = peak / fine["focal_pressure_p0"]
-    point = np.asarray(fine["focal_point_mm"]) + (np.asarray(fine["focal_point_mm"]) - np.asarray(coarse["focal_point_mm"])) * w
-    return {**fine, "focal_pressure_p0": peak, "axis_p0": (np.asarray(fine["axis_p0"]) * factor).tolist(),
-            "plane_p0": (np.asarray(fine["plane_p0"]) * factor).tolist(), "grid_factor": factor,
-            "voxel_mm": [h_fine, h_coarse], "extrapolated_focal_point_mm": point.tolist()}
+    point = (
+        np.asarray(fine["focal_point_mm"])
+        + (np.asarray(fine["focal_point_mm"]) - np.asarray(coarse["focal_point_mm"])) * w
+    )
+    return {
+        **fine,
+        "focal_pressure_p0": peak,
+        "axis_p0": (np.asarray(fine["axis_p0"]) * factor).tolist(),
+        "plane_p0": (np.asarray(fine["plane_p0"]) * factor).tolist(),
+        "grid_factor": factor,
+        "voxel_mm": [h_fine, h_coarse],
+        "extrapolated_focal_point_mm": point.tolist(),
+    }
 
 
 def reference() -> dict[str, Any]:
     """The stored reference; ValueError when it is missing."""
     if not REFERENCE.is_file():
-        raise ValueError(f"{REFERENCE}: no stored full-wave reference of the head (made by benches/fullwave/head_fdtd.py)")
+        raise ValueError(
+            f"{REFERENCE}: no stored full-wave reference of the head (made by benches/fullwave/head_fdtd.py)"
+        )
     return json.loads(REFERENCE.read_text())
 
 
@@ -117,8 +145,10 @@ def _on(samples: Any, at: Any, what: str) -> Any:
     samples, at = np.asarray(samples, dtype=float), np.asarray(at, dtype=float)
     idx = np.clip(np.searchsorted(samples, at - 1e-6), 0, len(samples) - 1)
     if not np.allclose(samples[idx], at, atol=1e-6):
-        raise ValueError(f"{NAME}: the reference's {what} lies on other samples than the march's (re-run "
-                         "benches/fullwave/head_fdtd.py)")
+        raise ValueError(
+            f"{NAME}: the reference's {what} lies on other samples than the march's (re-run "
+            "benches/fullwave/head_fdtd.py)"
+        )
     return idx
 
 
@@ -128,8 +158,9 @@ def metrics(march: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
     the march's."""
     point, ref_point = march["focal_point_mm"], ref["focal_point_mm"]
     if abs(march["plane_z_mm"] - ref["plane_z_mm"]) > 1e-6:
-        raise ValueError(f"{NAME}: the reference's plane z = {ref['plane_z_mm']} mm is not the march's "
-                         f"({march['plane_z_mm']} mm)")
+        raise ValueError(
+            f"{NAME}: the reference's plane z = {ref['plane_z_mm']} mm is not the march's ({march['plane_z_mm']} mm)"
+        )
     rz = np.asarray(ref["axis_z_mm"])
     near = np.abs(rz - ref_point[2]) <= WINDOW_MM
     if rz[near].min() > ref_point[2] - WINDOW_MM + 2.0 or rz[near].max() < ref_point[2] + WINDOW_MM - 2.0:
@@ -163,8 +194,18 @@ def march_parts(scenario: Path) -> tuple[dict[str, Any], Any]:
     focus = f.focus()
     if focus["focal_peak_pa"] is None:
         raise ValueError(f"{NAME}: the march has no focal peak to compare")
-    return parts(f.pressure, f.x_mm, f.y_mm, f.z_mm, f.axis_z_mm, f.axis_pressure, focus["focal_peak_pa"],
-                 focus["focal_peak_mm"], f.surface_pressure_pa, cut=False), sim
+    return parts(
+        f.pressure,
+        f.x_mm,
+        f.y_mm,
+        f.z_mm,
+        f.axis_z_mm,
+        f.axis_pressure,
+        focus["focal_peak_pa"],
+        focus["focal_peak_mm"],
+        f.surface_pressure_pa,
+        cut=False,
+    ), sim
 
 
 def compare(stored: dict[str, Any] | None = None) -> Any:
@@ -178,8 +219,10 @@ def compare(stored: dict[str, Any] | None = None) -> Any:
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as d:
         path, sha = write_inputs(Path(d))
         if stored["ct_sha256"] != sha:
-            raise ValueError(f"{NAME}: the stored full-wave reference was made on another CT than the one written now "
-                             "(re-run benches/fullwave/head_fdtd.py)")
+            raise ValueError(
+                f"{NAME}: the stored full-wave reference was made on another CT than the one written now (re-run "
+                "benches/fullwave/head_fdtd.py)"
+            )
         march, sim = march_parts(path)
     m = metrics(march, stored["reference"])
     ps, pe = m["focal_pressure"]
@@ -187,11 +230,24 @@ def compare(stored: dict[str, Any] | None = None) -> Any:
     engine = stored["runs"][0]["fdtd"]
     h = stored["reference"]["voxel_mm"]
     return FullWaveResult(
-        name=NAME, description=(f"the head phantom (seed {SEED}, CT of {VOXEL_MM:g} mm, fluid bone) with the {ELEMENTS}-element "
-                                f"hemisphere at {FREQUENCY_HZ / 1e3:.0f} kHz; against {engine['engine']} ({h[0]:.3f} mm voxels, "
-                                f"x{stored['reference']['grid_factor']:.3f} for its grid error, from {h[1]:.3f} mm)"),
-        focal_pressure=(ps, pe), focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
-        focal_point_mm=m["focal_point_mm"], focal_pressure_error=ps / pe - 1.0,
-        focal_position_error_mm=m["focal_position_error_mm"], axial_error=m["axial_error"], correlation=m["correlation"],
-        axis=m["axis"], focal_line=m["focal_line"], step_mm=float(grid["dz_mm"]), spacing_mm=float(grid["dx_mm"]),
-        seconds=time.perf_counter() - t0, tolerances=TOLERANCES, engine=f"{engine['engine']} {engine['engine_version']}")
+        name=NAME,
+        description=(
+            f"the head phantom (seed {SEED}, CT of {VOXEL_MM:g} mm, fluid bone) with the {ELEMENTS}-element hemisphere "
+            f"at {FREQUENCY_HZ / 1e3:.0f} kHz; against {engine['engine']} ({h[0]:.3f} mm voxels, "
+            f"x{stored['reference']['grid_factor']:.3f} for its grid error, from {h[1]:.3f} mm)"
+        ),
+        focal_pressure=(ps, pe),
+        focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
+        focal_point_mm=m["focal_point_mm"],
+        focal_pressure_error=ps / pe - 1.0,
+        focal_position_error_mm=m["focal_position_error_mm"],
+        axial_error=m["axial_error"],
+        correlation=m["correlation"],
+        axis=m["axis"],
+        focal_line=m["focal_line"],
+        step_mm=float(grid["dz_mm"]),
+        spacing_mm=float(grid["dx_mm"]),
+        seconds=time.perf_counter() - t0,
+        tolerances=TOLERANCES,
+        engine=f"{engine['engine']} {engine['engine_version']}",
+    )

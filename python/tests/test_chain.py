@@ -42,14 +42,40 @@ def head_scenarios(d: Path, seed: int) -> None:
     """Writes the tutorial's three scenarios for phantom ``seed`` at 220 kHz, 256 elements, the
     target at (10, 0, 140) mm: ``head.toml`` (the CT as read), ``patient.toml`` (the real head) and
     ``model.toml`` (the estimate's model: the head without its skull)."""
-    assert main(["phantom", "--out", str(d / "head_ct.nii.gz"), "--scenario-out", str(d / "head.toml"), "--array",
-                 "hemisphere", "--thickness-mm", "4", "12", "--voxel-mm", "1", "--seed", str(seed)]) == 0
-    text = (d / "head.toml").read_text().replace("elements = 1024", "elements = 256") \
-        .replace("frequency_hz = 650000.0", "frequency_hz = 220000.0") \
+    assert (
+        main(
+            [
+                "phantom",
+                "--out",
+                str(d / "head_ct.nii.gz"),
+                "--scenario-out",
+                str(d / "head.toml"),
+                "--array",
+                "hemisphere",
+                "--thickness-mm",
+                "4",
+                "12",
+                "--voxel-mm",
+                "1",
+                "--seed",
+                str(seed),
+            ]
+        )
+        == 0
+    )
+    text = (
+        (d / "head.toml")
+        .read_text()
+        .replace("elements = 1024", "elements = 256")
+        .replace("frequency_hz = 650000.0", "frequency_hz = 220000.0")
         .replace("position_mm = [0.0, 0.0, 150.0]", "position_mm = [10.0, 0.0, 140.0]")
+    )
     (d / "head.toml").write_text(text)
-    (d / "patient.toml").write_text(text.replace("[ct]\n", "[ct]\nbone_sound_speed_m_s = 3190.0\nsteer_without_bone = true\n")
-                                    .replace("[[1, 0, 0, 0]", "[[1, 0, 0, 1.5]"))
+    (d / "patient.toml").write_text(
+        text.replace("[ct]\n", "[ct]\nbone_sound_speed_m_s = 3190.0\nsteer_without_bone = true\n").replace(
+            "[[1, 0, 0, 0]", "[[1, 0, 0, 1.5]"
+        )
+    )
     (d / "model.toml").write_text(text.replace("[ct]\n", "[ct]\nwithout_bone = true\n"))
 
 
@@ -60,27 +86,78 @@ def run_chain(d: Path, seed: int) -> dict[str, float]:
     assert main(["predict", "--scenario", f("head.toml"), "--out", f("prior.npy"), "--json", f("prediction.json")]) == 0
     for k, shift in enumerate([None, "5", "-5"]):
         extra = [] if shift is None else ["--focus-shift-mm", "0", "0", shift]
-        assert main(["simulate", "--scenario", f("patient.toml"), *extra, "--steering-from", f("prediction.json"),
-                     "--noise-rad", "0.02", "--seed", str(k + 1), "--out", f(f"a{k}.nii.gz")]) == 0
-    assert main(["estimate", "--scenario", f("model.toml"), "--groups", "256", "--image", f("a0.nii.gz"), "--image",
-                 f("a1.nii.gz"), "--image", f("a2.nii.gz"), "--prior", f("prior.npy"), "--prior-std-rad", "0.15",
-                 "--prior-transmission", f("prediction.json"), "--fit-nuisance", "amplitude", "--out-phases",
-                 f("estimate.npy"), "--json", f("estimate.json")]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--scenario",
+                    f("patient.toml"),
+                    *extra,
+                    "--steering-from",
+                    f("prediction.json"),
+                    "--noise-rad",
+                    "0.02",
+                    "--seed",
+                    str(k + 1),
+                    "--out",
+                    f(f"a{k}.nii.gz"),
+                ]
+            )
+            == 0
+        )
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                f("model.toml"),
+                "--groups",
+                "256",
+                "--image",
+                f("a0.nii.gz"),
+                "--image",
+                f("a1.nii.gz"),
+                "--image",
+                f("a2.nii.gz"),
+                "--prior",
+                f("prior.npy"),
+                "--prior-std-rad",
+                "0.15",
+                "--prior-transmission",
+                f("prediction.json"),
+                "--fit-nuisance",
+                "amplitude",
+                "--out-phases",
+                f("estimate.npy"),
+                "--json",
+                f("estimate.json"),
+            ]
+        )
+        == 0
+    )
     truth = predict(Scenario.load(d / "patient.toml"))
     clinic = np.asarray(json.loads((d / "prediction.json").read_text())["reference_steering_rad"])
+
     # The clinic drives its reference steering (the CT's, as registered) minus the phases.
-    fraction = lambda phases: float(np.abs(np.sum(truth.skull_responses * np.exp(1j * (clinic - phases))))  # noqa: E731
-                                    / truth.optimal_pa)
-    return {"uncorrected": fraction(np.zeros(256)), "prediction": fraction(np.load(d / "prior.npy")),
-            "estimate": fraction(np.load(d / "estimate.npy")), **json.loads((d / "estimate.json").read_text())}
+    def fraction(phases):
+        return float(np.abs(np.sum(truth.skull_responses * np.exp(1j * (clinic - phases)))) / truth.optimal_pa)
+
+    return {
+        "uncorrected": fraction(np.zeros(256)),
+        "prediction": fraction(np.load(d / "prior.npy")),
+        "estimate": fraction(np.load(d / "estimate.npy")),
+        **json.loads((d / "estimate.json").read_text()),
+    }
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_the_chain_through_a_head_corrects_as_documented(tmp_path, capsys, seed):
     r = run_chain(tmp_path, seed)
-    line = (f"seed {seed}: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, estimate "
-            f"{r['estimate']:.3f} of the optimum; misfit {r['misfit']:.2f}, scale {r['nuisance']['scale']:.3f}; bone speed "
-            f"{r['bone_speed_fit']['percent']:+.1f} +- {r['bone_speed_fit']['std_percent']:.1f} %")
+    line = (
+        f"seed {seed}: uncorrected {r['uncorrected']:.3f}, prediction {r['prediction']:.3f}, estimate "
+        f"{r['estimate']:.3f} of the optimum; misfit {r['misfit']:.2f}, scale {r['nuisance']['scale']:.3f}; bone speed "
+        f"{r['bone_speed_fit']['percent']:+.1f} +- {r['bone_speed_fit']['std_percent']:.1f} %"
+    )
     out = capsys.readouterr().out
     print(line)
     # The images were fitted on the brain around the target, at their own scale: the skull's loss
@@ -108,7 +185,9 @@ def test_images_through_a_head_leave_the_bone_out(tmp_path, capsys):
     # model's acoustics).
     head_scenarios(tmp_path, 1)
     image = tmp_path / "a.nii.gz"
-    assert main(["simulate", "--scenario", str(tmp_path / "patient.toml"), "--noise-rad", "0", "--out", str(image)]) == 0
+    assert (
+        main(["simulate", "--scenario", str(tmp_path / "patient.toml"), "--noise-rad", "0", "--out", str(image)]) == 0
+    )
     data = np.squeeze(np.asarray(nib.load(str(image)).get_fdata()))
     patient = Simulation(Scenario.load(tmp_path / "patient.toml"))
     dark = ~patient.imaged
@@ -127,14 +206,23 @@ def test_field_through_a_head_reports_the_focus_at_the_target(tmp_path, capsys):
     # named by what it is, never brain: the skull, the scalp or the water in front of the head.
     head_scenarios(tmp_path, 1)
     js = tmp_path / "f.json"
-    assert main(["field", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "f.npz"), "--json", str(js)]) == 0
+    assert (
+        main(
+            ["field", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "f.npz"), "--json", str(js)]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     r = json.loads(js.read_text())
     assert r["plane_peak_to_axis_mm"] < 1.5 and abs(r["axis_peak_z_mm"] - 140.0) < 7.0, r
     # In 3-D: within a wavelength of the target, in the brain, and not hotter than the axis and plane
     # samples allow (the refined peak is at most a few % above them).
     assert r["peak_to_target_mm"] < 7.0 and r["focal_tissue"] == "brain", r
-    assert max(r["plane_peak_pa"], r["axis_peak_pa"]) <= r["focal_peak_pa"] < 1.1 * max(r["plane_peak_pa"], r["axis_peak_pa"])
+    assert (
+        max(r["plane_peak_pa"], r["axis_peak_pa"])
+        <= r["focal_peak_pa"]
+        < 1.1 * max(r["plane_peak_pa"], r["axis_peak_pa"])
+    )
     hottest = [ln for ln in out.splitlines() if "hottest on the" in ln]
     for line in hottest:
         assert line.split("hottest on the ")[1].split(":")[1].split(",")[0].strip() in {"skull", "scalp", "water"}, line
@@ -143,6 +231,10 @@ def test_field_through_a_head_reports_the_focus_at_the_target(tmp_path, capsys):
     # Each tissue's hottest place over the grid: the skull's and the scalp's are named, and the
     # brain's is a sample of the focal lobe (the peak, refined between samples, a few % above it as above).
     assert {"skull", "scalp", "brain"} <= set(r["hottest"]), r["hottest"]
-    assert r["hottest"]["brain"]["pressure_pa"] <= r["focal_peak_pa"] * (1 + 1e-6) < 1.1 * r["hottest"]["brain"]["pressure_pa"]
+    assert (
+        r["hottest"]["brain"]["pressure_pa"]
+        <= r["focal_peak_pa"] * (1 + 1e-6)
+        < 1.1 * r["hottest"]["brain"]["pressure_pa"]
+    )
     data = np.load(tmp_path / "f.npz")
     assert np.allclose(data["axis_x_mm"], data["axis_z_mm"] * 10.0 / 140.0)

@@ -19,7 +19,10 @@ def aberrated(sim):
     truth = np.random.default_rng(3).uniform(-np.pi, np.pi, sim.n_groups)
     diversity = np.zeros(sim.n_groups)
     diversity[:4] = np.pi / 2
-    images = [sim.arfi_image(truth, noise_rad=0.002, seed=1), sim.arfi_image(truth + diversity, noise_rad=0.002, seed=2)]
+    images = [
+        sim.arfi_image(truth, noise_rad=0.002, seed=1),
+        sim.arfi_image(truth + diversity, noise_rad=0.002, seed=2),
+    ]
     return truth, images, [None, diversity]
 
 

@@ -17,7 +17,7 @@ from arfi.simulation import Simulation
 
 GRID = "[grid]\nspacing_mm = 0.68\nstep_mm = 0.68\n"
 PLATE_HU = 1200.0
-WATER = "[[material]]\nname = \"water\"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n"
+WATER = '[[material]]\nname = "water"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n'
 
 
 def test_the_head_phantom_is_seeded_and_holds_air_scalp_bone_and_brain():
@@ -28,7 +28,9 @@ def test_the_head_phantom_is_seeded_and_holds_air_scalp_bone_and_brain():
     top = centre[::-1]
     assert top[0] < -900  # air above the crown
     bone = np.nonzero(top > 500)[0]
-    assert 2 <= len(bone) <= 5 and top[bone].max() > 1200  # 2 mm voxels across 4-9 mm of bone, a cortical table among them
+    assert (
+        2 <= len(bone) <= 5 and top[bone].max() > 1200
+    )  # 2 mm voxels across 4-9 mm of bone, a cortical table among them
     assert -100 < np.median(centre[: len(centre) // 2]) < 150  # brain, with 20 HU noise
     assert a.hu.min() >= -1024 and a.hu.max() <= 3071
     lo, hi, _ = a.thickness_mm
@@ -71,17 +73,19 @@ def test_a_plate_ct_written_by_nibabel_gives_the_field_of_the_plate_as_a_region(
     g = water.grid
     p = _plate_properties()
     a = int(round((30.0 - g["z0_mm"]) / g["dz_mm"]))
-    region = (f"{GRID}[[material]]\nname = \"water\"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n"
-              f"[[material]]\nname = \"bone\"\nsound_speed_m_s = {p[0]!r}\ndensity_kg_m3 = {p[1]!r}\n"
-              f"attenuation_db_cm_mhz = {p[2]!r}\n[[region]]\nmaterial = \"bone\"\nshape = \"slab\"\n"
-              f"z_min_mm = {g['z0_mm'] + a * g['dz_mm']!r}\nz_max_mm = {g['z0_mm'] + (a + 4) * g['dz_mm']!r}\n")
+    region = (
+        f'{GRID}[[material]]\nname = "water"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n'
+        f'[[material]]\nname = "bone"\nsound_speed_m_s = {p[0]!r}\ndensity_kg_m3 = {p[1]!r}\n'
+        f'attenuation_db_cm_mhz = {p[2]!r}\n[[region]]\nmaterial = "bone"\nshape = "slab"\n'
+        f"z_min_mm = {g['z0_mm'] + a * g['dz_mm']!r}\nz_max_mm = {g['z0_mm'] + (a + 4) * g['dz_mm']!r}\n"
+    )
     reference = Simulation(Scenario.from_toml(region)).field()
     peak = np.abs(reference.pressure).max()
     assert peak < 0.7 * np.abs(water.field().pressure).max()
     for rotate in (False, True):
         t = _plate_ct(tmp_path / f"plate{int(rotate)}.nii.gz", water, rotate)
         rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in t)
-        text = f"{GRID}[ct]\nfile = \"plate{int(rotate)}.nii.gz\"\npatient_to_transducer_mm = [{rows}]\n"
+        text = f'{GRID}[ct]\nfile = "plate{int(rotate)}.nii.gz"\npatient_to_transducer_mm = [{rows}]\n'
         sim = Simulation(Scenario.from_toml(text, tmp_path))
         f = sim.field()
         # Same cells, same steering rays (see tests/suite/ct.rs); 1e-4 allows the affine's float32.
@@ -105,8 +109,24 @@ def _plate_properties() -> tuple[float, float, float]:
 
 def test_cli_phantom_writes_a_ct_and_a_scenario_that_simulates_through_the_skull(tmp_path, capsys):
     ct, toml, js = tmp_path / "head.nii.gz", tmp_path / "head.toml", tmp_path / "p.json"
-    assert main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "1", "--seed", "2",
-                 "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "phantom",
+                "--out",
+                str(ct),
+                "--scenario-out",
+                str(toml),
+                "--voxel-mm",
+                "1",
+                "--seed",
+                "2",
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     result = json.loads(js.read_text())
     assert result["seed"] == 2 and np.allclose(result["patient_to_transducer_mm"], placement())
     head = Simulation(Scenario.load(toml))
@@ -125,11 +145,15 @@ def test_cli_phantom_for_a_hemisphere_focuses_through_the_skull_at_the_centre(tm
     # 220 kHz with 256 elements (2 mm CT voxels) to keep the test short; the defaults (650 kHz, 1024)
     # take about 40 s.
     ct, toml = tmp_path / "head.nii.gz", tmp_path / "head.toml"
-    assert main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "2",
-                 "--array", "hemisphere"]) == 0
+    assert (
+        main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "2", "--array", "hemisphere"])
+        == 0
+    )
     text = toml.read_text()
-    assert "kind = \"hemisphere\"" in text and "position_mm = [0.0, 0.0, 150.0]" in text
-    text = text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0").replace("elements = 1024", "elements = 256")
+    assert 'kind = "hemisphere"' in text and "position_mm = [0.0, 0.0, 150.0]" in text
+    text = text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0").replace(
+        "elements = 1024", "elements = 256"
+    )
     head = Simulation(Scenario.from_toml(text, tmp_path))
     water = Simulation(Scenario.from_toml(text.split("[ct]")[0] + WATER))
     skull, free = head.field(), water.field()
@@ -139,14 +163,17 @@ def test_cli_phantom_for_a_hemisphere_focuses_through_the_skull_at_the_centre(tm
     assert 0.2 * ref["plane_peak_pa"] < at["plane_peak_pa"] < 0.9 * ref["plane_peak_pa"], (at, ref)
 
 
-@pytest.mark.parametrize(("volume", "ct_keys", "message"), [
-    # The voxel as (i, j, k) of the NIfTI (nibabel's data[i, j, k]), not a flat index.
-    ("nan", "", "voxel (1, 1, 60) (i, j, k) is NaN"),
-    ("hot", "", "voxel (1, 1, 60) (i, j, k) is 5000 HU"),
-    ("good", "conversion = \"hounsfield\"", "ct.conversion"),
-    ("good", "patient_to_transducer_mm = [[1,0,0,0],[0,1,0,0],[0,0,1.5,0],[0,0,0,1]]", "rigid"),
-    ("missing", "", "no such file (the [ct] file of scenario \"vyas2014-phantom\")"),
-])
+@pytest.mark.parametrize(
+    ("volume", "ct_keys", "message"),
+    [
+        # The voxel as (i, j, k) of the NIfTI (nibabel's data[i, j, k]), not a flat index.
+        ("nan", "", "voxel (1, 1, 60) (i, j, k) is NaN"),
+        ("hot", "", "voxel (1, 1, 60) (i, j, k) is 5000 HU"),
+        ("good", 'conversion = "hounsfield"', "ct.conversion"),
+        ("good", "patient_to_transducer_mm = [[1,0,0,0],[0,1,0,0],[0,0,1.5,0],[0,0,0,1]]", "rigid"),
+        ("missing", "", 'no such file (the [ct] file of scenario "vyas2014-phantom")'),
+    ],
+)
 def test_cli_refuses_a_bad_ct_in_one_line_and_writes_nothing(tmp_path, capsys, volume, ct_keys, message):
     z = np.arange(120) * 1.0 + 10.0
     column = np.where((z > 30) & (z < 34), 1500.0, -1000.0)
@@ -158,7 +185,7 @@ def test_cli_refuses_a_bad_ct_in_one_line_and_writes_nothing(tmp_path, capsys, v
     affine = np.array([[-60.0, 0, 0, 60.0], [0, -60.0, 0, 60.0], [0, 0, 1.0, 10.0], [0, 0, 0, 1]])
     if volume != "missing":
         nib.save(nib.Nifti1Image(data, affine), str(tmp_path / f"{volume}.nii"))
-    (tmp_path / "s.toml").write_text(f"[ct]\nfile = \"{volume}.nii\"\n{ct_keys}\n")
+    (tmp_path / "s.toml").write_text(f'[ct]\nfile = "{volume}.nii"\n{ct_keys}\n')
     out = tmp_path / "f.npz"
     assert main(["field", "--scenario", str(tmp_path / "s.toml"), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()

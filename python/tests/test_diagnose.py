@@ -11,7 +11,14 @@ from arfi.cli import main
 from arfi.io import write_arfi_image
 
 # The effects that act on the image alone (no march per evaluation), for tests of the bindings.
-IMAGE_SPACE = ["amplitude", "broadening", "broadening_anisotropic", "registration_shift", "slice_offset", "background_phase"]
+IMAGE_SPACE = [
+    "amplitude",
+    "broadening",
+    "broadening_anisotropic",
+    "registration_shift",
+    "slice_offset",
+    "background_phase",
+]
 
 
 def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
@@ -26,8 +33,24 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
     cal.write_text(json.dumps({"broadening_width_mm": 0.0, "amplitude": sim.amplitude}))
     js = tmp_path / "d.json"
     report = tmp_path / "report"
-    assert main(["diagnose", "--image", str(image), "--calibration", str(cal), "--effects", ",".join(IMAGE_SPACE),
-                 "--json", str(js), "--report", str(report)]) == 0
+    assert (
+        main(
+            [
+                "diagnose",
+                "--image",
+                str(image),
+                "--calibration",
+                str(cal),
+                "--effects",
+                ",".join(IMAGE_SPACE),
+                "--json",
+                str(js),
+                "--report",
+                str(report),
+            ]
+        )
+        == 0
+    )
     d = json.loads(js.read_text())
     for key in ("effects", "cost_initial", "cost_final", "noise_floor"):
         assert key in d
@@ -37,7 +60,12 @@ def test_cli_diagnose_names_the_missing_broadening(tmp_path, sim):
     assert e["params"]["broadening_width_mm"] == pytest.approx(2.7, abs=0.2)
     assert d["cost_final"] < d["cost_initial"] and d["residual_rms_final"] < 1.2 * d["noise_floor"]
     # The report: one figure per step (measured, model, residual, candidates), the gap, one page.
-    assert sorted(p.name for p in report.iterdir()) == ["diagnose_gap.png", "diagnose_step0.png", "diagnose_step1.png", "report.html"]
+    assert sorted(p.name for p in report.iterdir()) == [
+        "diagnose_gap.png",
+        "diagnose_step0.png",
+        "diagnose_step1.png",
+        "report.html",
+    ]
     page = (report / "report.html").read_text()
     assert "broadening" in page and page.count("data:image/png;base64") == 3
 
@@ -65,8 +93,10 @@ def test_several_images_at_once_and_effect_images(sim):
     # A calibration image and one with known group phases, both 0.9 mm off in x: the shift is
     # named once for both, within 0.3 mm (the workflow's required accuracy for a shift).
     known = np.linspace(-1.0, 1.0, sim.n_groups)
-    images = [m + np.random.default_rng(k).normal(0.0, 0.02, m.shape)
-              for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))]
+    images = [
+        m + np.random.default_rng(k).normal(0.0, 0.02, m.shape)
+        for k, m in enumerate(sim.effect_images({"dx_mm": 0.9}, known=[None, known]))
+    ]
     # The image-space effects only: naming among the whole library is tested in Rust
     # (tests/suite/diagnose.rs); here the bindings carry several images and their known phases.
     d = sim.diagnose(images, [None, known], effects=IMAGE_SPACE)
@@ -111,7 +141,9 @@ def test_an_effect_that_cannot_be_fitted_is_reported_not_fatal():
 def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
     import time
 
-    image = sim.effect_images({"broadening_width_mm": 3.6, "dx_mm": 1.0})[0] + np.random.default_rng(3).normal(0.0, 0.02, sim.arfi_image().shape)
+    image = sim.effect_images({"broadening_width_mm": 3.6, "dx_mm": 1.0})[0] + np.random.default_rng(3).normal(
+        0.0, 0.02, sim.arfi_image().shape
+    )
     full = sim.diagnose(image, effects=IMAGE_SPACE)
     assert full.stop == "converged" and set(full.names) >= {"broadening", "registration_shift"}
     t = time.perf_counter()
@@ -127,18 +159,23 @@ def test_a_time_limit_returns_the_effects_added_so_far(sim, tmp_path, capsys):
     assert "stopped at the time limit" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("effect, hidden", [
-    # One effect per kind of value: numbers (the anisotropic widths, a pair effect_images takes by name),
-    # group indices and one phase per group. Every effect's round trip is tested in Rust
-    # (tests/suite/diagnose.rs); this is the path through the bindings' dict.
-    ("broadening_anisotropic", {"broadening_width_u_mm": 2.0, "broadening_width_v_mm": 3.6}),
-    ("element_dropout", {"dead_groups": [5]}),
-    ("phase_aberration", {"group_phases_rad": list(1.2 * np.sin(0.7 * np.arange(16)))}),
-])
+@pytest.mark.parametrize(
+    "effect, hidden",
+    [
+        # One effect per kind of value: numbers (the anisotropic widths, a pair effect_images takes by name),
+        # group indices and one phase per group. Every effect's round trip is tested in Rust
+        # (tests/suite/diagnose.rs); this is the path through the bindings' dict.
+        ("broadening_anisotropic", {"broadening_width_u_mm": 2.0, "broadening_width_v_mm": 3.6}),
+        ("element_dropout", {"dead_groups": [5]}),
+        ("phase_aberration", {"group_phases_rad": list(1.2 * np.sin(0.7 * np.arange(16)))}),
+    ],
+)
 def test_reported_params_fed_to_effect_images_give_the_fitted_images(sim, effect, hidden):
     known = [None, np.linspace(-1.5, 1.5, 16)]
-    images = [im + 0.02 * np.random.default_rng(k).standard_normal(im.shape)
-              for k, im in enumerate(sim.effect_images(hidden, known))]
+    images = [
+        im + 0.02 * np.random.default_rng(k).standard_normal(im.shape)
+        for k, im in enumerate(sim.effect_images(hidden, known))
+    ]
     d = sim.diagnose(images, known, effects=[effect])
     assert d.names == [effect]
     step = d.effects[0]
@@ -151,7 +188,12 @@ def test_reported_params_fed_to_effect_images_give_the_fitted_images(sim, effect
 def test_effect_images_names_the_known_parameters_when_one_is_unknown(sim):
     with pytest.raises(ValueError, match='unknown parameter "width_mm".*broadening_width_u_mm'):
         sim.effect_images({"width_mm": 2.0})
-    assert set(arfi.diagnose.PARAMETERS) >= {"broadening_width_u_mm", "broadening_width_v_mm", "dead_groups", "group_phases_rad"}
+    assert set(arfi.diagnose.PARAMETERS) >= {
+        "broadening_width_u_mm",
+        "broadening_width_v_mm",
+        "dead_groups",
+        "group_phases_rad",
+    }
     assert {e for e, _ in arfi.diagnose.PARAMETERS.values()} == set(arfi.diagnose.EFFECTS)
 
 

@@ -19,8 +19,19 @@ from arfi.dicom import read_dicom_arfi
 TO_FRAME = np.array([[0.0, 0.0, 1.0, 12.5], [0.0, -1.0, 0.0, -30.0], [1.0, 0.0, 0.0, 40.0], [0.0, 0.0, 0.0, 1.0]])
 
 
-def write_phase(path: Path, phase_rad: np.ndarray, position, row_dir, col_dir, spacing, *, thickness=3.0, echo_ms=12.0,
-                image_type=("ORIGINAL", "PRIMARY", "P", "ND"), manufacturer="SIEMENS") -> Path:
+def write_phase(
+    path: Path,
+    phase_rad: np.ndarray,
+    position,
+    row_dir,
+    col_dir,
+    spacing,
+    *,
+    thickness=3.0,
+    echo_ms=12.0,
+    image_type=("ORIGINAL", "PRIMARY", "P", "ND"),
+    manufacturer="SIEMENS",
+) -> Path:
     """One Siemens-style phase slice: 12-bit stored values, RescaleSlope 2, RescaleIntercept -4096
     (so that -4096..4094 maps to -pi..pi)."""
     wrapped = np.angle(np.exp(1j * phase_rad))
@@ -63,7 +74,7 @@ def scanner_pair(tmp_path: Path, sim: arfi.Simulation, arfi_rad: np.ndarray, *, 
     first = (to_patient @ np.append(origin, 1.0))[:3]
     col_dir, row_dir = (to_patient[:3, :3] @ (s / np.linalg.norm(s)) for s in steps)
     spacing = [float(np.linalg.norm(s)) for s in steps]
-    yy, xx = np.mgrid[0:image.shape[0], 0:image.shape[1]]
+    yy, xx = np.mgrid[0 : image.shape[0], 0 : image.shape[1]]
     background = 0.11 * xx + 0.07 * yy - 2.0  # wraps several times across the image
     plus = write_phase(tmp_path / "plus" / "IM0001.dcm", background + image, first, row_dir, col_dir, spacing, **kw)
     minus = write_phase(tmp_path / "minus" / "IM0001.dcm", background - image, first, row_dir, col_dir, spacing, **kw)
@@ -99,8 +110,26 @@ def test_phase_difference_and_geometry_come_back_in_the_transducer_frame(tmp_pat
 def test_cli_dicom_to_calibration(tmp_path, sim, arfi_rad):
     plus, minus = scanner_pair(tmp_path, sim, arfi_rad)
     out = tmp_path / "measured.nii.gz"
-    assert main(["dicom", "--plus", str(plus), "--minus", str(minus), "--transform", str(tmp_path / "to_frame.txt"),
-                 "--out", str(out), "--json", str(tmp_path / "d.json"), "--known-phases", str(_zeros(tmp_path))]) == 0
+    assert (
+        main(
+            [
+                "dicom",
+                "--plus",
+                str(plus),
+                "--minus",
+                str(minus),
+                "--transform",
+                str(tmp_path / "to_frame.txt"),
+                "--out",
+                str(out),
+                "--json",
+                str(tmp_path / "d.json"),
+                "--known-phases",
+                str(_zeros(tmp_path)),
+            ]
+        )
+        == 0
+    )
     d = json.loads((tmp_path / "d.json").read_text())
     assert d["mr"]["plane"] == "xy" and d["mr"]["slice_thickness_mm"] == 3.0
     side = json.loads((tmp_path / "measured.json").read_text())
@@ -124,17 +153,20 @@ def _run(capsys, args):
     return code, err
 
 
-@pytest.mark.parametrize("problem, match", [
-    ("size", "size (64, 96) differs from the plus series' (128, 96)"),
-    ("position", "position (ImagePositionPatient)"),
-    ("echo", "echo time 15.0 ms differs from the plus series' 12.0 ms"),
-    ("magnitude", "is a magnitude image"),
-    ("missing", "no such file or directory"),
-    ("empty", "no phase images"),
-    ("not dicom", "not a readable DICOM file"),
-    ("oblique", "oblique to the transducer frame"),
-    ("units", "not a phase image"),
-])
+@pytest.mark.parametrize(
+    "problem, match",
+    [
+        ("size", "size (64, 96) differs from the plus series' (128, 96)"),
+        ("position", "position (ImagePositionPatient)"),
+        ("echo", "echo time 15.0 ms differs from the plus series' 12.0 ms"),
+        ("magnitude", "is a magnitude image"),
+        ("missing", "no such file or directory"),
+        ("empty", "no phase images"),
+        ("not dicom", "not a readable DICOM file"),
+        ("oblique", "oblique to the transducer frame"),
+        ("units", "not a phase image"),
+    ],
+)
 def test_bad_dicom_is_one_line_naming_the_file(tmp_path, sim, arfi_rad, capsys, problem, match):
     plus, minus = scanner_pair(tmp_path, sim, arfi_rad)
     ds = pydicom.dcmread(minus)
@@ -165,8 +197,20 @@ def test_bad_dicom_is_one_line_naming_the_file(tmp_path, sim, arfi_rad, capsys, 
         minus.unlink()
     elif problem == "not dicom":
         minus.write_bytes(b"not a DICOM file at all")
-    code, err = _run(capsys, ["dicom", "--plus", str(plus), "--minus", str(minus.parent if problem == "empty" else minus),
-                              "--transform", str(tmp_path / "to_frame.txt"), "--out", str(tmp_path / "m.nii.gz")])
+    code, err = _run(
+        capsys,
+        [
+            "dicom",
+            "--plus",
+            str(plus),
+            "--minus",
+            str(minus.parent if problem == "empty" else minus),
+            "--transform",
+            str(tmp_path / "to_frame.txt"),
+            "--out",
+            str(tmp_path / "m.nii.gz"),
+        ],
+    )
     assert code == 2 and len(err.splitlines()) == 1 and match in err, err
     assert "minus" in err or "plus" in err
     assert not (tmp_path / "m.nii.gz").exists()
@@ -175,16 +219,44 @@ def test_bad_dicom_is_one_line_naming_the_file(tmp_path, sim, arfi_rad, capsys, 
 def test_a_transform_that_is_not_rigid_is_refused(tmp_path, sim, arfi_rad, capsys):
     plus, minus = scanner_pair(tmp_path, sim, arfi_rad)
     np.savetxt(tmp_path / "scaled.txt", np.diag([2.0, 1.0, 1.0, 1.0]))
-    code, err = _run(capsys, ["dicom", "--plus", str(plus), "--minus", str(minus), "--transform", str(tmp_path / "scaled.txt"),
-                              "--out", str(tmp_path / "m.nii.gz")])
+    code, err = _run(
+        capsys,
+        [
+            "dicom",
+            "--plus",
+            str(plus),
+            "--minus",
+            str(minus),
+            "--transform",
+            str(tmp_path / "scaled.txt"),
+            "--out",
+            str(tmp_path / "m.nii.gz"),
+        ],
+    )
     assert code == 2 and "transform" in err and "rigid" in err
 
 
 def test_scenario_geometry_must_match(tmp_path, sim, arfi_rad, capsys):
     plus, minus = scanner_pair(tmp_path, sim, arfi_rad)
     scenario = tmp_path / "s.toml"
-    scenario.write_text(arfi.Scenario.default().to_toml().replace("center_mm = [0.0, 0.0, 85.0]", "center_mm = [0.0, 0.0, 90.0]"))
+    scenario.write_text(
+        arfi.Scenario.default().to_toml().replace("center_mm = [0.0, 0.0, 85.0]", "center_mm = [0.0, 0.0, 90.0]")
+    )
     assert "90.0" in scenario.read_text()
-    code, err = _run(capsys, ["dicom", "--plus", str(plus), "--minus", str(minus), "--scenario", str(scenario),
-                              "--transform", str(tmp_path / "to_frame.txt"), "--out", str(tmp_path / "m.nii.gz")])
+    code, err = _run(
+        capsys,
+        [
+            "dicom",
+            "--plus",
+            str(plus),
+            "--minus",
+            str(minus),
+            "--scenario",
+            str(scenario),
+            "--transform",
+            str(tmp_path / "to_frame.txt"),
+            "--out",
+            str(tmp_path / "m.nii.gz"),
+        ],
+    )
     assert code == 2 and "does not match the DICOM image" in err and len(err.splitlines()) == 1

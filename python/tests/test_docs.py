@@ -42,12 +42,15 @@ def test_skips_say_why_and_step_10_is_left_to_test_tutorial():
 
 def test_a_python_block_that_does_not_say_it_continues_starts_afresh(tmp_path):
     # The name check follows the run: only a block starting '# continues' sees the names before it.
-    (tmp_path / "doc.md").write_text("```python\nx = 1\n```\n\n```python\n# continues the block above\nprint(x)\n```\n\n"
-                                     "```python\nprint(x)\n```\n")
+    (tmp_path / "doc.md").write_text(
+        "```python\nx = 1\n```\n\n```python\n# continues the block above\nprint(x)\n```\n\n```python\nprint(x)\n```\n"
+    )
     steps = run_docs.steps(str(tmp_path / "doc.md"))
     assert [s.continues for s in steps] == [False, True, False]
-    assert run_docs.undefined(steps) == [f"{steps[2].where()}: uses x, defined by no earlier block it continues "
-                                         "(define it, or start the block with '# continues ...')"]
+    assert run_docs.undefined(steps) == [
+        f"{steps[2].where()}: uses x, defined by no earlier block it continues (define it, or start the block with '# "
+        "continues ...')"
+    ]
     outcomes = run_docs.run_document(str(tmp_path / "doc.md"), tmp_path, small=False, log=lambda line: None)
     assert [o.runs[0].printed if o.runs else None for o in outcomes] == [[], ["1"], None]
     assert "NameError" in outcomes[2].error

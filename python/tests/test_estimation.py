@@ -5,7 +5,6 @@ import sys
 import numpy as np
 import pytest
 
-import arfi
 from arfi.cli import main
 from arfi.estimation import phase_error
 
@@ -38,8 +37,9 @@ def test_calibration_recovers_the_scenario_width(sim):
     # Widths beyond the MR field of view are not searched (they blur the image flat): a huge
     # max_width_mm gives the same width, in the time of the field of view's search (it took
     # minutes with 2**64 mm).
-    assert sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=3), None, 2**64).broadening_width_mm == \
-        pytest.approx(c.broadening_width_mm, abs=0.01)
+    assert sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=3), None, 2**64).broadening_width_mm == pytest.approx(
+        c.broadening_width_mm, abs=0.01
+    )
 
 
 def test_estimate_rejects_bad_arguments(sim, ideal):
@@ -68,8 +68,26 @@ def test_cli_calibrate_then_estimate(tmp_path, sim):
     cal = json.loads((tmp_path / "cal.json").read_text())
     assert cal["broadening_width_mm"] == pytest.approx(2.7, abs=0.02)
     assert main(["simulate", "--phases", f"{d}/ab.npy", "--noise-rad", "0", "--out", f"{d}/ab.nii.gz"]) == 0
-    assert main(["estimate", "--image", f"{d}/ab.nii.gz", "--calibration", f"{d}/cal.json", "--groups", "16",
-                 "--method", "nelder-mead", "--json", f"{d}/e.json", "--out-phases", f"{d}/e.npy"]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                "--image",
+                f"{d}/ab.nii.gz",
+                "--calibration",
+                f"{d}/cal.json",
+                "--groups",
+                "16",
+                "--method",
+                "nelder-mead",
+                "--json",
+                f"{d}/e.json",
+                "--out-phases",
+                f"{d}/e.npy",
+            ]
+        )
+        == 0
+    )
     e = json.loads((tmp_path / "e.json").read_text())
     for key in ("phases_rad", "cost", "evaluations", "seconds", "ambiguous"):
         assert key in e
@@ -84,8 +102,22 @@ def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path, sim):
     rng = np.random.default_rng(0)
     for k in range(3):
         np.save(tmp_path / f"d{k}.npy", rng.uniform(-np.pi, np.pi, 16))
-        assert main(["simulate", "--phases", f"{d}/ab.npy", "--known-phases", f"{d}/d{k}.npy", "--noise-rad", "0",
-                     "--out", f"{d}/m{k}.nii.gz"]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--phases",
+                    f"{d}/ab.npy",
+                    "--known-phases",
+                    f"{d}/d{k}.npy",
+                    "--noise-rad",
+                    "0",
+                    "--out",
+                    f"{d}/m{k}.nii.gz",
+                ]
+            )
+            == 0
+        )
     args = ["estimate", "--json", f"{d}/e.json"] + sum([["--image", f"{d}/m{k}.nii.gz"] for k in range(3)], [])
     assert main(args) == 0
     e = json.loads((tmp_path / "e.json").read_text())
@@ -103,7 +135,11 @@ def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path, sim):
         ("badside", ["estimate", "--image", "{d}/badside.nii.gz"], "applied_phases_rad"),
         ("badcal", ["estimate", "--image", "{d}/good.nii.gz", "--calibration", "{d}/cal.json"], "calibration"),
         ("none", ["estimate", "--image", "{d}/x.nii.gz", "--method", "simplex"], "invalid choice"),
-        ("good", ["calibrate", "--image", "{d}/good.nii.gz", "--max-width-mm", "-1"], "max_width_mm: must be a finite number > 0"),
+        (
+            "good",
+            ["calibrate", "--image", "{d}/good.nii.gz", "--max-width-mm", "-1"],
+            "max_width_mm: must be a finite number > 0",
+        ),
     ],
 )
 def test_bad_estimation_input_is_one_line_exit_2(tmp_path, sim, ideal, setup, args, match):
@@ -112,9 +148,15 @@ def test_bad_estimation_input_is_one_line_exit_2(tmp_path, sim, ideal, setup, ar
     if setup != "none":
         good = ideal
         aff = sim.mr_affine_mm
-        data = {"small": np.ones((10, 10, 1)), "nan": np.full((128, 96, 1), np.nan), "zero": np.zeros((128, 96, 1)),
-                "shifted": good[:, :, None], "badside": good[:, :, None], "good": good[:, :, None],
-                "badcal": good[:, :, None]}[setup]
+        data = {
+            "small": np.ones((10, 10, 1)),
+            "nan": np.full((128, 96, 1), np.nan),
+            "zero": np.zeros((128, 96, 1)),
+            "shifted": good[:, :, None],
+            "badside": good[:, :, None],
+            "good": good[:, :, None],
+            "badcal": good[:, :, None],
+        }[setup]
         affine = aff.copy()
         if setup == "shifted":
             affine[0, 3] += 5.0
@@ -123,9 +165,15 @@ def test_bad_estimation_input_is_one_line_exit_2(tmp_path, sim, ideal, setup, ar
         if setup == "badside":
             (tmp_path / "badside.json").write_text(json.dumps({"applied_phases_rad": [1.0, 2.0]}))
         if setup == "badcal":
-            (tmp_path / "cal.json").write_text(json.dumps({"broadening_width_mm": 2.7, "amplitude": 1e-7, "scenario": "other"}))
-    r = subprocess.run([sys.executable, "-m", "arfi", *[a.format(d=tmp_path) for a in args]],
-                       capture_output=True, text=True, timeout=300)
+            (tmp_path / "cal.json").write_text(
+                json.dumps({"broadening_width_mm": 2.7, "amplitude": 1e-7, "scenario": "other"})
+            )
+    r = subprocess.run(
+        [sys.executable, "-m", "arfi", *[a.format(d=tmp_path) for a in args]],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and match in lines[0], r.stderr

@@ -119,8 +119,22 @@ def test_a_grid_beyond_the_memory_is_refused_before_running(tmp_path, monkeypatc
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "GiB" in err and "points per wavelength" in err
     assert not out.exists() and not js.exists()
-    assert main(["field", "--engine", "fdtd", "--fdtd-points-per-wavelength", "1", "--scenario", scenario,
-                 "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "field",
+                "--engine",
+                "fdtd",
+                "--fdtd-points-per-wavelength",
+                "1",
+                "--scenario",
+                scenario,
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     assert "--fdtd-points-per-wavelength" in capsys.readouterr().err
 
 
@@ -129,9 +143,30 @@ def test_fdtd_in_water_agrees_with_the_exact_march_and_writes_the_same_outputs(t
     assert importlib.util.find_spec("BabelViscoFDTD") is not None, "pip install '.[test]' installs BabelViscoFDTD"
     sim, scenario = small_sim(tmp_path)
     out, js = tmp_path / "f.npz", tmp_path / "f.json"
-    assert main(["field", "--scenario", scenario, "--out", str(tmp_path / "m.npz"), "--json", str(tmp_path / "m.json")]) == 0
-    assert main(["field", "--engine", "fdtd", "--fdtd-points-per-wavelength", "6", "--scenario", scenario,
-                 "--out", str(out), "--json", str(js), "--report", str(tmp_path / "report")]) == 0
+    assert (
+        main(["field", "--scenario", scenario, "--out", str(tmp_path / "m.npz"), "--json", str(tmp_path / "m.json")])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "field",
+                "--engine",
+                "fdtd",
+                "--fdtd-points-per-wavelength",
+                "6",
+                "--scenario",
+                scenario,
+                "--out",
+                str(out),
+                "--json",
+                str(js),
+                "--report",
+                str(tmp_path / "report"),
+            ]
+        )
+        == 0
+    )
     # The report draws the engine's field and names the engine, not the march.
     html = (tmp_path / "report" / "report.html").read_text()
     assert "computed by BabelViscoFDTD" in html and (tmp_path / "report" / "field_sections.png").exists()
@@ -158,7 +193,9 @@ def test_fdtd_in_water_agrees_with_the_exact_march_and_writes_the_same_outputs(t
     assert corr > 0.98, corr
 
 
-SOLID_PLATE = SMALL_BOWL + """
+SOLID_PLATE = (
+    SMALL_BOWL
+    + """
 [[material]]
 name = "cortical"
 sound_speed_m_s = 2800.0
@@ -173,6 +210,7 @@ shape = "slab"
 z_min_mm = 20.0
 z_max_mm = 24.0
 """
+)
 
 
 def test_a_solid_material_gives_its_shear_wave_and_the_march_carries_it_on_its_planes(tmp_path):
@@ -189,11 +227,14 @@ def test_a_solid_material_gives_its_shear_wave_and_the_march_carries_it_on_its_p
     assert not water.has_shear and "shear" not in water.propagation_summary()
 
 
-@pytest.mark.parametrize(("cs", "a", "name"), [
-    (2800.0, 0.0, "shear_sound_speed_m_s"),   # at the compressional speed
-    (2500.0, 0.0, "shear_sound_speed_m_s"),   # above √3/2 of it: a negative bulk modulus
-    (1500.0, -1.0, "shear_attenuation_db_cm_mhz"),
-])
+@pytest.mark.parametrize(
+    ("cs", "a", "name"),
+    [
+        (2800.0, 0.0, "shear_sound_speed_m_s"),  # at the compressional speed
+        (2500.0, 0.0, "shear_sound_speed_m_s"),  # above √3/2 of it: a negative bulk modulus
+        (1500.0, -1.0, "shear_attenuation_db_cm_mhz"),
+    ],
+)
 def test_an_impossible_shear_wave_is_one_line_and_exit_2(tmp_path, capsys, cs, a, name):
     path = tmp_path / "solid.toml"
     path.write_text(SOLID_PLATE.format(cs=cs, a=a))
@@ -213,11 +254,15 @@ def test_ct_bone_shear_follows_the_solid_fraction_and_is_bounded_by_the_dense_bo
     hu = np.full((41, 61, 61), -1000.0, np.float32)
     hu[10:31] = 1000.0
     write_volume(tmp_path / "ct.nii", hu, affine, "test layer")
+
     def scenario(cs: float) -> str:
         path = tmp_path / f"ct_{cs:g}.toml"
-        path.write_text(SMALL_BOWL + f'\n[ct]\nfile = "ct.nii"\nbone_shear_sound_speed_m_s = {cs}\n'
-                        'bone_shear_attenuation_db_cm_mhz = 20.0\n')
+        path.write_text(
+            SMALL_BOWL + f'\n[ct]\nfile = "ct.nii"\nbone_shear_sound_speed_m_s = {cs}\n'
+            "bone_shear_attenuation_db_cm_mhz = 20.0\n"
+        )
         return str(path)
+
     sim = arfi.Simulation(arfi.Scenario.load(scenario(1500.0)))
     props = sim.properties_at([[0.0, 0.0, 30.0], [0.0, 0.0, 50.0]])
     assert props["shear_sound_speed_m_s"][0] == pytest.approx(750.0) and props["shear_sound_speed_m_s"][1] == 0.0
@@ -227,10 +272,14 @@ def test_ct_bone_shear_follows_the_solid_fraction_and_is_bounded_by_the_dense_bo
     # The same layer turned 20° about y: its planar walls convert, and the summary says where.
     z, x = np.meshgrid(10.0 + np.arange(41), -30.0 + np.arange(61), indexing="ij")
     tilted = np.where(np.abs((z - 30.0) * np.cos(np.radians(20)) + x * np.sin(np.radians(20))) <= 5.0, 1000.0, -1000.0)
-    write_volume(tmp_path / "ct.nii", np.repeat(tilted[:, None, :], 61, axis=1).astype(np.float32), affine, "tilted layer")
+    write_volume(
+        tmp_path / "ct.nii", np.repeat(tilted[:, None, :], 61, axis=1).astype(np.float32), affine, "tilted layer"
+    )
     sim = arfi.Simulation(arfi.Scenario.load(scenario(1500.0)))
     summary = sim.propagation_summary()
-    assert sim.propagation["shear"] and "planar walls tilted" in summary and "not carried by the march" in summary, summary
+    assert sim.propagation["shear"] and "planar walls tilted" in summary and "not carried by the march" in summary, (
+        summary
+    )
     # The dense bone's 2900 m/s allows up to 2511 m/s.
     assert main(["field", "--scenario", scenario(2600.0), "--out", str(tmp_path / "f.npz")]) == 2
     err = capsys.readouterr().err.strip()

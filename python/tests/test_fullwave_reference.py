@@ -120,8 +120,18 @@ def test_the_head_comparison_reports_a_moved_focus_and_refuses_another_grid(tmp_
     for dx in (-3.0, 3.0):
         moved = {**march, "focal_point_mm": [march["focal_point_mm"][0] + dx, *march["focal_point_mm"][1:]]}
         m = validation_head.metrics(moved, ref)
-        assert abs(abs(m["focal_position_error_mm"]) - float(np.hypot(dx + march["focal_point_mm"][0] - ref["focal_point_mm"][0],
-                                                                      march["focal_point_mm"][2] - ref["focal_point_mm"][2]))) < 0.2
+        assert (
+            abs(
+                abs(m["focal_position_error_mm"])
+                - float(
+                    np.hypot(
+                        dx + march["focal_point_mm"][0] - ref["focal_point_mm"][0],
+                        march["focal_point_mm"][2] - ref["focal_point_mm"][2],
+                    )
+                )
+            )
+            < 0.2
+        )
     shifted = {**ref, "plane_x_mm": [v + 0.3 for v in ref["plane_x_mm"]]}
     with pytest.raises(ValueError, match="plane"):
         validation_head.metrics(march, shifted)

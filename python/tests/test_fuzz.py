@@ -14,7 +14,6 @@ import json
 import os
 from collections import Counter
 from datetime import timedelta
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,8 +32,12 @@ DEADLINE = timedelta(seconds=60)
 # every explicit @example still runs (a simulation or an estimate per case makes the counts the
 # file's run time).
 FULL = bool(os.environ.get("ARFI_FULL_SWEEPS"))
-FAST = settings(max_examples=300 if FULL else 100, deadline=DEADLINE, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
-SLOW = settings(max_examples=100 if FULL else 35, deadline=DEADLINE, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+FAST = settings(
+    max_examples=300 if FULL else 100, deadline=DEADLINE, suppress_health_check=[HealthCheck.too_slow], derandomize=True
+)
+SLOW = settings(
+    max_examples=100 if FULL else 35, deadline=DEADLINE, suppress_health_check=[HealthCheck.too_slow], derandomize=True
+)
 
 SIM = arfi.Simulation()
 # A complex value cast silently to real (its imaginary part dropped) is a wrong answer, not a warning.
@@ -42,8 +45,29 @@ pytestmark = pytest.mark.filterwarnings("error::numpy.exceptions.ComplexWarning"
 SHAPE = SIM.arfi_image().shape
 
 NASTY_NUMBERS = [float("nan"), float("inf"), float("-inf"), -1.0, 0.0, 1e-300, 1e300, -1e300, 2**63, -(2**63), 2**64]
-NASTY_TOML = ["nan", "inf", "-inf", "-1", "0", "1e-300", "1e300", "-1e300", "9223372036854775807", "-9223372036854775808",
-              "\"text\"", "[]", "[1e300, 1e300]", "[0, 0, 0]", "[nan, nan, nan]", "true", "{}", "[[1]]", "\"\"", "1", "2"]
+NASTY_TOML = [
+    "nan",
+    "inf",
+    "-inf",
+    "-1",
+    "0",
+    "1e-300",
+    "1e300",
+    "-1e300",
+    "9223372036854775807",
+    "-9223372036854775808",
+    '"text"',
+    "[]",
+    "[1e300, 1e300]",
+    "[0, 0, 0]",
+    "[nan, nan, nan]",
+    "true",
+    "{}",
+    "[[1]]",
+    '""',
+    "1",
+    "2",
+]
 NASTY_OBJECTS = [None, "text", "", [], [[]], {}, object(), b"bytes", 1j, [1, "a"], True]
 
 
@@ -128,7 +152,9 @@ def test_a_corrupt_scenario_file_gives_a_value_error(tmp_path_factory, data, kin
 
 
 @FAST
-@given(arrays_or_objects(2), st.sampled_from(NASTY_NUMBERS + [0.02]), st.sampled_from([0, 1, -1, 2**64, 1.5, "1", None]))
+@given(
+    arrays_or_objects(2), st.sampled_from(NASTY_NUMBERS + [0.02]), st.sampled_from([0, 1, -1, 2**64, 1.5, "1", None])
+)
 def test_any_phases_noise_and_seed_give_an_image_or_a_value_error(phases, noise, seed):
     TRIED["phases, noise, seed"] += 1
     image = documented(SIM.arfi_image, phases, noise, seed)
@@ -163,13 +189,25 @@ def one_broken(valid: dict, nasty: dict) -> st.SearchStrategy:
 
 
 @SLOW
-@given(one_broken(
-    valid={"method": ["lbfgs", "nelder-mead", "pso"], "max_evaluations": [1, 30], "time_limit_s": [0.5, None],
-           "seed": [0, 2**64 - 1], "starts": [None, 1, 2]},
-    nasty={"method": ["", "LBFGS", None, 3], "max_evaluations": [0, -1, 2**70, 1.5, "5", float("nan")],
-           "time_limit_s": [0.0, -1.0, float("nan"), float("inf"), "1"], "seed": [-1, 2**64, 2**70, "0", 1.0],
-           "starts": [0, -3, 10**9, 2.5]}),
-    st.one_of(image_like(), st.lists(image_like(), max_size=3)))
+@given(
+    one_broken(
+        valid={
+            "method": ["lbfgs", "nelder-mead", "pso"],
+            "max_evaluations": [1, 30],
+            "time_limit_s": [0.5, None],
+            "seed": [0, 2**64 - 1],
+            "starts": [None, 1, 2],
+        },
+        nasty={
+            "method": ["", "LBFGS", None, 3],
+            "max_evaluations": [0, -1, 2**70, 1.5, "5", float("nan")],
+            "time_limit_s": [0.0, -1.0, float("nan"), float("inf"), "1"],
+            "seed": [-1, 2**64, 2**70, "0", 1.0],
+            "starts": [0, -3, 10**9, 2.5],
+        },
+    ),
+    st.one_of(image_like(), st.lists(image_like(), max_size=3)),
+)
 def test_any_estimation_input_gives_an_estimate_or_a_value_error(kwargs, images):
     TRIED["estimate inputs"] += 1
     e = documented(SIM.estimate, images, **kwargs)
@@ -179,11 +217,21 @@ def test_any_estimation_input_gives_an_estimate_or_a_value_error(kwargs, images)
 
 
 @SLOW
-@given(one_broken(
-    valid={"threshold": [0.0, 5.0], "effects": [["amplitude"], ["broadening", "registration_shift"]], "max_iterations": [1, 3]},
-    nasty={"threshold": [-1.0, 1e300, float("nan"), "1", None], "effects": [[], ["nonsense"], "amplitude", [3], None],
-           "max_iterations": [0, -1, 2**70, 1.5, "3"]}),
-    st.one_of(image_like(), st.lists(image_like(), max_size=3)))
+@given(
+    one_broken(
+        valid={
+            "threshold": [0.0, 5.0],
+            "effects": [["amplitude"], ["broadening", "registration_shift"]],
+            "max_iterations": [1, 3],
+        },
+        nasty={
+            "threshold": [-1.0, 1e300, float("nan"), "1", None],
+            "effects": [[], ["nonsense"], "amplitude", [3], None],
+            "max_iterations": [0, -1, 2**70, 1.5, "3"],
+        },
+    ),
+    st.one_of(image_like(), st.lists(image_like(), max_size=3)),
+)
 def test_any_diagnose_input_gives_a_diagnosis_or_a_value_error(kwargs, images):
     TRIED["diagnose inputs"] += 1
     if kwargs["effects"] is None:  # the whole library: bound the time by the iteration count
@@ -194,8 +242,19 @@ def test_any_diagnose_input_gives_a_diagnosis_or_a_value_error(kwargs, images):
         assert np.isfinite(d.cost_final) and d.cost_final <= d.cost_initial
 
 
-EFFECT_NUMBERS = ["scale", "broadening_width_mm", "broadening_anisotropy_mm", "dx_mm", "dy_mm", "offset_rad",
-                  "slope_x_rad_per_mm", "slope_y_rad_per_mm", "dz_mm", "sound_speed_m_s", "attenuation_db_cm_mhz"]
+EFFECT_NUMBERS = [
+    "scale",
+    "broadening_width_mm",
+    "broadening_anisotropy_mm",
+    "dx_mm",
+    "dy_mm",
+    "offset_rad",
+    "slope_x_rad_per_mm",
+    "slope_y_rad_per_mm",
+    "dz_mm",
+    "sound_speed_m_s",
+    "attenuation_db_cm_mhz",
+]
 
 
 @pytest.mark.parametrize("key", EFFECT_NUMBERS)
@@ -211,8 +270,13 @@ def test_every_nasty_number_for_every_effect_gives_finite_images_or_a_value_erro
 
 
 @SLOW
-@given(st.dictionaries(st.sampled_from(EFFECT_NUMBERS + ["group_phases_rad", "dead_groups", "bogus"]),
-                       st.one_of(st.sampled_from(NASTY_NUMBERS + NASTY_OBJECTS), nasty_arrays(1)), max_size=3))
+@given(
+    st.dictionaries(
+        st.sampled_from(EFFECT_NUMBERS + ["group_phases_rad", "dead_groups", "bogus"]),
+        st.one_of(st.sampled_from(NASTY_NUMBERS + NASTY_OBJECTS), nasty_arrays(1)),
+        max_size=3,
+    )
+)
 @example({"scale": -1.0, "broadening_width_mm": 1e-300})  # found by CI: a width whose square underflows gave NaN
 @example({"scale": -1.0, "sound_speed_m_s": 1e-300})  # found by CI: the wavenumber overflowed
 def test_any_effects_give_images_or_a_value_error(effects):
@@ -228,7 +292,9 @@ def test_any_effects_give_images_or_a_value_error(effects):
 @pytest.fixture(scope="module")
 def good_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("good")
-    write_arfi_image(d / "m.nii.gz", SIM.arfi_image(), SIM.mr_affine_mm, SIM.mr_volume_shape, {"applied_phases_rad": [0.0] * 16})
+    write_arfi_image(
+        d / "m.nii.gz", SIM.arfi_image(), SIM.mr_affine_mm, SIM.mr_volume_shape, {"applied_phases_rad": [0.0] * 16}
+    )
     write_arfi_image(d / "m.nii", SIM.arfi_image(), SIM.mr_affine_mm, SIM.mr_volume_shape)
     np.save(d / "p.npy", np.zeros(16))
     return d
@@ -237,11 +303,16 @@ def good_files(tmp_path_factory):
 def corrupt(data: bytes, how: int, at: int, junk: bytes) -> bytes:
     """Truncated, overwritten, extended or replaced bytes of a good file."""
     at = at % (len(data) + 1)
-    return [data[:at], data[:at] + junk + data[at + len(junk):], data + junk, junk][how]
+    return [data[:at], data[:at] + junk + data[at + len(junk) :], data + junk, junk][how]
 
 
 @SLOW
-@given(st.sampled_from(["m.nii.gz", "m.nii", "m.json", "p.npy"]), st.integers(0, 3), st.integers(0, 10**6), st.binary(max_size=64))
+@given(
+    st.sampled_from(["m.nii.gz", "m.nii", "m.json", "p.npy"]),
+    st.integers(0, 3),
+    st.integers(0, 10**6),
+    st.binary(max_size=64),
+)
 def test_a_corrupt_image_sidecar_or_phase_file_gives_a_value_error(good_files, tmp_path_factory, name, how, at, junk):
     TRIED["corrupt files"] += 1
     d = tmp_path_factory.mktemp("bad")
@@ -261,13 +332,37 @@ OPTIONS = {
     "field": ["--phases", "--z-mm"],
     "simulate": ["--phases", "--known-phases", "--noise-rad", "--seed"],
     "calibrate": ["--image", "--max-width-mm"],
-    "estimate": ["--image", "--calibration", "--groups", "--method", "--max-evaluations", "--time-limit-s", "--seed",
-                 "--starts", "--out-phases", "--suggest"],
+    "estimate": [
+        "--image",
+        "--calibration",
+        "--groups",
+        "--method",
+        "--max-evaluations",
+        "--time-limit-s",
+        "--seed",
+        "--starts",
+        "--out-phases",
+        "--suggest",
+    ],
     "diagnose": ["--image", "--calibration", "--threshold", "--effects"],
     "scenario": ["--default"],
 }
-VALUES = ["nan", "inf", "-1", "0", "1e400", "-1e300", "18446744073709551616", "x", "", "lbfgs", "amplitude,bogus",
-          "1", "16", "3"]
+VALUES = [
+    "nan",
+    "inf",
+    "-1",
+    "0",
+    "1e400",
+    "-1e300",
+    "18446744073709551616",
+    "x",
+    "",
+    "lbfgs",
+    "amplitude,bogus",
+    "1",
+    "16",
+    "3",
+]
 
 
 @st.composite
@@ -294,14 +389,30 @@ def cli_files(good_files, tmp_path_factory):
     (d / "p.txt").write_text("0.1\nnot a number\n")
     (d / "cal.json").write_text(json.dumps({"broadening_width_mm": "nan", "amplitude": -1}))
     (d / "dir").mkdir()
-    names = ["m.nii.gz", "bad.nii.gz", "bad.toml", "huge.toml", "p.npy", "p.txt", "cal.json", "dir", "absent.nii.gz",
-             "out.nii.gz", "out.npz", "out.json", "out.npy"]
+    names = [
+        "m.nii.gz",
+        "bad.nii.gz",
+        "bad.toml",
+        "huge.toml",
+        "p.npy",
+        "p.txt",
+        "cal.json",
+        "dir",
+        "absent.nii.gz",
+        "out.nii.gz",
+        "out.npz",
+        "out.json",
+        "out.npy",
+    ]
     return d, [str(d / n) for n in names]
 
 
-@settings(max_examples=300 if FULL else 100, deadline=DEADLINE,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
-          derandomize=True)
+@settings(
+    max_examples=300 if FULL else 100,
+    deadline=DEADLINE,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+    derandomize=True,
+)
 @given(data=st.data())
 def test_any_command_line_exits_0_or_2_with_one_line_and_no_partial_output(cli_files, data):
     d, files = cli_files

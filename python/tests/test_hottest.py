@@ -57,8 +57,24 @@ def test_through_a_head_the_skull_the_scalp_and_the_brain_each_have_their_hottes
     ct, toml = tmp_path / "head.nii.gz", tmp_path / "head.toml"
     assert main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "2", "--seed", "2"]) == 0
     vol, js = tmp_path / "v.nii.gz", tmp_path / "f.json"
-    assert main(["field", "--scenario", str(toml), "--out", str(tmp_path / "f.npz"), "--volume", str(vol), "--json", str(js),
-                 "--mi-limit", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "field",
+                "--scenario",
+                str(toml),
+                "--out",
+                str(tmp_path / "f.npz"),
+                "--volume",
+                str(vol),
+                "--json",
+                str(js),
+                "--mi-limit",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     d = json.loads(js.read_text())
     hottest = d["hottest"]

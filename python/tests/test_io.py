@@ -55,8 +55,12 @@ def test_the_cli_writes_files_the_group_can_read(tmp_path):
     # The verb's own process, with a umask that lets the group and others read.
     ct, scenario = tmp_path / "ct.nii.gz", tmp_path / "head.toml"
     code = "import os, sys; os.umask(0o022); from arfi.cli import main; sys.exit(main(sys.argv[1:]))"
-    r = subprocess.run([sys.executable, "-c", code, "phantom", "--out", str(ct), "--scenario-out", str(scenario),
-                        "--voxel-mm", "2"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-c", code, "phantom", "--out", str(ct), "--scenario-out", str(scenario), "--voxel-mm", "2"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     if r.returncode != 0:
         pytest.fail(r.stderr)
     assert mode(ct) == mode(scenario) == 0o644

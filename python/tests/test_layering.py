@@ -13,8 +13,13 @@ PACKAGE = Path(arfi.__file__).parent
 def imports(path: Path) -> set[str]:
     """The arfi modules a file imports."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    skipped = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
-               for child in node.body for n in ast.walk(child)}
+    skipped = {
+        id(n)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+        for child in node.body
+        for n in ast.walk(child)
+    }
     found = set()
     for node in ast.walk(tree):
         if id(node) in skipped:
@@ -34,7 +39,7 @@ def test_no_module_imports_a_module_that_imports_it_back():
     assert deps["simulation"], "the reader found no imports"
 
     def visit(m: str, path: list[str], done: set[str]) -> None:
-        assert m not in path, "import cycle: " + " -> ".join(path[path.index(m):] + [m])
+        assert m not in path, "import cycle: " + " -> ".join(path[path.index(m) :] + [m])
         if m in done:
             return
         for n in sorted(deps[m]):

@@ -39,7 +39,9 @@ def test_a_16_group_correction_of_1024_aberrations_never_makes_the_focus_worse(s
         r = run_loop(sim, applied, seed, iterations=2)
         aberrated = sim.arfi_image(applied).max()
         corrected = sim.arfi_image(applied - r.correction_rad[sim.groups]).max()
-        assert corrected >= aberrated - 1e-12, f"seed {seed}: {corrected / ideal.max():.3f} < {aberrated / ideal.max():.3f}"
+        assert corrected >= aberrated - 1e-12, (
+            f"seed {seed}: {corrected / ideal.max():.3f} < {aberrated / ideal.max():.3f}"
+        )
         assert len(r.steps) >= 2 and r.steps[0].estimate is None and r.steps[1].estimate is not None
 
 

@@ -39,8 +39,9 @@ def test_amplitude_and_backgrounds_are_fitted_with_the_element_phases(small: arf
     images = hidden_background(small, truth, offsets, 3)
     images[1] = hidden_background(small, truth + known[1], offsets[1:], 4)[0]
     plain = el.estimate(images, known, prior=truth, prior_std_rad=0.3, max_evaluations=60)
-    fitted = el.estimate(images, known, prior=truth, prior_std_rad=0.3, max_evaluations=60,
-                         fit_nuisance="amplitude,background_phase")
+    fitted = el.estimate(
+        images, known, prior=truth, prior_std_rad=0.3, max_evaluations=60, fit_nuisance="amplitude,background_phase"
+    )
     assert plain.nuisance is None and plain.model_mismatch
     n = fitted.nuisance
     assert n is not None and n.fitted == ["amplitude", "background_phase"]
@@ -56,11 +57,14 @@ def test_amplitude_and_backgrounds_are_fitted_with_the_element_phases(small: arf
     assert json.loads(json.dumps(fitted.to_dict()))["nuisance"]["fitted"] == ["amplitude", "background_phase"]
 
 
-@pytest.mark.parametrize("value, match", [
-    ("bogus", 'fit_nuisance: unknown nuisance parameter "bogus"'),
-    (3, "fit_nuisance: must be names"),
-    ([1, 2], "fit_nuisance: must be names"),
-])
+@pytest.mark.parametrize(
+    "value, match",
+    [
+        ("bogus", 'fit_nuisance: unknown nuisance parameter "bogus"'),
+        (3, "fit_nuisance: must be names"),
+        ([1, 2], "fit_nuisance: must be names"),
+    ],
+)
 def test_bad_nuisance_names_are_refused(small: arfi.Simulation, value, match: str) -> None:
     el = small.with_groups(small.n_elements)
     with pytest.raises(ValueError, match=match):
@@ -78,18 +82,52 @@ def test_cli_fit_nuisance(tmp_path, capsys) -> None:
     scenario = tmp_path / "small.toml"
     scenario.write_text(SMALL)
     image = tmp_path / "a.nii.gz"
-    assert main(["simulate", "--scenario", str(scenario), "--out", str(image), "--noise-rad", "0.02", "--seed", "2"]) == 0
+    assert (
+        main(["simulate", "--scenario", str(scenario), "--out", str(image), "--noise-rad", "0.02", "--seed", "2"]) == 0
+    )
     out = tmp_path / "e.json"
-    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--groups", "256", "--max-evaluations", "30",
-                 "--fit-nuisance", "background_phase", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                str(scenario),
+                "--image",
+                str(image),
+                "--groups",
+                "256",
+                "--max-evaluations",
+                "30",
+                "--fit-nuisance",
+                "background_phase",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "fitted background_phase" in printed
     # The amplitude was neither asked for nor fitted: no word of a refit with it.
     assert "the amplitude was not asked for" not in printed, printed
     assert json.loads(out.read_text())["nuisance"]["fitted"] == ["background_phase"]
     bad = tmp_path / "bad.json"
-    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--fit-nuisance", "broadening",
-                 "--json", str(bad)]) == 2
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                str(scenario),
+                "--image",
+                str(image),
+                "--fit-nuisance",
+                "broadening",
+                "--json",
+                str(bad),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "fit_nuisance: fitting broadening needs a per-element estimate" in err, err
     assert not bad.exists()
@@ -104,9 +142,33 @@ def test_cli_diagnose_with_the_aberration_in_the_model(tmp_path, capsys) -> None
     aberration = tmp_path / "ab.npy"
     np.save(aberration, sim.skull_phases(2))
     image = tmp_path / "s.nii.gz"
-    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--noise-rad", "0.02", "--seed", "3",
-                 "--out", str(image)]) == 0
-    base = ["diagnose", "--scenario", str(scenario), "--image", str(image), "--effects", "amplitude,broadening,background_phase"]
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(scenario),
+                "--phases",
+                str(aberration),
+                "--noise-rad",
+                "0.02",
+                "--seed",
+                "3",
+                "--out",
+                str(image),
+            ]
+        )
+        == 0
+    )
+    base = [
+        "diagnose",
+        "--scenario",
+        str(scenario),
+        "--image",
+        str(image),
+        "--effects",
+        "amplitude,broadening,background_phase",
+    ]
     capsys.readouterr()
     assert main(base + ["--aberration", str(aberration)]) == 0
     assert "no effect missing" in capsys.readouterr().out
@@ -116,4 +178,4 @@ def test_cli_diagnose_with_the_aberration_in_the_model(tmp_path, capsys) -> None
     np.save(bad, np.zeros(5))
     assert main(base + ["--aberration", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith("arfi: error: --aberration: has 5 values"), err
+    assert len(err.splitlines()) == 1 and err.startswith(f"arfi: error: --aberration: {bad}: has 5 values"), err

@@ -14,10 +14,20 @@ from arfi.prediction import compared_drives, compared_section, focal_metrics, pr
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
-
 #: The focal metrics' keys, as arfi field's JSON names them.
-FOCAL_KEYS = {"target_mm", "focal_peak_mm", "focal_peak_pa", "peak_to_target_mm", "fwhm_6db_mm", "fwhm_6db_across_mm",
-              "fwhm_3db_mm", "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index", "focal_tissue"}
+FOCAL_KEYS = {
+    "target_mm",
+    "focal_peak_mm",
+    "focal_peak_pa",
+    "peak_to_target_mm",
+    "fwhm_6db_mm",
+    "fwhm_6db_across_mm",
+    "fwhm_3db_mm",
+    "focal_volume_6db_mm3",
+    "isppa_w_cm2",
+    "mechanical_index",
+    "focal_tissue",
+}
 
 
 @pytest.fixture(scope="module")
@@ -25,11 +35,26 @@ def head(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The head phantom (2 mm voxels) in the hemisphere, at 220 kHz with 256 elements to keep the
     tests short; the scenario file is ``head.toml`` in the returned folder."""
     d = tmp_path_factory.mktemp("head")
-    assert main(["phantom", "--out", str(d / "head.nii.gz"), "--scenario-out", str(d / "head.toml"), "--voxel-mm", "2",
-                 "--array", "hemisphere"]) == 0
+    assert (
+        main(
+            [
+                "phantom",
+                "--out",
+                str(d / "head.nii.gz"),
+                "--scenario-out",
+                str(d / "head.toml"),
+                "--voxel-mm",
+                "2",
+                "--array",
+                "hemisphere",
+            ]
+        )
+        == 0
+    )
     text = (d / "head.toml").read_text()
-    (d / "head.toml").write_text(text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0")
-                                 .replace("elements = 1024", "elements = 256"))
+    (d / "head.toml").write_text(
+        text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0").replace("elements = 1024", "elements = 256")
+    )
     return d
 
 
@@ -74,8 +99,22 @@ def test_cli_predict_writes_the_prior_and_the_focal_pressures(head, tmp_path, ca
     assert metrics["corrected"]["focal_peak_pa"] >= max(m["focal_peak_pa"] for m in metrics.values())
     for name in ["uncorrected", "straight-ray CT steering", "corrected"]:
         assert f"predict: {name}: focus in 3-D: " in printed
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(out), "--json", str(js),
-                 "--no-focal-metrics", "--no-bone-speed-sensitivity"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(head / "head.toml"),
+                "--out",
+                str(out),
+                "--json",
+                str(js),
+                "--no-focal-metrics",
+                "--no-bone-speed-sensitivity",
+            ]
+        )
+        == 0
+    )
     assert "focal_metrics" not in json.loads(js.read_text()) and "focus in 3-D" not in capsys.readouterr().out
 
 
@@ -148,27 +187,72 @@ def test_a_patient_steered_without_bone_is_driven_as_the_prediction_assumes(head
     np.save(tmp_path / "prior.npy", p.phases_rad)
     prior = str(tmp_path / "prior.npy")
     # the correction with the same phases added cancels: the uncorrected focus again
-    for extra, expected in [([], p.uncorrected_pa), (["--correction", prior], p.corrected_pa),
-                            (["--correction", prior, "--phases", prior], p.uncorrected_pa)]:
-        assert main(["field", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "f.npz"),
-                     "--z-mm", str(p.target_mm[2]), *extra]) == 0
+    for extra, expected in [
+        ([], p.uncorrected_pa),
+        (["--correction", prior], p.corrected_pa),
+        (["--correction", prior, "--phases", prior], p.uncorrected_pa),
+    ]:
+        assert (
+            main(
+                [
+                    "field",
+                    "--scenario",
+                    str(tmp_path / "patient.toml"),
+                    "--out",
+                    str(tmp_path / "f.npz"),
+                    "--z-mm",
+                    str(p.target_mm[2]),
+                    *extra,
+                ]
+            )
+            == 0
+        )
         f = np.load(tmp_path / "f.npz")
         i, j = np.argmin(np.abs(f["x_mm"] - p.target_mm[0])), np.argmin(np.abs(f["y_mm"] - p.target_mm[1]))
         assert abs(abs(f["pressure"][j, i]) - expected) < 1e-4 * expected, extra
-    assert main(["field", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "f.npz"),
-                 "--correction", str(tmp_path / "missing.npy")]) == 2
+    assert (
+        main(
+            [
+                "field",
+                "--scenario",
+                str(tmp_path / "patient.toml"),
+                "--out",
+                str(tmp_path / "f.npz"),
+                "--correction",
+                str(tmp_path / "missing.npy"),
+            ]
+        )
+        == 2
+    )
     assert "--correction" in capsys.readouterr().err
 
 
 def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path):
     report, js = tmp_path / "report", tmp_path / "p.json"
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "prior.npy"),
-                 "--report", str(report), "--json", str(js), "--no-bone-speed-sensitivity"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(head / "head.toml"),
+                "--out",
+                str(tmp_path / "prior.npy"),
+                "--report",
+                str(report),
+                "--json",
+                str(js),
+                "--no-bone-speed-sensitivity",
+            ]
+        )
+        == 0
+    )
     for name in ["predict_section.png", "predict_elements.png", "report.html"]:
         assert (report / name).stat().st_size > 10_000, name
     # The report's march gives the focal metrics too: in the JSON and on the page, each drive's.
     metrics = json.loads(js.read_text())["focal_metrics"]
-    assert set(metrics) == {"uncorrected", "ray_steering", "corrected"} and all(set(m) == FOCAL_KEYS for m in metrics.values())
+    assert set(metrics) == {"uncorrected", "ray_steering", "corrected"} and all(
+        set(m) == FOCAL_KEYS for m in metrics.values()
+    )
     page = (report / "report.html").read_text()
     assert all(f"{label}: focal metrics" in page for label in ["uncorrected", "straight-ray CT steering", "corrected"])
     assert (report / "predict_section.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -214,7 +298,10 @@ def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head,
     # 0.013 rad RMS and predicted to about 8 % of it; the 650 kHz head moves about three times as much).
     # On by default with the porosity conversion (the default one).
     js = tmp_path / "prediction.json"
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js)]) == 0
+    assert (
+        main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js)])
+        == 0
+    )
     assert "bone speed sensitivity" in capsys.readouterr().out
     d = json.loads(js.read_text())
     g = np.asarray(d["bone_speed_sensitivity_rad_per_percent"])
@@ -225,15 +312,27 @@ def test_the_bone_speed_sensitivity_predicts_a_prediction_with_faster_bone(head,
     w = np.abs(np.asarray(d["transmission"]))
     change = np.angle(np.exp(1j * (moved.phases_rad - np.asarray(d["phases_rad"]))))
     change -= np.angle(np.sum(w * np.exp(1j * change)))
-    rms = lambda v: float(np.sqrt(np.average(v ** 2, weights=w)))  # noqa: E731
+    rms = lambda v: float(np.sqrt(np.average(v**2, weights=w)))  # noqa: E731
     err = rms(change - 5 * g)
     print(f"bone +5 %: change {rms(change):.3f} rad RMS, 5 x sensitivity {rms(5 * g):.3f}, difference {err:.3f}")
     assert g.shape == (256,) and rms(change) > 0.005 and err < 0.25 * rms(change), (err, rms(change))
     assert "bone_speed_sensitivity_rad_per_percent" not in predict(scenario).to_dict()
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js),
-                 "--no-bone-speed-sensitivity"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(head / "head.toml"),
+                "--out",
+                str(tmp_path / "p.npy"),
+                "--json",
+                str(js),
+                "--no-bone-speed-sensitivity",
+            ]
+        )
+        == 0
+    )
     assert "bone_speed_sensitivity_rad_per_percent" not in json.loads(js.read_text())
-
 
 
 def test_a_mode_is_fitted_on_the_head_with_its_bone(head):

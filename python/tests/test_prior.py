@@ -41,18 +41,27 @@ def test_the_prior_makes_one_image_better_than_either_alone(sim, case):
     assert post.to_dict()["prior_used"] is True
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"prior": np.zeros(7), "prior_std_rad": 0.5}, "prior: has 7 values; expected 1024 (one per element) or 16 (one per group)"),
-    ({"prior": np.array([np.nan] * 16), "prior_std_rad": 0.5}, "prior: contains NaN"),
-    ({"prior": np.zeros((4, 4)), "prior_std_rad": 0.5}, "prior: must be one-dimensional"),
-    ({"prior": np.zeros(16), "prior_std_rad": 0.0}, "prior_std_rad: must be a finite number > 0"),
-    ({"prior": np.zeros(16), "prior_std_rad": float("inf")}, "prior_std_rad: must be a finite number"),
-    ({"prior": np.zeros(16)}, "prior_std_rad: is required with a prior"),
-    ({"prior_std_rad": 0.5}, "prior_std_rad: was given without a prior"),
-    ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": 0.0}, "prior_correlation_mm: must be"),
-    ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": float("nan")}, "prior_correlation_mm: must be"),
-    ({"prior_correlation_mm": 15.0}, "prior_correlation_mm: was given without a prior"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (
+            {"prior": np.zeros(7), "prior_std_rad": 0.5},
+            "prior: has 7 values; expected 1024 (one per element) or 16 (one per group)",
+        ),
+        ({"prior": np.array([np.nan] * 16), "prior_std_rad": 0.5}, "prior: contains NaN"),
+        ({"prior": np.zeros((4, 4)), "prior_std_rad": 0.5}, "prior: must be one-dimensional"),
+        ({"prior": np.zeros(16), "prior_std_rad": 0.0}, "prior_std_rad: must be a finite number > 0"),
+        ({"prior": np.zeros(16), "prior_std_rad": float("inf")}, "prior_std_rad: must be a finite number"),
+        ({"prior": np.zeros(16)}, "prior_std_rad: is required with a prior"),
+        ({"prior_std_rad": 0.5}, "prior_std_rad: was given without a prior"),
+        ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": 0.0}, "prior_correlation_mm: must be"),
+        (
+            {"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": float("nan")},
+            "prior_correlation_mm: must be",
+        ),
+        ({"prior_correlation_mm": 15.0}, "prior_correlation_mm: was given without a prior"),
+    ],
+)
 def test_bad_priors_are_refused_naming_the_parameter(sim, ideal, kwargs, match):
     with pytest.raises(ValueError, match=match.replace("(", "\\(").replace(")", "\\)")):
         sim.estimate(ideal, **kwargs)
@@ -71,30 +80,58 @@ def files(tmp_path_factory, sim, case):
 
 def test_cli_estimate_with_a_prior_writes_prior_used(tmp_path, files, capsys):
     out = tmp_path / "e.json"
-    assert main(["estimate", "--image", str(files / "m.nii.gz"), "--prior", str(files / "prior.npy"),
-                 "--prior-std-rad", "0.6", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                "--image",
+                str(files / "m.nii.gz"),
+                "--prior",
+                str(files / "prior.npy"),
+                "--prior-std-rad",
+                "0.6",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "with the prior" in capsys.readouterr().out
     d = json.loads(out.read_text())
     assert d["prior_used"] is True and len(d["phases_rad"]) == 16 and d["posterior_cost"] > 0
     assert d["prior_std_rad"] == 0.6 and d["prior_correlation_mm"] is None
 
 
-@pytest.mark.parametrize("args, match", [
-    (["--prior", "{f}/short.npy", "--prior-std-rad", "0.5"], "prior: has 5 values"),
-    (["--prior", "{f}/nan.txt", "--prior-std-rad", "0.5"], "NaN"),
-    (["--prior", "{f}/prior.npy", "--prior-std-rad", "-1"], "prior_std_rad: must be a finite number > 0"),
-    (["--prior", "{f}/prior.npy", "--prior-std-rad", "nan"], "prior_std_rad: must be a finite number"),
-    (["--prior", "{f}/prior.npy"], "prior_std_rad: is required with a prior"),
-    (["--prior-std-rad", "0.5"], "prior_std_rad: was given without a prior"),
-    (["--prior", "{f}/prior.npy", "--prior-std-rad", "0.5", "--prior-correlation-mm", "-3"], "prior_correlation_mm: must be"),
-    (["--prior", "{f}/missing.npy", "--prior-std-rad", "0.5"], "missing.npy"),
-])
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        (["--prior", "{f}/short.npy", "--prior-std-rad", "0.5"], "--prior: {f}/short.npy: has 5 values"),
+        (["--prior", "{f}/nan.txt", "--prior-std-rad", "0.5"], "NaN"),
+        (["--prior", "{f}/prior.npy", "--prior-std-rad", "-1"], "prior_std_rad: must be a finite number > 0"),
+        (["--prior", "{f}/prior.npy", "--prior-std-rad", "nan"], "prior_std_rad: must be a finite number"),
+        (["--prior", "{f}/prior.npy"], "--prior-std-rad: required with --prior"),
+        (["--prior-std-rad", "0.5"], "prior_std_rad: was given without a prior"),
+        (
+            ["--prior", "{f}/prior.npy", "--prior-std-rad", "0.5", "--prior-correlation-mm", "-3"],
+            "prior_correlation_mm: must be",
+        ),
+        (["--prior", "{f}/missing.npy", "--prior-std-rad", "0.5"], "missing.npy"),
+    ],
+)
 def test_cli_bad_priors_are_one_line_exit_2_and_nothing_written(tmp_path, files, capsys, args, match):
-    args = ["estimate", "--image", str(files / "m.nii.gz"), *[a.format(f=files) for a in args],
-            "--json", str(tmp_path / "e.json"), "--out-phases", str(tmp_path / "p.npy")]
+    args = [
+        "estimate",
+        "--image",
+        str(files / "m.nii.gz"),
+        *[a.format(f=files) for a in args],
+        "--json",
+        str(tmp_path / "e.json"),
+        "--out-phases",
+        str(tmp_path / "p.npy"),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith("arfi: error:") and match in err, err
+    assert len(err.splitlines()) == 1 and err.startswith("arfi: error:") and match.format(f=files) in err, err
     assert list(tmp_path.iterdir()) == []
 
 
@@ -114,15 +151,22 @@ def test_per_element_prior_on_a_small_array_from_elements_or_default_groups():
         np.testing.assert_allclose(np.exp(1j * e.phases_rad), np.exp(1j * sim.element_phases(prior)), atol=1e-12)
     # A repeat with the same known phases (up to a common phase) is the same acquisition: kept too.
     repeat = sim.arfi_image(sim.element_phases(truth) + 0.7, noise_rad=0.02, seed=3)
-    assert el.estimate(images + [repeat], [None, np.full(sim.n_elements, 0.7)], prior=truth, prior_std_rad=0.3,
-                       max_evaluations=50).kept_prediction
+    assert el.estimate(
+        images + [repeat], [None, np.full(sim.n_elements, 0.7)], prior=truth, prior_std_rad=0.3, max_evaluations=50
+    ).kept_prediction
     # Errors as a smooth field (15 mm), with a defocused second image: the estimate corrects the
     # prediction by smooth fields; a prediction that is the truth stays within its stated error
     # (0.3 rad) of it.
     shift = sim.focus_shift_phases((0.0, 0.0, 10.0))
     defocused = sim.arfi_image(sim.element_phases(truth) + shift, noise_rad=0.02, seed=4)
-    e = el.estimate(images + [defocused], [None, shift], prior=truth, prior_std_rad=0.3, prior_correlation_mm=15.0,
-                    max_evaluations=50)
+    e = el.estimate(
+        images + [defocused],
+        [None, shift],
+        prior=truth,
+        prior_std_rad=0.3,
+        prior_correlation_mm=15.0,
+        max_evaluations=50,
+    )
     assert e.prior_used and len(e.phases_rad) == sim.n_elements and not e.kept_prediction and e.evaluations > 0
     assert phase_error(e.phases_rad, truth) < 0.3
     with pytest.raises(ValueError, match="prior_correlation_mm: 0.010 mm is too short for 256 phases"):

@@ -24,15 +24,44 @@ def head(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The head phantom (2 mm voxels) in the hemisphere at 220 kHz with 256 elements, its
     prediction's JSON (``prediction.json``, with the pose and bone-speed modes) and prior."""
     d = tmp_path_factory.mktemp("head")
-    assert main(["phantom", "--out", str(d / "head.nii.gz"), "--scenario-out", str(d / "head.toml"), "--voxel-mm", "2",
-                 "--array", "hemisphere"]) == 0
+    assert (
+        main(
+            [
+                "phantom",
+                "--out",
+                str(d / "head.nii.gz"),
+                "--scenario-out",
+                str(d / "head.toml"),
+                "--voxel-mm",
+                "2",
+                "--array",
+                "hemisphere",
+            ]
+        )
+        == 0
+    )
     text = (d / "head.toml").read_text()
     assert AS_READ in text, "the phantom's registration changed: update AS_READ"
-    (d / "head.toml").write_text(text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0")
-                                 .replace("elements = 1024", "elements = 256"))
+    (d / "head.toml").write_text(
+        text.replace("frequency_hz = 650000.0", "frequency_hz = 220000.0").replace("elements = 1024", "elements = 256")
+    )
     (d / "model.toml").write_text((d / "head.toml").read_text().replace("[ct]\n", "[ct]\nwithout_bone = true\n"))
-    assert main(["predict", "--scenario", str(d / "head.toml"), "--out", str(d / "prior.npy"), "--json",
-                 str(d / "prediction.json"), "--no-focal-metrics", "--pose-sensitivity"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(d / "head.toml"),
+                "--out",
+                str(d / "prior.npy"),
+                "--json",
+                str(d / "prediction.json"),
+                "--no-focal-metrics",
+                "--pose-sensitivity",
+            ]
+        )
+        == 0
+    )
     return d
 
 
@@ -51,8 +80,21 @@ def test_predict_gives_the_pose_modes_when_asked(head, tmp_path, capsys):
     for key in ("pose_sensitivity_rad_per_mm", "pose_sensitivity_rad_per_deg"):
         g = np.asarray(d[key])
         assert g.shape == (3, 256) and np.all(np.isfinite(g)) and np.all(np.sqrt(np.mean(g**2, axis=1)) > 0.005), key
-    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--json",
-                 str(tmp_path / "p.json"), "--no-focal-metrics"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(head / "head.toml"),
+                "--out",
+                str(tmp_path / "p.npy"),
+                "--json",
+                str(tmp_path / "p.json"),
+                "--no-focal-metrics",
+            ]
+        )
+        == 0
+    )
     assert "registration sensitivity" not in capsys.readouterr().out
     assert "pose_sensitivity_rad_per_mm" not in json.loads((tmp_path / "p.json").read_text())
 
@@ -98,8 +140,9 @@ def images_with_modes(head: Path, d: Path, modes: np.ndarray, c: np.ndarray) -> 
         image = skull.arfi_image(known + c @ modes, 0.02, k + 1)
         from arfi.io import write_arfi_image
 
-        write_arfi_image(d / f"m{k}.nii.gz", image, skull.mr_affine_mm, skull.mr_volume_shape,
-                         {"applied_phases_rad": known.tolist()})
+        write_arfi_image(
+            d / f"m{k}.nii.gz", image, skull.mr_affine_mm, skull.mr_volume_shape, {"applied_phases_rad": known.tolist()}
+        )
         out += ["--image", str(d / f"m{k}.nii.gz")]
     return out
 
@@ -112,14 +155,44 @@ def test_estimate_fits_a_users_mode_with_the_predictions_own(head, tmp_path, cap
     rng = np.random.default_rng(3)
     user = np.convolve(rng.normal(size=256 + 31), np.ones(32), mode="valid")
     user *= 0.5 / np.sqrt(np.mean(user**2))
-    np.savez(tmp_path / "modes.npz", modes=user[None, :], std=np.array([1.0]), names=np.array(["thickness"]),
-             units=np.array(["scale"]))
+    np.savez(
+        tmp_path / "modes.npz",
+        modes=user[None, :],
+        std=np.array([1.0]),
+        names=np.array(["thickness"]),
+        units=np.array(["scale"]),
+    )
     images = images_with_modes(head, tmp_path, user[None, :], np.array([1.2]))
     js = tmp_path / "e.json"
-    assert main(["estimate", "--scenario", str(head / "model.toml"), "--groups", "256", *images, "--prior",
-                 str(head / "prior.npy"), "--prior-std-rad", "0.15", "--prior-transmission", str(head / "prediction.json"),
-                 "--prior-modes", str(tmp_path / "modes.npz"), "--prior-pose-std-mm", "1.5", "--prior-pose-std-deg", "1.5",
-                 "--fit-nuisance", "amplitude", "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                str(head / "model.toml"),
+                "--groups",
+                "256",
+                *images,
+                "--prior",
+                str(head / "prior.npy"),
+                "--prior-std-rad",
+                "0.15",
+                "--prior-transmission",
+                str(head / "prediction.json"),
+                "--prior-modes",
+                str(tmp_path / "modes.npz"),
+                "--prior-pose-std-mm",
+                "1.5",
+                "--prior-pose-std-deg",
+                "1.5",
+                "--fit-nuisance",
+                "amplitude",
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     line = next(ln for ln in out.splitlines() if "prediction's modes" in ln)
     print(line)
@@ -127,8 +200,11 @@ def test_estimate_fits_a_users_mode_with_the_predictions_own(head, tmp_path, cap
     fit = json.loads(js.read_text())["prior_modes_fit"]
     thickness = next(m for m in fit["modes"] if m["name"] == "thickness")
     assert abs(thickness["value"] - 1.2 / (1 + thickness["std"] ** 2)) < 3 * thickness["std"], thickness
-    assert fit["supported"] and fit["prior_moved"] and set(fit["pose"]) == {"shift_mm", "shift_std_mm", "turn_deg",
-                                                                             "turn_std_deg"}
+    assert (
+        fit["supported"]
+        and fit["prior_moved"]
+        and set(fit["pose"]) == {"shift_mm", "shift_std_mm", "turn_deg", "turn_std_deg"}
+    )
     assert len(fit["modes"]) == 8  # six pose modes, the bone speed and the user's
 
 
@@ -136,9 +212,11 @@ def test_estimate_fits_a_users_mode_with_the_predictions_own(head, tmp_path, cap
 def test_bad_modes_are_one_line_and_exit_2_with_nothing_written(head, tmp_path, capsys, case):
     n = 256
     good = np.zeros((1, n))
-    files = {"wrong_length": dict(modes=np.zeros((1, n - 1)), std=np.array([1.0])),
-             "nan": dict(modes=np.where(np.arange(n) == 7, np.nan, 0.0)[None, :], std=np.array([1.0])),
-             "negative_std": dict(modes=good, std=np.array([-1.0]))}
+    files = {
+        "wrong_length": dict(modes=np.zeros((1, n - 1)), std=np.array([1.0])),
+        "nan": dict(modes=np.where(np.arange(n) == 7, np.nan, 0.0)[None, :], std=np.array([1.0])),
+        "negative_std": dict(modes=good, std=np.array([-1.0])),
+    }
     prediction = head / "prediction.json"
     extra: list[str] = []
     if case in files:
@@ -160,14 +238,39 @@ def test_bad_modes_are_one_line_and_exit_2_with_nothing_written(head, tmp_path, 
 
     write_arfi_image(tmp_path / "a.nii.gz", skull.arfi_image(), skull.mr_affine_mm, skull.mr_volume_shape)
     out, js = tmp_path / "e.npy", tmp_path / "e.json"
-    code = main(["estimate", "--scenario", str(head / "model.toml"), "--groups", "256", "--image", str(tmp_path / "a.nii.gz"),
-                 "--prior", str(head / "prior.npy"), "--prior-std-rad", "0.15", "--prior-transmission", str(prediction),
-                 *extra, "--out-phases", str(out), "--json", str(js)])
+    code = main(
+        [
+            "estimate",
+            "--scenario",
+            str(head / "model.toml"),
+            "--groups",
+            "256",
+            "--image",
+            str(tmp_path / "a.nii.gz"),
+            "--prior",
+            str(head / "prior.npy"),
+            "--prior-std-rad",
+            "0.15",
+            "--prior-transmission",
+            str(prediction),
+            *extra,
+            "--out-phases",
+            str(out),
+            "--json",
+            str(js),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     print(err)
     assert code == 2 and len(err.splitlines()) == 1 and not out.exists() and not js.exists(), (code, err)
-    expected = {"wrong_length": "256 finite numbers per row", "nan": "NaN", "negative_std": "'std'", "missing": "no such file",
-                "no_pose": "pose_sensitivity_rad_per_mm", "negative_pose_std": ">= 0"}[case]
+    expected = {
+        "wrong_length": "256 finite numbers per row",
+        "nan": "NaN",
+        "negative_std": "'std'",
+        "missing": "no such file",
+        "no_pose": "pose_sensitivity_rad_per_mm",
+        "negative_pose_std": ">= 0",
+    }[case]
     assert expected in err and ("--prior-modes" in err or "--prior-pose-std-mm" in err), err
 
 
@@ -197,8 +300,22 @@ def test_simulate_steering_from_a_prediction(head, tmp_path, capsys):
     (head / "steered.toml").write_text(text)  # beside the CT it names
     out = [tmp_path / f"{k}.nii.gz" for k in range(2)]
     assert main(["simulate", "--scenario", str(head / "steered.toml"), "--noise-rad", "0", "--out", str(out[0])]) == 0
-    assert main(["simulate", "--scenario", str(head / "steered.toml"), "--steering-from", str(head / "prediction.json"),
-                 "--noise-rad", "0", "--out", str(out[1])]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(head / "steered.toml"),
+                "--steering-from",
+                str(head / "prediction.json"),
+                "--noise-rad",
+                "0",
+                "--out",
+                str(out[1]),
+            ]
+        )
+        == 0
+    )
     from arfi.io import read_arfi_image
 
     a, b = (read_arfi_image(p)[0] for p in out)
@@ -206,10 +323,16 @@ def test_simulate_steering_from_a_prediction(head, tmp_path, capsys):
     capsys.readouterr()
     (tmp_path / "other.json").write_text(json.dumps({**d, "target_mm": [0.0, 0.0, 100.0]}))
     (tmp_path / "bare.json").write_text(json.dumps({"target_mm": d["target_mm"]}))
-    for bad, says in ((tmp_path / "none.json", "no such file"), (tmp_path / "other.json", "predicted for"),
-                      (tmp_path / "bare.json", "reference_steering_rad")):
+    for bad, says in (
+        (tmp_path / "none.json", "no such file"),
+        (tmp_path / "other.json", "predicted for"),
+        (tmp_path / "bare.json", "reference_steering_rad"),
+    ):
         target = tmp_path / "x.nii.gz"
-        assert main(["simulate", "--scenario", str(head / "head.toml"), "--steering-from", str(bad), "--out", str(target)]) == 2
+        assert (
+            main(["simulate", "--scenario", str(head / "head.toml"), "--steering-from", str(bad), "--out", str(target)])
+            == 2
+        )
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "--steering-from" in err and says in err and not target.exists(), err
 
@@ -218,14 +341,55 @@ def test_predict_leaves_the_pose_modes_out_where_the_array_cannot_move(tmp_path,
     # The phantom in the default planar array: its elements lie in the source plane, where a
     # turned element would cross it. By default `arfi predict --json` gives no pose modes (and
     # succeeds); asked for them there, one line and exit 2, nothing written.
-    assert main(["phantom", "--out", str(tmp_path / "h.nii.gz"), "--scenario-out", str(tmp_path / "h.toml"), "--voxel-mm",
-                 "2", "--seed", "2"]) == 0
+    assert (
+        main(
+            [
+                "phantom",
+                "--out",
+                str(tmp_path / "h.nii.gz"),
+                "--scenario-out",
+                str(tmp_path / "h.toml"),
+                "--voxel-mm",
+                "2",
+                "--seed",
+                "2",
+            ]
+        )
+        == 0
+    )
     js = tmp_path / "p.json"
-    assert main(["predict", "--scenario", str(tmp_path / "h.toml"), "--out", str(tmp_path / "p.npy"), "--json", str(js),
-                 "--no-focal-metrics"]) == 0
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(tmp_path / "h.toml"),
+                "--out",
+                str(tmp_path / "p.npy"),
+                "--json",
+                str(js),
+                "--no-focal-metrics",
+            ]
+        )
+        == 0
+    )
     assert "pose_sensitivity_rad_per_mm" not in json.loads(js.read_text())
     capsys.readouterr()
-    assert main(["predict", "--scenario", str(tmp_path / "h.toml"), "--out", str(tmp_path / "q.npy"), "--json",
-                 str(tmp_path / "q.json"), "--no-focal-metrics", "--pose-sensitivity"]) == 2
+    assert (
+        main(
+            [
+                "predict",
+                "--scenario",
+                str(tmp_path / "h.toml"),
+                "--out",
+                str(tmp_path / "q.npy"),
+                "--json",
+                str(tmp_path / "q.json"),
+                "--no-focal-metrics",
+                "--pose-sensitivity",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "planar array" in err and not (tmp_path / "q.npy").exists(), err

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 
-import arfi
 from arfi import cli
 
 
@@ -49,7 +48,10 @@ LONG_RUNS = {
     # march of a field effect, ~0.2 s) or between batches (~1.3 s on 2 cores).
     "estimate": ("sim.estimate(img, method='pso', max_evaluations=10**6)", 2.0),
     "diagnose": ("sim.diagnose(img)", 2.0),
-    "elements": ("arfi.Simulation(arfi.Scenario.from_toml('[grid]\\nreflections = true\\n'), groups=1024).estimate(img)", 4.0),
+    "elements": (
+        "arfi.Simulation(arfi.Scenario.from_toml('[grid]\\nreflections = true\\n'), groups=1024).estimate(img)",
+        4.0,
+    ),
 }
 
 
@@ -69,8 +71,13 @@ def interrupt(code: str, after_s: float = 2.0) -> tuple[float, subprocess.Comple
         "img = sim.arfi_image(sim.condense(sim.skull_phases(3)), noise_rad=0.02, seed=1)\n"
         "print('running', flush=True)\n" + code + "\n"
     )
-    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         preexec_fn=default_sigint)
+    p = subprocess.Popen(
+        [sys.executable, "-c", script],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=default_sigint,
+    )
     assert p.stdout is not None and p.stdout.readline().strip() == "running"
     time.sleep(after_s)
     t = time.perf_counter()
@@ -90,10 +97,29 @@ def test_ctrl_c_on_the_cli_exits_130_and_leaves_no_output(tmp_path):
     image = tmp_path / "m.nii.gz"
     assert cli.main(["simulate", "--noise-rad", "0.02", "--out", str(image)]) == 0
     out = tmp_path / "phases.npy"
-    p = subprocess.Popen([sys.executable, "-m", "arfi", "estimate", "--image", str(image), "--method", "pso",
-                          "--max-evaluations", "1000000", "--out-phases", str(out), "--json", str(tmp_path / "e.json")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
-                         preexec_fn=default_sigint)
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "arfi",
+            "estimate",
+            "--image",
+            str(image),
+            "--method",
+            "pso",
+            "--max-evaluations",
+            "1000000",
+            "--out-phases",
+            str(out),
+            "--json",
+            str(tmp_path / "e.json"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ),
+        preexec_fn=default_sigint,
+    )
     time.sleep(4.0)
     t = time.perf_counter()
     p.send_signal(signal.SIGINT)

@@ -10,8 +10,26 @@ from arfi.reproduce import run_study
 def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):
     out = tmp_path / "study"
     js = tmp_path / "r.json"
-    assert main(["reproduce", "--case", "16", "--repeats", "1", "--diversity", "3", "--method", "lbfgs",
-                 "--out", str(out), "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "--case",
+                "16",
+                "--repeats",
+                "1",
+                "--diversity",
+                "3",
+                "--method",
+                "lbfgs",
+                "--out",
+                str(out),
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     r = json.loads(js.read_text())
     # The ladder: every path on the same seed, in order, each with its recovered fraction.
     ladder = {rung["name"]: rung for rung in r["ladder"]}
@@ -24,13 +42,31 @@ def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):
     assert "recovered fraction by path: single image (paper)" in capsys.readouterr().out
     assert (out / "fig11_ladder.png").stat().st_size > 5000
     row = r["table"][0]
-    for key in ("evaluations", "seconds", "final_cost", "broadening_width_mm", "recovered_fraction", "gain", "phase_error_rad"):
+    for key in (
+        "evaluations",
+        "seconds",
+        "final_cost",
+        "broadening_width_mm",
+        "recovered_fraction",
+        "gain",
+        "phase_error_rad",
+    ):
         assert key in row
-    # Three known diversity images at 0.02 rad decide the aberration (one image alone hardly tells the aberration from its twin).
+    # Three known diversity images at 0.02 rad decide the aberration (one image alone hardly tells the aberration from
+    # its twin).
     assert row["recovered_fraction"] > 0.9
     assert row["broadening_width_mm"] == pytest.approx(2.7, abs=0.15)
-    for name in ("fig2_calibration", "fig3_optimisation_example", "fig4_aberrations", "fig5_beam_patterns", "fig6_images",
-                 "fig7_profiles", "fig8_convergence", "fig9_phases", "fig10_focal"):
+    for name in (
+        "fig2_calibration",
+        "fig3_optimisation_example",
+        "fig4_aberrations",
+        "fig5_beam_patterns",
+        "fig6_images",
+        "fig7_profiles",
+        "fig8_convergence",
+        "fig9_phases",
+        "fig10_focal",
+    ):
         assert (out / f"{name}.png").stat().st_size > 5000
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 10 and "Table 1" in html and "Paths to a correction" in html
@@ -46,8 +82,27 @@ def test_reproduce_rejects_bad_options(tmp_path, capsys):
 
 def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path, capsys):
     js = tmp_path / "r.json"
-    assert main(["reproduce", "--case", "1024", "--repeats", "1", "--loop2", "1", "--method", "lbfgs", "--no-ladder",
-                 "--out", str(tmp_path / "study"), "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "--case",
+                "1024",
+                "--repeats",
+                "1",
+                "--loop2",
+                "1",
+                "--method",
+                "lbfgs",
+                "--no-ladder",
+                "--out",
+                str(tmp_path / "study"),
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     r = json.loads(js.read_text())
     row = r["table"][0]
     assert r["loop2_iterations"] == 1 and row["images"] == 2 and row["loop2_kept"] in (0, 1)
@@ -56,11 +111,20 @@ def test_reproduce_1024_with_loop2_never_keeps_a_worse_correction(tmp_path, caps
     assert ("1 of 1 final estimates still flagged ambiguous" in capsys.readouterr().out) == row["ambiguous"]
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"repeats": 0}, "repeats"), ({"repeats": 2.5}, "repeats"), ({"diversity": -1}, "diversity"),
-    ({"loop2_iterations": 21}, "loop2_iterations"), ({"seed": -1}, "seed"), ({"seed": 2**64 - 1}, "seed"),
-    ({"noise_rad": float("nan")}, "noise_rad"), ({"noise_rad": "0.02"}, "noise_rad"), ({"case": 17}, "case"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"repeats": 0}, "repeats"),
+        ({"repeats": 2.5}, "repeats"),
+        ({"diversity": -1}, "diversity"),
+        ({"loop2_iterations": 21}, "loop2_iterations"),
+        ({"seed": -1}, "seed"),
+        ({"seed": 2**64 - 1}, "seed"),
+        ({"noise_rad": float("nan")}, "noise_rad"),
+        ({"noise_rad": "0.02"}, "noise_rad"),
+        ({"case": 17}, "case"),
+    ],
+)
 def test_run_study_refuses_bad_arguments_naming_them_and_writes_nothing(tmp_path, kwargs, match):
     args = {"case": 16, "repeats": 1, **kwargs}
     with pytest.raises(ValueError, match=f"^{match}: "):

@@ -74,8 +74,8 @@ def test_elements_csv_is_read_relative_to_the_scenario(tmp_path):
         rows.append(f"{(i - 3.5) * 5.0},0,0,0,0,1,4.5")
     (tmp_path / "els.csv").write_text("\n".join(rows) + "\n")
     (tmp_path / "s.toml").write_text(
-        "[transducer]\nkind = 'elements'\nfile = 'els.csv'\n[focus]\nposition_mm = [0, 0, 60]\n"
-        "[grid]\nz_max_mm = 70\n[mr]\nfov_mm = [40, 40]\nmatrix = [32, 32]\n"
+        "[transducer]\nkind = 'elements'\nfile = 'els.csv'\n[focus]\nposition_mm = [0, 0, 60]\n[grid]\nz_max_mm = "
+        "70\n[mr]\nfov_mm = [40, 40]\nmatrix = [32, 32]\n"
     )
     sim = arfi.Simulation(arfi.Scenario.load(tmp_path / "s.toml"))
     assert sim.n_elements == 8

@@ -60,20 +60,50 @@ def test_field_on_the_focal_plane(sim):
     focus = f.focus()
     assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
     # The keys `arfi field` writes to its JSON, in order; no hotter place than the focus in water.
-    metrics = ["focal_peak_mm", "focal_peak_pa", "peak_to_target_mm", "fwhm_6db_mm", "fwhm_6db_across_mm", "fwhm_3db_mm",
-               "focal_volume_6db_mm3", "isppa_w_cm2", "mechanical_index", "focal_tissue"]
-    assert list(focus) == ["target_mm", *metrics, "plane_peak_pa", "plane_peak_x_mm", "plane_peak_y_mm", "plane_peak_to_axis_mm",
-                           "plane_hottest_pa", "plane_hottest_mm", "axis_peak_pa", "axis_peak_z_mm", "axis_peak_mm",
-                           "axis_hottest_pa", "axis_hottest_mm", "hottest"]
+    metrics = [
+        "focal_peak_mm",
+        "focal_peak_pa",
+        "peak_to_target_mm",
+        "fwhm_6db_mm",
+        "fwhm_6db_across_mm",
+        "fwhm_3db_mm",
+        "focal_volume_6db_mm3",
+        "isppa_w_cm2",
+        "mechanical_index",
+        "focal_tissue",
+    ]
+    assert list(focus) == [
+        "target_mm",
+        *metrics,
+        "plane_peak_pa",
+        "plane_peak_x_mm",
+        "plane_peak_y_mm",
+        "plane_peak_to_axis_mm",
+        "plane_hottest_pa",
+        "plane_hottest_mm",
+        "axis_peak_pa",
+        "axis_peak_z_mm",
+        "axis_peak_mm",
+        "axis_hottest_pa",
+        "axis_hottest_mm",
+        "hottest",
+    ]
     # Each metric is also the Field's attribute of the same name; the phantom's focus lies within a
     # few mm of the target (the peak sits short of the geometric focus) and above the samples.
     assert all(focus[k] == getattr(f, k) for k in metrics)
     assert f.focal_tissue == "phantom" and f.peak_to_target_mm < 3.0 and f.focal_peak_pa >= focus["plane_peak_pa"]
     assert f.isppa_w_cm2 == pytest.approx(f.focal_peak_pa**2 / (2 * 1040 * 1533) / 1e4, rel=1e-12)
-    assert focus["plane_hottest_pa"] is None and focus["axis_hottest_mm"] is None and focus["target_mm"] == [0.0, 0.0, 85.0]
+    assert (
+        focus["plane_hottest_pa"] is None
+        and focus["axis_hottest_mm"] is None
+        and focus["target_mm"] == [0.0, 0.0, 85.0]
+    )
     # The peak on the plane is its largest |p| here (a focus in water), at the sample the keys name.
     j, i = np.unravel_index(np.argmax(np.abs(f.pressure)), f.pressure.shape)
-    assert focus["plane_peak_pa"] == np.abs(f.pressure).max() and (focus["plane_peak_x_mm"], focus["plane_peak_y_mm"]) == (f.x_mm[i], f.y_mm[j])
+    assert focus["plane_peak_pa"] == np.abs(f.pressure).max() and (
+        focus["plane_peak_x_mm"],
+        focus["plane_peak_y_mm"],
+    ) == (f.x_mm[i], f.y_mm[j])
     # An attribute is one array (made once), not a copy per access.
     assert f.pressure is f.pressure and f.axis_z_mm is f.axis_z_mm
     # Focal gain of a 81 mm aperture at 85 mm: between 10 and 25 times the face pressure.
@@ -184,17 +214,35 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
     assert p["interfaces"] == "angular" and p["screen"] == "oblique" and p["reflections"] is False
     r = p["reverberation"]
     # Between the plate's faces (the grid puts each on the nearest plane, within one step).
-    assert abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"] and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
+    assert (
+        abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"]
+        and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
+    )
     assert r["round_trips"] >= 1
-    normal = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\ninterfaces = \"normal-incidence\"\n[medium]")))
-    assert normal.propagation == {"interfaces": "normal-incidence", "screen": "oblique", "reflections": False, "shear": False, "reverberation": None}
-    vertical = arfi.Simulation(arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\nscreen = \"vertical\"\n[medium]")))
+    normal = arfi.Simulation(
+        arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\ninterfaces = "normal-incidence"\n[medium]'))
+    )
+    assert normal.propagation == {
+        "interfaces": "normal-incidence",
+        "screen": "oblique",
+        "reflections": False,
+        "shear": False,
+        "reverberation": None,
+    }
+    vertical = arfi.Simulation(
+        arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\nscreen = "vertical"\n[medium]'))
+    )
     assert vertical.propagation["screen"] == "vertical"
     with pytest.raises(ValueError, match="grid.screen"):
-        arfi.Scenario.from_toml(PLATE.replace("[medium]", "[grid]\nscreen = \"slanted\"\n[medium]"))
+        arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\nscreen = "slanted"\n[medium]'))
     scenario = tmp_path / "plate.toml"
     scenario.write_text(PLATE)
-    assert main(["field", "--scenario", str(scenario), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "rep")]) == 0
+    assert (
+        main(
+            ["field", "--scenario", str(scenario), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "rep")]
+        )
+        == 0
+    )
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "angle-dependent interface transmission" in html and "round trips" in html
 
@@ -240,7 +288,9 @@ def test_element_amplitudes_weight_the_elements_linearly(sim):
     part, rest = (sim.with_element_amplitudes(v).field().pressure for v in (a, 1.0 - a))
     assert np.abs(part + rest - whole).max() < 1e-9 * np.abs(whole).max()
     assert np.array_equal(sim.with_element_amplitudes(np.ones(sim.n_elements)).field().pressure, whole)
-    assert np.array_equal(sim.with_element_amplitudes(a).element_amplitudes, a) and np.all(sim.element_amplitudes == 1.0)
+    assert np.array_equal(sim.with_element_amplitudes(a).element_amplitudes, a) and np.all(
+        sim.element_amplitudes == 1.0
+    )
     for bad in [np.ones(3), -a, np.zeros(sim.n_elements), np.full(sim.n_elements, np.nan)]:
         with pytest.raises(ValueError, match="amplitudes"):
             sim.with_element_amplitudes(bad)

@@ -27,8 +27,15 @@ def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> 
     truth = small.skull_phases(2)
     prediction = truth + small.skull_phases(1002, correlation_length_mm=15.0, peak_to_peak_rad=3.0, jitter_rad=0.0)
     image = small.arfi_image(truth, noise_rad=0.02, seed=2)
-    e = el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, prior_correlation_mm=15.0, max_evaluations=60,
-                    suggest=True)
+    e = el.estimate(
+        [image],
+        [None],
+        prior=prediction,
+        prior_std_rad=0.8,
+        prior_correlation_mm=15.0,
+        max_evaluations=60,
+        suggest=True,
+    )
     n = e.next_acquisition
     assert n is not None
     shifts = [c.focus_shift_mm for c in n.candidates]
@@ -45,8 +52,9 @@ def test_per_element_estimate_suggests_a_focus_shift(small: arfi.Simulation) -> 
     # that would settle it; an unambiguous one (a tight prior) and a group estimate come without.
     loose = el.estimate([image], [None], prior=prediction, prior_std_rad=0.8, max_evaluations=20)
     assert loose.ambiguous and loose.next_acquisition is not None
-    np.testing.assert_allclose(loose.suggested_phases_rad, small.focus_shift_phases(loose.next_acquisition.focus_shift_mm),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        loose.suggested_phases_rad, small.focus_shift_phases(loose.next_acquisition.focus_shift_mm), atol=1e-12
+    )
     tight = el.estimate([image], [None], prior=prediction, prior_std_rad=0.05, max_evaluations=20)
     assert not tight.ambiguous and tight.next_acquisition is None, tight.worst_recovery
     assert small.estimate(image, suggest=True).next_acquisition is None
@@ -60,11 +68,42 @@ def test_cli_one_acquisition_keeps_the_prediction_until_a_second(tmp_path, capsy
     sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
     truth = sim.skull_phases(3)
     np.save(tmp_path / "ab.npy", truth)
-    np.save(tmp_path / "prior.npy", truth + sim.skull_phases(1003, correlation_length_mm=15.0, peak_to_peak_rad=3.0, jitter_rad=0.0))
-    common = ["--scenario", str(scenario), "--groups", "256", "--max-evaluations", "30", "--prior", str(tmp_path / "prior.npy"),
-              "--prior-std-rad", "0.8", "--prior-correlation-mm", "15"]
-    assert main(["simulate", "--scenario", str(scenario), "--phases", str(tmp_path / "ab.npy"), "--out", str(first),
-                 "--noise-rad", "0.02", "--seed", "3"]) == 0
+    np.save(
+        tmp_path / "prior.npy",
+        truth + sim.skull_phases(1003, correlation_length_mm=15.0, peak_to_peak_rad=3.0, jitter_rad=0.0),
+    )
+    common = [
+        "--scenario",
+        str(scenario),
+        "--groups",
+        "256",
+        "--max-evaluations",
+        "30",
+        "--prior",
+        str(tmp_path / "prior.npy"),
+        "--prior-std-rad",
+        "0.8",
+        "--prior-correlation-mm",
+        "15",
+    ]
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(scenario),
+                "--phases",
+                str(tmp_path / "ab.npy"),
+                "--out",
+                str(first),
+                "--noise-rad",
+                "0.02",
+                "--seed",
+                "3",
+            ]
+        )
+        == 0
+    )
     out, nxt = tmp_path / "e.json", tmp_path / "next.npy"
     assert main(["estimate", "--image", str(first), *common, "--suggest", str(nxt), "--json", str(out)]) == 0
     printed = capsys.readouterr().out
@@ -76,10 +115,30 @@ def test_cli_one_acquisition_keeps_the_prediction_until_a_second(tmp_path, capsy
     assert d["model_mismatch"] is False and d["underdetermined"] is True and d["misfit"] > 1.2
     assert f"misfit of {d['misfit']:.2f} x the noise expectation on this image (well above 1" in printed, printed
     assert "AMBIGUOUS" not in printed
-    np.testing.assert_allclose(np.exp(1j * np.array(d["phases_rad"])), np.exp(1j * np.load(tmp_path / "prior.npy")), atol=1e-12)
+    np.testing.assert_allclose(
+        np.exp(1j * np.array(d["phases_rad"])), np.exp(1j * np.load(tmp_path / "prior.npy")), atol=1e-12
+    )
     shift = d["next_acquisition"]["focus_shift_mm"]
-    assert main(["simulate", "--scenario", str(scenario), "--phases", str(tmp_path / "ab.npy"), "--focus-shift-mm",
-                 *map(str, shift), "--out", str(second), "--noise-rad", "0.02", "--seed", "4"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(scenario),
+                "--phases",
+                str(tmp_path / "ab.npy"),
+                "--focus-shift-mm",
+                *map(str, shift),
+                "--out",
+                str(second),
+                "--noise-rad",
+                "0.02",
+                "--seed",
+                "4",
+            ]
+        )
+        == 0
+    )
     assert main(["estimate", "--image", str(first), "--image", str(second), *common, "--json", str(out)]) == 0
     assert "KEPT" not in capsys.readouterr().out
     d = json.loads(out.read_text())
@@ -93,21 +152,91 @@ def test_cli_suggest_per_element(tmp_path, capsys) -> None:
     aberration = tmp_path / "ab.npy"
     sim = arfi.Simulation(arfi.Scenario.from_toml(SMALL))
     np.save(aberration, sim.skull_phases(4))
-    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--out", str(image), "--noise-rad", "0.02",
-                 "--seed", "4"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(scenario),
+                "--phases",
+                str(aberration),
+                "--out",
+                str(image),
+                "--noise-rad",
+                "0.02",
+                "--seed",
+                "4",
+            ]
+        )
+        == 0
+    )
     out, nxt = tmp_path / "e.json", tmp_path / "next.npy"
-    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--groups", "256", "--max-evaluations", "30",
-                 "--suggest", str(nxt), "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                str(scenario),
+                "--image",
+                str(image),
+                "--groups",
+                "256",
+                "--max-evaluations",
+                "30",
+                "--suggest",
+                str(nxt),
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "next acquisition: the focus shifted by" in printed, printed
     shift = json.loads(out.read_text())["next_acquisition"]["focus_shift_mm"]
     np.testing.assert_allclose(np.load(nxt), sim.focus_shift_phases(shift), atol=1e-12)
     # The suggested image can be taken with simulate --focus-shift-mm and estimated with the first.
     second = tmp_path / "b.nii.gz"
-    assert main(["simulate", "--scenario", str(scenario), "--phases", str(aberration), "--focus-shift-mm", *map(str, shift),
-                 "--out", str(second), "--noise-rad", "0.02", "--seed", "5"]) == 0
-    assert main(["estimate", "--scenario", str(scenario), "--image", str(image), "--image", str(second), "--groups", "256",
-                 "--max-evaluations", "30", "--json", str(tmp_path / "e2.json")]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--scenario",
+                str(scenario),
+                "--phases",
+                str(aberration),
+                "--focus-shift-mm",
+                *map(str, shift),
+                "--out",
+                str(second),
+                "--noise-rad",
+                "0.02",
+                "--seed",
+                "5",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "estimate",
+                "--scenario",
+                str(scenario),
+                "--image",
+                str(image),
+                "--image",
+                str(second),
+                "--groups",
+                "256",
+                "--max-evaluations",
+                "30",
+                "--json",
+                str(tmp_path / "e2.json"),
+            ]
+        )
+        == 0
+    )
 
 
 def poor_prediction(sim: arfi.Simulation, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -137,7 +266,10 @@ def test_a_poor_prediction_is_raised_by_a_defocused_image_with_the_amplitude_fit
     el = small.with_groups(small.n_elements)
     truth, prior, alone = poor_prediction(small, 22)
     shift = small.focus_shift_phases((0.0, 0.0, -20.0))
-    images = [small.arfi_image(truth, noise_rad=0.02, seed=22), small.arfi_image(truth + shift, noise_rad=0.02, seed=2200)]
+    images = [
+        small.arfi_image(truth, noise_rad=0.02, seed=22),
+        small.arfi_image(truth + shift, noise_rad=0.02, seed=2200),
+    ]
     e = el.estimate(images, [None, shift], prior=prior, prior_std_rad=0.9, prior_correlation_mm=20.0, seed=22)
     assert e.recommended == "estimate" and not e.model_mismatch and e.misfit < 1.2, e.misfit
     assert e.nuisance is not None and e.nuisance.fitted == ["amplitude"], e.nuisance
@@ -146,7 +278,9 @@ def test_a_poor_prediction_is_raised_by_a_defocused_image_with_the_amplitude_fit
     assert focus >= 0.85 and focus > alone + 0.1, (focus, alone)
 
 
-@pytest.mark.skipif(not os.environ.get("ARFI_FULL_SWEEPS"), reason="full mode (ARFI_FULL_SWEEPS=1): 1024 elements, four seeds")
+@pytest.mark.skipif(
+    not os.environ.get("ARFI_FULL_SWEEPS"), reason="full mode (ARFI_FULL_SWEEPS=1): 1024 elements, four seeds"
+)
 def test_a_poor_prediction_keeps_rising_along_the_suggested_acquisitions_on_1024_elements() -> None:
     # The whole path of benches/bench_poor_prediction.py: 1024 elements, the poor prediction
     # above, the in-focus image and then each acquisition the estimate suggests, four in all.
@@ -163,12 +297,16 @@ def test_a_poor_prediction_keeps_rising_along_the_suggested_acquisitions_on_1024
         truth, prior, alone = poor_prediction(sim, seed)
         images, known = [sim.arfi_image(truth, noise_rad=0.02, seed=seed)], [None]
         while True:
-            e = el.estimate(images, known, prior=prior, prior_std_rad=0.9, prior_correlation_mm=20.0, seed=seed, suggest=True)
+            e = el.estimate(
+                images, known, prior=prior, prior_std_rad=0.9, prior_correlation_mm=20.0, seed=seed, suggest=True
+            )
             focus = focal_pressure(sim, truth, e.recommended_phases_rad)
             assert focus >= alone - 0.02, (seed, len(images), focus, alone)
             if len(images) == 4:
                 break
-            images.append(sim.arfi_image(truth + e.suggested_phases_rad, noise_rad=0.02, seed=100 * seed + len(images) - 1))
+            images.append(
+                sim.arfi_image(truth + e.suggested_phases_rad, noise_rad=0.02, seed=100 * seed + len(images) - 1)
+            )
             known.append(np.asarray(e.suggested_phases_rad))
         last.append(focus)
     assert np.mean(last) >= 0.85, last
@@ -195,12 +333,37 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
         for i, k in enumerate(known):
             image = sim.arfi_image(truth + (0.0 if k is None else k), noise_rad=0.02, seed=10 + i)
             path = tmp_path / f"{'moved' if moved else 'plain'}{i}.nii.gz"
-            arfi.write_arfi_image(path, np.roll(image, 1, axis=0) if moved else image, sim.mr_affine_mm, sim.mr_volume_shape,
-                                  None if k is None else {"applied_phases_rad": list(k)})
+            arfi.write_arfi_image(
+                path,
+                np.roll(image, 1, axis=0) if moved else image,
+                sim.mr_affine_mm,
+                sim.mr_volume_shape,
+                None if k is None else {"applied_phases_rad": list(k)},
+            )
             paths += ["--image", str(path)]
-        assert main(["estimate", "--scenario", str(scenario), *paths, "--groups", str(sim.n_elements), "--prior",
-                     str(tmp_path / "prior.npy"), "--prior-std-rad", "0.3", "--seed", "1", "--out-phases",
-                     str(tmp_path / "out.npy"), "--json", str(tmp_path / "e.json")]) == 0
+        assert (
+            main(
+                [
+                    "estimate",
+                    "--scenario",
+                    str(scenario),
+                    *paths,
+                    "--groups",
+                    str(sim.n_elements),
+                    "--prior",
+                    str(tmp_path / "prior.npy"),
+                    "--prior-std-rad",
+                    "0.3",
+                    "--seed",
+                    "1",
+                    "--out-phases",
+                    str(tmp_path / "out.npy"),
+                    "--json",
+                    str(tmp_path / "e.json"),
+                ]
+            )
+            == 0
+        )
         return json.loads((tmp_path / "e.json").read_text()), capsys.readouterr().out
 
     result, out = estimate(moved=True)

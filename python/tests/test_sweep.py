@@ -5,7 +5,6 @@ import json
 
 import numpy as np
 import pytest
-
 from distributed import LocalCluster  # a test dependency (pyproject's [test]): missing is a failure
 
 from arfi.cli import main
@@ -14,8 +13,27 @@ from arfi.sweep import Trial, run_sweep, run_trial, summarise, trials
 
 def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):
     out = tmp_path / "sweep"
-    code = main(["sweep", "--noise-rad", "0.01", "0.05", "--images", "1", "2", "--methods", "lbfgs", "--seeds", "1",
-                 "--workers", "2", "--out", str(out), "--json", str(tmp_path / "s.json")])
+    code = main(
+        [
+            "sweep",
+            "--noise-rad",
+            "0.01",
+            "0.05",
+            "--images",
+            "1",
+            "2",
+            "--methods",
+            "lbfgs",
+            "--seeds",
+            "1",
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "s.json"),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     rows = list(csv.DictReader((out / "sweep.csv").open()))
     assert [(float(r["noise_rad"]), int(r["images"])) for r in rows] == [(0.01, 1), (0.01, 2), (0.05, 1), (0.05, 2)]
@@ -28,34 +46,70 @@ def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):
     # A trial's result does not depend on the worker process that ran it.
     here = run_trial(Trial(0.05, 2, "lbfgs", 0))
     there = d["trials"][3]
-    assert there["recovered_fraction"] == here["recovered_fraction"] and there["phase_error_rad"] == here["phase_error_rad"]
+    assert (
+        there["recovered_fraction"] == here["recovered_fraction"]
+        and there["phase_error_rad"] == here["phase_error_rad"]
+    )
 
 
 def test_existing_cluster_via_scheduler_address(tmp_path):
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        assert main(["sweep", "--noise-rad", "0.02", "--images", "1", "--methods", "lbfgs", "--seeds", "2",
-                     "--scheduler", cluster.scheduler_address, "--out", str(tmp_path)]) == 0
+        assert (
+            main(
+                [
+                    "sweep",
+                    "--noise-rad",
+                    "0.02",
+                    "--images",
+                    "1",
+                    "--methods",
+                    "lbfgs",
+                    "--seeds",
+                    "2",
+                    "--scheduler",
+                    cluster.scheduler_address,
+                    "--out",
+                    str(tmp_path),
+                ]
+            )
+            == 0
+        )
         workers = set(cluster.scheduler.workers)
     rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
     assert [int(r["seed"]) for r in rows] == [0, 1] and len(workers) == 2
 
 
 def test_more_images_recover_more_in_the_summary():
-    rows = [{"method": "lbfgs", "images": k, "noise_rad": 0.02, "recovered_fraction": f, "gain": 0.0, "phase_error_rad": 0.0,
-             "ambiguous": a} for k, f, a in [(1, 0.5, True), (1, 0.7, True), (3, 0.95, False), (3, 0.97, False)]]
+    rows = [
+        {
+            "method": "lbfgs",
+            "images": k,
+            "noise_rad": 0.02,
+            "recovered_fraction": f,
+            "gain": 0.0,
+            "phase_error_rad": 0.0,
+            "ambiguous": a,
+        }
+        for k, f, a in [(1, 0.5, True), (1, 0.7, True), (3, 0.95, False), (3, 0.97, False)]
+    ]
     s = summarise(rows)
     assert [(x["images"], x["trials"]) for x in s] == [(1, 2), (3, 2)]
-    assert s[0]["recovered_fraction_mean"] == pytest.approx(0.6) and s[0]["recovered_fraction_std"] == pytest.approx(0.1)
+    assert s[0]["recovered_fraction_mean"] == pytest.approx(0.6) and s[0]["recovered_fraction_std"] == pytest.approx(
+        0.1
+    )
     assert s[0]["ambiguous_fraction"] == 1.0 and s[1]["ambiguous_fraction"] == 0.0
 
 
-@pytest.mark.parametrize("args, match", [
-    (["--noise-rad", "nan"], "noise_rad"),
-    (["--images", "0"], "images"),
-    (["--methods", "gradient-descent"], "methods"),
-    (["--seeds", "0"], "seeds"),
-    (["--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot connect"),
-])
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        (["--noise-rad", "nan"], "noise_rad"),
+        (["--images", "0"], "images"),
+        (["--methods", "gradient-descent"], "methods"),
+        (["--seeds", "0"], "seeds"),
+        (["--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot connect"),
+    ],
+)
 def test_bad_sweep_input_is_one_line_exit_2(tmp_path, capsys, args, match):
     assert main(["sweep", *args, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()

@@ -14,10 +14,9 @@ scatters back and sideways), so that a change that makes it worse fails; the low
 suite's 5 %.
 """
 
+import nibabel as nib
 import numpy as np
 import pytest
-
-import nibabel as nib
 
 from arfi.cli import main
 
@@ -58,7 +57,11 @@ def texture(x: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Zero mean, unit variance: 30 cosines of wavelengths 2.5-7.5 mm in depth ``x`` and arc
     length ``u`` (mm), drawn from ``default_rng(0)`` (wavelengths, directions, phases)."""
     rng = np.random.default_rng(0)
-    wavelength, direction, phase = rng.uniform(2.5, 7.5, 30), rng.uniform(0.0, np.pi, 30), rng.uniform(0.0, 2 * np.pi, 30)
+    wavelength, direction, phase = (
+        rng.uniform(2.5, 7.5, 30),
+        rng.uniform(0.0, np.pi, 30),
+        rng.uniform(0.0, 2 * np.pi, 30),
+    )
     k = 2 * np.pi / wavelength
     t = sum(np.cos(kx * x + ku * u + p) for kx, ku, p in zip(k * np.cos(direction), k * np.sin(direction), phase))
     return t * np.sqrt(2.0 / 30)
@@ -97,7 +100,7 @@ def focal_peak(npz) -> float:
     z, p = d["axis_z_mm"], np.abs(d["axis_pressure"])
     near = np.flatnonzero(np.abs(z - CENTRE_MM) <= 15.0)
     i = near[np.argmax(p[near])]
-    a, b, c = p[i - 1:i + 2]
+    a, b, c = p[i - 1 : i + 2]
     return float(b + 0.125 * (a - c) ** 2 / (2 * b - a - c))
 
 

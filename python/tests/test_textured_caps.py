@@ -96,8 +96,12 @@ def march_of_cap():
 
 
 def test_the_comparison_of_the_march_with_itself_is_exact_and_each_metric_beyond_its_tolerance_fails(march_of_cap):
-    ref = {"case": "cap_texture3", "solid": None, "fdtd": vf.stored_parts(march_of_cap),
-           "engine": {"engine": "the march itself", "engine_version": "-", "voxel_mm": 0.7}}
+    ref = {
+        "case": "cap_texture3",
+        "solid": None,
+        "fdtd": vf.stored_parts(march_of_cap),
+        "engine": {"engine": "the march itself", "engine_version": "-", "voxel_mm": 0.7},
+    }
     r = vf.compare("cap_texture3", ref)
     # Equal but for the stored rounding to 1e-5 of p0.
     assert abs(r.focal_pressure_error) < 1e-9 and r.focal_position_error_mm == 0.0
@@ -112,8 +116,12 @@ def test_the_comparison_of_the_march_with_itself_is_exact_and_each_metric_beyond
     # A result fails on any one metric beyond its tolerance.
     p, z, a, c = r.tolerances
     assert r.tolerances == vf.TEXTURED_TOLERANCES
-    for field, value in (("focal_pressure_error", -p - 0.01), ("focal_position_error_mm", z + 0.1), ("axial_error", a + 0.01),
-                         ("correlation", c - 0.01)):
+    for field, value in (
+        ("focal_pressure_error", -p - 0.01),
+        ("focal_position_error_mm", z + 0.1),
+        ("axial_error", a + 0.01),
+        ("correlation", c - 0.01),
+    ):
         assert not dataclasses.replace(r, **{field: value}).passed, field
 
 
@@ -130,8 +138,10 @@ class _Field:
         cx, cy, cz = centre
         self._volume = 20.0 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 8.0 - (z - cz) ** 2 / 50.0)
         k, j, i = np.unravel_index(np.argmax(self._volume), self._volume.shape)
-        self._focus = {"focal_peak_pa": float(self._volume.max()),
-                       "focal_peak_mm": [self.x_mm[i], self.y_mm[j], self.axis_z_mm[k]]}
+        self._focus = {
+            "focal_peak_pa": float(self._volume.max()),
+            "focal_peak_mm": [self.x_mm[i], self.y_mm[j], self.axis_z_mm[k]],
+        }
 
     def focus(self):
         return self._focus

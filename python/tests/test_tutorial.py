@@ -76,15 +76,15 @@ def skeleton(step10, lines: list[str]) -> list[str]:
     start, stop = step10.section(lines)
     kept = lines[:begin] + lines[end:]
     generated = range(start, stop - (end - begin))
-    return [step10.TIME.sub("", line) for i, line in enumerate(kept)
-            if not (i in generated and step10.is_output(line))]
+    return [step10.TIME.sub("", line) for i, line in enumerate(kept) if not (i in generated and step10.is_output(line))]
 
 
 def test_the_figures_step_10_embeds_are_drawn(step10, ran):
     folder, _ = ran
     pairs = step10.figures(step10.TUTORIAL.read_text().splitlines())
-    assert pairs and all((folder / source).stat().st_size > 0 and (step10.DOCS / target).exists()
-                         for source, target in pairs)
+    assert pairs and all(
+        (folder / source).stat().st_size > 0 and (step10.DOCS / target).exists() for source, target in pairs
+    )
 
 
 def test_the_claims_of_step_10_hold(step10, ran):
@@ -93,7 +93,8 @@ def test_the_claims_of_step_10_hold(step10, ran):
     # "the CT prediction alone raises the focus above the uncorrected beam's"
     assert fraction["prior.npy"] > fraction[None], step.table
     # "(at the size test_tutorial runs) the estimate keeps the prediction's focus: never more than
-    # 0.01 of optimal below it, and at least 0.95 of optimal": the images' 0.02 rad noise moves a per-element estimate by a few hundredths of a
+    # 0.01 of optimal below it, and at least 0.95 of optimal": the images' 0.02 rad noise moves a per-element estimate
+    # by a few hundredths of a
     # radian around the prior, under 0.01 of the focus (test_chain); 0.95 is the chain's floor.
     assert fraction["estimate.npy"] >= fraction["prior.npy"] - 0.01 and fraction["estimate.npy"] >= 0.95, step.table
     # "(at this size) the model without bone explains the images, a misfit about 1 and no MODEL

@@ -11,7 +11,9 @@ from arfi import validation
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "arfi", "validate", *args], capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "arfi", "validate", *args], capture_output=True, text=True, timeout=600
+    )
 
 
 def test_validate_writes_its_table_and_report_and_passes_the_layered_cases(tmp_path):
@@ -58,24 +60,33 @@ def test_a_tilted_plate_is_held_to_its_own_tolerances_and_says_so(tmp_path):
     # Looser than the suite's (the march's measured accuracy on bone met obliquely), and printed.
     assert own["focal_pressure"] > validation.TOLERANCES["focal_pressure"]
     assert own["focal_position_mm"] > validation.TOLERANCES["focal_position_mm"]
-    assert f"(±{100 * own['focal_pressure']:.0f} %)" in r.stdout and "A tolerance in brackets is the case's own" in r.stdout
+    assert (
+        f"(±{100 * own['focal_pressure']:.0f} %)" in r.stdout
+        and "A tolerance in brackets is the case's own" in r.stdout
+    )
     # Its pass is judged by its own tolerances.
-    assert case["passed"] == (abs(case["focal_pressure_error"]) <= own["focal_pressure"]
-                              and abs(case["focal_position_error_mm"]) <= own["focal_position_mm"]
-                              and case["axial_error"] <= own["axial_profile"]
-                              and case["focal_plane_correlation"] >= own["focal_plane_correlation"])
+    assert case["passed"] == (
+        abs(case["focal_pressure_error"]) <= own["focal_pressure"]
+        and abs(case["focal_position_error_mm"]) <= own["focal_position_mm"]
+        and case["axial_error"] <= own["axial_profile"]
+        and case["focal_plane_correlation"] >= own["focal_plane_correlation"]
+    )
     assert r.returncode == (0 if case["passed"] else 1)
 
 
 def test_an_unknown_case_or_an_out_that_is_a_file_is_one_line_and_exit_2(tmp_path):
     r = run("--case", "bm9")
     assert r.returncode == 2
-    assert r.stderr.strip() == ("arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, "
-                                "tilt20, tilt30, tilt0_shear1500, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, cap_texture1, "
-                                "cap_texture3, head220")
+    assert r.stderr.strip() == (
+        "arfi: error: --case: unknown bm9; the suite has water, bm3, bm4, bm3_solid, shell, bm5, tilt0, tilt10, "
+        "tilt20, tilt30, tilt0_shear1500, tilt10_shear1500, tilt20_shear1500, tilt30_shear1500, cap_uniform, "
+        "cap_texture1, cap_texture3, head220"
+    )
     (tmp_path / "file").write_text("x")
     r = run("--case", "water", "--out", str(tmp_path / "file"))
-    assert r.returncode == 2 and r.stderr.strip() == f"arfi: error: --out: {tmp_path / 'file'} exists and is not a folder"
+    assert (
+        r.returncode == 2 and r.stderr.strip() == f"arfi: error: --out: {tmp_path / 'file'} exists and is not a folder"
+    )
     with pytest.raises(ValueError, match="cases: unknown bm9"):
         validation.run(["bm9"])
 

@@ -7,11 +7,11 @@ writes nothing."""
 from __future__ import annotations
 
 import json
-import tomllib
 
 import nibabel as nib
 import numpy as np
 import pytest
+import tomllib
 
 import arfi
 from arfi.cli import main
@@ -37,7 +37,10 @@ def test_arfi_field_volume_opens_with_its_focus_where_the_json_puts_it(tmp_path,
     assert np.all(np.abs(at - np.array(d["focal_peak_mm"])) <= 0.69), (at, d["focal_peak_mm"])
     assert 0.97 * d["focal_peak_pa"] <= data.max() <= d["focal_peak_pa"] * (1 + 1e-6)
     assert d["volume"]["shape_ijk"] == [180, 180, 189] and d["volume"]["path"] == str(vol)
-    assert any(line.startswith("field: |p| in 3-D (Pa) on 180 x 180 x 189 voxels") for line in capsys.readouterr().out.splitlines())
+    assert any(
+        line.startswith("field: |p| in 3-D (Pa) on 180 x 180 x 189 voxels")
+        for line in capsys.readouterr().out.splitlines()
+    )
 
 
 def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedance(tmp_path, capsys, sim):
@@ -47,8 +50,24 @@ def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedan
     # JSON reports to within 6 % (the peak's |p| to 3 %, refined between samples, squared).
     out, vol, iv, js = tmp_path / "f.npz", tmp_path / "p.nii", tmp_path / "i.nii.gz", tmp_path / "f.json"
     box = ["-4", "4", "-3", "3", "20", "95"]
-    assert main(["field", "--out", str(out), "--volume", str(vol), "--intensity-volume", str(iv), "--volume-box-mm", *box,
-                 "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "field",
+                "--out",
+                str(out),
+                "--volume",
+                str(vol),
+                "--intensity-volume",
+                str(iv),
+                "--volume-box-mm",
+                *box,
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     d = json.loads(js.read_text())
     p_img, i_img = nib.load(str(vol)), nib.load(str(iv))
     p, intensity = np.asarray(p_img.dataobj, dtype=np.float64), np.asarray(i_img.dataobj)
@@ -59,14 +78,16 @@ def test_arfi_field_intensity_volume_is_p_squared_over_twice_each_voxels_impedan
     m = sim.properties_at(points)
     rho_c = (m["density_kg_m3"] * m["sound_speed_m_s"]).reshape(p.shape)
     assert len(np.unique(rho_c)) >= 2  # water in front of the gel, the gel behind its face
-    expected = p ** 2 / (2 * rho_c) * 1e-4
+    expected = p**2 / (2 * rho_c) * 1e-4
     assert np.abs(intensity - expected).max() <= 1e-6 * expected.max()
     assert 0.94 * d["isppa_w_cm2"] <= intensity.max() <= d["isppa_w_cm2"] * (1 + 1e-5)
     v = d["intensity_volume"]
     assert v["path"] == str(iv) and v["shape_ijk"] == list(p.shape) and v["box_mm"] == [float(b) for b in box]
     assert v["max_w_cm2"] == pytest.approx(float(intensity.max()), rel=1e-6)
-    assert any(line.startswith(f"field: intensity in 3-D (W/cm²) on {p.shape[0]} x {p.shape[1]} x {p.shape[2]} voxels")
-               for line in capsys.readouterr().out.splitlines())
+    assert any(
+        line.startswith(f"field: intensity in 3-D (W/cm²) on {p.shape[0]} x {p.shape[1]} x {p.shape[2]} voxels")
+        for line in capsys.readouterr().out.splitlines()
+    )
 
 
 def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_it(tmp_path):
@@ -81,8 +102,26 @@ def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_i
     assert main(["phantom", "--out", str(ct), "--scenario-out", str(toml), "--voxel-mm", "2", "--seed", "2"]) == 0
     vol, on_ct, js = tmp_path / "v.nii.gz", tmp_path / "v_ct.nii.gz", tmp_path / "f.json"
     intensity_ct = tmp_path / "i_ct.nii.gz"
-    assert main(["field", "--scenario", str(toml), "--out", str(tmp_path / "f.npz"), "--volume", str(vol),
-                 "--volume-ct", str(on_ct), "--intensity-volume-ct", str(intensity_ct), "--json", str(js)]) == 0
+    assert (
+        main(
+            [
+                "field",
+                "--scenario",
+                str(toml),
+                "--out",
+                str(tmp_path / "f.npz"),
+                "--volume",
+                str(vol),
+                "--volume-ct",
+                str(on_ct),
+                "--intensity-volume-ct",
+                str(intensity_ct),
+                "--json",
+                str(js),
+            ]
+        )
+        == 0
+    )
     d = json.loads(js.read_text())
     head, grid, img = nib.load(str(ct)), nib.load(str(vol)), nib.load(str(on_ct))
     assert img.shape == head.shape and np.allclose(img.affine, head.affine)
@@ -112,7 +151,9 @@ def test_arfi_field_volume_ct_lies_on_the_ct_as_an_independent_resampling_puts_i
     m = arfi.Simulation(arfi.Scenario.load(toml)).properties_at(frame[:3, hot].T)
     rho_c = m["density_kg_m3"] * m["sound_speed_m_s"]
     expected = data.ravel()[hot].astype(np.float64) ** 2 / (2 * rho_c) * 1e-4
-    assert np.abs(intensity[hot] - expected).max() <= 1e-6 * expected.max() and np.all(intensity[data.ravel() == 0] == 0)
+    assert np.abs(intensity[hot] - expected).max() <= 1e-6 * expected.max() and np.all(
+        intensity[data.ravel() == 0] == 0
+    )
     hu = np.asarray(head.dataobj).ravel()[hot]
     bone, soft = hu > 1000.0, hu < 100.0
     assert bone.any() and rho_c[bone].min() > 1.5 * rho_c[soft].max()
@@ -138,7 +179,7 @@ def test_a_crop_box_holds_the_same_voxels_as_the_whole_grid(sim):
     first = np.linalg.solve(whole.affine_mm, np.append(box.position_mm((0, 0, 0)), 1.0))[:3]
     i, j, k = (int(round(v)) for v in first)
     nz, ny, nx = box.pressure_pa.shape
-    assert np.array_equal(box.pressure_pa, whole.pressure_pa[k:k + nz, j:j + ny, i:i + nx])
+    assert np.array_equal(box.pressure_pa, whole.pressure_pa[k : k + nz, j : j + ny, i : i + nx])
     assert np.allclose(box.position_mm((0, 0, 0)), [-5.0, -4.0, 75.0], atol=0.69)
     assert np.allclose(box.position_mm((nz - 1, ny - 1, nx - 1)), [5.0, 4.0, 95.0], atol=0.69)
 
@@ -160,7 +201,9 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
     with pytest.raises(ValueError, match="read-only"):
         own.pressure_pa[0, 0, 0] = 1.0
     f.to_nifti(tmp_path / "whole.nii")
-    assert np.array_equal(np.asarray(nib.load(str(tmp_path / "whole.nii")).dataobj).transpose(2, 1, 0), whole.pressure_pa)
+    assert np.array_equal(
+        np.asarray(nib.load(str(tmp_path / "whole.nii")).dataobj).transpose(2, 1, 0), whole.pressure_pa
+    )
     box = f.pressure_volume([-5, 5, -4, 4, 75, 95])
     assert np.array_equal(box.pressure_pa, sim.pressure_volume(phases, box_mm=[-5, 5, -4, 4, 75, 95]).pressure_pa)
     f.to_nifti(tmp_path / "f.nii.gz", box_mm=[-5, 5, -4, 4, 75, 95])
@@ -202,16 +245,25 @@ def test_a_volume_too_large_for_memory_is_refused_before_the_march(sim, monkeypa
     assert f.intensity_volume([-5, 5, -5, 5, 80, 90]).intensity_w_cm2.max() > 0
 
 
-@pytest.mark.parametrize("args, says", [
-    (["--volume", "{tmp}/no/such/folder/v.nii.gz"], "does not exist"),
-    (["--volume", "{tmp}/v.npz"], ".nii or .nii.gz"),
-    (["--volume", "{tmp}/v.nii.gz", "--volume-box-mm", "500", "600", "0", "1", "80", "90"], "holds no sample of the grid"),
-    (["--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
-    (["--volume-ct", "{tmp}/v.nii.gz", "--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
-    (["--intensity-volume", "{tmp}/no/such/folder/i.nii.gz"], "does not exist"),
-    (["--intensity-volume-ct", "{tmp}/i.nii.gz"], "--intensity-volume-ct: needs a scenario with a [ct] section"),
-    (["--intensity-volume", "{tmp}/i.nii", "--volume-box-mm", "500", "600", "0", "1", "80", "90"], "holds no sample of the grid"),
-])
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (["--volume", "{tmp}/no/such/folder/v.nii.gz"], "does not exist"),
+        (["--volume", "{tmp}/v.npz"], ".nii or .nii.gz"),
+        (
+            ["--volume", "{tmp}/v.nii.gz", "--volume-box-mm", "500", "600", "0", "1", "80", "90"],
+            "holds no sample of the grid",
+        ),
+        (["--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
+        (["--volume-ct", "{tmp}/v.nii.gz", "--volume-box-mm", "-5", "5", "-5", "5", "80", "90"], "--volume-box-mm"),
+        (["--intensity-volume", "{tmp}/no/such/folder/i.nii.gz"], "does not exist"),
+        (["--intensity-volume-ct", "{tmp}/i.nii.gz"], "--intensity-volume-ct: needs a scenario with a [ct] section"),
+        (
+            ["--intensity-volume", "{tmp}/i.nii", "--volume-box-mm", "500", "600", "0", "1", "80", "90"],
+            "holds no sample of the grid",
+        ),
+    ],
+)
 def test_cli_bad_volume_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, args, says):
     argv = ["field", "--out", str(tmp_path / "f.npz"), *[a.format(tmp=tmp_path) for a in args]]
     assert main(argv) == 2
@@ -242,7 +294,9 @@ def test_a_gzipped_volume_is_written_in_parallel_members_that_every_reader_reads
     assert gzip.decompress(raw) == plain.read_bytes()
 
 
-def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_without_it(sim, tmp_path, capsys, monkeypatch):
+def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_without_it(
+    sim, tmp_path, capsys, monkeypatch
+):
     # The whole grid's |p| (8 bytes a voxel while marching: 49 MB here) against a 10 MiB budget:
     # sim.field(volume=True) is refused before the march, naming what and how to shrink it; the
     # lean field is not. arfi field, asked for no volume and no report, prints why the hottest
@@ -259,14 +313,19 @@ def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_wit
 
     def refused(self, phases=None, z_mm=None, volume=False):
         if volume:
-            raise arfi.MemoryLimitError("|p| on the whole 180 x 180 x 189 grid needs 9.9 GiB, more than the 0.1 GiB this machine has")
+            raise arfi.MemoryLimitError(
+                "|p| on the whole 180 x 180 x 189 grid needs 9.9 GiB, more than the 0.1 GiB this machine has"
+            )
         return original(self, phases, z_mm)
 
     monkeypatch.setattr(arfi.Simulation, "field", refused)
     js = tmp_path / "f.json"
     assert main(["field", "--out", str(tmp_path / "f.npz"), "--json", str(js)]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[2].startswith("field: no hottest place per tissue: |p| on the whole") and json.loads(js.read_text())["hottest"] is None
+    assert (
+        out[2].startswith("field: no hottest place per tissue: |p| on the whole")
+        and json.loads(js.read_text())["hottest"] is None
+    )
     # Asked for a volume, the refusal is the answer: one line, exit 2, nothing written.
     assert main(["field", "--out", str(tmp_path / "g.npz"), "--volume", str(tmp_path / "g.nii.gz")]) == 2
     assert "|p| on the whole" in capsys.readouterr().err and not (tmp_path / "g.npz").exists()

@@ -1,7 +1,8 @@
 //! Scenario files: parse, validate and write them back as complete TOML or JSON.
 
 use crate::error::{invalid, to_py};
-use has_core::scenario::Scenario;
+use has_core::scenario::{Outline, Scenario};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use std::path::Path;
 
@@ -50,4 +51,99 @@ fn validated_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyRes
     let s = parse_scenario(text, format, base_dir)?;
     s.resolve().map_err(to_py)?;
     Ok(s)
+}
+
+/// What a scenario fixes before a simulation is built (elements, default groups, focus, MR
+/// geometry), with the simulation's own rules for phases and images: inputs are checked against
+/// it before the build.
+#[pyclass(module = "arfi._core", name = "ScenarioOutline", frozen)]
+pub(crate) struct CoreOutline {
+    inner: Outline,
+}
+
+/// The scenario's outline: its transducer and `[mr]` checked, its CT and grid not read.
+#[pyfunction]
+#[pyo3(signature = (text, format="toml", base_dir=None))]
+pub(crate) fn scenario_outline(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<CoreOutline> {
+    Ok(CoreOutline { inner: parse_scenario(text, format, base_dir)?.outline().map_err(to_py)? })
+}
+
+#[pymethods]
+impl CoreOutline {
+    /// Number of elements of the array.
+    #[getter]
+    fn n_elements(&self) -> usize {
+        self.inner.n_elements()
+    }
+    /// Number of the array's default groups.
+    #[getter]
+    fn n_default_groups(&self) -> usize {
+        self.inner.default_groups().iter().max().map_or(0, |m| m + 1)
+    }
+    /// The steering target (mm, transducer frame).
+    #[getter]
+    fn focus_mm(&self) -> [f64; 3] {
+        self.inner.focus().map(|v| v * 1e3)
+    }
+    /// Shape of the MR image volume (a singleton along the slice normal).
+    #[getter]
+    fn mr_volume_shape(&self) -> (usize, usize, usize) {
+        let s = self.inner.mr().volume_shape();
+        (s[0], s[1], s[2])
+    }
+    /// The MR image's 4 x 4 affine (mm, transducer frame).
+    #[getter]
+    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows: Vec<Vec<f64>> = self.inner.mr().affine_mm().iter().map(|r| r.to_vec()).collect();
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+    /// Phases added to the steering, per element or per group (`groups` contiguous groups, or
+    /// the default ones), as one per element; a ValueError naming `name` otherwise.
+    #[pyo3(signature = (phases, name="phases", groups=None))]
+    fn element_phases<'py>(
+        &self,
+        py: Python<'py>,
+        phases: PyReadonlyArray1<'py, f64>,
+        name: &str,
+        groups: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.element_phases(name, &phases.as_array().to_vec(), groups).map_err(to_py)?.into_pyarray(py))
+    }
+    /// An image's known phases (per element, per group or per default group) as one per
+    /// element; a ValueError naming `name` otherwise.
+    #[pyo3(signature = (known, name="known", groups=None))]
+    fn known_per_element<'py>(
+        &self,
+        py: Python<'py>,
+        known: PyReadonlyArray1<'py, f64>,
+        name: &str,
+        groups: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.inner.known_per_element(name, &known.as_array().to_vec(), groups).map_err(to_py)?.into_pyarray(py))
+    }
+    /// A prior's predicted phases as the estimate with `groups` groups takes them (per element,
+    /// per group, and for per-element estimates per default group); a ValueError naming `name`.
+    #[pyo3(signature = (prior, name="prior", groups=None))]
+    fn check_prior(&self, prior: PyReadonlyArray1<'_, f64>, name: &str, groups: Option<usize>) -> PyResult<()> {
+        self.inner.check_prior(name, &prior.as_array().to_vec(), groups).map_err(to_py)
+    }
+    /// Per-element values (e.g. transmissions): a ValueError naming `name` unless one per element.
+    #[pyo3(signature = (n_values, name))]
+    fn check_per_element(&self, n_values: usize, name: &str) -> PyResult<()> {
+        self.inner.check_per_element(name, n_values).map_err(to_py)
+    }
+    /// An MR-ARFI image file's shape (rows, columns) and 4 x 4 affine (mm) against the
+    /// scenario's MR geometry; a ValueError naming `name` otherwise.
+    #[pyo3(signature = (shape, affine_mm, name="image"))]
+    fn check_image(&self, shape: [usize; 2], affine_mm: PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<()> {
+        let a = affine_mm.as_array();
+        if a.dim() != (4, 4) {
+            return Err(invalid(name, format!("affine must be 4 x 4, got {:?}", a.dim())));
+        }
+        let affine: [[f64; 4]; 4] = std::array::from_fn(|r| std::array::from_fn(|c| a[[r, c]]));
+        self.inner.mr().check_file(name, shape, &affine).map_err(to_py)
+    }
+    fn __repr__(&self) -> String {
+        format!("ScenarioOutline({} elements, MR {:?})", self.inner.n_elements(), self.inner.mr().matrix)
+    }
 }

@@ -10,10 +10,22 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
-from arfi.cli import (calibrate, diagnose, dicom, estimate, field, phantom, predict, reproduce, scenario, simulate, sweep,
-                      validate)
+from arfi.cli import (
+    calibrate,
+    diagnose,
+    dicom,
+    estimate,
+    field,
+    phantom,
+    predict,
+    reproduce,
+    scenario,
+    simulate,
+    sweep,
+    validate,
+)
 from arfi.cli.common import Parser, UsageError
 
 #: The verbs, in the order ``arfi --help`` lists them.

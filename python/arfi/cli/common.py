@@ -36,7 +36,9 @@ def add_common(p: argparse.ArgumentParser) -> None:
 
 def add_calibration(p: argparse.ArgumentParser) -> None:
     """``--calibration``, read by :func:`calibrated_simulation`."""
-    p.add_argument("--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)")
+    p.add_argument(
+        "--calibration", metavar="CAL.json", help="output of arfi calibrate (default: the scenario's W and amplitude)"
+    )
 
 
 def add_method(p: argparse.ArgumentParser, default: str, help: str) -> None:
@@ -118,27 +120,43 @@ def image_peak(sim: Simulation, image: np.ndarray) -> tuple[float, list[float]]:
     return float(value), [float(v) for v in pos[:3]]
 
 
-def read_image(sim: Simulation, path: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """An MR-ARFI image checked against the scenario's MR geometry, and its known phases."""
+def read_checked_phases(
+    outline: _core.ScenarioOutline, path: str | None, option: str, groups: int | None = None
+) -> np.ndarray | None:
+    """A phase vector file given as ``option`` (or None), checked against the scenario's outline
+    before anything is built: one value per element or per group (``groups`` contiguous groups,
+    or the array's default ones), errors naming the option and the file."""
+    values = read_optional_phases(path, option)
+    if values is not None:
+        outline.element_phases(values, f"{option}: {path}", groups)
+    return values
+
+
+def read_image(
+    outline: _core.ScenarioOutline, path: str, groups: int | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """An MR-ARFI image given as ``--image``, checked against the scenario's MR geometry, and
+    its known phases (one per element, per group or per default group), by the simulation's own
+    rules but before anything is built."""
     image, affine, side = read_arfi_image(path)
-    if image.shape != tuple(n for n in sim.mr_volume_shape if n != 1):
-        raise ValueError(f"image: {path}: shape {image.shape} does not match the scenario's MR matrix "
-                         f"{tuple(n for n in sim.mr_volume_shape if n != 1)}")
-    if not np.allclose(affine[:3], sim.mr_affine_mm[:3], atol=1e-3):
-        raise ValueError(f"image: {path}: its affine does not match the scenario's MR geometry "
-                         f"(plane, centre_mm, fov_mm, slice_thickness_mm)")
+    if image.ndim != 2:
+        raise ValueError(f"--image: {path}: an MR-ARFI image is one slice, got shape {image.shape}")
+    outline.check_image(image.shape, np.asarray(affine, dtype=np.float64), f"--image: {path}")
     known = side.get("applied_phases_rad")
     if known is not None:
         try:
             known = np.asarray(known, dtype=np.float64)
         except (TypeError, ValueError):
             raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers") from None
-        sim.known_per_element(known, f"sidecar of {path}: applied_phases_rad")  # the core's rule for known phases
+        if known.ndim != 1:
+            raise ValueError(f"sidecar of {path}: applied_phases_rad must be a list of numbers")
+        outline.known_per_element(known, f"sidecar of {path}: applied_phases_rad", groups)
     return image, known
 
 
-def calibrated_simulation(args: argparse.Namespace, scenario: Scenario | None = None,
-                          source: _core.CoreSourceModel | None = None) -> Simulation:
+def calibrated_simulation(
+    args: argparse.Namespace, scenario: Scenario | None = None, source: _core.CoreSourceModel | None = None
+) -> Simulation:
     """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
     applied when given; ``source`` as :class:`Simulation` takes it."""
     sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None), source=source)
@@ -151,9 +169,14 @@ def calibrated_simulation(args: argparse.Namespace, scenario: Scenario | None = 
             width, amplitude = float(cal["broadening_width_mm"]), float(cal["amplitude"])
         except (ValueError, KeyError, TypeError) as e:
             raise ValueError(f"--calibration: {path}: not a calibration file ({e})") from None
-        if cal.get("scenario") not in (None, sim.scenario.name) or cal.get("frequency_hz") not in (None, sim.scenario.to_dict()["frequency_hz"]):
-            raise ValueError(f"--calibration: {path}: made for scenario {cal.get('scenario')!r} at {cal.get('frequency_hz')} Hz, "
-                             f"not {sim.scenario.name!r}")
+        if cal.get("scenario") not in (None, sim.scenario.name) or cal.get("frequency_hz") not in (
+            None,
+            sim.scenario.to_dict()["frequency_hz"],
+        ):
+            raise ValueError(
+                f"--calibration: {path}: made for scenario {cal.get('scenario')!r} at {cal.get('frequency_hz')} Hz, "
+                f"not {sim.scenario.name!r}"
+            )
         sim = sim.with_calibration(width, amplitude)
     return sim
 

@@ -16,7 +16,8 @@ from arfi.prediction import compared_section, focal_metrics, predict
 def register(sub: Any) -> None:
     """Adds the verb to the subcommands ``sub``."""
     p = sub.add_parser(
-        "predict", help="per-element aberration of the CT's skull at the focus (.npy, the prior of arfi estimate)",
+        "predict",
+        help="per-element aberration of the CT's skull at the focus (.npy, the prior of arfi estimate)",
         description="Predict what the skull of the scenario's CT ([ct]) does to each element's wave at the focus, by "
         "reciprocity: one march from the focus back to the array through the head, and one through the same head with "
         "its bone read as soft tissue (the reference the estimation's model assumes). Writes the predicted phase per "
@@ -24,41 +25,64 @@ def register(sub: Any) -> None:
         "and it is the --prior of arfi estimate. --json adds each element's transmission and the focal pressures "
         "(reference, uncorrected, straight-ray CT steering, corrected, and the most any phases give), and the focal "
         "metrics in 3-D of the uncorrected, straight-ray and corrected beams (see --focal-metrics).",
-        epilog="example: arfi predict --scenario head.toml --out prior.npy --json prediction.json")
+        epilog="example: arfi predict --scenario head.toml --out prior.npy --json prediction.json",
+    )
     add_common(p)
     p.add_argument("--out", required=True, metavar="P.npy", help="predicted phases (rad), one per element")
-    p.add_argument("--target-mm", type=float, nargs=3, dest="target_mm", metavar=("X", "Y", "Z"),
-                   help="point to predict for, transducer frame (default: the focus)")
-    p.add_argument("--bone-speed-sensitivity", action=argparse.BooleanOptionalAction, default=None,
-                   dest="bone_speed_sensitivity",
-                   help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
-                        "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the mode arfi "
-                        "estimate fits to the images on the head with the CT's bone before its per-element fit. One more "
-                        "simulation of the skull (about half the prediction's time). Default: on with --json and the "
-                        "porosity conversion (\"aubry2003\", the default), which has the constant; --no-bone-speed-sensitivity "
-                        "skips it")
-    p.add_argument("--pose-sensitivity", action=argparse.BooleanOptionalAction, default=False, dest="pose_sensitivity",
-                   help="also give how the predicted phases move per mm that the head lies shifted along x, y, z and per "
-                        "degree that it lies turned about x, y, z through the target, off where the CT is registered (rad "
-                        "per mm or degree, per element, in the --json as pose_sensitivity_rad_per_mm and "
-                        "pose_sensitivity_rad_per_deg, rows x, y, z): the registration modes arfi estimate fits to the "
-                        "images with the bone speed before its per-element fit. The moved head is the registered one seen "
-                        "by the array moved the other way: six more transposed marches through the skull, side by side, no plan, "
-                        "about two thirds more time than the prediction alone. For a hemisphere or a "
-                        "bowl of elements (a planar array's elements lie in the source plane, a single bowl has one "
-                        "element). Off by default: on the head phantom three images do not determine a 1.5-2 mm "
-                        "registration error from these modes")
-    p.add_argument("--focal-metrics", action=argparse.BooleanOptionalAction, default=None, dest="focal_metrics",
-                   help="also march the uncorrected, straight-ray CT steering and corrected beams through the skull "
-                        "and give each one's focal metrics in 3-D around the target: the focal peak and its distance "
-                        "from the target, the -6 dB extents and volume, I_SPPA and MI in the tissue it lies in "
-                        "(printed, and in the --json as focal_metrics with the keys of arfi field's JSON). Three marches "
-                        "of the skull's simulation to the focal box, kept until they are done (with --report, the "
-                        "report's own march gives them). Default: on with --json or --report; --no-focal-metrics skips them")
-    add_report(p, "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, "
-                  "with straight-ray CT steering and corrected, over the sound speed; element maps of the predicted "
-                  "phase and transmission; one batch march of the three beams through the prediction's own simulation of the skull, "
-                  "kept for the report, which also gives their focal metrics)")
+    p.add_argument(
+        "--target-mm",
+        type=float,
+        nargs=3,
+        dest="target_mm",
+        metavar=("X", "Y", "Z"),
+        help="point to predict for, transducer frame (default: the focus)",
+    )
+    p.add_argument(
+        "--bone-speed-sensitivity",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        dest="bone_speed_sensitivity",
+        help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
+        "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the mode arfi "
+        "estimate fits to the images on the head with the CT's bone before its per-element fit. One more "
+        "simulation of the skull (about half the prediction's time). Default: on with --json and the "
+        'porosity conversion ("aubry2003", the default), which has the constant; --no-bone-speed-sensitivity '
+        "skips it",
+    )
+    p.add_argument(
+        "--pose-sensitivity",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        dest="pose_sensitivity",
+        help="also give how the predicted phases move per mm that the head lies shifted along x, y, z and per "
+        "degree that it lies turned about x, y, z through the target, off where the CT is registered (rad per mm or "
+        "degree, per element, in the --json as pose_sensitivity_rad_per_mm and pose_sensitivity_rad_per_deg, rows x, "
+        "y, z): the registration modes arfi estimate fits to the images with the bone speed before its per-element "
+        "fit. The moved head is the registered one seen by the array moved the other way: six more transposed marches "
+        "through the skull, side by side, no plan, about two thirds more time than the prediction alone. For a "
+        "hemisphere or a bowl of elements (a planar array's elements lie in the source plane, a single bowl has one "
+        "element). Off by default: on the head phantom three images do not determine a 1.5-2 mm registration error "
+        "from these modes",
+    )
+    p.add_argument(
+        "--focal-metrics",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        dest="focal_metrics",
+        help="also march the uncorrected, straight-ray CT steering and corrected beams through the skull "
+        "and give each one's focal metrics in 3-D around the target: the focal peak and its distance from the target, "
+        "the -6 dB extents and volume, I_SPPA and MI in the tissue it lies in (printed, and in the --json as "
+        "focal_metrics with the keys of arfi field's JSON). Three marches of the skull's simulation to the focal box, "
+        "kept until they are done (with --report, the report's own march gives them). Default: on with --json or "
+        "--report; --no-focal-metrics skips them",
+    )
+    add_report(
+        p,
+        "PNG figures (the beam through the skull on the x-z section through the target, uncorrected, with straight-ray "
+        "CT steering and corrected, over the sound speed; element maps of the predicted phase and transmission; one "
+        "batch march of the three beams through the prediction's own simulation of the skull, kept for the report, "
+        "which also gives their focal metrics)",
+    )
     p.set_defaults(run=run)
 
 
@@ -66,8 +90,10 @@ def run(args: argparse.Namespace) -> int:
     npy_path(args.out, "--out")  # before the simulation
     scenario = load_scenario(args)
     if scenario.to_dict().get("ct") is None:
-        raise UsageError("--scenario: a prediction needs a CT of the head ([ct] in the scenario); "
-                         "arfi phantom writes a synthetic one")
+        raise UsageError(
+            "--scenario: a prediction needs a CT of the head ([ct] in the scenario); arfi phantom writes a synthetic "
+            "one"
+        )
     sensitivity = args.bone_speed_sensitivity
     if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
         sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
@@ -77,8 +103,13 @@ def run(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     # The focal metrics and the report march the beams through the skull: the prediction keeps the
     # skull's simulation for them.
-    p = predict(scenario, args.target_mm, bone_speed_sensitivity=sensitivity,
-                keep_simulation=bool(args.report) or metrics_wanted, pose_sensitivity=args.pose_sensitivity)
+    p = predict(
+        scenario,
+        args.target_mm,
+        bone_speed_sensitivity=sensitivity,
+        keep_simulation=bool(args.report) or metrics_wanted,
+        pose_sensitivity=args.pose_sensitivity,
+    )
     seconds = time.perf_counter() - t
     # One batch march of the three drives draws the report's section and gives their focal
     # metrics; without a report, the metrics alone march each drive only to its focal box.
@@ -89,20 +120,25 @@ def run(args: argparse.Namespace) -> int:
     x, y, z = p.target_mm
     print(
         f"predict: {len(p.phases_rad)} elements at ({x:.1f}, {y:.1f}, {z:.1f}) mm: phases span "
-        f"{p.phases_rad.max() - p.phases_rad.min():.2f} rad, transmission {p.transmission.mean():.2f} mean -> {args.out}\n"
-        f"predict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {p.ray_steering_pa / 1e6:.3f} MPa with straight-ray "
-        f"CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: {p.optimal_pa / 1e6:.3f} MPa; "
-        f"{p.reference_pa / 1e6:.3f} MPa without the skull, {p.reference_pa / p.reference_optimal_pa:.2f} of what that head "
-        f"allows) in {seconds:.1f} s"
+        f"{p.phases_rad.max() - p.phases_rad.min():.2f} rad, transmission {p.transmission.mean():.2f} mean -> "
+        f"{args.out}\npredict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {p.ray_steering_pa / 1e6:.3f} "
+        f"MPa with straight-ray CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: "
+        f"{p.optimal_pa / 1e6:.3f} MPa; {p.reference_pa / 1e6:.3f} MPa without the skull, "
+        f"{p.reference_pa / p.reference_optimal_pa:.2f} of what that head allows) in {seconds:.1f} s"
     )
     if p.bone_speed_sensitivity_rad_per_percent is not None:
         g = p.bone_speed_sensitivity_rad_per_percent
-        print(f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
-              f"({np.abs(g).max():.3f} at most)")
+        print(
+            f"predict: bone speed sensitivity {np.sqrt(np.mean(g**2)):.3f} rad RMS per percent of bone sound speed "
+            f"({np.abs(g).max():.3f} at most)"
+        )
     if p.pose_sensitivity_rad_per_mm is not None and p.pose_sensitivity_rad_per_deg is not None:
         rms = lambda rows: ", ".join(f"{np.sqrt(np.mean(r**2)):.3f}" for r in rows)  # noqa: E731
-        print(f"predict: registration sensitivity, rad RMS per mm of the head's shift along x, y, z: {rms(p.pose_sensitivity_rad_per_mm)}; "
-              f"per degree of its turn about x, y, z through the target: {rms(p.pose_sensitivity_rad_per_deg)}")
+        print(
+            "predict: registration sensitivity, rad RMS per mm of the head's shift along x, y, z: "
+            f"{rms(p.pose_sensitivity_rad_per_mm)}; per degree of its turn about x, y, z through the target: "
+            f"{rms(p.pose_sensitivity_rad_per_deg)}"
+        )
     for name, m in (metrics or {}).items():
         print(f"predict: {DRIVE_LABELS[name]}: {metrics_text(m)}")
     result = p.to_dict()
@@ -112,10 +148,18 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from arfi.report import predict_report
 
-        predict_report(args.report, p, {"out": args.out, "target_mm": p.target_mm, "elements": len(p.phases_rad),
-                                        "seconds": seconds,
-                                        **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()},
-                                        **{f"{DRIVE_LABELS[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()}},
-                       section)
+        predict_report(
+            args.report,
+            p,
+            {
+                "out": args.out,
+                "target_mm": p.target_mm,
+                "elements": len(p.phases_rad),
+                "seconds": seconds,
+                **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()},
+                **{f"{DRIVE_LABELS[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()},
+            },
+            section,
+        )
     finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

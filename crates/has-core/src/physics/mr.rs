@@ -108,6 +108,33 @@ impl MrGeometry {
         s
     }
 
+    /// Checks an image's shape (rows, columns) against the MR matrix; an error naming `name`.
+    pub fn check_shape(&self, name: &str, shape: [usize; 2]) -> Result<()> {
+        if shape != self.matrix {
+            return Err(HasError::invalid(
+                name,
+                format!("has shape ({}, {}), the scenario's MR matrix is {} x {}", shape[0], shape[1], self.matrix[0], self.matrix[1]),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks that an image file lies on this geometry: its shape ([`MrGeometry::check_shape`])
+    /// and its 4 x 4 affine (mm) within 1 µm of [`MrGeometry::affine_mm`], so that an image of
+    /// another plane, centre, field of view or slice is refused by name.
+    pub fn check_file(&self, name: &str, shape: [usize; 2], affine_mm: &[[f64; 4]; 4]) -> Result<()> {
+        self.check_shape(name, shape)?;
+        let expected = self.affine_mm();
+        let off = (0..3).flat_map(|r| (0..4).map(move |c| (r, c))).find(|&(r, c)| !((affine_mm[r][c] - expected[r][c]).abs() <= 1e-3));
+        if off.is_some() {
+            return Err(HasError::invalid(
+                name,
+                "its affine does not match the scenario's MR geometry ([mr] plane, center_mm, fov_mm, slice_thickness_mm): an image of another scenario",
+            ));
+        }
+        Ok(())
+    }
+
     /// Pixels whose centres lie within `radius` (m) of `point` (m, transducer frame) in the image
     /// plane (the distance along the slice normal is not counted).
     pub fn pixels_near(&self, point: [f64; 3], radius: f64) -> Array2<bool> {

@@ -6,9 +6,11 @@
 //! [`Scenario::resolve`] validates them and turns them into SI objects ([`Resolved`]).
 
 mod ct;
+mod outline;
 mod resolve;
 
 pub use ct::CtSpec;
+pub use outline::Outline;
 pub use resolve::Resolved;
 
 use crate::error::{HasError, Result};

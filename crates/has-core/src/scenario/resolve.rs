@@ -65,14 +65,7 @@ impl Scenario {
         }
         let steer_without_bone = self.ct.as_ref().and_then(|c| c.steer_without_bone) == Some(true);
         let steering_medium = if steer_without_bone { medium.without_bone() } else { None };
-        let mr = MrGeometry {
-            plane: MrPlane::parse(&self.mr.plane)?,
-            center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
-            fov: [self.mr.fov_mm[0] * 1e-3, self.mr.fov_mm[1] * 1e-3],
-            matrix: self.mr.matrix,
-            slice_thickness: self.mr.slice_thickness_mm * 1e-3,
-        };
-        mr.validate()?;
+        let mr = self.mr_geometry()?;
         let a = &self.arfi;
         require_non_negative("arfi.broadening_width_mm", a.broadening_width_mm)?;
         require_non_negative("arfi.noise_rad", a.noise_rad)?;
@@ -183,7 +176,20 @@ impl Scenario {
         Ok(m)
     }
 
-    fn transducer_si(&self) -> Result<Transducer> {
+    /// The MR image geometry (`[mr]`), checked.
+    pub(crate) fn mr_geometry(&self) -> Result<MrGeometry> {
+        let mr = MrGeometry {
+            plane: MrPlane::parse(&self.mr.plane)?,
+            center: mm3(self.mr.center_mm.unwrap_or(self.focus.position_mm), "mr.center_mm")?,
+            fov: [self.mr.fov_mm[0] * 1e-3, self.mr.fov_mm[1] * 1e-3],
+            matrix: self.mr.matrix,
+            slice_thickness: self.mr.slice_thickness_mm * 1e-3,
+        };
+        mr.validate()?;
+        Ok(mr)
+    }
+
+    pub(crate) fn transducer_si(&self) -> Result<Transducer> {
         let t = &self.transducer;
         let given = |name: &str, v: bool| (name.to_string(), v);
         let fields = [

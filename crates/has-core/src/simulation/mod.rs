@@ -24,6 +24,7 @@ mod build;
 mod external;
 mod focus;
 mod grid;
+pub mod grouping;
 mod hottest;
 mod regrid;
 mod volume;
@@ -293,17 +294,8 @@ impl Simulation {
 
     /// Replaces the element → group map (every group from 0 to G-1 must have an element).
     pub fn set_groups(&mut self, groups: Vec<usize>) -> Result<()> {
-        if groups.len() != self.n_elements() {
-            return Err(HasError::invalid("groups", format!("has {} entries for {} elements", groups.len(), self.n_elements())));
-        }
-        let n_groups = groups.iter().max().map_or(0, |m| m + 1);
-        let mut used = vec![false; n_groups];
-        groups.iter().for_each(|&g| used[g] = true);
-        if let Some(g) = used.iter().position(|u| !u) {
-            return Err(HasError::invalid("groups", format!("group {g} has no element")));
-        }
+        self.n_groups = grouping::check_groups(&groups, self.n_elements())?;
         self.groups = groups;
-        self.n_groups = n_groups;
         Ok(())
     }
 
@@ -345,24 +337,10 @@ impl Simulation {
         steering_phases(&self.transducer, self.steering_medium(), self.frequency, target)
     }
 
-    /// Expands added phases (rad), one per element or one per group, to one per element.
+    /// Expands added phases (rad), one per element or one per group, to one per element
+    /// ([`grouping::per_element`]).
     pub fn element_phases(&self, phases: &[f64]) -> Result<Vec<f64>> {
-        crate::error::require_finite("phases", phases)?;
-        if phases.len() == self.n_elements() {
-            Ok(phases.to_vec())
-        } else if phases.len() == self.n_groups {
-            Ok(self.groups.iter().map(|&g| phases[g]).collect())
-        } else {
-            Err(HasError::invalid(
-                "phases",
-                format!(
-                    "has {} values; expected {} (one per element) or {} (one per group)",
-                    phases.len(),
-                    self.n_elements(),
-                    self.n_groups
-                ),
-            ))
-        }
+        grouping::per_element("phases", phases, &self.groups, self.n_groups)
     }
 
     /// Source plane for the steering plus `added` phases (per element or per group; empty or all

@@ -42,10 +42,7 @@ pub const MAX_PHASE: f64 = 1e6;
 /// signal (left out of every fit); other values must be finite MR phases, with a positive focal
 /// maximum near the target ([`Simulation::focal_arfi`]).
 pub fn check_image(sim: &Simulation, image: &Array2<f64>, name: &str) -> Result<()> {
-    let m = sim.mr.matrix;
-    if image.dim() != (m[0], m[1]) {
-        return Err(HasError::invalid(name, format!("has shape {:?}, the scenario's MR matrix is {} x {}", image.dim(), m[0], m[1])));
-    }
+    sim.mr.check_shape(name, [image.nrows(), image.ncols()])?;
     if let Some(((i, j), v)) = image.indexed_iter().find(|(_, v)| v.is_infinite()) {
         return Err(HasError::invalid(name, format!("pixel ({i}, {j}) is {v} (NaN marks a pixel without signal; infinity is no phase)")));
     }

@@ -31,7 +31,7 @@ use crate::memory;
 use crate::physics::grid::Grid;
 use crate::physics::mr::MrSampler;
 use crate::physics::propagation::single;
-use crate::simulation::{coarser_grid, Simulation};
+use crate::simulation::{coarser_grid, grouping, Simulation};
 use ndarray::Array2;
 use num_complex::{Complex32 as C32, Complex64 as C64};
 use products::{Column, Split};
@@ -387,30 +387,11 @@ pub fn fits_whole_box(nuisance: &Nuisance) -> bool {
 /// [`known_per_element`] of image `k`'s known phases, an error naming that image's
 /// `applied_phases_rad`.
 pub fn image_known_per_element(sim: &Simulation, k: usize, known: &[f64]) -> Result<Vec<f64>> {
-    known_per_element(sim, known).map_err(|e| HasError::invalid(format!("image[{k}].applied_phases_rad"), e.to_string()))
+    known_per_element(sim, known).map_err(|e| e.naming(&format!("image[{k}].applied_phases_rad")))
 }
 
 /// Known phases per element from values per element, per group of `sim`, or per default group
 /// of the array (16 groups of contiguous element numbers, the paper's; empty = none).
 pub fn known_per_element(sim: &Simulation, known: &[f64]) -> Result<Vec<f64>> {
-    let n = sim.n_elements();
-    if known.is_empty() {
-        return Ok(vec![0.0; n]);
-    }
-    let default = sim.transducer.default_groups();
-    let n_default = default.iter().max().map_or(0, |m| m + 1);
-    if known.len() == n_default && known.len() != sim.n_groups && known.len() != n {
-        crate::error::require_finite("phases", known)?;
-        return Ok(default.iter().map(|&g| known[g]).collect());
-    }
-    sim.element_phases(known).map_err(|_| {
-        let mut sizes = vec![format!("{n} (one per element)")];
-        if sim.n_groups != n {
-            sizes.push(format!("{} (one per group)", sim.n_groups));
-        }
-        if n_default != sim.n_groups && n_default != n {
-            sizes.push(format!("{n_default} (one per default group)"));
-        }
-        HasError::invalid("phases", format!("has {} values; expected {}", known.len(), sizes.join(" or ")))
-    })
+    grouping::known_per_element("phases", known, &sim.groups, sim.n_groups, &sim.transducer.default_groups())
 }
