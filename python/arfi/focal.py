@@ -13,6 +13,16 @@ from typing import Any
 DRIVE_LABELS = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
 
 
+def drive_labels(scenario: Any) -> dict[str, str]:
+    """:data:`DRIVE_LABELS` true to ``scenario``: where it steers by straight rays through the head
+    without its bone (``[ct] steer_without_bone``), its straight-ray steering is the uncorrected
+    drive, and is called so."""
+    ct = scenario.to_dict().get("ct") or {}
+    if ct.get("steer_without_bone"):
+        return {**DRIVE_LABELS, "ray_steering": "straight-ray steering without bone (the uncorrected drive)"}
+    return dict(DRIVE_LABELS)
+
+
 def metrics_text(focus: dict[str, Any]) -> str:
     """The focal region in 3-D in words: its peak, extents and volume, and the exposure there
     (``focus`` holds the keys of ``Field.focus()`` or ``Simulation.focal_metrics()``)."""

@@ -198,8 +198,28 @@ def write_html(path: Path, title: str, body: str) -> Path:
     return path
 
 
+def _text(v: Any) -> str:
+    """A value as a person reads it: numbers to 4 significant digits, sequences as comma lists in
+    parentheses, mappings as "key: value" pairs, absent values as a dash."""
+    if v is None:
+        return "—"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.4g}"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, dict):
+        return "; ".join(f"{k}: " + (f"({_text(x)})" if isinstance(x, dict) else _text(x)) for k, x in v.items()) or "—"
+    if isinstance(v, (list, tuple)):
+        return "(" + ", ".join(_text(x) for x in v) + ")"
+    return str(v)
+
+
 def _cell(v: Any) -> str:
-    return f"{v:.4g}" if isinstance(v, float) else html.escape(str(v))
+    return html.escape(_text(v))
 
 
 def table_html(rows: dict[str, Any]) -> str:
@@ -418,14 +438,17 @@ def field_report(
     return _verb_page(out, "field", values, figures)
 
 
-def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], section: Any) -> Path:
+def predict_report(
+    out: str | Path, prediction: Any, values: dict[str, Any], section: Any, labels: dict[str, str] | None = None
+) -> Path:
     """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
     skull on the x–z section through the target for each drive it compares (``section`` from
     ``arfi.prediction.compared_section``: uncorrected, straight-ray CT steering, corrected, in the
-    order of ``arfi.focal.DRIVE_LABELS``); the element maps of the predicted phase and of the
+    order of ``arfi.focal.DRIVE_LABELS``, or ``labels``); the element maps of the predicted phase and of the
     transmission."""
     from arfi.focal import DRIVE_LABELS
 
+    labels = DRIVE_LABELS if labels is None else labels
     sim = prediction.kept_simulation()
     plt = pyplot()
     out = _report_dir(out)
@@ -437,7 +460,7 @@ def predict_report(out: str | Path, prediction: Any, values: dict[str, Any], sec
     }
     fig = section_figure(
         section,
-        [f"{label}: {pressures[name] / best:.2f} of the best focus" for name, label in DRIVE_LABELS.items()],
+        [f"{label}: {pressures[name] / best:.2f} of the best focus" for name, label in labels.items()],
         prediction.target_mm,
     )
     figures = [

@@ -1,4 +1,5 @@
 import json
+import re
 import subprocess
 import sys
 
@@ -346,7 +347,7 @@ def test_every_option_of_every_verb_says_what_it_does():
     assert not undocumented, undocumented
 
 
-def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
+def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path, capsys):
     phases = tmp_path / "ab.npy"
     np.save(phases, np.random.default_rng(3).uniform(-2, 2, 16))
     image = tmp_path / "a.nii.gz"
@@ -357,6 +358,12 @@ def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
         main(["field", "--phases", str(phases), "--out", str(tmp_path / "f.npz"), "--report", str(tmp_path / "field")])
         == 0
     )
+    # Each verb says where its report went, as validate and diagnose do.
+    said = [line for line in capsys.readouterr().out.splitlines() if " report -> " in line]
+    assert said == [
+        f"{verb}: report -> {tmp_path / folder / 'report.html'}"
+        for verb, folder in (("simulate", "sim"), ("calibrate", "cal"), ("estimate", "est"), ("field", "field"))
+    ]
     expected = {
         "sim": ["simulate.png"],
         "cal": ["calibrate_images.png"],
@@ -367,6 +374,11 @@ def test_reports_of_field_simulate_calibrate_and_estimate(tmp_path):
         page = (tmp_path / folder / "report.html").read_text()
         # Self-contained: every figure embedded, none linked.
         assert page.count("data:image/png;base64,") == len(pngs) and "src='" + pngs[0] not in page
+        # Values written for people: no Python reprs, no None, numbers to 4 significant digits.
+        text = re.sub(r"<img[^>]*>", "", page)
+        assert "None" not in text and "{'" not in text and "[" not in text, folder
+        long = [n for n in re.findall(r"\d+\.\d+", text) if len(n.replace(".", "").lstrip("0")) > 5]
+        assert not long, (folder, long[:3])
         for png in pngs:
             assert (tmp_path / folder / png).read_bytes()[:4] == b"\x89PNG"
 

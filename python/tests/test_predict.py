@@ -172,6 +172,20 @@ def test_section_through_the_target_gives_the_predicted_focal_pressures(head):
         sim.section(y_mm=1e4)
 
 
+def test_a_scenario_steered_without_bone_is_not_said_to_have_ct_steering(head, tmp_path, capsys):
+    # Its straight-ray steering leaves the bone out: the same drive as "uncorrected", and named so
+    # (not a second "CT steering" line with the same numbers).
+    text = (head / "head.toml").read_text().replace("[ct]\n", "[ct]\nsteer_without_bone = true\n")
+    (tmp_path / "head.nii.gz").symlink_to(head / "head.nii.gz")
+    (tmp_path / "patient.toml").write_text(text)
+    args = ["predict", "--scenario", str(tmp_path / "patient.toml"), "--out", str(tmp_path / "p.npy")]
+    assert main([*args, "--no-bone-speed-sensitivity", "--focal-metrics"]) == 0
+    out = capsys.readouterr().out
+    assert "the same with the scenario's straight-ray steering (it leaves the bone out" in out, out
+    assert "straight-ray CT steering" not in out, out
+    assert "predict: straight-ray steering without bone (the uncorrected drive): focus in 3-D" in out, out
+
+
 def test_a_patient_steered_without_bone_is_driven_as_the_prediction_assumes(head, tmp_path, capsys):
     # [ct] steer_without_bone: the bone stays, the steering is the prediction's reference, so the
     # scenario's own field is the uncorrected focus and --correction with the prior the corrected one.
@@ -227,7 +241,7 @@ def test_a_patient_steered_without_bone_is_driven_as_the_prediction_assumes(head
     assert "--correction" in capsys.readouterr().err
 
 
-def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path):
+def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path, capsys):
     report, js = tmp_path / "report", tmp_path / "p.json"
     assert (
         main(
@@ -248,6 +262,9 @@ def test_cli_predict_report_draws_the_beams_and_the_element_maps(head, tmp_path)
     )
     for name in ["predict_section.png", "predict_elements.png", "report.html"]:
         assert (report / name).stat().st_size > 10_000, name
+    out = capsys.readouterr().out
+    assert out.splitlines()[-1] == f"predict: report -> {report / 'report.html'}"
+    assert "MPa with straight-ray CT steering" in out
     # The report's march gives the focal metrics too: in the JSON and on the page, each drive's.
     metrics = json.loads(js.read_text())["focal_metrics"]
     assert set(metrics) == {"uncorrected", "ray_steering", "corrected"} and all(

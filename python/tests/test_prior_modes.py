@@ -194,9 +194,11 @@ def test_estimate_fits_a_users_mode_with_the_predictions_own(head, tmp_path, cap
         == 0
     )
     out = capsys.readouterr().out
-    line = next(ln for ln in out.splitlines() if "prediction's modes" in ln)
+    line = next(ln for ln in out.splitlines() if "prediction's modes from the images" in ln)
     print(line)
     assert "head shifted" in line and "thickness" in line and "estimate: prior moved along the modes" in out
+    # The fit was announced before it ran, with what it fits.
+    assert out.index("estimate: fitting the prediction's modes (shift_x,") < out.index(line)
     fit = json.loads(js.read_text())["prior_modes_fit"]
     thickness = next(m for m in fit["modes"] if m["name"] == "thickness")
     assert abs(thickness["value"] - 1.2 / (1 + thickness["std"] ** 2)) < 3 * thickness["std"], thickness

@@ -23,6 +23,7 @@
 
 pub mod error;
 pub mod focal;
+pub mod grouping;
 pub mod inverse;
 pub mod memory;
 pub mod nifti;

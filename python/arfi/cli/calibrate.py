@@ -43,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
         from arfi.report import fit_report
 
         model = sim.with_calibration(c.broadening_width_mm, c.amplitude).arfi_image(known)
-        fit_report(args.report, sim, "calibrate", image, model, {"image": args.image, **c.to_dict()})
+        page = fit_report(args.report, sim, "calibrate", image, model, {"image": args.image, **c.to_dict()})
+        print(f"calibrate: report -> {page}")
     print(
         f"calibrate: broadening width W = {c.broadening_width_mm:.3f} mm, amplitude {c.amplitude:.4e} rad·m³/N "
         f"({c.n_pixels} pixels, noise {c.noise_rad:.4f} rad)"

@@ -155,7 +155,9 @@ def register(sub: Any) -> None:
         "'transmission'), or .npy or text with one value per element. The model then drives each element at its "
         "transmission relative to the mean, so that a model of the head without its skull weighs the elements as the "
         "skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude). The JSON's 'target_mm' "
-        "must lie within 0.5 mm of the scenario's focus",
+        "must lie within 0.5 mm of the scenario's focus. For a per-element estimate with --prior, the JSON also turns "
+        "on the fit of the prediction's bone-speed mode before the estimate (a second model, of the head with its "
+        "bone, built and marched; announced when it starts; --prior-bone-speed-std-percent 0 leaves it out)",
     )
     p.add_argument(
         "--prior-bone-speed-std-percent",
@@ -419,7 +421,7 @@ def run(args: argparse.Namespace) -> int:
             )
             if on
         ]
-        fit_report(
+        page = fit_report(
             args.report,
             sim,
             "estimate",
@@ -437,6 +439,7 @@ def run(args: argparse.Namespace) -> int:
             e.phases_rad,
             warning=("; ".join(flags) + ": see the printed summary before applying this estimate") if flags else None,
         )
+        print(f"estimate: report -> {page}")
     prior_settings = (
         {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
     )
@@ -539,6 +542,19 @@ def fit_modes(
         if first:
             raise UsageError(f"{first}: needs a [ct] scenario (the modes are fitted on the head with the CT's bone)")
         return None, None
+    # Said before it runs: the fit builds and marches a second model, through the skull.
+    by_default = args.prior_bone_speed_std_percent is None and any(m.name == "bone_speed" for m in modes)
+    print(
+        f"estimate: fitting the prediction's modes ({', '.join(m.name for m in modes)}) to the images first, on a "
+        "model of the head with the CT's bone"
+        + (
+            " (the bone speed by default where the --prior-transmission JSON holds its sensitivity; "
+            "--prior-bone-speed-std-percent 0 skips it)"
+            if by_default
+            else ""
+        ),
+        flush=True,
+    )
     skull = calibrated_simulation(args, scenario.with_ct_bone())
     result = prior_modes.fit_prior_modes(
         skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes, noise_rad=args.noise_rad

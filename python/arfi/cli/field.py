@@ -336,7 +336,10 @@ def run(args: argparse.Namespace) -> int:
             summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"
         )
         engine = sim.propagation_summary() if engine_line is None else engine_line[len("field: ") :]
-        field_report(args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": engine}, phases)
+        page = field_report(
+            args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": engine}, phases
+        )
+        print(f"field: report -> {page}")
     finish(
         args,
         {

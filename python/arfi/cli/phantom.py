@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     lo, hi, _ = head.thickness_mm
     print(
         f"phantom: head CT {head.hu.shape[0]} x {head.hu.shape[1]} x {head.hu.shape[2]} voxels of {args.voxel_mm:g} "
-        f"mm, skull {lo:.1f}-{hi:.1f} mm thick, seed {args.seed} -> {out}"
+        f"mm, skull {lo:.1f}-{hi:.1f} mm thick (a smooth random thickness within the asked "
+        f"{args.thickness_mm[0]:g}-{args.thickness_mm[1]:g} mm, drawn by seed {args.seed}) -> {out}"
         + (f"\nphantom: scenario -> {args.scenario_out}" if args.scenario_out else "")
     )
     finish(

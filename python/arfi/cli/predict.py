@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
-from arfi.focal import DRIVE_LABELS, metrics_text
+from arfi.focal import drive_labels, metrics_text
 from arfi.prediction import compared_section, focal_metrics, predict
 
 
@@ -118,11 +118,17 @@ def run(args: argparse.Namespace) -> int:
     metrics_seconds = time.perf_counter() - t - seconds
     save_npy(args.out, p.phases_rad)
     x, y, z = p.target_mm
+    labels = drive_labels(scenario)
+    steering = (
+        f"{p.ray_steering_pa / 1e6:.3f} MPa with straight-ray CT steering"
+        if labels["ray_steering"] == "straight-ray CT steering"
+        else "the same with the scenario's straight-ray steering (it leaves the bone out: [ct] steer_without_bone)"
+    )
     print(
         f"predict: {len(p.phases_rad)} elements at ({x:.1f}, {y:.1f}, {z:.1f}) mm: phases span "
         f"{p.phases_rad.max() - p.phases_rad.min():.2f} rad, transmission {p.transmission.mean():.2f} mean -> "
-        f"{args.out}\npredict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {p.ray_steering_pa / 1e6:.3f} "
-        f"MPa with straight-ray CT steering, {p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: "
+        f"{args.out}\npredict: focal |p| {p.uncorrected_pa / 1e6:.3f} MPa uncorrected, {steering}, "
+        f"{p.corrected_pa / 1e6:.3f} MPa corrected (the most any phases give: "
         f"{p.optimal_pa / 1e6:.3f} MPa; {p.reference_pa / 1e6:.3f} MPa without the skull, "
         f"{p.reference_pa / p.reference_optimal_pa:.2f} of what that head allows) in {seconds:.1f} s"
     )
@@ -140,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
             f"{rms(p.pose_sensitivity_rad_per_deg)}"
         )
     for name, m in (metrics or {}).items():
-        print(f"predict: {DRIVE_LABELS[name]}: {metrics_text(m)}")
+        print(f"predict: {labels[name]}: {metrics_text(m)}")
     result = p.to_dict()
     if metrics is not None:
         result["focal_metrics"] = metrics
@@ -148,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from arfi.report import predict_report
 
-        predict_report(
+        page = predict_report(
             args.report,
             p,
             {
@@ -157,9 +163,11 @@ def run(args: argparse.Namespace) -> int:
                 "elements": len(p.phases_rad),
                 "seconds": seconds,
                 **{f"focal |p| {k} (Pa)": v for k, v in result["focal_pressure_pa"].items()},
-                **{f"{DRIVE_LABELS[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()},
+                **{f"{labels[k]}: focal metrics": metrics_text(m) for k, m in (metrics or {}).items()},
             },
             section,
+            labels,
         )
+        print(f"predict: report -> {page}")
     finish(args, {"out": args.out, **result, "seconds": seconds})
     return 0

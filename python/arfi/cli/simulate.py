@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from arfi.report import image_report
 
-        image_report(
+        page = image_report(
             args.report,
             sim,
             "simulate",
@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
             {"out": out, "focal_arfi_rad": peak, "noise_rad": noise, "seed": args.seed},
             total,
         )
+        print(f"simulate: report -> {page}")
     print(
         f"simulate: {image.shape[0]} x {image.shape[1]} MR-ARFI image, focal ARFI phase {peak:.3f} rad at "
         f"({pos[0]:.1f}, {pos[1]:.1f}, {pos[2]:.1f}) mm, noise {noise:g} rad -> {out}"

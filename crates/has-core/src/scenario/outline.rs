@@ -1,13 +1,13 @@
 //! What a scenario fixes before a simulation is built (the array's elements and default groups,
 //! the focus, the MR image geometry): enough to check a user's phases and images against it in
 //! milliseconds, before a build that through a head takes tens of seconds and gigabytes. The
-//! checks are the simulation's own rules ([`crate::simulation::grouping`],
+//! checks are the simulation's own rules ([`crate::grouping`],
 //! [`MrGeometry::check_file`]), not copies of them.
 
 use super::Scenario;
 use crate::error::{HasError, Result};
+use crate::grouping;
 use crate::physics::mr::MrGeometry;
-use crate::simulation::grouping;
 
 /// A scenario's array, focus and MR geometry, read without its CT or grid.
 #[derive(Debug, Clone)]
@@ -98,32 +98,5 @@ impl Outline {
             return Err(HasError::invalid(name, format!("has {len} values for {} elements", self.n_elements)));
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_default_scenarios_outline_is_its_simulations() {
-        let scenario = Scenario::default();
-        let outline = scenario.outline().unwrap();
-        let sim = crate::simulation::Simulation::new(&scenario).unwrap();
-        assert_eq!(outline.n_elements(), sim.n_elements());
-        assert_eq!(outline.default_groups(), &sim.groups[..]);
-        assert_eq!(outline.mr().affine_mm(), sim.mr.affine_mm());
-        let per_group: Vec<f64> = (0..sim.n_groups).map(|g| g as f64 * 0.1).collect();
-        assert_eq!(outline.element_phases("p", &per_group, None).unwrap(), sim.element_phases(&per_group).unwrap());
-        let e = outline.element_phases("--correction", &[0.0; 5], None).unwrap_err().to_string();
-        assert!(e.starts_with("--correction: has 5 values; expected"), "{e}");
-        let m = sim.mr.matrix;
-        assert!(outline.mr().check_file("--image a.nii", m, &sim.mr.affine_mm()).is_ok());
-        let mut moved = sim.mr.affine_mm();
-        moved[2][3] += 0.5;
-        let e = outline.mr().check_file("--image a.nii", m, &moved).unwrap_err().to_string();
-        assert!(e.starts_with("--image a.nii: its affine does not match"), "{e}");
-        let e = outline.mr().check_file("--image a.nii", [m[0] + 1, m[1]], &sim.mr.affine_mm()).unwrap_err().to_string();
-        assert!(e.contains("the scenario's MR matrix is"), "{e}");
     }
 }

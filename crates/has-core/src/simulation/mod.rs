@@ -6,6 +6,7 @@
 
 use crate::error::{HasError, Result};
 use crate::focal::FocalMetrics;
+use crate::grouping;
 use crate::memory;
 use crate::phase::wrap;
 use crate::physics::grid::Grid;
@@ -24,7 +25,6 @@ mod build;
 mod external;
 mod focus;
 mod grid;
-pub mod grouping;
 mod hottest;
 mod regrid;
 mod volume;

@@ -21,6 +21,7 @@ mod mode_fit;
 mod modes_fit;
 mod mr_tissue;
 mod nuisance;
+mod outline;
 mod physics;
 mod prediction;
 mod prior;

@@ -25,13 +25,14 @@ pub mod view_fit;
 pub use cost::{ElementCost, ElementTerm, LinearNuisance};
 
 use crate::error::{HasError, Result};
+use crate::grouping;
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
 use crate::inverse::element::nuisance::Nuisance;
 use crate::memory;
 use crate::physics::grid::Grid;
 use crate::physics::mr::MrSampler;
 use crate::physics::propagation::single;
-use crate::simulation::{coarser_grid, grouping, Simulation};
+use crate::simulation::{coarser_grid, Simulation};
 use ndarray::Array2;
 use num_complex::{Complex32 as C32, Complex64 as C64};
 use products::{Column, Split};
