@@ -20,7 +20,7 @@ from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
 from arfi.scenario import Scenario
-from arfi.simulation import Field, Section, Simulation
+from arfi.simulation import Field, FocalMetrics, Section, Simulation
 from arfi.volume import IntensityVolume, PressureVolume
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "Simulation",
     "Field",
     "Section",
+    "FocalMetrics",
     "PressureVolume",
     "IntensityVolume",
     "read_arfi_image",

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from arfi._core import FocalMetrics
+
 #: The drives a CT-based prediction compares, by the names of its focal pressures, as a reader
 #: names them (the printed focal-metrics lines and the report's titles).
 DRIVE_LABELS = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
@@ -23,16 +25,16 @@ def drive_labels(scenario: Any) -> dict[str, str]:
     return dict(DRIVE_LABELS)
 
 
-def metrics_text(focus: dict[str, Any]) -> str:
+def metrics_text(m: FocalMetrics) -> str:
     """The focal region in 3-D in words: its peak, extents and volume, and the exposure there
-    (``focus`` holds the keys of ``Field.focus()`` or ``Simulation.focal_metrics()``)."""
-    if focus["focal_peak_mm"] is None:
+    (``Simulation.focal_metrics``, ``Section.focal_metrics`` or ``Field.focal_metrics``)."""
+    if m.focal_peak_mm is None or m.fwhm_6db_mm is None:
         return "no closed -6 dB focal region around the target inside the grid (no focal metrics)"
-    p = [round(v, 2) + 0.0 for v in focus["focal_peak_mm"]]  # + 0.0: no "-0.00" for a peak on the axis
-    along, across = focus["fwhm_6db_mm"]
+    p = [round(v, 2) + 0.0 for v in m.focal_peak_mm]  # + 0.0: no "-0.00" for a peak on the axis
+    along, across = m.fwhm_6db_mm
     return (
-        f"focus in 3-D: {focus['focal_peak_pa'] / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
-        f"{focus['peak_to_target_mm']:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
-        f"across, {focus['focal_volume_6db_mm3']:.1f} mm³; in {focus['focal_tissue']}: I_SPPA "
-        f"{focus['isppa_w_cm2']:.1f} W/cm², MI {focus['mechanical_index']:.2f}"
+        f"focus in 3-D: {(m.focal_peak_pa or 0.0) / 1e6:.3f} MPa at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) mm, "
+        f"{m.peak_to_target_mm:.2f} mm from the target; -6 dB {along:.2f} mm along the beam x {across:.2f} mm "
+        f"across, {m.focal_volume_6db_mm3:.1f} mm³; in {m.focal_tissue}: I_SPPA {m.isppa_w_cm2:.1f} W/cm², MI "
+        f"{m.mechanical_index:.2f}"
     )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, cast
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -70,7 +70,7 @@ def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:
     }
 
 
-def focal_metrics(prediction: Prediction) -> dict[str, dict[str, Any]]:
+def focal_metrics(prediction: Prediction) -> dict[str, _core.FocalMetrics]:
     """The focal metrics in 3-D around the prediction's target (``Simulation.focal_metrics``: the
     focal peak, its distance from the target, -3/-6 dB extents, -6 dB volume, I_SPPA and MI) for
     each of :func:`compared_drives`, one march each through the kept skull, stopping past the
@@ -80,7 +80,7 @@ def focal_metrics(prediction: Prediction) -> dict[str, dict[str, Any]]:
     return {name: sim.focal_metrics(phases, target_mm=prediction.target_mm) for name, phases in drives.items()}
 
 
-def compared_section(prediction: Prediction) -> tuple[Section, dict[str, dict[str, Any]]]:
+def compared_section(prediction: Prediction) -> tuple[Section, dict[str, _core.FocalMetrics]]:
     """Each of :func:`compared_drives` on the x–z section through the prediction's target, and
     its focal metrics there (as :func:`focal_metrics` gives them), from one batch march of the
     three through the kept skull (what ``arfi predict --report`` draws and prints)."""

@@ -54,12 +54,12 @@ def images_and_known(
 
 
 def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
-    """``G`` → contiguous groups ``e * G // n``; an array → itself (validated in the core)."""
+    """``G`` → contiguous groups ``e * G // n`` (the core's rule); an array → itself (validated in
+    the core)."""
     if isinstance(groups, (int, np.integer)):
-        g = int(groups)
-        if not 1 <= g <= n_elements:
-            raise ValueError(f"groups: must be between 1 and {n_elements}, got {g}")
-        return (np.arange(n_elements) * g // n_elements).astype(np.int64)
+        if groups < 1:  # the core takes a count; a negative one is named here, not overflowed
+            raise ValueError(f"groups: must be between 1 and {n_elements}, got {int(groups)}")
+        return _core.contiguous_groups(n_elements, int(groups))
     a = np.asarray(groups)
     if a.ndim != 1 or a.dtype.kind not in "iu":
         raise ValueError("groups: must be an integer count or a 1-D integer array (element -> group)")
@@ -69,6 +69,7 @@ def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
 # The beam results are the core's types (arrays in Pa and mm; ``Field.focus()`` computed there).
 Field = _core.Field
 Section = _core.Section
+FocalMetrics = _core.FocalMetrics
 
 
 class Simulation:
@@ -288,15 +289,16 @@ class Simulation:
             np.ascontiguousarray(magnitude, dtype=np.float32),
         )
 
-    def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> dict[str, Any]:
+    def focal_metrics(self, phases: ArrayLike | None = None, target_mm: ArrayLike | None = None) -> FocalMetrics:
         """The focal metrics in 3-D of the beam driven with ``phases`` (as for :meth:`field`)
         around ``target_mm`` (mm, transducer frame; default: the focus), from one march that
-        records only a box around it: ``target_mm``, ``focal_peak_mm``, ``focal_peak_pa``,
-        ``peak_to_target_mm``, ``fwhm_6db_mm`` [along, across], ``fwhm_6db_across_mm``,
-        ``fwhm_3db_mm``, ``focal_volume_6db_mm3``, ``isppa_w_cm2``, ``mechanical_index`` and
-        ``focal_tissue``, as :meth:`Field.focus` names them (each None when no closed -6 dB region
-        lies around the target). Cheaper than :meth:`field` when only the metrics are wanted, and
-        for a target other than the focus (e.g. a prediction's)."""
+        records only a box around it: a :class:`FocalMetrics` (``target_mm``, ``focal_peak_mm``,
+        ``focal_peak_pa``, ``peak_to_target_mm``, ``fwhm_6db_mm`` [along, across],
+        ``fwhm_6db_across_mm``, ``fwhm_3db_mm``, ``focal_volume_6db_mm3``, ``isppa_w_cm2``,
+        ``mechanical_index`` and ``focal_tissue``, the JSON's keys by ``to_dict()``; each but the
+        target None when no closed -6 dB region lies around the target). Cheaper than
+        :meth:`field` when only the metrics are wanted, and for a target other than the focus
+        (e.g. a prediction's)."""
         target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
         return self._core.focal_metrics(as_phases(phases), target)
 
@@ -357,7 +359,7 @@ class Simulation:
         None: the steering alone) or a sequence (None entries: the steering alone) or 2-D array of
         drives, marched in one batch. With ``target_mm`` (mm, transducer frame), the same march
         also gives each drive's focal metrics around it as :meth:`focal_metrics` does
-        (``Section.focal_metrics``, one dict per drive)."""
+        (``Section.focal_metrics``, one :class:`FocalMetrics` per drive)."""
         none = np.zeros(0)
         if phases is None:
             drives = [none]

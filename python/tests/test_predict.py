@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +64,15 @@ def test_cli_predict_writes_the_prior_and_the_focal_pressures(head, tmp_path, ca
     assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(out), "--json", str(js)]) == 0
     printed = capsys.readouterr().out
     assert "predict: 256 elements" in printed
+    # Asking for a file changes no printed line (the sensitivity and the focal metrics are computed
+    # either way; only the times differ).
+    assert main(["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "again.npy")]) == 0
+    again = capsys.readouterr().out
+
+    def untimed(text: str) -> list[str]:
+        return [re.sub(r" in [0-9.]+ s$", "", line).replace("again.npy", "prior.npy") for line in text.splitlines()]
+
+    assert untimed(again) == untimed(printed) and "bone speed sensitivity" in again and "focus in 3-D" in again
     phases = np.load(out)
     result = json.loads(js.read_text())
     assert phases.shape == (256,) and np.allclose(phases, result["phases_rad"])
@@ -296,13 +306,13 @@ def test_one_march_draws_the_section_and_gives_each_drives_focal_metrics(head):
     assert list(metrics) == list(drives) == list(DRIVE_LABELS)
     for name, m in metrics.items():
         for key in ("focal_peak_pa", "peak_to_target_mm", "isppa_w_cm2", "mechanical_index"):
-            assert m[key] == pytest.approx(expected[name][key], rel=1e-6, abs=1e-9), (name, key)
+            assert getattr(m, key) == pytest.approx(getattr(expected[name], key), rel=1e-6, abs=1e-9), (name, key)
         # The -6 dB volume counts 2 x 2 x 2 sub-samples a voxel (dy = dx here): one flipped by a
         # rounding moves it by an eighth of a voxel.
         dx, dz = section.x_mm[1] - section.x_mm[0], section.z_mm[1] - section.z_mm[0]
-        assert abs(m["focal_volume_6db_mm3"] - expected[name]["focal_volume_6db_mm3"]) <= dx * dx * dz / 8 + 1e-9, name
-        assert np.allclose(m["focal_peak_mm"], expected[name]["focal_peak_mm"], atol=1e-6)
-        assert m["target_mm"] == expected[name]["target_mm"] and m["focal_tissue"] == expected[name]["focal_tissue"]
+        assert abs(m.focal_volume_6db_mm3 - expected[name].focal_volume_6db_mm3) <= dx * dx * dz / 8 + 1e-9, name
+        assert np.allclose(m.focal_peak_mm, expected[name].focal_peak_mm, atol=1e-6)
+        assert m.target_mm == expected[name].target_mm and m.focal_tissue == expected[name].focal_tissue
     with pytest.raises(ValueError, match="target_mm"):
         p.simulation.section(y_mm=0.0, target_mm=(0.0, 0.0, -500.0))
 

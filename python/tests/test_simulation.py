@@ -115,16 +115,19 @@ def test_focal_metrics_alone_and_around_another_target(sim):
     # at the box: the planes up to it are the same operators).
     focus = sim.field().focus()
     alone = sim.focal_metrics()
-    assert alone == {k: focus[k] for k in alone} and len(alone) == 11
+    # A typed result whose to_dict() is the JSON's keys, those of Field.focus().
+    d = alone.to_dict()
+    assert isinstance(alone, arfi.FocalMetrics) and d == {k: focus[k] for k in d} and len(d) == 11
+    assert d == sim.field().focal_metrics.to_dict() and list(d) == alone._fields
     # Steered 5 mm sideways and measured around that target: against a simulation built with its
     # focus there, which steers the same way but fixes its plan's mean wavenumbers on its own
     # beam (a different plan): the peak within 0.1 mm and |p| within 0.1 %.
     target = (5.0, 0.0, 85.0)
     shifted = sim.focal_metrics(sim.focus_shift_phases([5.0, 0.0, 0.0]), target_mm=target)
     there = arfi.Simulation(arfi.Scenario.from_toml("[focus]\nposition_mm = [5.0, 0.0, 85.0]\n")).field().focus()
-    assert shifted["target_mm"] == list(target) == there["target_mm"]
-    assert np.allclose(shifted["focal_peak_mm"], there["focal_peak_mm"], atol=0.1)
-    assert shifted["focal_peak_pa"] == pytest.approx(there["focal_peak_pa"], rel=1e-3)
+    assert list(shifted.target_mm) == list(target) == there["target_mm"]
+    assert np.allclose(shifted.focal_peak_mm, there["focal_peak_mm"], atol=0.1)
+    assert shifted.focal_peak_pa == pytest.approx(there["focal_peak_pa"], rel=1e-3)
     for bad in [(0.0, 0.0, 900.0), (np.nan, 0.0, 85.0), (1.0, 2.0)]:
         with pytest.raises(ValueError, match="target_mm"):
             sim.focal_metrics(target_mm=bad)

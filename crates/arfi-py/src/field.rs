@@ -3,6 +3,7 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
+use crate::focal::{metrics_items, CoreFocalMetrics, MetricsMm};
 use crate::volume::{borrowed_grid_arrays, ct_arrays, grid_arrays, window_of_box_mm};
 use has_core::focal::{FieldFocus, FocalMetrics, Peak};
 use has_core::physics::ct::CtMedium;
@@ -18,54 +19,6 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyUntypedArrayMethods, To
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::OnceLock;
-
-/// The focal metrics in the units their names give (mm, Pa, mm³, W/cm²): the attributes of a
-/// `Field`, the keys of its `focus()` and of `Simulation.focal_metrics`, converted here once.
-pub(crate) struct MetricsMm {
-    focal_peak_mm: [f64; 3],
-    focal_peak_pa: f64,
-    peak_to_target_mm: f64,
-    fwhm_6db_mm: [f64; 2],
-    fwhm_6db_across_mm: [f64; 2],
-    fwhm_3db_mm: [f64; 2],
-    focal_volume_6db_mm3: f64,
-    isppa_w_cm2: f64,
-    mechanical_index: f64,
-    focal_tissue: String,
-}
-
-impl From<&FocalMetrics> for MetricsMm {
-    fn from(m: &FocalMetrics) -> Self {
-        MetricsMm {
-            focal_peak_mm: point_mm(m.peak),
-            focal_peak_pa: m.peak_pressure,
-            peak_to_target_mm: m.peak_to_target() * 1e3,
-            fwhm_6db_mm: m.fwhm_6db.map(|v| v * 1e3),
-            fwhm_6db_across_mm: m.across_6db.map(|v| v * 1e3),
-            fwhm_3db_mm: m.fwhm_3db.map(|v| v * 1e3),
-            focal_volume_6db_mm3: m.volume_6db * 1e9,
-            isppa_w_cm2: m.isppa * 1e-4,
-            mechanical_index: m.mechanical_index,
-            focal_tissue: m.tissue.clone(),
-        }
-    }
-}
-
-/// Sets the focal metrics' keys of `d` from `m`, each None when there are none (no closed -6 dB
-/// region around the target).
-pub(crate) fn metrics_items(d: &Bound<'_, PyDict>, m: Option<&MetricsMm>) -> PyResult<()> {
-    d.set_item("focal_peak_mm", m.map(|m| m.focal_peak_mm))?;
-    d.set_item("focal_peak_pa", m.map(|m| m.focal_peak_pa))?;
-    d.set_item("peak_to_target_mm", m.map(|m| m.peak_to_target_mm))?;
-    d.set_item("fwhm_6db_mm", m.map(|m| m.fwhm_6db_mm))?;
-    d.set_item("fwhm_6db_across_mm", m.map(|m| m.fwhm_6db_across_mm))?;
-    d.set_item("fwhm_3db_mm", m.map(|m| m.fwhm_3db_mm))?;
-    d.set_item("focal_volume_6db_mm3", m.map(|m| m.focal_volume_6db_mm3))?;
-    d.set_item("isppa_w_cm2", m.map(|m| m.isppa_w_cm2))?;
-    d.set_item("mechanical_index", m.map(|m| m.mechanical_index))?;
-    d.set_item("focal_tissue", m.map(|m| m.focal_tissue.as_str()))?;
-    Ok(())
-}
 
 /// Millimetres of lengths in metres.
 fn mm(v: &[f64]) -> Vec<f64> {
@@ -152,7 +105,7 @@ fn w_cm2(mut values: Vec<f32>) -> Vec<f32> {
 }
 
 /// A position in metres as millimetres.
-fn point_mm<const N: usize>(p: [f64; N]) -> [f64; N] {
+pub(crate) fn point_mm<const N: usize>(p: [f64; N]) -> [f64; N] {
     p.map(|v| v * 1e3)
 }
 
@@ -286,6 +239,11 @@ impl CoreField {
     #[getter]
     fn focal_tissue(&self) -> Option<String> {
         self.metrics.as_ref().map(|m| m.focal_tissue.clone())
+    }
+    /// The focal metrics above as one typed result (`Simulation.focal_metrics`'s type).
+    #[getter]
+    fn focal_metrics(&self) -> CoreFocalMetrics {
+        CoreFocalMetrics::new(self.target, self.metrics.clone())
     }
 
     /// The hottest grid sample of each tissue class over the whole grid, hottest first: `skull`
@@ -460,19 +418,12 @@ impl CoreSection {
         self.y * 1e3
     }
 
-    /// Each drive's focal metrics in 3-D around the target asked for (the keys of
-    /// `Simulation.focal_metrics`, with `target_mm`), from the section's own march; None when the
-    /// section was made without a target.
+    /// Each drive's focal metrics in 3-D around the target asked for ([`CoreFocalMetrics`]), from
+    /// the section's own march; None when the section was made without a target.
     #[getter]
-    fn focal_metrics<'py>(&self, py: Python<'py>) -> PyResult<Option<Vec<Bound<'py, PyDict>>>> {
-        let Some((target, metrics)) = &self.focal_metrics else { return Ok(None) };
-        let dicts = metrics.iter().map(|m| {
-            let d = PyDict::new(py);
-            d.set_item("target_mm", point_mm(*target))?;
-            metrics_items(&d, m.as_ref())?;
-            Ok(d)
-        });
-        Ok(Some(dicts.collect::<PyResult<_>>()?))
+    fn focal_metrics(&self) -> Option<Vec<CoreFocalMetrics>> {
+        let (target, metrics) = self.focal_metrics.as_ref()?;
+        Some(metrics.iter().map(|m| CoreFocalMetrics::new(*target, m.clone())).collect())
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

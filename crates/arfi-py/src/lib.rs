@@ -6,6 +6,7 @@ mod cost;
 mod diagnose;
 mod error;
 mod field;
+mod focal;
 mod interrupt;
 mod mode_fit;
 mod phase;
@@ -20,7 +21,7 @@ mod volume;
 use has_core::inverse::estimate::workflow::Method;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use scenario::{default_scenario_toml, normalize_scenario, scenario_json, scenario_outline, scenario_toml_with_grid};
+use scenario::{contiguous_groups, default_scenario_toml, normalize_scenario, scenario_json, scenario_outline, scenario_toml_with_grid};
 
 /// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`): call
 /// after dropping a simulation whose HAS plan is large, before building the next.
@@ -51,6 +52,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<prediction::CorePrediction>()?;
     m.add_class::<field::CoreField>()?;
     m.add_class::<field::CoreSection>()?;
+    m.add_class::<focal::CoreFocalMetrics>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
@@ -58,6 +60,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_outline, m)?)?;
+    m.add_function(wrap_pyfunction!(contiguous_groups, m)?)?;
     m.add_class::<scenario::CoreOutline>()?;
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;

@@ -147,3 +147,11 @@ impl CoreOutline {
         format!("ScenarioOutline({} elements, MR {:?})", self.inner.n_elements(), self.inner.mr().matrix)
     }
 }
+
+/// `groups` contiguous groups of `n_elements` by element number (`group = e·G / n`), the map a
+/// simulation with that many groups uses; a ValueError naming `groups` outside 1..=n_elements.
+#[pyfunction]
+pub(crate) fn contiguous_groups<'py>(py: Python<'py>, n_elements: usize, groups: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let g = has_core::grouping::contiguous(n_elements, groups).map_err(to_py)?;
+    Ok(g.into_iter().map(|v| v as i64).collect::<Vec<_>>().into_pyarray(py))
+}

@@ -4,7 +4,8 @@ use crate::convert::{measurements, phases_vec};
 use crate::cost::CoreCostModel;
 use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
-use crate::field::{metrics_items, CoreField, CoreSection, MetricsMm};
+use crate::field::{CoreField, CoreSection};
+use crate::focal::{CoreFocalMetrics, MetricsMm};
 use crate::interrupt::run_interruptible;
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::results::{CoreCalibration, CoreEstimate};
@@ -236,19 +237,16 @@ impl CoreSimulation {
     /// frame; default the focus), from one march that records only the box around it: the keys of
     /// `Field.focus()`'s metrics and `target_mm` (each None without a closed -6 dB region).
     #[pyo3(signature = (phases=None, target_mm=None))]
-    fn focal_metrics<'py>(
+    fn focal_metrics(
         &self,
-        py: Python<'py>,
+        py: Python<'_>,
         phases: Option<PyReadonlyArray1<'_, f64>>,
         target_mm: Option<[f64; 3]>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<CoreFocalMetrics> {
         let phases = phases_vec(phases);
         let target = target_mm.map_or(self.inner.focus, |t| t.map(|v| v * 1e-3));
         let metrics = py.detach(|| self.inner.focal_metrics(&phases, target)).map_err(to_py)?;
-        let d = PyDict::new(py);
-        d.set_item("target_mm", target.map(|v| v * 1e3))?;
-        metrics_items(&d, metrics.as_ref().map(MetricsMm::from).as_ref())?;
-        Ok(d)
+        Ok(CoreFocalMetrics::new(target, metrics.as_ref().map(MetricsMm::from)))
     }
 
     /// `|p|` (Pa, float32, shape (nz, ny, nx): z, y, x) of the beam on the box `box_mm` (x0, x1,

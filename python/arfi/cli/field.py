@@ -190,7 +190,7 @@ def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> l
         f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
         f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"
     ]
-    lines.append(f"field: {metrics_text(focus)}")
+    lines.append(f"field: {metrics_text(f.focal_metrics)}")
     if focus["hottest"] is not None:
         lines.append(hottest_line(focus["hottest"]))
     for where, key in (("on the plane", "plane"), ("on the axis", "axis")):

@@ -45,9 +45,9 @@ def register(sub: Any) -> None:
         help="also give how the predicted phases move per percent of the CT conversion's bone sound speed "
         "(rad/%%, per element, in the --json as bone_speed_sensitivity_rad_per_percent): the mode arfi "
         "estimate fits to the images on the head with the CT's bone before its per-element fit. One more "
-        "simulation of the skull (about half the prediction's time). Default: on with --json and the "
-        'porosity conversion ("aubry2003", the default), which has the constant; --no-bone-speed-sensitivity '
-        "skips it",
+        "simulation of the skull (about half the prediction's time). Default: on with the porosity conversion "
+        '("aubry2003", the default), which has the constant, whether or not --json is given (what is printed does '
+        "not depend on the files asked for); --no-bone-speed-sensitivity skips it",
     )
     p.add_argument(
         "--pose-sensitivity",
@@ -73,8 +73,8 @@ def register(sub: Any) -> None:
         "and give each one's focal metrics in 3-D around the target: the focal peak and its distance from the target, "
         "the -6 dB extents and volume, I_SPPA and MI in the tissue it lies in (printed, and in the --json as "
         "focal_metrics with the keys of arfi field's JSON). Three marches of the skull's simulation to the focal box, "
-        "kept until they are done (with --report, the report's own march gives them). Default: on with --json or "
-        "--report; --no-focal-metrics skips them",
+        "kept until they are done (with --report, the report's own march gives them). Default: on; "
+        "--no-focal-metrics skips them",
     )
     add_report(
         p,
@@ -94,12 +94,11 @@ def run(args: argparse.Namespace) -> int:
             "--scenario: a prediction needs a CT of the head ([ct] in the scenario); arfi phantom writes a synthetic "
             "one"
         )
+    # The defaults do not depend on whether a file is asked for: the same command prints the same.
     sensitivity = args.bone_speed_sensitivity
-    if sensitivity is None:  # by default for the JSON (what arfi estimate reads), where the conversion has the constant
-        sensitivity = args.json is not None and scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
-    metrics_wanted = args.focal_metrics
-    if metrics_wanted is None:
-        metrics_wanted = args.json is not None or bool(args.report)
+    if sensitivity is None:  # where the conversion has the constant the sensitivity is taken along
+        sensitivity = scenario.to_dict()["ct"].get("conversion", "aubry2003") == "aubry2003"
+    metrics_wanted = True if args.focal_metrics is None else args.focal_metrics
     t = time.perf_counter()
     # The focal metrics and the report march the beams through the skull: the prediction keeps the
     # skull's simulation for them.
@@ -149,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"predict: {labels[name]}: {metrics_text(m)}")
     result = p.to_dict()
     if metrics is not None:
-        result["focal_metrics"] = metrics
+        result["focal_metrics"] = {name: m.to_dict() for name, m in metrics.items()}
         result["focal_metrics_seconds"] = metrics_seconds
     if args.report:
         from arfi.report import predict_report
