@@ -336,8 +336,9 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
     axes = [a[n, 3] + a[n, n] * np.arange(p.shape[2 - n]) for n in range(3)]  # x, y, z (mm)
     t = field.target_mm
     i, j, k = (int(np.argmin(np.abs(axes[n] - t[n]))) for n in range(3))
-    peak = (field.focal_peak_pa or float(volume.pressure_pa.max())) / 1e6
-    along, across = field.fwhm_6db_mm or (20.0, 5.0)
+    metrics = field.focal_metrics
+    peak = (metrics.focal_peak_pa or float(volume.pressure_pa.max())) / 1e6
+    along, across = metrics.fwhm_6db_mm or (20.0, 5.0)
     reach = {"x": max(10.0, 3.0 * across), "y": max(10.0, 3.0 * across), "z": max(10.0, 1.5 * along)}
     sections = [
         ("x", "z", p[:, j, :], (axes[0], axes[1][j], axes[2])),

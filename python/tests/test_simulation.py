@@ -88,11 +88,13 @@ def test_field_on_the_focal_plane(sim):
         "axis_hottest_mm",
         "hottest",
     ]
-    # Each metric is also the Field's attribute of the same name; the phantom's focus lies within a
-    # few mm of the target (the peak sits short of the geometric focus) and above the samples.
-    assert all(focus[k] == getattr(f, k) for k in metrics)
-    assert f.focal_tissue == "phantom" and f.peak_to_target_mm < 3.0 and f.focal_peak_pa >= focus["plane_peak_pa"]
-    assert f.isppa_w_cm2 == pytest.approx(f.focal_peak_pa**2 / (2 * 1040 * 1533) / 1e4, rel=1e-12)
+    # Each metric is also the attribute of the same name of the Field's typed FocalMetrics (one
+    # name per quantity); the phantom's focus lies within a few mm of the target (the peak sits
+    # short of the geometric focus) and above the samples.
+    m = f.focal_metrics
+    assert all(focus[k] == getattr(m, k) for k in metrics)
+    assert m.focal_tissue == "phantom" and m.peak_to_target_mm < 3.0 and m.focal_peak_pa >= focus["plane_peak_pa"]
+    assert m.isppa_w_cm2 == pytest.approx(m.focal_peak_pa**2 / (2 * 1040 * 1533) / 1e4, rel=1e-12)
     assert (
         focus["plane_hottest_pa"] is None
         and focus["axis_hottest_mm"] is None

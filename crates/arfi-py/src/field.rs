@@ -180,67 +180,8 @@ impl CoreField {
         (t[0], t[1], t[2])
     }
 
-    /// The focal peak in 3-D near the target, sub-voxel (mm; None when the target lies outside the
-    /// grid or its -6 dB region reaches the grid's edge).
-    #[getter]
-    fn focal_peak_mm(&self) -> Option<[f64; 3]> {
-        self.metrics.as_ref().map(|m| m.focal_peak_mm)
-    }
-
-    /// |p| at the focal peak (Pa), in situ.
-    #[getter]
-    fn focal_peak_pa(&self) -> Option<f64> {
-        self.metrics.as_ref().map(|m| m.focal_peak_pa)
-    }
-
-    /// Distance from the target to the focal peak (mm).
-    #[getter]
-    fn peak_to_target_mm(&self) -> Option<f64> {
-        self.metrics.as_ref().map(|m| m.peak_to_target_mm)
-    }
-
-    /// The -6 dB extent along the beam and across it (the mean of two directions), mm.
-    #[getter]
-    fn fwhm_6db_mm(&self) -> Option<[f64; 2]> {
-        self.metrics.as_ref().map(|m| m.fwhm_6db_mm)
-    }
-
-    /// The -6 dB extents across the beam: along the direction nearest x, then nearest y (mm).
-    #[getter]
-    fn fwhm_6db_across_mm(&self) -> Option<[f64; 2]> {
-        self.metrics.as_ref().map(|m| m.fwhm_6db_across_mm)
-    }
-
-    /// The -3 dB extent along the beam and across it (mm).
-    #[getter]
-    fn fwhm_3db_mm(&self) -> Option<[f64; 2]> {
-        self.metrics.as_ref().map(|m| m.fwhm_3db_mm)
-    }
-
-    /// Volume of the -6 dB region around the focal peak (mm³).
-    #[getter]
-    fn focal_volume_6db_mm3(&self) -> Option<f64> {
-        self.metrics.as_ref().map(|m| m.focal_volume_6db_mm3)
-    }
-
-    /// Spatial-peak pulse-average intensity at the focal peak, p²/(2·ρ·c) (W/cm²).
-    #[getter]
-    fn isppa_w_cm2(&self) -> Option<f64> {
-        self.metrics.as_ref().map(|m| m.isppa_w_cm2)
-    }
-
-    /// Mechanical index at the focal peak, p[MPa]/√f[MHz] (in situ).
-    #[getter]
-    fn mechanical_index(&self) -> Option<f64> {
-        self.metrics.as_ref().map(|m| m.mechanical_index)
-    }
-
-    /// The tissue the focal peak lies in.
-    #[getter]
-    fn focal_tissue(&self) -> Option<String> {
-        self.metrics.as_ref().map(|m| m.focal_tissue.clone())
-    }
-    /// The focal metrics above as one typed result (`Simulation.focal_metrics`'s type).
+    /// The field's focal metrics in 3-D around the target: the focal peak, its -3/-6 dB extents
+    /// and -6 dB volume, I_SPPA and MI there (the attributes' values; `focus()` holds them too).
     #[getter]
     fn focal_metrics(&self) -> CoreFocalMetrics {
         CoreFocalMetrics::new(self.target, self.metrics.clone())

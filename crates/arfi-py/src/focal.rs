@@ -97,52 +97,53 @@ impl CoreFocalMetrics {
     fn target_mm(&self) -> [f64; 3] {
         self.target_mm
     }
-    /// The focal peak (mm, sub-voxel).
+    /// The focal peak in 3-D near the target, sub-voxel (mm; None when the target lies outside the
+    /// grid or its -6 dB region reaches the grid's edge).
     #[getter]
     fn focal_peak_mm(&self) -> Option<[f64; 3]> {
         self.m.as_ref().map(|m| m.focal_peak_mm)
     }
-    /// |p| at the focal peak (Pa).
+    /// |p| at the focal peak (Pa), in situ.
     #[getter]
     fn focal_peak_pa(&self) -> Option<f64> {
         self.m.as_ref().map(|m| m.focal_peak_pa)
     }
-    /// The focal peak's distance from the target (mm).
+    /// Distance from the target to the focal peak (mm).
     #[getter]
     fn peak_to_target_mm(&self) -> Option<f64> {
         self.m.as_ref().map(|m| m.peak_to_target_mm)
     }
-    /// The -6 dB extents (mm): along the beam, across it.
+    /// The -6 dB extent along the beam and across it (the mean of two directions), mm.
     #[getter]
     fn fwhm_6db_mm(&self) -> Option<[f64; 2]> {
         self.m.as_ref().map(|m| m.fwhm_6db_mm)
     }
-    /// The -6 dB extents across the beam in its two directions (mm).
+    /// The -6 dB extents across the beam: along the direction nearest x, then nearest y (mm).
     #[getter]
     fn fwhm_6db_across_mm(&self) -> Option<[f64; 2]> {
         self.m.as_ref().map(|m| m.fwhm_6db_across_mm)
     }
-    /// The -3 dB extents (mm): along the beam, across it.
+    /// The -3 dB extent along the beam and across it (mm).
     #[getter]
     fn fwhm_3db_mm(&self) -> Option<[f64; 2]> {
         self.m.as_ref().map(|m| m.fwhm_3db_mm)
     }
-    /// The volume of the -6 dB region (mm³).
+    /// Volume of the -6 dB region around the focal peak (mm³).
     #[getter]
     fn focal_volume_6db_mm3(&self) -> Option<f64> {
         self.m.as_ref().map(|m| m.focal_volume_6db_mm3)
     }
-    /// I_SPPA = p²/(2ρc) at the focal peak (W/cm²), ρ and c of the tissue there.
+    /// Spatial-peak pulse-average intensity at the focal peak, p²/(2·ρ·c) (W/cm²).
     #[getter]
     fn isppa_w_cm2(&self) -> Option<f64> {
         self.m.as_ref().map(|m| m.isppa_w_cm2)
     }
-    /// The mechanical index p[MPa]/√f[MHz] at the focal peak, in situ.
+    /// Mechanical index at the focal peak, p[MPa]/√f[MHz] (in situ).
     #[getter]
     fn mechanical_index(&self) -> Option<f64> {
         self.m.as_ref().map(|m| m.mechanical_index)
     }
-    /// The tissue class the focal peak lies in (as `hottest` names them).
+    /// The tissue the focal peak lies in.
     #[getter]
     fn focal_tissue(&self) -> Option<String> {
         self.m.as_ref().map(|m| m.focal_tissue.clone())
