@@ -1,7 +1,9 @@
 //! Scenario files: parse, validate and write them back as complete TOML or JSON.
 
 use crate::error::{invalid, to_py};
+use has_core::physics::mr::MrGeometry;
 use has_core::scenario::{Outline, Scenario};
+use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use std::path::Path;
@@ -53,6 +55,18 @@ fn validated_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyRes
     Ok(s)
 }
 
+/// Shape of the MR image volume of `mr` (NIfTI order, a singleton along the slice normal).
+pub(crate) fn mr_volume_shape(mr: &MrGeometry) -> (usize, usize, usize) {
+    let s = mr.volume_shape();
+    (s[0], s[1], s[2])
+}
+
+/// The 4 x 4 affine (mm, transducer frame) of `mr`'s image volume as a NumPy array.
+pub(crate) fn mr_affine_array<'py>(py: Python<'py>, mr: &MrGeometry) -> Bound<'py, PyArray2<f64>> {
+    let a = mr.affine_mm();
+    Array2::from_shape_fn((4, 4), |(r, c)| a[r][c]).into_pyarray(py)
+}
+
 /// What a scenario fixes before a simulation is built (elements, default groups, focus, MR
 /// geometry), with the simulation's own rules for phases and images: inputs are checked against
 /// it before the build.
@@ -78,7 +92,7 @@ impl CoreOutline {
     /// Number of the array's default groups.
     #[getter]
     fn n_default_groups(&self) -> usize {
-        self.inner.default_groups().iter().max().map_or(0, |m| m + 1)
+        has_core::grouping::count(self.inner.default_groups())
     }
     /// The steering target (mm, transducer frame).
     #[getter]
@@ -88,14 +102,12 @@ impl CoreOutline {
     /// Shape of the MR image volume (a singleton along the slice normal).
     #[getter]
     fn mr_volume_shape(&self) -> (usize, usize, usize) {
-        let s = self.inner.mr().volume_shape();
-        (s[0], s[1], s[2])
+        mr_volume_shape(self.inner.mr())
     }
     /// The MR image's 4 x 4 affine (mm, transducer frame).
     #[getter]
-    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self.inner.mr().affine_mm().iter().map(|r| r.to_vec()).collect();
-        Ok(PyArray2::from_vec2(py, &rows)?)
+    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mr_affine_array(py, self.inner.mr())
     }
     /// Phases added to the steering, per element or per group (`groups` contiguous groups, or
     /// the default ones), as one per element; a ValueError naming `name` otherwise.

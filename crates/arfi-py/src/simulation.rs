@@ -10,6 +10,7 @@ use crate::interrupt::run_interruptible;
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
+use crate::scenario::{mr_affine_array, mr_volume_shape};
 use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm, VolumeArrays};
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::build_model;
@@ -106,7 +107,7 @@ impl CoreSimulation {
     /// Number of the array's default groups (16 on the paper's quadrant array: element // 64).
     #[getter]
     fn n_default_groups(&self) -> usize {
-        self.inner.transducer.default_groups().iter().max().map_or(0, |m| m + 1)
+        has_core::grouping::count(&self.inner.transducer.default_groups())
     }
     /// Scale from broadened force density to ARFI phase (rad·m³/N); a ValueError says why a
     /// scenario has none (no radiation force in the MR slice).
@@ -185,15 +186,12 @@ impl CoreSimulation {
     }
     /// MR geometry: affine (4x4, mm), volume shape, plane.
     #[getter]
-    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let a = self.inner.mr.affine_mm();
-        let rows: Vec<Vec<f64>> = a.iter().map(|r| r.to_vec()).collect();
-        Ok(PyArray2::from_vec2(py, &rows)?)
+    fn mr_affine_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        mr_affine_array(py, &self.inner.mr)
     }
     #[getter]
     fn mr_volume_shape(&self) -> (usize, usize, usize) {
-        let s = self.inner.mr.volume_shape();
-        (s[0], s[1], s[2])
+        mr_volume_shape(&self.inner.mr)
     }
     #[getter]
     fn mr_plane(&self) -> &'static str {

@@ -5,13 +5,19 @@
 
 use crate::error::{require_finite, HasError, Result};
 
+/// The number of groups G of an element → group map (its largest group number plus one; 0 for
+/// no elements).
+pub fn count(groups: &[usize]) -> usize {
+    groups.iter().max().map_or(0, |m| m + 1)
+}
+
 /// An element-to-group map (element number = index), checked: every group from 0 to G-1 holds
 /// at least one element. Returns G.
 pub fn check_groups(groups: &[usize], n_elements: usize) -> Result<usize> {
     if groups.len() != n_elements {
         return Err(HasError::invalid("groups", format!("has {} entries for {} elements", groups.len(), n_elements)));
     }
-    let n_groups = groups.iter().max().map_or(0, |m| m + 1);
+    let n_groups = count(groups);
     let mut used = vec![false; n_groups];
     groups.iter().for_each(|&g| used[g] = true);
     if let Some(g) = used.iter().position(|u| !u) {
@@ -55,12 +61,11 @@ pub fn known_per_element(name: &str, known: &[f64], groups: &[usize], n_groups: 
     if known.is_empty() {
         return Ok(vec![0.0; n]);
     }
-    let n_default = default_groups.iter().max().map_or(0, |m| m + 1);
+    require_finite(name, known)?;
+    let n_default = count(default_groups);
     if known.len() == n_default && known.len() != n_groups && known.len() != n {
-        require_finite(name, known)?;
         return Ok(default_groups.iter().map(|&g| known[g]).collect());
     }
-    require_finite(name, known)?;
     per_element(name, known, groups, n_groups).map_err(|_| {
         let mut sizes = vec![format!("{n} (one per element)")];
         if n_groups != n {

@@ -36,7 +36,7 @@ pub fn condense(element_phases: &[f64], groups: &[usize]) -> Result<Vec<f64>> {
     if element_phases.len() != groups.len() {
         return Err(HasError::invalid("phases", format!("has {} values for {} elements", element_phases.len(), groups.len())));
     }
-    let g = groups.iter().max().map_or(0, |m| m + 1);
+    let g = crate::grouping::count(groups);
     let mut sums = vec![C64::new(0.0, 0.0); g];
     for (&p, &k) in element_phases.iter().zip(groups) {
         sums[k] += C64::from_polar(1.0, p);

@@ -125,8 +125,7 @@ impl MrGeometry {
     pub fn check_file(&self, name: &str, shape: [usize; 2], affine_mm: &[[f64; 4]; 4]) -> Result<()> {
         self.check_shape(name, shape)?;
         let expected = self.affine_mm();
-        let off = (0..3).flat_map(|r| (0..4).map(move |c| (r, c))).find(|&(r, c)| !((affine_mm[r][c] - expected[r][c]).abs() <= 1e-3));
-        if off.is_some() {
+        if (0..3).any(|r| (0..4).any(|c| !((affine_mm[r][c] - expected[r][c]).abs() <= 1e-3))) {
             return Err(HasError::invalid(
                 name,
                 "its affine does not match the scenario's MR geometry ([mr] plane, center_mm, fov_mm, slice_thickness_mm): an image of another scenario",

@@ -60,20 +60,25 @@ impl Outline {
         }
     }
 
+    /// [`Outline::groups`] and their count.
+    fn grouped(&self, groups: Option<usize>) -> Result<(Vec<usize>, usize)> {
+        let g = self.groups(groups)?;
+        let n = grouping::count(&g);
+        Ok((g, n))
+    }
+
     /// Phases added to the steering (per element or per group of [`Outline::groups`]) as one per
     /// element, as [`crate::simulation::Simulation::element_phases`] will take them; an error
     /// naming `name` otherwise.
     pub fn element_phases(&self, name: &str, phases: &[f64], groups: Option<usize>) -> Result<Vec<f64>> {
-        let g = self.groups(groups)?;
-        let n_groups = grouping::check_groups(&g, self.n_elements)?;
+        let (g, n_groups) = self.grouped(groups)?;
         grouping::per_element(name, phases, &g, n_groups)
     }
 
     /// An image's known phases as one per element, as the estimators will take them (per
     /// element, per group or per default group; [`grouping::known_per_element`]).
     pub fn known_per_element(&self, name: &str, known: &[f64], groups: Option<usize>) -> Result<Vec<f64>> {
-        let g = self.groups(groups)?;
-        let n_groups = grouping::check_groups(&g, self.n_elements)?;
+        let (g, n_groups) = self.grouped(groups)?;
         grouping::known_per_element(name, known, &g, n_groups, &self.default_groups)
     }
 
@@ -81,8 +86,7 @@ impl Outline {
     /// per element) per element, per group or per default group, as an image's known phases; a
     /// group estimate per element or per group. An error naming `name` otherwise.
     pub fn check_prior(&self, name: &str, prior: &[f64], groups: Option<usize>) -> Result<()> {
-        let g = self.groups(groups)?;
-        let n_groups = grouping::check_groups(&g, self.n_elements)?;
+        let (g, n_groups) = self.grouped(groups)?;
         if n_groups == self.n_elements {
             grouping::known_per_element(name, prior, &g, n_groups, &self.default_groups)?;
         } else {

@@ -162,7 +162,7 @@ impl Unbuilt {
             }
         };
         let groups = r.transducer.default_groups();
-        let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+        let n_groups = crate::grouping::count(&groups);
         Ok(Simulation {
             name: r.name,
             frequency: r.frequency,

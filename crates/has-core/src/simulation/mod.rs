@@ -384,7 +384,7 @@ impl Simulation {
             return Err(HasError::invalid("groups", format!("has {} entries for {n} elements", groups.len())));
         }
         let known = if known.is_empty() { vec![0.0; n] } else { self.element_phases(known)? };
-        let g_count = groups.iter().max().map_or(0, |m| m + 1);
+        let g_count = grouping::count(groups);
         (0..g_count)
             .map(|g| {
                 let drive: Vec<C64> = (0..n).map(|e| if groups[e] == g { self.drive(e, known[e]) } else { C64::new(0.0, 0.0) }).collect();

@@ -62,7 +62,7 @@ impl ArfiKernel {
     /// Marches the `G` group fields (steering plus `known` element phases, rad; empty = none) and
     /// builds the kernels of the pixels in the box `u x v`.
     pub fn build(sim: &Simulation, groups: &[usize], known: &[f64], u: Range<usize>, v: Range<usize>) -> Result<Self> {
-        let g_count = groups.iter().max().map_or(0, |m| m + 1);
+        let g_count = crate::grouping::count(groups);
         if g_count < 2 {
             return Err(HasError::invalid("groups", "need at least two groups"));
         }
