@@ -84,6 +84,40 @@ class FullWaveResult:
     tolerances: tuple[float, float, float, float]
     engine: str
 
+    @classmethod
+    def from_comparison(
+        cls,
+        name: str,
+        description: str,
+        m: dict[str, Any],
+        grid: dict[str, Any],
+        seconds: float,
+        tolerances: tuple[float, float, float, float],
+        engine: dict[str, Any],
+    ) -> FullWaveResult:
+        """The result of a comparison ``m`` (the dict of :func:`compare_fields` or of
+        :func:`arfi.validation_head.metrics`), the march on ``grid`` (``Simulation.grid``) against
+        the full-wave ``engine`` (its stored ``engine`` and ``engine_version``)."""
+        ps, pe = m["focal_pressure"]
+        return cls(
+            name=name,
+            description=description,
+            focal_pressure=(ps, pe),
+            focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
+            focal_point_mm=m["focal_point_mm"],
+            focal_pressure_error=ps / pe - 1.0,
+            focal_position_error_mm=m["focal_position_error_mm"],
+            axial_error=m["axial_error"],
+            correlation=m["correlation"],
+            axis=m["axis"],
+            focal_line=m["focal_line"],
+            step_mm=float(grid["dz_mm"]),
+            spacing_mm=float(grid["dx_mm"]),
+            seconds=seconds,
+            tolerances=tolerances,
+            engine=f"{engine['engine']} {engine['engine_version']}",
+        )
+
     @property
     def passed(self) -> bool:
         p, z, a, c = self.tolerances
@@ -262,26 +296,14 @@ def compare(name: str, row: dict[str, Any] | None = None) -> FullWaveResult:
         toml = textured_caps.scenario_toml(cap, "cap.nii", solid=ref.get("solid") is not None)
         sim = arfi.Simulation(arfi.Scenario.from_toml(toml, base_dir=d))
         march = sim.field(volume=True)
-    m = compare_fields(march, ref["fdtd"])
-    ps, pe = m["focal_pressure"]
-    grid = sim.grid
     engine = ref["engine"]
-    return FullWaveResult(
-        name=name,
-        description=f"{cap.description}; against {engine['engine']} ({engine['voxel_mm']:g} mm voxels"
+    return FullWaveResult.from_comparison(
+        name,
+        f"{cap.description}; against {engine['engine']} ({engine['voxel_mm']:g} mm voxels"
         + (f", x{ref['grid_factor']:.3f} for its grid error)" if "grid_factor" in ref else ")"),
-        focal_pressure=(ps, pe),
-        focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
-        focal_point_mm=m["focal_point_mm"],
-        focal_pressure_error=ps / pe - 1.0,
-        focal_position_error_mm=m["focal_position_error_mm"],
-        axial_error=m["axial_error"],
-        correlation=m["correlation"],
-        axis=m["axis"],
-        focal_line=m["focal_line"],
-        step_mm=float(grid["dz_mm"]),
-        spacing_mm=float(grid["dx_mm"]),
-        seconds=time.perf_counter() - t0,
-        tolerances=TOLERANCES if cap.correlation_mm is None else TEXTURED_TOLERANCES,
-        engine=f"{engine['engine']} {engine['engine_version']}",
+        compare_fields(march, ref["fdtd"]),
+        sim.grid,
+        time.perf_counter() - t0,
+        TOLERANCES if cap.correlation_mm is None else TEXTURED_TOLERANCES,
+        engine,
     )

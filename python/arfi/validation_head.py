@@ -224,30 +224,16 @@ def compare(stored: dict[str, Any] | None = None) -> Any:
                 "benches/fullwave/head_fdtd.py)"
             )
         march, sim = march_parts(path)
-    m = metrics(march, stored["reference"])
-    ps, pe = m["focal_pressure"]
-    grid = sim.grid
     engine = stored["runs"][0]["fdtd"]
     h = stored["reference"]["voxel_mm"]
-    return FullWaveResult(
-        name=NAME,
-        description=(
-            f"the head phantom (seed {SEED}, CT of {VOXEL_MM:g} mm, fluid bone) with the {ELEMENTS}-element hemisphere "
-            f"at {FREQUENCY_HZ / 1e3:.0f} kHz; against {engine['engine']} ({h[0]:.3f} mm voxels, "
-            f"x{stored['reference']['grid_factor']:.3f} for its grid error, from {h[1]:.3f} mm)"
-        ),
-        focal_pressure=(ps, pe),
-        focal_z_mm=(m["focal_point_mm"][0][2], m["focal_point_mm"][1][2]),
-        focal_point_mm=m["focal_point_mm"],
-        focal_pressure_error=ps / pe - 1.0,
-        focal_position_error_mm=m["focal_position_error_mm"],
-        axial_error=m["axial_error"],
-        correlation=m["correlation"],
-        axis=m["axis"],
-        focal_line=m["focal_line"],
-        step_mm=float(grid["dz_mm"]),
-        spacing_mm=float(grid["dx_mm"]),
-        seconds=time.perf_counter() - t0,
-        tolerances=TOLERANCES,
-        engine=f"{engine['engine']} {engine['engine_version']}",
+    return FullWaveResult.from_comparison(
+        NAME,
+        f"the head phantom (seed {SEED}, CT of {VOXEL_MM:g} mm, fluid bone) with the {ELEMENTS}-element hemisphere "
+        f"at {FREQUENCY_HZ / 1e3:.0f} kHz; against {engine['engine']} ({h[0]:.3f} mm voxels, "
+        f"x{stored['reference']['grid_factor']:.3f} for its grid error, from {h[1]:.3f} mm)",
+        metrics(march, stored["reference"]),
+        sim.grid,
+        time.perf_counter() - t0,
+        TOLERANCES,
+        engine,
     )
