@@ -12,6 +12,7 @@
 //! to the last plane) so a regression can be located without a profiler.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use has_core::control::Control;
 use has_core::inverse::cost::{build_model, Measurement, Model, Objective};
 use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::{condense, Estimator};
@@ -186,7 +187,7 @@ fn bench_has_step(c: &mut Criterion) {
 fn bench_estimation_1024(c: &mut Criterion) {
     let sim = Simulation::new(&Scenario::default()).unwrap();
     let meas = aberrated_measurement(&sim);
-    let m = build_element_model(&sim, &meas, sim.mask_fraction, 0, None, None).unwrap();
+    let m = build_element_model(&sim, &meas, sim.mask_fraction, 0, Control::default()).unwrap();
     let x: Vec<f64> = (0..sim.transducer.elements.len()).map(|e| 0.3 * (e as f64).sin()).collect();
     let mut g = c.benchmark_group("estimation_1024");
     g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(8));
@@ -197,7 +198,7 @@ fn bench_estimation_1024(c: &mut Criterion) {
     for dz in [5e-3, -5e-3, 10e-3] {
         four.push(Measurement { image: meas[0].image.clone(), known: sim.focus_shift_phases([0.0, 0.0, dz]).unwrap() });
     }
-    let m4 = build_element_model(&sim, &four, sim.mask_fraction, 0, None, None).unwrap();
+    let m4 = build_element_model(&sim, &four, sim.mask_fraction, 0, Control::default()).unwrap();
     g.bench_function("cost_and_gradient_1024_elements_4_images", |b| b.iter(|| m4.cost.cost_and_gradient(black_box(&x))));
     g.finish();
 }

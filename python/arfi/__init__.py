@@ -15,12 +15,12 @@ Quick start::
 
 from arfi._core import MemoryLimitError, ModeFit, ModesFit
 from arfi.cost import CostModel, CostTerm
-from arfi.estimation import Calibration, Estimate, EstimateSupport, NextAcquisition, NuisanceFit
+from arfi.estimation import Calibration, Estimate, EstimateOptions, EstimateSupport, NextAcquisition, NuisanceFit
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
 from arfi.scenario import Scenario
-from arfi.simulation import Field, FocalMetrics, Section, Simulation
+from arfi.simulation import Field, FieldFocus, FocalMetrics, HottestPlace, Section, Simulation
 from arfi.volume import IntensityVolume, PressureVolume
 
 __all__ = [
@@ -29,6 +29,8 @@ __all__ = [
     "Field",
     "Section",
     "FocalMetrics",
+    "FieldFocus",
+    "HottestPlace",
     "PressureVolume",
     "IntensityVolume",
     "read_arfi_image",
@@ -45,6 +47,7 @@ __all__ = [
     "MemoryLimitError",
     "Calibration",
     "Estimate",
+    "EstimateOptions",
     "EstimateSupport",
     "NuisanceFit",
     "NextAcquisition",

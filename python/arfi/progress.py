@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import TextIO
 
 
@@ -40,3 +41,23 @@ class Progress:
 
     def advance(self, n: int = 1) -> None:
         self.update(self.done + n)
+
+
+def callback(
+    progress: bool | Callable[[int, int], object], label: str, unit: str = ""
+) -> Callable[[int, int], object] | None:
+    """A ``(done, total)`` callback for the core's long runs: ``progress`` itself when it is
+    callable, a :class:`Progress` bar (drawn on a terminal only) when it is True, else None."""
+    if callable(progress):
+        return progress
+    if not progress:
+        return None
+    bar: Progress | None = None
+
+    def report(done: int, total: int) -> None:
+        nonlocal bar
+        if bar is None or bar.total != total:
+            bar = Progress(label, total, unit)
+        bar.update(done)
+
+    return report

@@ -413,10 +413,10 @@ def field_report(
         origin="lower",
         cmap="inferno",
         vmin=0.0,
-        vmax=focus["plane_peak_pa"] / 1e6,
+        vmax=focus.plane_peak_pa / 1e6,
         extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2],
     )
-    ax[0].plot(focus["plane_peak_x_mm"], focus["plane_peak_y_mm"], "c+", ms=10)
+    ax[0].plot(focus.plane_peak_x_mm, focus.plane_peak_y_mm, "c+", ms=10)
     ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm (+: focal peak)", xlabel="x (mm)", ylabel="y (mm)")
     fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)", extend="max")
     ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)

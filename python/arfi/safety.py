@@ -27,36 +27,27 @@ def check_limit(value: float, name: str) -> float:
 
 
 def exceeded(
-    focus: dict[str, Any], mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2
+    focus: Any, mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2
 ) -> list[dict[str, Any]]:
     """The exposures above the limits, one entry each (``where``, ``tissue``, ``quantity``,
-    ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak, and at the hottest
-    place of each tissue class (``focus["hottest"]``) unless that place is the focal peak's own
-    tissue no hotter than the peak (the focus itself). ``focus`` is ``Field.focus()``."""
+    ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak
+    (``focus.focal_metrics``), and at the hottest place of each tissue class (``focus.hottest``)
+    unless that place is the focus itself (``is_focus``). ``focus`` is ``Field.focus()``."""
     mi_limit = check_limit(mi_limit, "mi_limit")
     isppa_limit_w_cm2 = check_limit(isppa_limit_w_cm2, "isppa_limit_w_cm2")
     rows: list[dict[str, Any]] = []
 
-    def flag(where: str, tissue: str | None, exposure: dict[str, Any]) -> None:
+    def flag(where: str, tissue: str | None, exposure: Any) -> None:
         for quantity, limit in (("mechanical_index", mi_limit), ("isppa_w_cm2", isppa_limit_w_cm2)):
-            if exposure[quantity] > limit:
-                rows.append(
-                    {
-                        "where": where,
-                        "tissue": tissue,
-                        "quantity": quantity,
-                        "value": exposure[quantity],
-                        "limit": limit,
-                    }
-                )
+            value = getattr(exposure, quantity)
+            if value > limit:
+                rows.append({"where": where, "tissue": tissue, "quantity": quantity, "value": value, "limit": limit})
 
-    peak = focus.get("focal_peak_pa")
-    if peak is not None:
-        flag("focal peak", focus["focal_tissue"], focus)
-    # The focal tissue's hottest sample is the focus when no hotter than the peak refined between
-    # samples (1e-6: the sample's float32 sum); both name tissues by class ("skull" for bone).
-    for tissue, h in (focus.get("hottest") or {}).items():
-        if not (peak is not None and tissue == focus["focal_tissue"] and h["pressure_pa"] <= peak * (1 + 1e-6)):
+    m = focus.focal_metrics
+    if m.focal_peak_pa is not None:
+        flag("focal peak", m.focal_tissue, m)
+    for tissue, h in (focus.hottest or {}).items():
+        if not h.is_focus:
             flag("hottest place", tissue, h)
     return rows
 

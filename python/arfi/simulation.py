@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -13,8 +13,9 @@ from arfi import _core
 from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
+from arfi.progress import callback
 from arfi.scenario import Scenario
-from arfi.validate import as_count, as_image, as_modes, as_number, as_phases, as_point_mm, nuisance_names, real_array
+from arfi.validate import as_count, as_image, as_number, as_phases, as_point_mm, real_array
 from arfi.volume import PressureVolume
 
 #: One MR-ARFI image (2-D, or a list of rows) or several (a sequence of 2-D arrays, or a 3-D stack).
@@ -70,6 +71,8 @@ def _group_map(groups: int | ArrayLike, n_elements: int) -> NDArray[np.int64]:
 Field = _core.Field
 Section = _core.Section
 FocalMetrics = _core.FocalMetrics
+FieldFocus = _core.FieldFocus
+HottestPlace = _core.HottestPlace
 
 
 class Simulation:
@@ -459,138 +462,55 @@ class Simulation:
         self,
         images: Images,
         known: Known = None,
-        method: str = "lbfgs",
-        max_evaluations: int | None = None,
-        time_limit_s: float | None = None,
-        seed: int = 0,
-        starts: int | None = None,
-        fit_amplitude: bool = False,
-        progress: bool = False,
-        prior: ArrayLike | None = None,
-        prior_std_rad: float | None = None,
-        prior_correlation_mm: float | None = None,
-        fit_nuisance: str | Sequence[str] | None = None,
-        suggest: bool = False,
-        prior_modes: ArrayLike | None = None,
-        noise_rad: float | None = None,
+        options: _core.EstimateOptions | None = None,
+        *,
+        progress: bool | Callable[[int, int], object] = False,
+        **kwargs: Any,
     ) -> Estimate:
         """Hybrid estimation of the per-group aberration from one or more MR-ARFI images, each
         taken with ``known`` phases (per element or per group) added to the steering.
 
-        ``noise_rad``: the images' noise standard deviation (rad) where it is known (e.g. the
-        standard deviation of the difference of two reference acquisitions over sqrt(2)); by
-        default each image's floor is estimated from its background, which counts any
-        pixel-scale structure there as noise (through a head at 650 kHz: 0.024-0.025 rad for a
-        noise of 0.02, enough to hide a model mismatch). The misfit, ``model_mismatch``,
-        ``prior_check`` and the posterior's weights all use it.
-
-        ``method``: ``"nelder-mead"`` (the paper's: zero start, <= 8000 evaluations), ``"pso"``
-        or ``"lbfgs"`` (analytic gradient, seeded multi-start; the default). The result flags
-        ``ambiguous`` when clearly different solutions fit within the noise.
+        What to estimate with is ``options`` (an :class:`arfi.EstimateOptions`: method, limits,
+        prior, noise, nuisance, suggestion), or the same options as keywords
+        (``sim.estimate(image, method="nelder-mead")``), not both. ``progress``: True draws a bar
+        on a terminal (stderr) as the element basis is marched; a callable is called with
+        ``(done, total)`` element fields instead (an exception it raises stops the estimate). The
+        result flags ``ambiguous`` when clearly different solutions fit within the noise.
 
         With one group per element (``with_groups(n_elements)``, the CLI's ``--groups 1024``)
         the estimate is per element: an L-BFGS fit on the element field basis (one march per
-        element), warm-started by the estimate on the default 16 groups (with a
-        prior it starts from the prediction, and ``ambiguous`` is judged on searches of the element posterior
-        from draws of the prior: ``worst_recovery``);
-        ``max_evaluations`` (default 200; 120 when ``fit_nuisance`` fits W or the shift) bounds that fit. ``progress``
-        prints the basis
-        marching to stderr.
+        element), warm-started by the estimate on the default 16 groups (with a prior it starts
+        from the prediction, and ``ambiguous`` is judged on searches of the element posterior
+        from draws of the prior: ``worst_recovery``).
 
-        ``prior``: a predicted aberration (e.g. from a CT-based skull simulation), one phase per
-        element or per group in the sign of ``phases_rad`` (subtracting it corrects), with
-        ``prior_std_rad`` the expected error of each predicted phase. The estimate is then the
-        posterior optimum: the images' cost as a Gaussian likelihood at the measured noise floor
-        plus a von Mises prior ``(1 - cos(phi - prior)) / prior_std_rad**2`` per phase. The prior
-        fixes the common phase, rules out the twin that one image cannot, and ``ambiguous`` is
-        judged on the posterior. ``cost`` stays the images' cost (paper Eq. 4);
-        ``posterior_cost`` is the minimised negative log posterior.
-
-        ``prior_correlation_mm``: the prediction's errors form a smooth field over the aperture,
-        correlated over this length (a CT-based prediction errs where skull thickness or sound
-        speed is misjudged, which varies over centimetres). A per-element estimate then corrects
-        the prediction by smooth fields only (a Gaussian random field of ``prior_std_rad`` per
-        phase, squared-exponential correlation, in the reduced-rank form of Solin & Särkkä 2020):
-        element-scale detail the images cannot resolve stays as predicted instead of being
-        fitted to noise. Group estimates keep the independent prior of the group means.
-
-        ``prior_modes`` (per element, with ``prior_correlation_mm``): error modes of known shape,
-        an array of shape ``(modes, n_elements)`` in rad, each the change of the predicted phases
-        when one input of the prediction is off by one standard deviation: e.g.
-        ``20 * prediction.bone_speed_sensitivity_rad_per_percent`` for a CT conversion whose bone
-        sound speed may be off by 20 %. Each mode's coefficient (a standard normal a priori) is
-        fitted with the smooth corrections, so one misjudged constant that moves every phase is
-        one number for the images to find. With a fitted image scale the images pin it only
-        loosely (a uniform change of bone speed also changes the focal amplitude the scale
-        absorbs), so it helps a poor prediction more than a good one (docs/head.md).
-        ``ambiguous`` is judged on draws of the prior without the modes.
-
-        Per element, a prior and one acquisition (one image, or repeats with the same known
-        phases) keep the prediction unsearched (``kept_prediction``): one in-focus image cannot
-        check a per-element correction of it: a correction that fits the image better than the
-        truth does can leave less focus than the prediction, while a second image with other
-        known phases (a defocus) constrains it (BENCHMARKS.md, "Smooth-error prior and defocused
-        images"). ``posterior_cost`` is then the negative log posterior at the prediction.
-
-        ``fit_nuisance``: what else the images may differ in from this model, fitted jointly with
-        per-element phases (names as ``diagnose`` reports them, a list or a comma-separated
-        string, or ``"all"``): ``"amplitude"`` (one scale for all images, as ``fit_amplitude``),
-        ``"background_phase"`` (per image an offset and a linear ramp, fitted on every pixel
-        around the focal zone), ``"broadening"`` (the width W) and ``"registration_shift"``
-        (an in-plane offset of the images; per element it trades with a tilt of the phases, which
-        steers the focus, so prefer registering the images on a calibration image). The scale and
-        backgrounds are solved in every evaluation; W and the shift alternate with the phase
-        search. The fitted values are in ``nuisance``; ``misfit`` is then judged on the fit with
-        them. Group estimates fit the amplitude only.
-
-        ``suggest`` (per element): also choose the next image to take, a focus shift (defocus
-        diversity) from a fixed set of candidates, the one whose image most raises the focal
-        intensity the correction is expected to leave. The expectation is over the linearised
-        posterior: the images' Fisher information at the estimate plus the prior's spread (without
-        a prior, phases as spread as uniform ones, correlated over 12 mm). It ignores distant
-        rivals such as twins, so it ranks acquisitions rather than predicts the focus; see
-        ``next_acquisition``.
+        With a prior, ``cost`` stays the images' cost (paper Eq. 4) and ``posterior_cost`` is the
+        minimised negative log posterior. Per element, a prior and one acquisition (one image, or
+        repeats with the same known phases) keep the prediction unsearched (``kept_prediction``):
+        one in-focus image cannot check a per-element correction of it (a correction that fits
+        the image better than the truth does can leave less focus than the prediction), while a
+        second image with other known phases (a defocus) constrains it. With fitted nuisance
+        parameters their values are in ``nuisance`` and ``misfit`` is judged on the fit with them.
 
         What to apply is ``recommended_phases_rad`` (``recommended`` names it, ``supported`` is
         True when it is the estimate): with a prior, the prediction when the model does not explain
         the images (``model_mismatch``) or, per element, when the images' chi-squared at the
         prediction lies far above what truths within the prior's std give (``prior_check``: the
-        search's move would absorb what the model cannot form). Per element without a prior, the estimate is judged on
-        what the images determine (``support``: the Fisher information at the estimate, about
-        50 combinations of 1024 phases for four images at 0.02 rad): unless the correction it is
-        expected to leave reaches the uncorrected beam's focus and the group fit's, and its search
-        converged (``converged``), the estimate is not recommended (``underdetermined`` when the
-        images do not determine it) and ``recommended`` is ``"uncorrected"`` (zero phases) or
-        ``"groups"`` (``group_phases_rad`` on their elements)."""
+        search's move would absorb what the model cannot form). Per element without a prior, the
+        estimate is judged on what the images determine (``support``: the Fisher information at
+        the estimate): unless the correction it is expected to leave reaches the uncorrected
+        beam's focus and the group fit's, and its search converged (``converged``), the estimate
+        is not recommended (``underdetermined`` when the images do not determine it) and
+        ``recommended`` is ``"uncorrected"`` (zero phases) or ``"groups"`` (``group_phases_rad`` on
+        their elements)."""
         arrays, kn_arrays = images_and_known(images, known)
-        if not isinstance(method, str):
-            raise ValueError(f"method: must be one of {', '.join(_core.METHODS)}, got {method!r}")
-        evaluations = None if max_evaluations is None else as_count(max_evaluations, "max_evaluations")
-        limit = None if time_limit_s is None else as_number(time_limit_s, "time_limit_s")
-        n_starts = None if starts is None else as_count(starts, "starts")
-        prior_array = as_phases(prior, "prior")
-        std = None if prior_std_rad is None else as_number(prior_std_rad, "prior_std_rad")
-        length = None if prior_correlation_mm is None else as_number(prior_correlation_mm, "prior_correlation_mm")
-        nuisance = nuisance_names(fit_nuisance)
-        modes = None if prior_modes is None else as_modes(prior_modes, self.n_elements)
-        return self._core.estimate(
-            arrays,
-            kn_arrays,
-            method,
-            evaluations,
-            limit,
-            as_count(seed, "seed"),
-            n_starts,
-            bool(fit_amplitude),
-            progress=bool(progress),
-            prior=prior_array,
-            prior_std_rad=std,
-            prior_correlation_mm=length,
-            fit_nuisance=nuisance,
-            suggest=bool(suggest),
-            prior_modes=modes,
-            noise_rad=None if noise_rad is None else as_number(noise_rad, "noise_rad"),
-        )
+        if options is None:
+            options = _core.EstimateOptions(**kwargs)
+        elif kwargs:
+            raise ValueError(f"options: give EstimateOptions or keyword options ({', '.join(kwargs)}), not both")
+        elif not isinstance(options, _core.EstimateOptions):
+            raise ValueError(f"options: must be an EstimateOptions, got {type(options).__name__}")
+        report = callback(progress, "arfi: element fields", "elements")
+        return self._core.estimate(arrays, kn_arrays, options, progress=report)
 
     def cost_model(self, images: Images, known: Known = None, fit_amplitude: bool = False) -> CostModel:
         """The hybrid cost (paper Eq. 4) that ``estimate`` minimises, for one MR-ARFI image or a

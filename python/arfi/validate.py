@@ -3,7 +3,6 @@ takes, or raises ``ValueError`` naming the parameter (complex values are refused
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any, overload
 
 import numpy as np
@@ -50,21 +49,6 @@ def as_phases(phases: ArrayLike | None, name: str = "phases") -> NDArray[np.floa
     return np.ascontiguousarray(a)
 
 
-def as_modes(modes: ArrayLike, n: int, name: str = "prior_modes") -> NDArray[np.float64]:
-    """Error modes (rad) as a C-contiguous float64 array of shape (modes, n): one row per mode, a
-    single 1-D mode taken as one row. Raises ValueError naming `name`."""
-    a = real_array(modes, name)
-    if a.ndim == 1:
-        a = a[None, :]
-    if a.ndim != 2 or a.shape[1] != n or a.shape[0] == 0:
-        raise ValueError(
-            f"{name}: must have shape (modes, {n}) (one value per element in each mode), got shape {a.shape}"
-        )
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
-    return np.ascontiguousarray(a)
-
-
 def as_number(value: Any, name: str, low: float = -np.inf, low_open: bool = False) -> float:
     """A finite real number >= ``low`` (> ``low`` when ``low_open``). Raises ValueError naming `name`."""
     try:
@@ -92,17 +76,3 @@ def as_image(image: ArrayLike, name: str) -> NDArray[np.float64]:
     if a.ndim != 2:
         raise ValueError(f"{name}: must be a 2-D image, got shape {a.shape}")
     return np.ascontiguousarray(a)
-
-
-def nuisance_names(value: str | Sequence[str] | None) -> list[str] | None:
-    """Nuisance parameter names from a list or a comma-separated string (None: none). The core
-    checks the names; this checks the form. Raises ValueError naming ``fit_nuisance``."""
-    if value is None:
-        return None
-    if isinstance(value, str):
-        return [n.strip() for n in value.split(",") if n.strip()]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(n, str) for n in value):
-        raise ValueError(
-            f"fit_nuisance: must be names (a list of strings or one comma-separated string), got {value!r}"
-        )
-    return list(value)

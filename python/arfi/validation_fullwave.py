@@ -139,16 +139,16 @@ def stored_parts(f: Any) -> dict[str, Any]:
     ``|p|/p0`` (``p0`` its pressure at the source): the focal peak, the line along z through it
     and the focal plane about it, on the field's own samples."""
     p0 = f.surface_pressure_pa
-    focus = f.focus()
-    fx, fy, fz = focus["focal_peak_mm"]
+    focus = f.focal_metrics
+    fx, fy, fz = focus.focal_peak_mm
     volume = f.pressure_volume().pressure_pa
     x, y, z = np.asarray(f.x_mm), np.asarray(f.y_mm), np.asarray(f.axis_z_mm)
     col, row, k = int(np.argmin(np.abs(x - fx))), int(np.argmin(np.abs(y - fy))), int(np.argmin(np.abs(z - fz)))
     along = np.abs(z - fz) <= LINE_MM
     cols, rows = np.abs(x - fx) <= PLANE_MM, np.abs(y - fy) <= PLANE_MM
     return {
-        "focal_pressure_p0": focus["focal_peak_pa"] / p0,
-        "focal_point_mm": [float(v) for v in focus["focal_peak_mm"]],
+        "focal_pressure_p0": focus.focal_peak_pa / p0,
+        "focal_point_mm": [float(v) for v in focus.focal_peak_mm],
         "line_xy_mm": [float(x[col]), float(y[row])],
         "line_z_mm": np.round(z[along], 4).tolist(),
         "line_p0": np.round(volume[along, row, col] / p0, 5).tolist(),
@@ -239,10 +239,10 @@ def compare_fields(field: Any, ref: dict[str, Any]) -> dict[str, Any]:
     p0 = field.surface_pressure_pa
     volume = field.pressure_volume().pressure_pa / p0
     x, y, z = np.asarray(field.x_mm), np.asarray(field.y_mm), np.asarray(field.axis_z_mm)
-    focus = field.focus()
-    if focus["focal_peak_pa"] is None or focus["focal_peak_mm"] is None:
+    focus = field.focal_metrics
+    if focus.focal_peak_pa is None or focus.focal_peak_mm is None:
         raise ValueError("the march has no focal peak to compare")
-    point = tuple(float(v) for v in focus["focal_peak_mm"])
+    point = tuple(float(v) for v in focus.focal_peak_mm)
     ref_point = tuple(float(v) for v in ref["focal_point_mm"])
     # Along z through the reference focus's column, bilinear across.
     lx, ly = ref["line_xy_mm"]
@@ -266,7 +266,7 @@ def compare_fields(field: Any, ref: dict[str, Any]) -> dict[str, Any]:
     disc = np.hypot(px[None, :] - ref_point[0], py[:, None] - ref_point[1]) <= PLANE_MM
     row = int(np.argmin(np.abs(py - ref_point[1])))
     return {
-        "focal_pressure": (focus["focal_peak_pa"] / p0, ref["focal_pressure_p0"]),
+        "focal_pressure": (focus.focal_peak_pa / p0, ref["focal_pressure_p0"]),
         "focal_point_mm": (point, ref_point),
         # Negative when the march's peak lies short along z (as the exact cases).
         "focal_position_error_mm": math.copysign(math.dist(point, ref_point), point[2] - ref_point[2]),

@@ -191,8 +191,8 @@ def march_parts(scenario: Path) -> tuple[dict[str, Any], Any]:
 
     sim = arfi.Simulation(arfi.Scenario.load(scenario))
     f = sim.field()
-    focus = f.focus()
-    if focus["focal_peak_pa"] is None:
+    focus = f.focal_metrics
+    if focus.focal_peak_pa is None:
         raise ValueError(f"{NAME}: the march has no focal peak to compare")
     return parts(
         f.pressure,
@@ -201,8 +201,8 @@ def march_parts(scenario: Path) -> tuple[dict[str, Any], Any]:
         f.z_mm,
         f.axis_z_mm,
         f.axis_pressure,
-        focus["focal_peak_pa"],
-        focus["focal_peak_mm"],
+        focus.focal_peak_pa,
+        focus.focal_peak_mm,
         f.surface_pressure_pa,
         cut=False,
     ), sim

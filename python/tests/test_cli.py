@@ -202,20 +202,20 @@ def measured(tmp_path_factory, sim, ideal):
             "max_width_mm: must be a finite number > 0",
         ),
         (["calibrate", "--image", "{m}", "--max-width-mm", "inf"], "max_width_mm: must be a finite number"),
-        (["estimate", "--image", "{m}", "--seed", "-1", "--out-phases", "{d}/x.npy"], "seed: must be an integer"),
+        (["estimate", "--image", "{m}", "--seed", "-1", "--out-phases", "{d}/x.npy"], "--seed: must be an integer"),
         (
             ["estimate", "--image", "{m}", "--max-evaluations", "0", "--suggest", "{d}/x.npy"],
-            "max_evaluations: must be > 0",
+            "--max-evaluations: must be > 0",
         ),
-        (["estimate", "--image", "{m}", "--starts", "0", "--report", "{d}/x"], "starts: must be >= 1"),
-        (["estimate", "--image", "{m}", "--time-limit-s", "0"], "time_limit_s: must be a finite number > 0"),
+        (["estimate", "--image", "{m}", "--starts", "0", "--report", "{d}/x"], "--starts: must be >= 1"),
+        (["estimate", "--image", "{m}", "--time-limit-s", "0"], "--time-limit-s: must be a finite number > 0"),
         (
             ["estimate", "--image", "{m}", "--noise-rad", "0", "--out-phases", "{d}/x.npy"],
             "--noise-rad: must be a finite number > 0",
         ),
         (
             ["estimate", "--image", "{m}", "--noise-rad", "nan", "--json", "{d}/x.json"],
-            "--noise-rad: must be a finite number > 0",
+            "--noise-rad: must be a finite number, got nan",
         ),
         (
             ["estimate", "--image", "{m}", "--out-phases", "{d}/x.npy", "--suggest", "{d}/x.txt"],

@@ -95,7 +95,15 @@ def test_estimates_inputs_are_checked_before_the_build(tmp_path, capsys, no_buil
     # A prior without its spread.
     prior = write(tmp_path / "prior16.npy", np.zeros(16))
     assert main(["estimate", "--image", str(image), "--prior", prior, "--json", out]) == 2
-    assert "--prior-std-rad: required with --prior" in one_line(capsys)
+    assert "--prior-std-rad: is required with a prior" in one_line(capsys)
+    # The estimate's own options, by the library's rules, named as typed.
+    for option, value, message in (
+        ("--max-evaluations", "0", "--max-evaluations: must be > 0"),
+        ("--fit-nuisance", "bogus", '--fit-nuisance: unknown nuisance parameter "bogus"'),
+        ("--prior-correlation-mm", "20", "--prior-correlation-mm: was given without a prior"),
+    ):
+        assert main(["estimate", "--image", str(image), option, value, "--json", out]) == 2
+        assert message in one_line(capsys)
     # Transmissions for another array.
     transmission = write(tmp_path / "t.npy", np.ones(9))
     assert main(["estimate", "--image", str(image), "--prior-transmission", transmission, "--json", out]) == 2

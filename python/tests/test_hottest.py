@@ -109,10 +109,14 @@ def test_without_bone_the_hottest_places_cover_the_whole_grid_and_name_no_skull(
     hottest = f.hottest
     assert list(hottest) == ["phantom", "water"]
     peak = f.focal_metrics.focal_peak_pa
-    assert 0.97 * peak <= hottest["phantom"]["pressure_pa"] <= peak * (1 + 1e-6)
+    assert 0.97 * peak <= hottest["phantom"].pressure_pa <= peak * (1 + 1e-6)
     whole = sim.pressure_volume(None).pressure_pa
-    assert hottest["phantom"]["pressure_pa"] == float(whole.max())
-    assert f.focus()["hottest"] == hottest
+    assert hottest["phantom"].pressure_pa == float(whole.max())
+    # The phantom's hottest sample is the focus itself (flagged once, as the focal peak); the water's is not.
+    assert hottest["phantom"].is_focus and not hottest["water"].is_focus
+    assert hottest["phantom"].tissue == "phantom" and list(f.focus().hottest) == list(hottest)
+    assert f.focus().to_dict()["hottest"] == {t: h.to_dict() for t, h in hottest.items()}
+    assert list(hottest["water"].to_dict()) == ["pressure_pa", "position_mm", "isppa_w_cm2", "mechanical_index"]
 
 
 def test_tissue_classes_name_each_place_as_the_slow_reference_does(tmp_path):

@@ -107,13 +107,13 @@ def test_cli_estimate_with_a_prior_writes_prior_used(tmp_path, files, capsys):
     [
         (["--prior", "{f}/short.npy", "--prior-std-rad", "0.5"], "--prior: {f}/short.npy: has 5 values"),
         (["--prior", "{f}/nan.txt", "--prior-std-rad", "0.5"], "NaN"),
-        (["--prior", "{f}/prior.npy", "--prior-std-rad", "-1"], "prior_std_rad: must be a finite number > 0"),
-        (["--prior", "{f}/prior.npy", "--prior-std-rad", "nan"], "prior_std_rad: must be a finite number"),
-        (["--prior", "{f}/prior.npy"], "--prior-std-rad: required with --prior"),
-        (["--prior-std-rad", "0.5"], "prior_std_rad: was given without a prior"),
+        (["--prior", "{f}/prior.npy", "--prior-std-rad", "-1"], "--prior-std-rad: must be a finite number > 0"),
+        (["--prior", "{f}/prior.npy", "--prior-std-rad", "nan"], "--prior-std-rad: must be a finite number"),
+        (["--prior", "{f}/prior.npy"], "--prior-std-rad: is required with a prior"),
+        (["--prior-std-rad", "0.5"], "--prior-std-rad: was given without a prior"),
         (
             ["--prior", "{f}/prior.npy", "--prior-std-rad", "0.5", "--prior-correlation-mm", "-3"],
-            "prior_correlation_mm: must be",
+            "--prior-correlation-mm: must be",
         ),
         (["--prior", "{f}/missing.npy", "--prior-std-rad", "0.5"], "missing.npy"),
     ],

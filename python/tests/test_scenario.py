@@ -111,5 +111,5 @@ amplitude_rad_m3_per_n = 1.0
     assert sim.n_elements == 32 and sim.grid["z0_mm"] > 4.0
     f = sim.field()
     focus = f.focus()
-    assert 43.0 < focus["axis_peak_z_mm"] < 50.0
-    assert abs(focus["plane_peak_x_mm"]) <= 1.0 and abs(focus["plane_peak_y_mm"]) <= 1.0
+    assert 43.0 < focus.axis_peak_z_mm < 50.0
+    assert abs(focus.plane_peak_x_mm) <= 1.0 and abs(focus.plane_peak_y_mm) <= 1.0

@@ -57,7 +57,15 @@ def test_field_on_the_focal_plane(sim):
     f = sim.field()
     assert f.pressure.shape == (len(f.y_mm), len(f.x_mm))
     assert f.z_mm == pytest.approx(85.0, abs=sim.grid["dz_mm"] / 2)
-    focus = f.focus()
+    typed = f.focus()
+    focus = typed.to_dict()
+    # The typed result's attributes are the JSON's keys (the focal metrics under focal_metrics).
+    assert isinstance(typed, arfi.FieldFocus) and typed.focal_metrics.to_dict() == {
+        k: focus[k] for k in arfi.FocalMetrics._fields
+    }
+    for key in set(focus) - set(arfi.FocalMetrics._fields):
+        value = getattr(typed, key)
+        assert (list(value) if isinstance(value, (list, tuple)) else value) == focus[key], key
     assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
     # The keys `arfi field` writes to its JSON, in order; no hotter place than the focus in water.
     metrics = [
@@ -115,7 +123,7 @@ def test_field_on_the_focal_plane(sim):
 def test_focal_metrics_alone_and_around_another_target(sim):
     # Without a target, the metrics of the field's own march, bit for bit (the box's march stops
     # at the box: the planes up to it are the same operators).
-    focus = sim.field().focus()
+    focus = sim.field().focus().to_dict()
     alone = sim.focal_metrics()
     # A typed result whose to_dict() is the JSON's keys, those of Field.focus().
     d = alone.to_dict()
@@ -126,7 +134,9 @@ def test_focal_metrics_alone_and_around_another_target(sim):
     # beam (a different plan): the peak within 0.1 mm and |p| within 0.1 %.
     target = (5.0, 0.0, 85.0)
     shifted = sim.focal_metrics(sim.focus_shift_phases([5.0, 0.0, 0.0]), target_mm=target)
-    there = arfi.Simulation(arfi.Scenario.from_toml("[focus]\nposition_mm = [5.0, 0.0, 85.0]\n")).field().focus()
+    there = (
+        arfi.Simulation(arfi.Scenario.from_toml("[focus]\nposition_mm = [5.0, 0.0, 85.0]\n")).field().focus().to_dict()
+    )
     assert list(shifted.target_mm) == list(target) == there["target_mm"]
     assert np.allclose(shifted.focal_peak_mm, there["focal_peak_mm"], atol=0.1)
     assert shifted.focal_peak_pa == pytest.approx(there["focal_peak_pa"], rel=1e-3)
@@ -262,9 +272,9 @@ def test_focus_shift_phases_move_the_focus_where_asked(sim):
     ideal = sim.field().focus()
     lateral = sim.field(sim.focus_shift_phases((3.0, 0.0, 0.0))).focus()
     step = float(np.diff(sim.field().x_mm[:2])[0])
-    assert abs(lateral["plane_peak_x_mm"] - ideal["plane_peak_x_mm"] - 3.0) <= step
+    assert abs(lateral.plane_peak_x_mm - ideal.plane_peak_x_mm - 3.0) <= step
     axial = sim.field(sim.focus_shift_phases((0.0, 0.0, 10.0))).focus()
-    assert 5.0 < axial["axis_peak_z_mm"] - ideal["axis_peak_z_mm"] < 15.0
+    assert 5.0 < axial.axis_peak_z_mm - ideal.axis_peak_z_mm < 15.0
     with pytest.raises(ValueError, match="shift_mm: must be three finite numbers"):
         sim.focus_shift_phases((0.0, 1.0))
 

@@ -1,3 +1,4 @@
+import ast
 import inspect
 
 from arfi import _core
@@ -39,3 +40,41 @@ def test_result_classes_write_every_attribute_to_json_once():
         getters = {n for n, v in vars(cls).items() if type(v).__name__ == "getset_descriptor" and not n.startswith("_")}
         images = {"models", "models_initial", "models_final"}  # model images stay out of the JSON
         assert sorted(cls._fields) == sorted(getters - images), cls.__name__
+
+
+def _stub_parameters(fn):
+    """(name, default) of a stub function's parameters, without self/cls and */**."""
+    a = fn.args
+    positional = a.posonlyargs + a.args
+    defaults = [None] * (len(positional) - len(a.defaults)) + list(a.defaults)
+    pairs = list(zip([x.arg for x in positional], defaults)) + list(zip([x.arg for x in a.kwonlyargs], a.kw_defaults))
+    return [(n, None if d is None else ast.literal_eval(d)) for n, d in pairs if n not in ("self", "cls")]
+
+
+def test_stub_signatures_are_the_extensions():
+    # Each stubbed function, method and constructor takes the parameters, in order and with the
+    # defaults, that the extension's own signature (from its text signature) gives: a renamed or
+    # added option cannot leave the .pyi behind.
+    stub = inspect.getfile(_core).rsplit("/", 1)[0] + "/_core.pyi"
+    tree = ast.parse(open(stub, encoding="utf-8").read())
+    functions = [([], f) for f in tree.body if isinstance(f, ast.FunctionDef)]
+    for c in (c for c in tree.body if isinstance(c, ast.ClassDef)):
+        functions += [([c.name], f) for f in c.body if isinstance(f, ast.FunctionDef) and not f.decorator_list]
+    checked, wrong = 0, []
+    for owner, fn in functions:
+        path = owner + ([] if fn.name == "__init__" else [fn.name])
+        obj = _core
+        for part in path:
+            obj = getattr(obj, part, None)
+        if obj is None or (fn.name.startswith("__") and fn.name != "__init__"):
+            continue
+        sig = inspect.signature(obj)
+        runtime = [
+            (p.name, None if p.default is p.empty else p.default)
+            for p in sig.parameters.values()
+            if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD) and p.name not in ("self", "cls")
+        ]
+        checked += 1
+        if runtime != _stub_parameters(fn):
+            wrong.append(f"{'.'.join(path)}: stub {_stub_parameters(fn)}, extension {runtime}")
+    assert checked > 80 and not wrong, wrong

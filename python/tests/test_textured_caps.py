@@ -11,6 +11,7 @@ import json
 import math
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -138,13 +139,9 @@ class _Field:
         cx, cy, cz = centre
         self._volume = 20.0 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 8.0 - (z - cz) ** 2 / 50.0)
         k, j, i = np.unravel_index(np.argmax(self._volume), self._volume.shape)
-        self._focus = {
-            "focal_peak_pa": float(self._volume.max()),
-            "focal_peak_mm": [self.x_mm[i], self.y_mm[j], self.axis_z_mm[k]],
-        }
-
-    def focus(self):
-        return self._focus
+        self.focal_metrics = SimpleNamespace(
+            focal_peak_pa=float(self._volume.max()), focal_peak_mm=[self.x_mm[i], self.y_mm[j], self.axis_z_mm[k]]
+        )
 
     def pressure_volume(self):
         return type("Volume", (), {"pressure_pa": self._volume})()

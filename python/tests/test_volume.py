@@ -218,7 +218,7 @@ def test_a_fields_volume_is_the_volume_of_its_own_march(sim, tmp_path):
         f.pressure_volume([1.0, 2.0, 3.0])
     # A field made without volume=True keeps none (the default: a lean march) and says how.
     lean = sim.field(phases)
-    assert lean.hottest is None and lean.focus()["hottest"] is None
+    assert lean.hottest is None and lean.focus().hottest is None and lean.focus().to_dict()["hottest"] is None
     with pytest.raises(ValueError, match="volume=True"):
         lean.to_nifti(tmp_path / "g.nii.gz")
     assert not (tmp_path / "g.nii.gz").exists()

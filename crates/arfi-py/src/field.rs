@@ -3,9 +3,9 @@
 //! array each time) with lengths in mm.
 
 use crate::error::{invalid, to_py};
-use crate::focal::{metrics_items, CoreFocalMetrics, MetricsMm};
+use crate::focal::{hottest_dict, hottest_places, CoreFocalMetrics, FieldFocus, HottestPlace, MetricsMm};
 use crate::volume::{borrowed_grid_arrays, ct_arrays, grid_arrays, window_of_box_mm};
-use has_core::focal::{FieldFocus, FocalMetrics, Peak};
+use has_core::focal::FocalMetrics;
 use has_core::physics::ct::CtMedium;
 use has_core::physics::grid::Grid;
 use has_core::physics::medium::Medium;
@@ -42,7 +42,7 @@ pub(crate) struct CoreField {
     /// The field's focal metrics in the units of the attributes.
     metrics: Option<MetricsMm>,
     target: [f64; 3],
-    focus: OnceLock<FieldFocus>,
+    focus: OnceLock<has_core::focal::FieldFocus>,
     /// The grid the volume lies on; the medium (the intensity's ρ and c; its CT, shared, what the
     /// volume may be laid on) and the frequency (Hz): copies, so that a field does not keep its
     /// simulation's plan alive.
@@ -92,8 +92,13 @@ impl CoreField {
         }
     }
 
+    /// The hottest place of each tissue class, with a volume.
+    fn hottest_places(&self) -> Option<Vec<HottestPlace>> {
+        self.field.volume.as_ref().map(|v| hottest_places(&v.hottest, self.field.metrics.as_ref()))
+    }
+
     /// The plane's and the axis's focal peaks, found on the first call.
-    fn plane_and_axis(&self) -> &FieldFocus {
+    fn plane_and_axis(&self) -> &has_core::focal::FieldFocus {
         self.focus.get_or_init(|| self.field.focus(self.target))
     }
 }
@@ -107,14 +112,6 @@ fn w_cm2(mut values: Vec<f32>) -> Vec<f32> {
 /// A position in metres as millimetres.
 pub(crate) fn point_mm<const N: usize>(p: [f64; N]) -> [f64; N] {
     p.map(|v| v * 1e3)
-}
-
-/// The keys `<prefix>_hottest_pa` and `<prefix>_hottest_mm` of a peak (None when it is the
-/// hottest place).
-fn hottest_items<const N: usize>(d: &Bound<'_, PyDict>, prefix: &str, peak: &Peak<N>) -> PyResult<()> {
-    d.set_item(format!("{prefix}_hottest_pa"), peak.hottest.map(|h| h.0))?;
-    d.set_item(format!("{prefix}_hottest_mm"), peak.hottest.map(|h| point_mm(h.1).to_vec()))?;
-    Ok(())
 }
 
 #[pymethods]
@@ -187,53 +184,24 @@ impl CoreField {
         CoreFocalMetrics::new(self.target, self.metrics.clone())
     }
 
-    /// The hottest grid sample of each tissue class over the whole grid, hottest first: `skull`
-    /// (bone), `scalp` (the target's soft tissue whose straight path to the target crosses bone),
-    /// else the tissue's name (`brain`, `water` …). Each: `pressure_pa`, `position_mm`,
-    /// `isppa_w_cm2`, `mechanical_index`.
-    /// None for a field made without `volume=True`.
+    /// The hottest place of each tissue class over the whole grid, hottest first
+    /// (`{tissue: HottestPlace}`: `skull` for bone, `scalp` for the target's soft tissue whose
+    /// straight path to the target crosses bone, else the tissue's name). None for a field made
+    /// without `volume=True`.
     #[getter]
     fn hottest<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(volume) = self.field.volume.as_ref() else { return Ok(None) };
-        let d = PyDict::new(py);
-        for h in &volume.hottest {
-            let e = PyDict::new(py);
-            e.set_item("pressure_pa", h.pressure)?;
-            e.set_item("position_mm", point_mm(h.position).to_vec())?;
-            e.set_item("isppa_w_cm2", h.isppa * 1e-4)?;
-            e.set_item("mechanical_index", h.mechanical_index)?;
-            d.set_item(&h.tissue, e)?;
-        }
-        Ok(Some(d))
+        self.hottest_places().as_deref().map(|h| hottest_dict(py, h)).transpose()
     }
 
-    /// What the field says at its target, in the JSON keys of `arfi field`: the focal metrics in
-    /// 3-D (`focal_peak_mm`, `focal_peak_pa`, `peak_to_target_mm`, `fwhm_6db_mm`,
-    /// `fwhm_6db_across_mm`, `fwhm_3db_mm`, `focal_volume_6db_mm3`, `isppa_w_cm2`,
-    /// `mechanical_index`, `focal_tissue`; None without a closed focal region), the focal peak on
-    /// the plane (`plane_peak_*`: the lobe around the axis's point there, and the peak's distance
-    /// from that point, `plane_peak_to_axis_mm`) and along the axis (`axis_peak_*`), and any hotter
-    /// place than the peak on each (`plane_hottest_*`, `axis_hottest_*`: None when the peak is the
-    /// hottest), and the hottest place of each tissue class (`hottest`). Pa and mm.
-    fn focus<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
-        let py = slf.py();
-        let d = PyDict::new(py);
-        d.set_item("target_mm", point_mm(slf.get().target).to_vec())?;
-        metrics_items(&d, slf.get().metrics.as_ref())?;
-        let f = slf.get().plane_and_axis();
-        let plane = point_mm(f.plane.position);
-        d.set_item("plane_peak_pa", f.plane.pressure)?;
-        d.set_item("plane_peak_x_mm", plane[0])?;
-        d.set_item("plane_peak_y_mm", plane[1])?;
-        d.set_item("plane_peak_to_axis_mm", f.peak_to_axis() * 1e3)?;
-        hottest_items(&d, "plane", &f.plane)?;
-        let axis = point_mm(f.axis.position);
-        d.set_item("axis_peak_pa", f.axis.pressure)?;
-        d.set_item("axis_peak_z_mm", axis[2])?;
-        d.set_item("axis_peak_mm", axis.to_vec())?;
-        hottest_items(&d, "axis", &f.axis)?;
-        d.set_item("hottest", slf.get().hottest(py)?)?;
-        Ok(d)
+    /// What the field says at its target (a `FieldFocus`: the focal metrics in 3-D, the focal
+    /// peaks on the plane and along the axis, any hotter place on each, and the hottest place of
+    /// each tissue); its `to_dict()` is the JSON of `arfi field`. Pa and mm.
+    fn focus(&self) -> FieldFocus {
+        FieldFocus {
+            metrics: CoreFocalMetrics::new(self.target, self.metrics.clone()),
+            focus: self.plane_and_axis().clone(),
+            hottest: self.hottest_places(),
+        }
     }
 
     /// `|p|` (Pa) of this beam in 3-D, from the march that made the field (with `volume=True`), as an

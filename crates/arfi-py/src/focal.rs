@@ -1,9 +1,11 @@
-//! The focal region in 3-D as a typed result: the focal metrics of `Simulation.focal_metrics`
-//! and `Section.focal_metrics` (and the keys of `Field.focus()`), in the units their names give.
+//! The focal region as typed results, in the units their names give: the focal metrics in 3-D
+//! (`Simulation.focal_metrics`, `Section.focal_metrics`, `Field.focal_metrics`), what a field
+//! says at its target (`Field.focus()`) and the hottest place of each tissue (`Field.hottest`).
 
 use crate::field::point_mm;
 use crate::results::fields_dict;
-use has_core::focal::FocalMetrics;
+use has_core::focal::{FocalMetrics, Peak};
+use has_core::simulation::TissueHottest;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -60,7 +62,8 @@ pub(crate) fn metrics_items(d: &Bound<'_, PyDict>, m: Option<&MetricsMm>) -> PyR
 /// -3/-6 dB extents and -6 dB volume, and I_SPPA and the mechanical index at the peak, in the
 /// tissue it lies in. Every attribute but `target_mm` is None when no closed -6 dB region lies
 /// around the target inside the grid.
-#[pyclass(module = "arfi._core", name = "FocalMetrics", frozen)]
+#[pyclass(module = "arfi._core", name = "FocalMetrics", frozen, skip_from_py_object)]
+#[derive(Clone)]
 pub(crate) struct CoreFocalMetrics {
     target_mm: [f64; 3],
     m: Option<MetricsMm>,
@@ -162,5 +165,233 @@ impl CoreFocalMetrics {
             ),
             None => "FocalMetrics(no closed -6 dB region around the target)".to_string(),
         }
+    }
+}
+
+/// The hottest place of one tissue class over the whole grid: `|p|` (Pa), where (mm), I_SPPA
+/// (W/cm²) and the mechanical index there.
+#[pyclass(module = "arfi._core", frozen, skip_from_py_object)]
+#[derive(Clone)]
+pub(crate) struct HottestPlace {
+    tissue: String,
+    pressure_pa: f64,
+    position_mm: [f64; 3],
+    isppa_w_cm2: f64,
+    mechanical_index: f64,
+    is_focus: bool,
+}
+
+/// The hottest place of each tissue class, hottest first, each knowing whether it is the focus
+/// itself ([`TissueHottest::is_focus`] with the field's focal metrics `focal`).
+pub(crate) fn hottest_places(hottest: &[TissueHottest], focal: Option<&FocalMetrics>) -> Vec<HottestPlace> {
+    hottest
+        .iter()
+        .map(|h| HottestPlace {
+            tissue: h.tissue.clone(),
+            pressure_pa: h.pressure,
+            position_mm: point_mm(h.position),
+            isppa_w_cm2: h.isppa * 1e-4,
+            mechanical_index: h.mechanical_index,
+            is_focus: focal.is_some_and(|m| h.is_focus(m)),
+        })
+        .collect()
+}
+
+/// `{tissue: HottestPlace}`, hottest first.
+pub(crate) fn hottest_dict<'py>(py: Python<'py>, places: &[HottestPlace]) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for h in places {
+        d.set_item(&h.tissue, h.clone())?;
+    }
+    Ok(d)
+}
+
+#[pymethods]
+impl HottestPlace {
+    /// The attributes `to_dict` writes (the JSON's keys under `hottest`, keyed by tissue).
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 4] = ["pressure_pa", "position_mm", "isppa_w_cm2", "mechanical_index"];
+
+    /// The class: `skull` (bone), `scalp` (the target's soft tissue whose straight path to the
+    /// target crosses bone), else the tissue's name (`brain`, `water` …).
+    #[getter]
+    fn tissue(&self) -> &str {
+        &self.tissue
+    }
+    /// `|p|` there (Pa).
+    #[getter]
+    fn pressure_pa(&self) -> f64 {
+        self.pressure_pa
+    }
+    /// The grid sample's position (mm, transducer frame).
+    #[getter]
+    fn position_mm(&self) -> [f64; 3] {
+        self.position_mm
+    }
+    /// Spatial-peak pulse-average intensity there, p²/(2·ρ·c) (W/cm²).
+    #[getter]
+    fn isppa_w_cm2(&self) -> f64 {
+        self.isppa_w_cm2
+    }
+    /// Mechanical index there, p[MPa]/√f[MHz] (in situ).
+    #[getter]
+    fn mechanical_index(&self) -> f64 {
+        self.mechanical_index
+    }
+    /// Whether this place is the focus itself: the focal peak's tissue, no hotter than the peak
+    /// (a safety check flags it once, as the focal peak).
+    #[getter]
+    fn is_focus(&self) -> bool {
+        self.is_focus
+    }
+
+    /// The place as a dict of its attributes (the JSON's keys).
+    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        fields_dict(slf.as_any())
+    }
+
+    fn __repr__(&self) -> String {
+        let [x, y, z] = self.position_mm;
+        format!(
+            "HottestPlace({}: {:.4e} Pa at ({x:.2}, {y:.2}, {z:.2}) mm, I_SPPA {:.4} W/cm², MI {:.3})",
+            self.tissue, self.pressure_pa, self.isppa_w_cm2, self.mechanical_index
+        )
+    }
+}
+
+/// The keys `<prefix>_hottest_pa` and `<prefix>_hottest_mm` of a peak (None when it is the
+/// hottest place).
+fn hottest_items<const N: usize>(d: &Bound<'_, PyDict>, prefix: &str, peak: &Peak<N>) -> PyResult<()> {
+    d.set_item(format!("{prefix}_hottest_pa"), peak.hottest.map(|h| h.0))?;
+    d.set_item(format!("{prefix}_hottest_mm"), peak.hottest.map(|h| point_mm(h.1).to_vec()))?;
+    Ok(())
+}
+
+/// What a field says at its target: the focal metrics in 3-D (`focal_metrics`), the focal peak
+/// on the plane (the lobe around the axis's point there) and along the axis, any hotter place
+/// than the peak on each (None when the peak is the hottest), and the hottest place of each
+/// tissue class (`hottest`, with a volume). Pa and mm; `to_dict()` is `arfi field`'s JSON.
+#[pyclass(module = "arfi._core", frozen)]
+pub(crate) struct FieldFocus {
+    pub(crate) metrics: CoreFocalMetrics,
+    pub(crate) focus: has_core::focal::FieldFocus,
+    pub(crate) hottest: Option<Vec<HottestPlace>>,
+}
+
+#[pymethods]
+impl FieldFocus {
+    /// The steering target (mm, transducer frame).
+    #[getter]
+    fn target_mm(&self) -> [f64; 3] {
+        self.metrics.target_mm
+    }
+    /// The focal metrics in 3-D around the target.
+    #[getter]
+    fn focal_metrics(&self) -> CoreFocalMetrics {
+        self.metrics.clone()
+    }
+    /// |p| at the focal peak on the plane (Pa).
+    #[getter]
+    fn plane_peak_pa(&self) -> f64 {
+        self.focus.plane.pressure
+    }
+    /// x of the plane's focal peak (mm).
+    #[getter]
+    fn plane_peak_x_mm(&self) -> f64 {
+        self.focus.plane.position[0] * 1e3
+    }
+    /// y of the plane's focal peak (mm).
+    #[getter]
+    fn plane_peak_y_mm(&self) -> f64 {
+        self.focus.plane.position[1] * 1e3
+    }
+    /// Distance on the plane from the axis's point to the focal peak (mm).
+    #[getter]
+    fn plane_peak_to_axis_mm(&self) -> f64 {
+        self.focus.peak_to_axis() * 1e3
+    }
+    /// |p| of a place on the plane hotter than its focal peak (Pa), or None.
+    #[getter]
+    fn plane_hottest_pa(&self) -> Option<f64> {
+        self.focus.plane.hottest.map(|h| h.0)
+    }
+    /// Where that place lies (x, y mm), or None.
+    #[getter]
+    fn plane_hottest_mm(&self) -> Option<[f64; 2]> {
+        self.focus.plane.hottest.map(|h| point_mm(h.1))
+    }
+    /// |p| at the focal peak along the axis (Pa).
+    #[getter]
+    fn axis_peak_pa(&self) -> f64 {
+        self.focus.axis.pressure
+    }
+    /// z of the axis's focal peak (mm).
+    #[getter]
+    fn axis_peak_z_mm(&self) -> f64 {
+        self.focus.axis.position[2] * 1e3
+    }
+    /// The axis's focal peak (x, y, z mm).
+    #[getter]
+    fn axis_peak_mm(&self) -> [f64; 3] {
+        point_mm(self.focus.axis.position)
+    }
+    /// |p| of a place on the axis hotter than its focal peak (Pa), or None.
+    #[getter]
+    fn axis_hottest_pa(&self) -> Option<f64> {
+        self.focus.axis.hottest.map(|h| h.0)
+    }
+    /// Where that place lies (x, y, z mm), or None.
+    #[getter]
+    fn axis_hottest_mm(&self) -> Option<[f64; 3]> {
+        self.focus.axis.hottest.map(|h| point_mm(h.1))
+    }
+    /// The hottest place of each tissue class, hottest first (`{tissue: HottestPlace}`); None for
+    /// a field made without `volume=True`.
+    #[getter]
+    fn hottest<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.hottest.as_deref().map(|h| hottest_dict(py, h)).transpose()
+    }
+
+    /// The JSON of `arfi field`'s focus: `target_mm`, the focal metrics' keys (None without a
+    /// closed focal region), `plane_peak_*`, `plane_hottest_*`, `axis_peak_*`, `axis_hottest_*` and
+    /// `hottest` (`{tissue: {pressure_pa, position_mm, isppa_w_cm2, mechanical_index}}`).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("target_mm", self.metrics.target_mm.to_vec())?;
+        metrics_items(&d, self.metrics.m.as_ref())?;
+        let f = &self.focus;
+        let plane = point_mm(f.plane.position);
+        d.set_item("plane_peak_pa", f.plane.pressure)?;
+        d.set_item("plane_peak_x_mm", plane[0])?;
+        d.set_item("plane_peak_y_mm", plane[1])?;
+        d.set_item("plane_peak_to_axis_mm", f.peak_to_axis() * 1e3)?;
+        hottest_items(&d, "plane", &f.plane)?;
+        let axis = point_mm(f.axis.position);
+        d.set_item("axis_peak_pa", f.axis.pressure)?;
+        d.set_item("axis_peak_z_mm", axis[2])?;
+        d.set_item("axis_peak_mm", axis.to_vec())?;
+        hottest_items(&d, "axis", &f.axis)?;
+        match &self.hottest {
+            Some(places) => {
+                let h = PyDict::new(py);
+                for p in places {
+                    h.set_item(&p.tissue, fields_dict(Bound::new(py, p.clone())?.as_any())?)?;
+                }
+                d.set_item("hottest", h)?;
+            }
+            None => d.set_item("hottest", py.None())?,
+        }
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        let [x, y, z] = point_mm(self.focus.axis.position);
+        format!(
+            "FieldFocus(plane peak {:.4e} Pa, {:.2} mm from the axis; axis peak {:.4e} Pa at ({x:.2}, {y:.2}, {z:.2}) mm)",
+            self.focus.plane.pressure,
+            self.focus.peak_to_axis() * 1e3,
+            self.focus.axis.pressure
+        )
     }
 }

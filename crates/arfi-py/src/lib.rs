@@ -5,6 +5,7 @@ mod convert;
 mod cost;
 mod diagnose;
 mod error;
+mod estimate_options;
 mod field;
 mod focal;
 mod interrupt;
@@ -40,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<mode_fit::CoreModesFit>()?;
     m.add_class::<results::CoreCalibration>()?;
     m.add_class::<results::CoreEstimate>()?;
+    m.add_class::<estimate_options::EstimateOptions>()?;
     m.add_class::<results::NuisanceFit>()?;
     m.add_class::<results::NextAcquisition>()?;
     m.add_class::<results::ShiftCandidate>()?;
@@ -53,6 +55,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<field::CoreField>()?;
     m.add_class::<field::CoreSection>()?;
     m.add_class::<focal::CoreFocalMetrics>()?;
+    m.add_class::<focal::FieldFocus>()?;
+    m.add_class::<focal::HottestPlace>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
     m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;

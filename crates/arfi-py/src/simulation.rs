@@ -4,6 +4,7 @@ use crate::convert::{measurements, phases_vec};
 use crate::cost::CoreCostModel;
 use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
+use crate::estimate_options::EstimateOptions;
 use crate::field::{CoreField, CoreSection};
 use crate::focal::{CoreFocalMetrics, MetricsMm};
 use crate::interrupt::run_interruptible;
@@ -12,16 +13,15 @@ use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
 use crate::scenario::{mr_affine_array, mr_volume_shape};
 use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm, VolumeArrays};
+use has_core::control::Control;
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::build_model;
 use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions};
-use has_core::inverse::element::nuisance::Nuisance;
 use has_core::inverse::element::{known_per_element, BasisCache};
 use has_core::inverse::estimate::condense;
-use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateRequest, Method};
+use has_core::inverse::estimate::workflow::estimate_aberration_with;
 use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::modes_fit::fit_modes_with_noise;
-use has_core::inverse::prior::Prior;
 use has_core::physics::aberration::SkullScreen;
 use has_core::physics::source::SourceModel;
 use has_core::simulation::{ExternalField, Simulation};
@@ -29,8 +29,9 @@ use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::sync::Mutex;
 
 /// Points (mm, shape (n, 3), finite) in metres.
 fn points_m(points_mm: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
@@ -539,67 +540,37 @@ impl CoreSimulation {
         Ok(CoreModesFit(fit))
     }
 
-    /// Hybrid estimation from one or more images, each with its known added phases.
-    #[pyo3(signature = (images, known, method="lbfgs", max_evaluations=None, time_limit_s=None, seed=0, starts=None, fit_amplitude=false, threshold=0.9, progress=false, prior=None, prior_std_rad=None, prior_correlation_mm=None, fit_nuisance=None, suggest=false, prior_modes=None, noise_rad=None))]
-    #[allow(clippy::too_many_arguments)]
+    /// Hybrid estimation from one or more images, each with its known added phases, with
+    /// `options` (an `EstimateOptions`); `progress`, a callable, is called with `(done, total)`
+    /// element fields as the element basis is marched (an exception it raises stops the run and
+    /// is raised here).
+    #[pyo3(signature = (images, known, options, progress=None))]
     fn estimate<'py>(
         &self,
         py: Python<'py>,
         images: Vec<PyReadonlyArray2<'py, f64>>,
         known: Vec<Option<PyReadonlyArray1<'py, f64>>>,
-        method: &str,
-        max_evaluations: Option<usize>,
-        time_limit_s: Option<f64>,
-        seed: u64,
-        starts: Option<usize>,
-        fit_amplitude: bool,
-        threshold: f64,
-        progress: bool,
-        prior: Option<PyReadonlyArray1<'py, f64>>,
-        prior_std_rad: Option<f64>,
-        prior_correlation_mm: Option<f64>,
-        fit_nuisance: Option<Vec<String>>,
-        suggest: bool,
-        prior_modes: Option<PyReadonlyArray2<'py, f64>>,
-        noise_rad: Option<f64>,
+        options: PyRef<'py, EstimateOptions>,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<CoreEstimate> {
         let measurements = measurements(images, known)?;
-        let nuisance = Nuisance::parse(&fit_nuisance.unwrap_or_default()).map_err(to_py)?;
-        let prior = Prior::from_parts(prior.map(|p| p.as_array().to_vec()), prior_std_rad).map_err(to_py)?;
-        let prior = match (prior, prior_correlation_mm) {
-            (Some(p), Some(l)) => Some(p.with_correlation_length(l * 1e-3).map_err(to_py)?),
-            (None, Some(_)) => return Err(invalid("prior_correlation_mm", "was given without a prior")),
-            (p, None) => p,
-        };
-        let prior = match (prior, prior_modes) {
-            (Some(p), Some(m)) => Some(p.with_modes(m.as_array().rows().into_iter().map(|r| r.to_vec()).collect()).map_err(to_py)?),
-            (None, Some(_)) => return Err(invalid("prior_modes", "were given without a prior")),
-            (p, None) => p,
-        };
-        let request = EstimateRequest {
-            method: Method::parse(method).map_err(to_py)?,
-            max_evaluations,
-            time_limit_s,
-            seed,
-            starts,
-            fit_amplitude,
-            noise_rad,
-            nuisance,
-            threshold,
-            prior,
-            suggest,
-        };
+        let request = &options.0;
+        let cancel = AtomicBool::new(false);
+        let failed: Mutex<Option<PyErr>> = Mutex::new(None);
         let report = |done: usize, total: usize| {
-            if progress {
-                eprint!("\rarfi: element fields {done}/{total}{}", if done == total { "\n" } else { "" });
+            if let Some(f) = &progress {
+                if let Err(e) = Python::attach(|py| f.call1(py, (done, total)).map(drop)) {
+                    failed.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
+                    cancel.store(true, Ordering::Relaxed);
+                }
             }
         };
-        let cancel = AtomicBool::new(false);
-        let r = run_interruptible(py, &cancel, || {
-            estimate_aberration_with(&self.inner, &measurements, &request, &self.basis, Some(&cancel), Some(&report))
-        })?
-        .map_err(to_py)?;
-        Ok(CoreEstimate { report: r, method: request.method })
+        let control = Control::default().with_cancel(&cancel).with_progress(&report);
+        let r = run_interruptible(py, &cancel, || estimate_aberration_with(&self.inner, &measurements, request, &self.basis, control))?;
+        if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        Ok(CoreEstimate { report: r.map_err(to_py)?, method: request.method })
     }
 
     /// The hybrid cost (paper Eq. 4) of images, each with its known added phases, on the per-pixel

@@ -3,6 +3,7 @@
 //! Builds the element basis, checks it against the direct image, and estimates 1024 phases from
 //! `images` noise-free images with known random steering-offset diversity.
 
+use has_core::control::Control;
 use has_core::inverse::cost::{build_model, Measurement, Objective};
 use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::{condense, phase_error, Estimator};
@@ -33,18 +34,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         measurements.push(Measurement { image: sim.arfi_image(&total)?, known: d });
     }
     let t = Instant::now();
-    let model = build_element_model(
-        &sim,
-        &measurements,
-        sim.mask_fraction,
-        0,
-        Some(&|d, n| {
-            if d % 256 == 0 {
-                eprintln!("basis {d}/{n}")
-            }
-        }),
-        None,
-    )?;
+    let report = |d: usize, n: usize| {
+        if d % 256 == 0 {
+            eprintln!("basis {d}/{n}")
+        }
+    };
+    let model = build_element_model(&sim, &measurements, sim.mask_fraction, 0, Control::default().with_progress(&report))?;
     let b = &model.cost.basis;
     println!(
         "basis: {} samples x {} elements, {:.0} MB, {:.1} s",

@@ -21,6 +21,7 @@
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod control;
 pub mod error;
 pub mod focal;
 pub mod grouping;

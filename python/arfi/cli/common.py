@@ -154,6 +154,18 @@ def read_image(
     return image, known
 
 
+def estimate_options(**values: Any) -> _core.EstimateOptions:
+    """The estimate's options from the command line's values, checked by the library's rules
+    before any model is built; an error names the option as typed (``--prior-std-rad: ...``)."""
+    try:
+        return _core.EstimateOptions(**values)
+    except ValueError as e:
+        name, sep, reason = str(e).partition(":")
+        if sep and name in _core.EstimateOptions._fields:
+            raise UsageError(f"--{name.replace('_', '-')}:{reason}") from None
+        raise
+
+
 def calibrated_simulation(
     args: argparse.Namespace, scenario: Scenario | None = None, source: _core.CoreSourceModel | None = None
 ) -> Simulation:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from typing import Any
@@ -18,6 +17,7 @@ from arfi.cli.common import (
     add_method,
     add_report,
     calibrated_simulation,
+    estimate_options,
     finish,
     load_scenario,
     npy_path,
@@ -28,7 +28,6 @@ from arfi.cli.common import (
     save_npy,
 )
 from arfi.scenario import Scenario
-from arfi.validate import nuisance_names
 
 TARGET_TOLERANCE_MM = 0.5
 """How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
@@ -226,8 +225,6 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.noise_rad is not None and not (math.isfinite(args.noise_rad) and args.noise_rad > 0):
-        raise ValueError(f"--noise-rad: must be a finite number > 0, got {args.noise_rad:g}")
     for path, option in ((args.out_phases, "--out-phases"), (args.suggest, "--suggest")):
         if path:
             npy_path(path, option)  # before the estimate, so that neither is written when one is wrong
@@ -239,8 +236,20 @@ def run(args: argparse.Namespace) -> int:
     prior = read_optional_phases(args.prior, "--prior")
     if prior is not None:
         outline.check_prior(prior, f"--prior: {args.prior}", args.groups)
-    if prior is not None and args.prior_std_rad is None:
-        raise UsageError("--prior-std-rad: required with --prior (the expected error of each predicted phase, rad)")
+    options = estimate_options(
+        method=args.method,
+        max_evaluations=args.max_evaluations,
+        time_limit_s=args.time_limit_s,
+        seed=args.seed,
+        starts=args.starts,
+        fit_amplitude=args.fit_amplitude,
+        noise_rad=args.noise_rad,
+        prior=prior,
+        prior_std_rad=args.prior_std_rad,
+        prior_correlation_mm=args.prior_correlation_mm,
+        fit_nuisance=args.fit_nuisance,
+        suggest=bool(args.suggest),
+    )
     transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
     if transmission is not None:
         check_transmission(args, transmission, predicted_at, outline)
@@ -249,26 +258,11 @@ def run(args: argparse.Namespace) -> int:
     moved = modes is not None and modes.prior_moved
     if modes is not None and moved:
         prior = modes.prior
+        options = options.replace(prior=prior)
     sim = calibrated_simulation(args, scenario, source)
     if transmission is not None:
         sim = sim.with_element_amplitudes(transmission / transmission.mean())
-    e = sim.estimate(
-        [p[0] for p in pairs],
-        [p[1] for p in pairs],
-        method=args.method,
-        max_evaluations=args.max_evaluations,
-        time_limit_s=args.time_limit_s,
-        seed=args.seed,
-        starts=args.starts,
-        fit_amplitude=args.fit_amplitude,
-        progress=sys.stderr.isatty(),
-        prior=prior,
-        prior_std_rad=args.prior_std_rad,
-        prior_correlation_mm=args.prior_correlation_mm,
-        fit_nuisance=args.fit_nuisance,
-        suggest=bool(args.suggest),
-        noise_rad=args.noise_rad,
-    )
+    e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], options, progress=sys.stderr.isatty())
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(
@@ -287,9 +281,7 @@ def run(args: argparse.Namespace) -> int:
     if e.nuisance is not None:
         n = e.nuisance
         # Fitted though not asked for: the library's refit of a smooth prior's mismatched estimate.
-        refit = "amplitude" in n.fitted and not (
-            args.fit_amplitude or {"amplitude", "all"} & set(nuisance_names(args.fit_nuisance) or [])
-        )
+        refit = "amplitude" in n.fitted and not (options.fit_amplitude or "amplitude" in options.fit_nuisance)
         offsets = ", ".join(f"{b:+.3f}" for b in n.offset_rad)
         print(
             f"estimate: fitted {', '.join(n.fitted)}: amplitude scale {n.scale:.3f}, W {n.broadening_width_mm:.2f} mm, "

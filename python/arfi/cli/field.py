@@ -170,62 +170,64 @@ VOLUMES = (
 
 
 def hottest_line(hottest: dict[str, Any]) -> str:
-    """The hottest place of each tissue class over the grid, hottest first."""
+    """The hottest place of each tissue class over the grid, hottest first (``Field.hottest``)."""
     parts = [
-        f"{tissue} {h['pressure_pa'] / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in h['position_mm'])}) mm, "
-        f"MI {h['mechanical_index']:.2f}"
+        f"{tissue} {h.pressure_pa / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in h.position_mm)}) mm, "
+        f"MI {h.mechanical_index:.2f}"
         for tissue, h in hottest.items()
     ]
     return "field: hottest in each tissue: " + "; ".join(parts)
 
 
-def focus_lines(sim: Simulation, f: Field, focus: dict[str, Any], out: str) -> list[str]:
+def focus_lines(sim: Simulation, f: Field, focus: Any, out: str) -> tuple[list[str], dict[str, str]]:
     """The printed summary: the focal peak near the target on the plane and along the beam's axis,
-    any hotter place named by its tissue (which ``focus`` gains as ``*_hottest_tissue``), and the
-    propagation model."""
-    t = tuple(focus["target_mm"])
+    any hotter place named by its tissue (returned as the JSON's ``*_hottest_tissue``), and the
+    propagation model. ``focus`` is ``f.focus()``."""
+    t = tuple(focus.target_mm)
     lines = [
-        f"field: plane z = {f.z_mm:.2f} mm: focal peak {focus['plane_peak_pa'] / 1e6:.3f} MPa at "
-        f"({focus['plane_peak_x_mm']:.2f}, {focus['plane_peak_y_mm']:.2f}) mm, {focus['plane_peak_to_axis_mm']:.2f} mm "
+        f"field: plane z = {f.z_mm:.2f} mm: focal peak {focus.plane_peak_pa / 1e6:.3f} MPa at "
+        f"({focus.plane_peak_x_mm:.2f}, {focus.plane_peak_y_mm:.2f}) mm, {focus.plane_peak_to_axis_mm:.2f} mm "
         f"from the beam's axis; along the axis to the target ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: "
-        f"{focus['axis_peak_pa'] / 1e6:.3f} MPa at z = {focus['axis_peak_z_mm']:.2f} mm -> {out}"
+        f"{focus.axis_peak_pa / 1e6:.3f} MPa at z = {focus.axis_peak_z_mm:.2f} mm -> {out}"
     ]
-    lines.append(f"field: {metrics_text(f.focal_metrics)}")
-    if focus["hottest"] is not None:
-        lines.append(hottest_line(focus["hottest"]))
+    lines.append(f"field: {metrics_text(focus.focal_metrics)}")
+    if focus.hottest is not None:
+        lines.append(hottest_line(focus.hottest))
+    tissues = {}
     for where, key in (("on the plane", "plane"), ("on the axis", "axis")):
-        if focus[f"{key}_hottest_pa"] is not None:
-            p = focus[f"{key}_hottest_mm"]
-            point = [*p, f.z_mm] if len(p) == 2 else p
+        pa, p = getattr(focus, f"{key}_hottest_pa"), getattr(focus, f"{key}_hottest_mm")
+        if pa is not None:
+            point = [*p, f.z_mm] if len(p) == 2 else list(p)
             tissue = sim.tissue_classes(point)[0]
-            focus[f"{key}_hottest_tissue"] = tissue
+            tissues[f"{key}_hottest_tissue"] = tissue
             lines.append(
-                f"field: hottest {where}: {tissue}, {focus[f'{key}_hottest_pa'] / 1e6:.3f} MPa at ({point[0]:.1f}, "
+                f"field: hottest {where}: {tissue}, {pa / 1e6:.3f} MPa at ({point[0]:.1f}, "
                 f"{point[1]:.1f}, {point[2]:.1f}) mm (not the focus)"
             )
     lines.append(f"field: {sim.propagation_summary()}")
-    return lines
+    return lines, tissues
 
 
-def fdtd_line(r: FdtdResult, focus: dict[str, Any], march: dict[str, Any]) -> str:
-    """The full-wave run in one line, its focal peak beside the march's."""
+def fdtd_line(r: FdtdResult, focus: Any, march: Any) -> str:
+    """The full-wave run in one line, its focal peak beside the march's (``focus`` and ``march``:
+    the two fields' focal metrics)."""
     nx, ny, nz = r.plan.shape
     text = (
         f"field: computed by BabelViscoFDTD (full wave, {r.plan.h_m * 1e3:.3f} mm voxels, {nx} x {ny} x {nz}, "
         f"{r.materials} materials) in {r.seconds:.0f} s, steady to {100 * r.steady_change:.2f} %"
     )
-    if focus.get("focal_peak_pa") and march.get("focal_peak_pa"):
-        fp, mp = focus["focal_peak_mm"], march["focal_peak_mm"]
+    if focus.focal_peak_pa and march.focal_peak_pa:
+        fp, mp = focus.focal_peak_mm, march.focal_peak_mm
         gap = sum((a - b) ** 2 for a, b in zip(fp, mp)) ** 0.5
         text += (
-            f"; the march: {march['focal_peak_pa'] / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in mp)}) mm, "
-            f"{100 * (march['focal_peak_pa'] / focus['focal_peak_pa'] - 1):+.1f} % and {gap:.2f} mm from the full "
+            f"; the march: {march.focal_peak_pa / 1e6:.3f} MPa at ({', '.join(f'{v:.1f}' for v in mp)}) mm, "
+            f"{100 * (march.focal_peak_pa / focus.focal_peak_pa - 1):+.1f} % and {gap:.2f} mm from the full "
             "wave's"
         )
     return text
 
 
-def fdtd_json(r: FdtdResult, march: dict[str, Any]) -> dict[str, Any]:
+def fdtd_json(r: FdtdResult, march: Any) -> dict[str, Any]:
     """The full-wave run's JSON: its grid, time step, steadiness and the march's focal metrics."""
     p = r.plan
     return {
@@ -238,8 +240,8 @@ def fdtd_json(r: FdtdResult, march: dict[str, Any]) -> dict[str, Any]:
         "materials": r.materials,
         "steady_change": r.steady_change,
         "seconds": r.seconds,
-        "march_focal_peak_pa": march.get("focal_peak_pa"),
-        "march_focal_peak_mm": march.get("focal_peak_mm"),
+        "march_focal_peak_pa": march.focal_peak_pa,
+        "march_focal_peak_mm": march.focal_peak_mm,
     }
 
 
@@ -307,7 +309,8 @@ def run(args: argparse.Namespace) -> int:
         },
     )
     focus = f.focus()
-    lines = focus_lines(sim, f, focus, args.out)
+    lines, tissues = focus_lines(sim, f, focus, args.out)
+    summary_values = {**focus.to_dict(), **tissues}
     if skipped:
         lines.insert(2, f"field: no hottest place per tissue: {skipped}")
     written = {}
@@ -321,13 +324,13 @@ def run(args: argparse.Namespace) -> int:
         written[v.key] = {"path": path, "shape_ijk": [ni, nj, nk], v.max_key: float(values.max())}
         if not v.in_ct:
             written[v.key]["box_mm"] = args.volume_box_mm
-    engine_line = None if fdtd is None or march is None else fdtd_line(fdtd, focus, march.focus())
+    engine_line = None if fdtd is None or march is None else fdtd_line(fdtd, f.focal_metrics, march.focal_metrics)
     if engine_line is not None:
         lines.insert(-1, engine_line)
     rows = exceeded(focus, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
-    focus["safety"] = {"mechanical_index_limit": limits[0], "isppa_limit_w_cm2": limits[1], "exceeded": rows}
+    summary_values["safety"] = {"mechanical_index_limit": limits[0], "isppa_limit_w_cm2": limits[1], "exceeded": rows}
     print("\n".join(lines))
     if args.report:
         from arfi.report import field_report
@@ -337,7 +340,7 @@ def run(args: argparse.Namespace) -> int:
         )
         engine = sim.propagation_summary() if engine_line is None else engine_line[len("field: ") :]
         page = field_report(
-            args.report, sim, f, {"out": args.out, **focus, "safety": safety, "propagation": engine}, phases
+            args.report, sim, f, {"out": args.out, **summary_values, "safety": safety, "propagation": engine}, phases
         )
         print(f"field: report -> {page}")
     finish(
@@ -346,11 +349,11 @@ def run(args: argparse.Namespace) -> int:
             "out": args.out,
             "z_mm": f.z_mm,
             "surface_pressure_pa": f.surface_pressure_pa,
-            **focus,
+            **summary_values,
             **{v.key: written.get(v.key) for v in VOLUMES},
             "propagation": sim.propagation,
             "engine": args.engine,
-            "fdtd": None if fdtd is None or march is None else fdtd_json(fdtd, march.focus()),
+            "fdtd": None if fdtd is None or march is None else fdtd_json(fdtd, march.focal_metrics),
             "seconds": time.perf_counter() - t,
         },
     )

@@ -12,7 +12,7 @@
 
 use super::Simulation;
 use crate::error::{HasError, Result};
-use crate::focal::exposure;
+use crate::focal::{exposure, FocalMetrics};
 use crate::physics::grid::Grid;
 use rayon::prelude::*;
 
@@ -41,6 +41,16 @@ pub struct TissueHottest {
     pub isppa: f64,
     /// Mechanical index there, `p[MPa] / √f[MHz]` (in situ).
     pub mechanical_index: f64,
+}
+
+impl TissueHottest {
+    /// Whether this place is the focus itself: in the focal peak's tissue and no hotter than the
+    /// peak refined between samples (`1e-6`: the sample is a float32 sum, the peak a
+    /// double-precision refinement, which may lie a hair below it). A safety check flags the focus
+    /// once, at the focal peak, and any other hottest place on its own.
+    pub fn is_focus(&self, focal: &FocalMetrics) -> bool {
+        self.tissue == focal.tissue && self.pressure <= focal.peak_pressure * (1.0 + 1e-6)
+    }
 }
 
 /// Per grid sample: the index of its tissue's name in a list of names.
@@ -240,6 +250,35 @@ fn nearer(shape: [usize; 3], target: [f64; 3], s: usize) -> Option<usize> {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
+
+    /// The focal tissue's hottest sample is the focus when no hotter than the peak (a float32
+    /// hair above it included); hotter (a side lobe), or another tissue, it is a place of its own.
+    #[test]
+    fn the_focal_tissues_hottest_sample_is_the_focus_unless_hotter() {
+        let focal = FocalMetrics {
+            target: [0.0; 3],
+            peak: [0.0; 3],
+            peak_pressure: 1.5e6,
+            fwhm_6db: [0.0; 2],
+            across_6db: [0.0; 2],
+            fwhm_3db: [0.0; 2],
+            volume_6db: 0.0,
+            isppa: 0.0,
+            mechanical_index: 0.0,
+            tissue: "skull".into(),
+        };
+        let place = |tissue: &str, pressure: f64| TissueHottest {
+            tissue: tissue.into(),
+            pressure,
+            position: [0.0; 3],
+            isppa: 0.0,
+            mechanical_index: 0.0,
+        };
+        assert!(place("skull", 1.5e6 * (1.0 + 1e-7)).is_focus(&focal));
+        assert!(place("skull", 1.2e6).is_focus(&focal));
+        assert!(!place("skull", 1.5e6 * 1.01).is_focus(&focal));
+        assert!(!place("brain", 1.2e6).is_focus(&focal));
+    }
 
     /// A 41³ grid (0.5 mm) around a target at its centre sample: brain within 5 mm of it, a bone
     /// shell to 7 mm (4 samples thick: a step of the path test moves at most √3 samples, so it

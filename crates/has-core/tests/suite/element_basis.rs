@@ -2,6 +2,7 @@
 //! 256-element version of the default array (8 x 8 per quadrant) to keep the marches short.
 
 use crate::common;
+use has_core::control::Control;
 use has_core::inverse::cost::{build_model, Measurement, Objective};
 use has_core::inverse::element::nuisance::Nuisance;
 use has_core::inverse::element::{build_element_model, BasisCache};
@@ -36,7 +37,7 @@ fn element_basis_images_gradient_and_estimate() {
     let n = sim.n_elements();
     assert_eq!(n, 256);
     let (truth, ms) = study(&sim, 4);
-    let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, None, None).unwrap();
+    let model = build_element_model(&sim, &ms, sim.mask_fraction, 0, Control::default()).unwrap();
     let basis = &model.cost.basis;
 
     // The basis is marched on a grid 1.5 x coarser (3λ/8: the phantom and water reverberate
@@ -64,7 +65,7 @@ fn element_basis_images_gradient_and_estimate() {
     let amplitudes: Vec<f64> = (0..n).map(|e| 0.2 + 0.8 * ((e * 37) % 11) as f64 / 10.0).collect();
     let weighted = sim.with_element_amplitudes(&amplitudes).unwrap();
     let direct_weighted = common::basis_model(&weighted).arfi_image(&truth).unwrap();
-    let basis_weighted = build_element_model(&weighted, &ms, sim.mask_fraction, 0, None, None).unwrap().cost.basis;
+    let basis_weighted = build_element_model(&weighted, &ms, sim.mask_fraction, 0, Control::default()).unwrap().cost.basis;
     let q = &basis_weighted.sampler.pixels;
     let err = (&basis_weighted.image(&truth).unwrap() - &direct_weighted.slice(ndarray::s![q[0].clone(), q[1].clone()]))
         .iter()
@@ -108,10 +109,10 @@ fn a_basis_cache_reuses_the_basis_for_the_same_pixel_box_only() {
     let sim = common::small_array();
     let (_, ms) = study(&sim, 2);
     let cache = BasisCache::default();
-    let a = cache.element_model(&sim, &ms, sim.mask_fraction, 0, &Nuisance::default(), None, None).unwrap();
-    let b = cache.element_model(&sim, &ms, sim.mask_fraction, 0, &Nuisance::default(), None, None).unwrap();
+    let a = cache.element_model(&sim, &ms, sim.mask_fraction, 0, &Nuisance::default(), Control::default()).unwrap();
+    let b = cache.element_model(&sim, &ms, sim.mask_fraction, 0, &Nuisance::default(), Control::default()).unwrap();
     assert!(Arc::ptr_eq(&a.cost.basis, &b.cost.basis));
-    let c = cache.element_model(&sim, &ms, sim.mask_fraction, 2, &Nuisance::default(), None, None).unwrap();
+    let c = cache.element_model(&sim, &ms, sim.mask_fraction, 2, &Nuisance::default(), Control::default()).unwrap();
     assert!(!Arc::ptr_eq(&a.cost.basis, &c.cost.basis) && c.cost.basis.sampler.pixels != a.cost.basis.sampler.pixels);
 }
 
@@ -134,7 +135,7 @@ fn element_gradient_with_nuisance_projected_out() {
         }
     }
     let nuisance = Nuisance::parse(&["all"]).unwrap();
-    let model = BasisCache::default().element_model(&sim, &ms, sim.mask_fraction, 0, &nuisance, None, None).unwrap();
+    let model = BasisCache::default().element_model(&sim, &ms, sim.mask_fraction, 0, &nuisance, Control::default()).unwrap();
     let linear = model.cost.linear_at(&truth);
     assert!((linear.scale - 0.9).abs() < 1e-5, "scale {}", linear.scale);
     for (fit, b) in linear.background.iter().zip(&added) {

@@ -1,6 +1,7 @@
 //! Hybrid estimation on synthetic data from the default scenario: the estimators' acceptance checks.
 //! Every check is against the known applied aberration; tolerances are stated where used.
 
+use has_core::control::Control;
 use has_core::inverse::calibrate::calibrate;
 use has_core::inverse::cost::{build_model, ArfiKernel, Measurement};
 use has_core::inverse::estimate::{condense, phase_error, point_reflection, Estimator};
@@ -257,7 +258,7 @@ fn the_estimation_workflow_estimates_per_group_and_names_what_it_refuses() {
     let s = sim();
     let truth = group_truth(3);
     let m = measurements(&truth, 0.0, 2, 3);
-    let r = estimate_aberration(s, &m, &EstimateRequest::default(), None, None).unwrap();
+    let r = estimate_aberration(s, &m, &EstimateRequest::default(), Control::default()).unwrap();
     let err = phase_error(&r.estimate.phases, &truth);
     assert!(err < 0.01, "phase error {err}");
     assert!(!r.assessment.ambiguous && !r.underdetermined && r.group_phases.is_none() && r.n_pixels > 0);
@@ -267,10 +268,10 @@ fn the_estimation_workflow_estimates_per_group_and_names_what_it_refuses() {
     let mut per_element = s.clone();
     per_element.set_groups((0..s.n_elements()).collect()).unwrap();
     let request = EstimateRequest { method: Method::NelderMead, ..EstimateRequest::default() };
-    let e = estimate_aberration(&per_element, &m, &request, None, None).unwrap_err().to_string();
+    let e = estimate_aberration(&per_element, &m, &request, Control::default()).unwrap_err().to_string();
     assert!(e.contains("per-element") && e.contains("lbfgs"), "{e}");
     let mut many = s.clone();
     many.set_groups((0..s.n_elements()).map(|e| e % 300).collect()).unwrap();
-    let e = estimate_aberration(&many, &m, &EstimateRequest::default(), None, None).unwrap_err().to_string();
+    let e = estimate_aberration(&many, &m, &EstimateRequest::default(), Control::default()).unwrap_err().to_string();
     assert!(e.starts_with("groups: 300 groups"), "{e}");
 }

@@ -4,6 +4,7 @@
 //! On a 256-element version of the default array to keep the marches short.
 
 use crate::common;
+use has_core::control::Control;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::element::build_element_model;
 use has_core::inverse::estimate::information::{
@@ -35,7 +36,7 @@ fn study(sim: &Simulation) -> (Vec<f64>, Vec<Measurement>) {
 fn jacobian_matches_central_differences_of_the_basis_images() {
     let sim = common::small_array();
     let (truth, images) = study(&sim);
-    let model = build_element_model(&sim, &images, sim.mask_fraction, 0, None, None).unwrap();
+    let model = build_element_model(&sim, &images, sim.mask_fraction, 0, Control::default()).unwrap();
     let cost = &model.cost;
     let term = &cost.terms[1];
     let j = image_jacobian(cost, &truth, &term.offset, &term.mask).unwrap();
@@ -73,7 +74,7 @@ fn independent_focus(b: &[C64], v: f64) -> f64 {
 fn expected_focus_matches_the_closed_form_and_monte_carlo() {
     let sim = common::small_array();
     let (_, images) = study(&sim);
-    let model = build_element_model(&sim, &images, sim.mask_fraction, 0, None, None).unwrap();
+    let model = build_element_model(&sim, &images, sim.mask_fraction, 0, Control::default()).unwrap();
     let b = focal_fields(&model.cost.basis);
     let g = b.len();
 
@@ -112,7 +113,7 @@ fn expected_focus_matches_the_closed_form_and_monte_carlo() {
 fn images_add_information_and_the_suggestion_is_the_best_candidate() {
     let sim = common::small_array();
     let (truth, images) = study(&sim);
-    let model = build_element_model(&sim, &images[..1], sim.mask_fraction, 0, None, None).unwrap();
+    let model = build_element_model(&sim, &images[..1], sim.mask_fraction, 0, Control::default()).unwrap();
     let b = focal_fields(&model.cost.basis);
     let spread = Spread::Smooth(error_modes(&sim.transducer.reference_points(), 0.8, 15e-3).unwrap());
     let noise = 0.02;
@@ -122,7 +123,7 @@ fn images_add_information_and_the_suggestion_is_the_best_candidate() {
     let g = sim.n_elements();
     let prior_only = expected_focus(&error_covariance(&Array2::zeros((g, g)), &spread).unwrap(), &b).unwrap();
     let one = expected_focus(&error_covariance(&fisher(&model.cost, &truth, noise).unwrap(), &spread).unwrap(), &b).unwrap();
-    let both = build_element_model(&sim, &images, sim.mask_fraction, 0, None, None).unwrap();
+    let both = build_element_model(&sim, &images, sim.mask_fraction, 0, Control::default()).unwrap();
     let two =
         expected_focus(&error_covariance(&fisher(&both.cost, &truth, noise).unwrap(), &spread).unwrap(), &focal_fields(&both.cost.basis))
             .unwrap();

@@ -8,6 +8,7 @@
 //! the beam meets it before it has lost its amplitude: a model that let bone move would put its
 //! brightest pixel in the plate (checked below, so that the test can fail).
 
+use has_core::control::Control;
 use has_core::inverse::cost::{build_model, check_image, Measurement};
 use has_core::inverse::diagnose::{diagnose, DiagnoseOptions};
 use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateRequest};
@@ -104,7 +105,7 @@ fn images_without_signal_in_places_are_fitted_on_their_imaged_pixels() {
     // them it would be NaN). Tolerance: 1.4826·MAD of about 2000 pairs scatters by ~3 %.
     println!("noise floor {:.4} rad (0.02 added)", model.noise);
     assert!((model.noise - 0.02).abs() < 0.004, "{}", model.noise);
-    let report = estimate_aberration(&sim, &m, &EstimateRequest::default(), None, None).unwrap();
+    let report = estimate_aberration(&sim, &m, &EstimateRequest::default(), Control::default()).unwrap();
     let misfit = report.assessment.misfit;
     println!("16-group estimate through the plate: {} pixels, misfit {misfit:.2}", report.n_pixels);
     assert!(report.n_pixels > 10);

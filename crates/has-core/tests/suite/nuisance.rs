@@ -10,6 +10,7 @@
 //! Per-seed values (`ARFI_FULL_SWEEPS=1`, seeds 1–5): BENCHMARKS.md, section "Nuisance fitted
 //! with the phases".
 
+use has_core::control::Control;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::diagnose::{effect_images, Effects};
 use has_core::inverse::element::nuisance::Nuisance;
@@ -127,7 +128,7 @@ fn estimate(c: &Case, nuisance: Nuisance, seed: u64) -> EstimateReport {
     let cache = &caches[usize::from(nuisance.any())];
     let prior = Prior::new(c.prediction.clone(), 0.8).unwrap().with_correlation_length(15e-3).unwrap();
     let request = EstimateRequest { prior: Some(prior), seed, nuisance, ..EstimateRequest::default() };
-    estimate_aberration_with(sim, &c.measurements, &request, cache, None, None).unwrap()
+    estimate_aberration_with(sim, &c.measurements, &request, cache, Control::default()).unwrap()
 }
 
 /// Without the nuisance every seed's misfit is 1.6–3.6 and flagged; with it fitted the misfit is

@@ -2,6 +2,7 @@
 //! skull simulation), on synthetic data from the default scenario with a perfect model. Every
 //! check is against the known applied aberration over seeds 1–5; tolerances are stated where used.
 
+use has_core::control::Control;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::element::nuisance::Nuisance;
 use has_core::inverse::estimate::workflow::{estimate_aberration, EstimateReport, EstimateRequest, Recommended, CONFLICT_Z};
@@ -87,13 +88,13 @@ fn one_image_with_a_prior_is_never_worse_than_the_prior_and_never_a_twin() {
     for seed in seeds {
         let truth = group_truth(seed);
         let m = one_image(&truth, 0.02, seed);
-        let alone = estimate_aberration(sim(), &m, &EstimateRequest::default(), None, None).unwrap();
+        let alone = estimate_aberration(sim(), &m, &EstimateRequest::default(), Control::default()).unwrap();
         assert!(!alone.prior_used && (alone.image_cost - alone.estimate.cost).abs() <= 1e-9 * alone.image_cost);
         for error in [0.3, 0.6] {
             let prediction = predicted(&truth, error, seed);
             let prior = Prior::new(prediction.clone(), error).unwrap();
             let request = EstimateRequest { prior: Some(prior), ..EstimateRequest::default() };
-            let post = estimate_aberration(sim(), &m, &request, None, None).unwrap();
+            let post = estimate_aberration(sim(), &m, &request, Control::default()).unwrap();
             let (r_prior, r_images, r_post) =
                 (recovered(&truth, &prediction), recovered(&truth, &alone.estimate.phases), recovered(&truth, &post.estimate.phases));
             let (e_prior, e_post) = (phase_error(&prediction, &truth), phase_error(&post.estimate.phases, &truth));
@@ -127,11 +128,11 @@ fn prior_lengths_per_group_and_per_element() {
     let truth = group_truth(1);
     let m = one_image(&truth, 0.02, 1);
     let bad = EstimateRequest { prior: Some(Prior::new(vec![0.0; 7], 0.5).unwrap()), ..EstimateRequest::default() };
-    let e = estimate_aberration(s, &m, &bad, None, None).unwrap_err().to_string();
+    let e = estimate_aberration(s, &m, &bad, Control::default()).unwrap_err().to_string();
     assert!(e.starts_with("prior:") && e.contains("1024") && e.contains("16"), "{e}");
     let per_element: Vec<f64> = s.groups.iter().map(|&g| truth[g]).collect();
     let request = EstimateRequest { prior: Some(Prior::new(per_element, 0.3).unwrap()), ..EstimateRequest::default() };
-    let r = estimate_aberration(s, &m, &request, None, None).unwrap();
+    let r = estimate_aberration(s, &m, &request, Control::default()).unwrap();
     // The prediction is the truth: the image (0.02 rad noise) moves the posterior well within the
     // prediction's stated error S = 0.3 rad (about 0.12 rad; asserted below S/2).
     let err = phase_error(&r.estimate.phases, &truth);
@@ -174,10 +175,10 @@ fn per_element_with_a_smooth_prior_and_defocused_images_lifts_a_prediction_of_0_
         let prediction: Vec<f64> = truth.iter().zip(&error).map(|(t, e)| t + e).collect();
         let prior = Prior::new(prediction.clone(), 0.8).unwrap().with_correlation_length(15e-3).unwrap();
         let request = EstimateRequest { prior: Some(prior), seed, ..EstimateRequest::default() };
-        let one = estimate_aberration(&per_element, &m[..1], &request, None, None).unwrap();
+        let one = estimate_aberration(&per_element, &m[..1], &request, Control::default()).unwrap();
         assert!(one.kept_prediction && one.estimate.evaluations == 0 && !one.assessment.mismatch, "seed {seed}");
         assert!(one.estimate.phases.iter().zip(&prediction).all(|(e, p)| wrap(e - p).abs() < 1e-12), "seed {seed}");
-        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+        let r = estimate_aberration(&per_element, &m, &request, Control::default()).unwrap();
         assert!(!r.kept_prediction, "seed {seed}");
         let (alone, post) = (recovered(&prediction), recovered(&r.estimate.phases));
         println!("seed {seed}: prediction alone {alone:.3}, with 4 images {post:.3} ({} evaluations)", r.estimate.evaluations);
@@ -247,7 +248,7 @@ impl SkullCase {
     fn estimate(&self, images: &[Measurement], prediction: &[f64], std_rad: f64) -> EstimateReport {
         let prior = Some(Prior::new(prediction.to_vec(), std_rad).unwrap());
         let request = EstimateRequest { prior, seed: self.seed, ..EstimateRequest::default() };
-        estimate_aberration(&self.per_element, images, &request, None, None).unwrap()
+        estimate_aberration(&self.per_element, images, &request, Control::default()).unwrap()
     }
 }
 
@@ -387,7 +388,7 @@ fn a_smooth_prior_with_a_fitted_scale_is_never_worse_than_the_prediction_beyond_
         let prior = Prior::new(prediction.clone(), std_rad).unwrap().with_correlation_length(length).unwrap();
         let nuisance = Nuisance { amplitude: true, ..Nuisance::default() };
         let request = EstimateRequest { prior: Some(prior), nuisance, seed, ..EstimateRequest::default() };
-        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+        let r = estimate_aberration(&per_element, &m, &request, Control::default()).unwrap();
         let (alone, post) = (recovered(&prediction), recovered(&r.estimate.phases));
         let scale = r.nuisance.as_ref().map_or(f64::NAN, |f| f.scale);
         println!("seed {seed}: prediction alone {alone:.3}, posterior {post:.3} (fitted scale {scale:.3})");
@@ -426,7 +427,7 @@ fn a_mode_of_known_shape_in_the_prior_is_fitted_as_one_number() {
     let smooth = Prior::new(prediction.clone(), 0.3).unwrap().with_correlation_length(30e-3).unwrap();
     let left = |prior: Prior| {
         let request = EstimateRequest { prior: Some(prior), seed, ..EstimateRequest::default() };
-        let r = estimate_aberration(&per_element, &m, &request, None, None).unwrap();
+        let r = estimate_aberration(&per_element, &m, &request, Control::default()).unwrap();
         focus_left(&s, &truth, &r.estimate.phases, ideal)
     };
     let (alone, without, with) =
@@ -442,7 +443,7 @@ fn a_mode_of_known_shape_in_the_prior_is_fitted_as_one_number() {
     // Refused where they cannot be fitted: a group estimate, and a prior without a correlation.
     let request = |prior: Prior| EstimateRequest { prior: Some(prior), seed, ..EstimateRequest::default() };
     let independent = Prior::new(prediction.clone(), 0.3).unwrap().with_modes(vec![vec![0.1; 256]]).unwrap();
-    let err = |sim: &Simulation, p: Prior| estimate_aberration(sim, &m, &request(p), None, None).unwrap_err().to_string();
+    let err = |sim: &Simulation, p: Prior| estimate_aberration(sim, &m, &request(p), Control::default()).unwrap_err().to_string();
     assert!(err(&per_element, independent.clone()).starts_with("prior_modes"));
     assert!(err(&s, independent.with_correlation_length(30e-3).unwrap()).starts_with("prior_modes"));
     let short = Prior::new(prediction.clone(), 0.3).unwrap().with_correlation_length(30e-3).unwrap().with_modes(vec![vec![0.1; 10]]);
@@ -450,5 +451,5 @@ fn a_mode_of_known_shape_in_the_prior_is_fitted_as_one_number() {
     // Predicted phases per default group are spread to the elements; the modes stay per element.
     let per_group = condense(&prediction, &s.groups).unwrap();
     let spread = Prior::new(per_group, 0.3).unwrap().with_correlation_length(30e-3).unwrap().with_modes(vec![mode]).unwrap();
-    assert!(estimate_aberration(&per_element, &m, &request(spread), None, None).is_ok());
+    assert!(estimate_aberration(&per_element, &m, &request(spread), Control::default()).is_ok());
 }

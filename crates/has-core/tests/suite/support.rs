@@ -4,6 +4,7 @@
 //! known random group phases, 0.02 rad noise (the paper's). Foci are judged in the model, as
 //! the recovered fraction is: the focal ARFI of the truth corrected, over the ideal's.
 
+use has_core::control::Control;
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::element::BasisCache;
 use has_core::inverse::estimate::workflow::{estimate_aberration_with, EstimateReport, EstimateRequest, Recommended};
@@ -58,7 +59,7 @@ fn case(seed: u64) -> Case {
     }
     let t = std::time::Instant::now();
     let request = EstimateRequest { seed, ..EstimateRequest::default() };
-    let report = estimate_aberration_with(per_element, &m, &request, cache, None, None).unwrap();
+    let report = estimate_aberration_with(per_element, &m, &request, cache, Control::default()).unwrap();
     let seconds = t.elapsed().as_secs_f64();
     let ideal = peak(&s.arfi_image(&[]).unwrap());
     let left = |c: &[f64]| peak(&s.arfi_image(&truth.iter().zip(c).map(|(t, e)| t - e).collect::<Vec<_>>()).unwrap()) / ideal;

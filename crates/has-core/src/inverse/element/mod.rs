@@ -24,6 +24,7 @@ pub mod view_fit;
 
 pub use cost::{ElementCost, ElementTerm, LinearNuisance};
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::grouping;
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
@@ -38,7 +39,6 @@ use num_complex::{Complex32 as C32, Complex64 as C64};
 use products::{Column, Split};
 use rayon::prelude::*;
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Pixels around the masks whose background a background plane is fitted on.
@@ -97,17 +97,9 @@ impl FieldBasis {
     /// samples that pixels `u x v` depend on, also with the views `reach` fits: another
     /// broadening width (up to [`crate::inverse::element::nuisance::width_reach`]) and a registration
     /// shift (up to [`crate::inverse::element::nuisance::SHIFT_REACH_MM`]); see
-    /// [`Nuisance::window_width`]. `progress(done, total)` is called after each batch; `cancel`,
-    /// when set by another thread, ends the build before the next batch
-    /// ([`HasError::Interrupted`]).
-    pub fn build(
-        sim: &Simulation,
-        u: Range<usize>,
-        v: Range<usize>,
-        reach: &Nuisance,
-        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-        cancel: Option<&AtomicBool>,
-    ) -> Result<Self> {
+    /// [`Nuisance::window_width`]. `control` reports `(done, total)` elements after each batch and,
+    /// once cancelled, ends the build before the next batch ([`HasError::Interrupted`]).
+    pub fn build(sim: &Simulation, u: Range<usize>, v: Range<usize>, reach: &Nuisance, control: Control<'_>) -> Result<Self> {
         let coarser = basis_grid(sim)?.map(|g| sim.on_grid(g)).transpose()?;
         let sim = coarser.as_ref().unwrap_or(sim);
         let full = sim.sampler()?;
@@ -139,9 +131,7 @@ impl FieldBasis {
         let mut im = Array2::<f32>::zeros((s_len, n));
         let single_plan = steps_bytes.and_then(|_| sim.plan.single_precision(last));
         for start in (0..n).step_by(BATCH) {
-            if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-                return Err(HasError::Interrupted);
-            }
+            control.check()?;
             let end = (start + BATCH).min(n);
             let sources = (start..end)
                 .map(|e| {
@@ -160,9 +150,7 @@ impl FieldBasis {
                     im[[s, start + k]] = p.im;
                 }
             }
-            if let Some(f) = progress {
-                f(end, n);
-            }
+            control.report(end, n);
         }
         Ok(FieldBasis { sampler, amplitude: sim.amplitude()?, re, im, reach })
     }
@@ -286,10 +274,9 @@ pub fn build_element_model(
     measurements: &[Measurement],
     mask_fraction: f64,
     margin: usize,
-    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-    cancel: Option<&AtomicBool>,
+    control: Control<'_>,
 ) -> Result<ElementModel> {
-    BasisCache::default().element_model(sim, measurements, mask_fraction, margin, &Nuisance::default(), progress, cancel)
+    BasisCache::default().element_model(sim, measurements, mask_fraction, margin, &Nuisance::default(), control)
 }
 
 /// Keeps the element basis of the last per-element model built through it, for the next on the
@@ -310,8 +297,7 @@ impl BasisCache {
         u: Range<usize>,
         v: Range<usize>,
         reach: &Nuisance,
-        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-        cancel: Option<&AtomicBool>,
+        control: Control<'_>,
     ) -> Result<Arc<FieldBasis>> {
         let mut kept = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let fits = |b: &&Arc<FieldBasis>| {
@@ -322,7 +308,7 @@ impl BasisCache {
         }
         // Release the old basis before building the next: at most one in memory.
         *kept = None;
-        let b = Arc::new(FieldBasis::build(sim, u, v, reach, progress, cancel)?);
+        let b = Arc::new(FieldBasis::build(sim, u, v, reach, control)?);
         *kept = Some(Arc::clone(&b));
         Ok(b)
     }
@@ -331,7 +317,6 @@ impl BasisCache {
     /// to fit `nuisance`: a fitted amplitude or background plane is fitted on every pixel of the
     /// box (its margin at least [`BACKGROUND_MARGIN`] pixels; see [`fits_whole_box`]), and W or
     /// the shift need a wider window ([`Nuisance::window_width`]).
-    #[allow(clippy::too_many_arguments)]
     pub fn element_model(
         &self,
         sim: &Simulation,
@@ -339,8 +324,7 @@ impl BasisCache {
         mask_fraction: f64,
         margin: usize,
         nuisance: &Nuisance,
-        progress: Option<&(dyn Fn(usize, usize) + Sync)>,
-        cancel: Option<&AtomicBool>,
+        control: Control<'_>,
     ) -> Result<ElementModel> {
         let whole_box = fits_whole_box(nuisance);
         let margin = if whole_box { margin.max(BACKGROUND_MARGIN) } else { margin };
@@ -362,7 +346,7 @@ impl BasisCache {
                 offset,
             });
         }
-        let basis = self.basis(sim, u, v, nuisance, progress, cancel)?;
+        let basis = self.basis(sim, u, v, nuisance, control)?;
         let mut cost = ElementCost::new(basis, terms)?;
         cost.fit_amplitude = nuisance.amplitude;
         cost.fit_background = nuisance.background_phase;

@@ -108,15 +108,42 @@ impl Prior {
     }
 
     /// The prior of optional parts as a caller gives them: none without `mean`; a `mean` needs
-    /// its `std_rad`, and a `std_rad` alone is refused (it would silently do nothing).
-    pub fn from_parts(mean: Option<Vec<f64>>, std_rad: Option<f64>) -> Result<Option<Self>> {
-        match (mean, std_rad) {
-            (None, None) => Ok(None),
-            (Some(m), Some(s)) => Prior::new(m, s).map(Some),
+    /// its `std_rad`; a `std_rad`, a correlation length (m) or modes without a mean are refused
+    /// (they would silently do nothing). See [`Prior::with_correlation_length`] and
+    /// [`Prior::with_modes`].
+    pub fn from_parts(
+        mean: Option<Vec<f64>>,
+        std_rad: Option<f64>,
+        correlation_length_m: Option<f64>,
+        modes: Option<Vec<Vec<f64>>>,
+    ) -> Result<Option<Self>> {
+        let prior = match (mean, std_rad) {
+            (Some(m), Some(s)) => Prior::new(m, s)?,
             (Some(_), None) => {
-                Err(HasError::invalid("prior_std_rad", "is required with a prior: the expected error of each predicted phase (rad)"))
+                return Err(HasError::invalid(
+                    "prior_std_rad",
+                    "is required with a prior: the expected error of each predicted phase (rad)",
+                ))
             }
-            (None, Some(_)) => Err(HasError::invalid("prior_std_rad", "was given without a prior")),
+            (None, std) => {
+                let given = [
+                    ("prior_std_rad", std.is_some()),
+                    ("prior_correlation_mm", correlation_length_m.is_some()),
+                    ("prior_modes", modes.is_some()),
+                ];
+                return match given.iter().find(|(_, g)| *g) {
+                    Some((name, _)) => Err(HasError::invalid(*name, "was given without a prior")),
+                    None => Ok(None),
+                };
+            }
+        };
+        let prior = match correlation_length_m {
+            Some(l) => prior.with_correlation_length(l)?,
+            None => prior,
+        };
+        match modes {
+            Some(m) => prior.with_modes(m).map(Some),
+            None => Ok(Some(prior)),
         }
     }
 
@@ -257,9 +284,16 @@ mod tests {
 
     #[test]
     fn bad_priors_are_refused_naming_the_parameter() {
-        assert_eq!(Prior::from_parts(None, None).unwrap(), None);
-        assert!(Prior::from_parts(Some(vec![0.0, 1.0]), None).unwrap_err().to_string().starts_with("prior_std_rad"));
-        assert!(Prior::from_parts(None, Some(0.5)).unwrap_err().to_string().starts_with("prior_std_rad"));
+        let err = |m, s, l, g| Prior::from_parts(m, s, l, g).unwrap_err().to_string();
+        assert_eq!(Prior::from_parts(None, None, None, None).unwrap(), None);
+        assert!(err(Some(vec![0.0, 1.0]), None, None, None).starts_with("prior_std_rad"));
+        assert!(err(None, Some(0.5), None, None).starts_with("prior_std_rad"));
+        assert!(err(None, None, Some(0.02), None).starts_with("prior_correlation_mm"));
+        assert!(err(None, None, None, Some(vec![vec![0.0, 1.0]])).starts_with("prior_modes"));
+        assert!(err(Some(vec![0.0, 1.0]), Some(0.5), Some(-1.0), None).starts_with("prior_correlation_mm"));
+        assert!(err(Some(vec![0.0, 1.0]), Some(0.5), None, Some(vec![vec![0.0], vec![f64::NAN]])).starts_with("prior_modes"));
+        let full = Prior::from_parts(Some(vec![0.0, 1.0]), Some(0.5), Some(0.02), Some(vec![vec![0.1, 0.2]])).unwrap().unwrap();
+        assert_eq!((full.correlation_length(), full.modes().len()), (Some(0.02), 1));
         assert!(Prior::new(vec![], 0.5).unwrap_err().to_string().contains("prior"));
         assert!(Prior::new(vec![0.0, f64::NAN], 0.5).unwrap_err().to_string().contains("prior"));
         for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {

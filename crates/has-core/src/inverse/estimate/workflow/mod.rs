@@ -9,6 +9,7 @@ mod per_element;
 mod prior_check;
 mod support;
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
 use crate::inverse::element::nuisance::{FittedNuisance, Nuisance};
@@ -141,6 +142,21 @@ impl EstimateRequest {
         }
     }
 
+    /// Checks what the request holds on its own (the method's limits, the threshold, the noise),
+    /// before any image is read: each error names its parameter. What depends on the simulation
+    /// (the prior's length, modes per element) is checked by the estimate.
+    pub fn check(&self) -> Result<()> {
+        self.noise(1.0)?;
+        if !(self.threshold.is_finite() && (0.0..=1.0).contains(&self.threshold)) {
+            return Err(HasError::invalid("threshold", format!("must be a fraction of the ideal focus in [0, 1], got {}", self.threshold)));
+        }
+        let est = estimator(self, self.method, None)?;
+        if let Some(n) = self.max_evaluations {
+            est.with_max_evaluations(n)?;
+        }
+        Ok(())
+    }
+
     /// The nuisance fitted: `nuisance`, with the amplitude also when `fit_amplitude`.
     pub fn fitted_nuisance(&self) -> Nuisance {
         Nuisance { amplitude: self.fit_amplitude || self.nuisance.amplitude, ..self.nuisance }
@@ -252,16 +268,15 @@ fn estimator(request: &EstimateRequest, method: Method, sigma: Option<Vec<usize>
 /// added phases): per group on the group kernels (at most [`MAX_KERNEL_GROUPS`] groups), or, when
 /// the groups are the elements, per element with L-BFGS on the element basis warm-started from
 /// the default groups. With a prior, every stage minimises the posterior and starts from the
-/// prediction. `cancel`, when set by another thread, ends the run with
-/// [`HasError::Interrupted`]; `progress(done, total)` follows the element fields' marches.
+/// prediction. `control`, once cancelled, ends the run with [`HasError::Interrupted`]; its
+/// progress follows the element fields' marches `(done, total)`.
 pub fn estimate_aberration(
     sim: &Simulation,
     measurements: &[Measurement],
     request: &EstimateRequest,
-    cancel: Option<&AtomicBool>,
-    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    control: Control<'_>,
 ) -> Result<EstimateReport> {
-    estimate_aberration_with(sim, measurements, request, &BasisCache::default(), cancel, progress)
+    estimate_aberration_with(sim, measurements, request, &BasisCache::default(), control)
 }
 
 /// [`estimate_aberration`] keeping the element basis of a per-element estimate in `basis` for
@@ -271,10 +286,9 @@ pub fn estimate_aberration_with(
     measurements: &[Measurement],
     request: &EstimateRequest,
     basis: &BasisCache,
-    cancel: Option<&AtomicBool>,
-    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    control: Control<'_>,
 ) -> Result<EstimateReport> {
-    request.noise(0.0)?;
+    request.check()?;
     if let Some(p) = request.prior.as_ref().filter(|p| !p.modes().is_empty()) {
         if !per_element(sim) {
             return Err(HasError::invalid(
@@ -297,7 +311,7 @@ pub fn estimate_aberration_with(
     }
     if per_element(sim) {
         let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
-        return estimate_per_element(sim, measurements, request, prior, basis, cancel, progress);
+        return estimate_per_element(sim, measurements, request, prior, basis, control);
     }
     if sim.n_groups > MAX_KERNEL_GROUPS {
         return Err(HasError::invalid(
@@ -329,7 +343,7 @@ pub fn estimate_aberration_with(
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
     model.noise = request.noise(model.noise)?;
     model.cost.fit_amplitude = request.fitted_nuisance().amplitude;
-    let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, cancel)?;
+    let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, control.cancel())?;
     let recommendation = recommend(&estimate.phases, request.prior.as_ref(), (assessment.mismatch, false), None, None);
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),

@@ -2,6 +2,7 @@
 //! from the array's default groups, or from the prediction of a prior), the prediction kept when
 //! one acquisition cannot check it, and the assessment on the element posterior.
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{build_model, Measurement, Objective};
 use crate::inverse::element::nuisance::{FittedNuisance, Nuisance};
@@ -175,13 +176,12 @@ pub(super) fn estimate_per_element(
     request: &EstimateRequest,
     prior: Option<Prior>,
     basis: &BasisCache,
-    cancel: Option<&AtomicBool>,
-    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    control: Control<'_>,
 ) -> Result<EstimateReport> {
-    let (mut report, mut cost) = search_and_assess(sim, measurements, request, prior.clone(), basis, cancel, progress)?;
+    let (mut report, mut cost) = search_and_assess(sim, measurements, request, prior.clone(), basis, control)?;
     if coherence_refit(&report, prior.as_ref(), request) {
         let scaled = EstimateRequest { fit_amplitude: true, ..request.clone() };
-        let (refit, refit_cost) = search_and_assess(sim, measurements, &scaled, prior.clone(), basis, cancel, progress)?;
+        let (refit, refit_cost) = search_and_assess(sim, measurements, &scaled, prior.clone(), basis, control)?;
         if !refit.assessment.mismatch {
             (report, cost) = (refit, refit_cost);
         }
@@ -243,8 +243,7 @@ fn search_and_assess(
     request: &EstimateRequest,
     prior: Option<Prior>,
     basis: &BasisCache,
-    cancel: Option<&AtomicBool>,
-    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
+    control: Control<'_>,
 ) -> Result<(EstimateReport, ElementCost)> {
     if request.method != Method::Lbfgs {
         return Err(HasError::invalid(
@@ -273,7 +272,7 @@ fn search_and_assess(
             let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
             group_model.noise = request.noise(group_model.noise)?;
             group_model.cost.fit_amplitude = request.fit_amplitude;
-            let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, cancel)?;
+            let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, control.cancel())?;
             WarmStart::Groups { elements: grouped.element_phases(&group.phases)?, groups: group.phases, assessment }
         }
     };
@@ -282,7 +281,7 @@ fn search_and_assess(
         WarmStart::Groups { elements, .. } => elements.clone(),
     };
     let nuisance = request.fitted_nuisance();
-    let mut model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, progress, cancel)?;
+    let mut model = basis.element_model(sim, measurements, sim.mask_fraction, 0, &nuisance, control)?;
     model.noise = request.noise(model.noise)?;
     let search = Estimator::lbfgs().with_starts(1)?.with_time_limit_opt(time_limit);
     let default_budget = if nuisance.view() { VIEW_ELEMENT_EVALUATIONS } else { ELEMENT_EVALUATIONS };
@@ -291,7 +290,7 @@ fn search_and_assess(
     let kept_prediction = prior.is_some() && single_acquisition;
     let (elements, cost) = match &prior {
         Some(p) if kept_prediction => keep_prediction(model.cost, model.noise, p, &nuisance, &positions)?,
-        _ => search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, cancel)?,
+        _ => search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, control.cancel())?,
     };
     let fitted = nuisance.any().then(|| {
         let linear = cost.linear_at(&elements.phases);
@@ -310,9 +309,10 @@ fn search_and_assess(
     };
     let (group_phases, mut assessment) = match warm_start {
         WarmStart::Groups { groups, assessment, .. } => (Some(groups), assessment),
-        WarmStart::Prediction(p) => {
-            (None, element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, cancel)?)
-        }
+        WarmStart::Prediction(p) => (
+            None,
+            element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, control.cancel())?,
+        ),
     };
     // One acquisition cannot determine a phase per element (a kept prediction says so on its
     // own), nor, without a prior, can images that determine too few combinations of phases for
