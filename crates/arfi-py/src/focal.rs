@@ -4,7 +4,7 @@
 
 use crate::field::point_mm;
 use crate::results::fields_dict;
-use has_core::focal::{FocalMetrics, Peak};
+use has_core::focal::FocalMetrics;
 use has_core::simulation::TissueHottest;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -40,22 +40,6 @@ impl From<&FocalMetrics> for MetricsMm {
             focal_tissue: m.tissue.clone(),
         }
     }
-}
-
-/// Sets the focal metrics' keys of `d` from `m`, each None when there are none (no closed -6 dB
-/// region around the target).
-pub(crate) fn metrics_items(d: &Bound<'_, PyDict>, m: Option<&MetricsMm>) -> PyResult<()> {
-    d.set_item("focal_peak_mm", m.map(|m| m.focal_peak_mm))?;
-    d.set_item("focal_peak_pa", m.map(|m| m.focal_peak_pa))?;
-    d.set_item("peak_to_target_mm", m.map(|m| m.peak_to_target_mm))?;
-    d.set_item("fwhm_6db_mm", m.map(|m| m.fwhm_6db_mm))?;
-    d.set_item("fwhm_6db_across_mm", m.map(|m| m.fwhm_6db_across_mm))?;
-    d.set_item("fwhm_3db_mm", m.map(|m| m.fwhm_3db_mm))?;
-    d.set_item("focal_volume_6db_mm3", m.map(|m| m.focal_volume_6db_mm3))?;
-    d.set_item("isppa_w_cm2", m.map(|m| m.isppa_w_cm2))?;
-    d.set_item("mechanical_index", m.map(|m| m.mechanical_index))?;
-    d.set_item("focal_tissue", m.map(|m| m.focal_tissue.as_str()))?;
-    Ok(())
 }
 
 /// The focal region in 3-D around a target: the focal peak climbed to from the target, its
@@ -260,14 +244,6 @@ impl HottestPlace {
     }
 }
 
-/// The keys `<prefix>_hottest_pa` and `<prefix>_hottest_mm` of a peak (None when it is the
-/// hottest place).
-fn hottest_items<const N: usize>(d: &Bound<'_, PyDict>, prefix: &str, peak: &Peak<N>) -> PyResult<()> {
-    d.set_item(format!("{prefix}_hottest_pa"), peak.hottest.map(|h| h.0))?;
-    d.set_item(format!("{prefix}_hottest_mm"), peak.hottest.map(|h| point_mm(h.1).to_vec()))?;
-    Ok(())
-}
-
 /// What a field says at its target: the focal metrics in 3-D (`focal_metrics`), the focal peak
 /// on the plane (the lobe around the axis's point there) and along the axis, any hotter place
 /// than the peak on each (None when the peak is the hottest), and the hottest place of each
@@ -281,6 +257,24 @@ pub(crate) struct FieldFocus {
 
 #[pymethods]
 impl FieldFocus {
+    /// The attributes `to_dict` writes after the focal metrics' keys (the JSON's keys, in order).
+    #[classattr]
+    #[pyo3(name = "_fields")]
+    const FIELDS: [&'static str; 12] = [
+        "plane_peak_pa",
+        "plane_peak_x_mm",
+        "plane_peak_y_mm",
+        "plane_peak_to_axis_mm",
+        "plane_hottest_pa",
+        "plane_hottest_mm",
+        "axis_peak_pa",
+        "axis_peak_z_mm",
+        "axis_peak_mm",
+        "axis_hottest_pa",
+        "axis_hottest_mm",
+        "hottest",
+    ];
+
     /// The steering target (mm, transducer frame).
     #[getter]
     fn target_mm(&self) -> [f64; 3] {
@@ -353,35 +347,12 @@ impl FieldFocus {
         self.hottest.as_deref().map(|h| hottest_dict(py, h)).transpose()
     }
 
-    /// The JSON of `arfi field`'s focus: `target_mm`, the focal metrics' keys (None without a
-    /// closed focal region), `plane_peak_*`, `plane_hottest_*`, `axis_peak_*`, `axis_hottest_*` and
-    /// `hottest` (`{tissue: {pressure_pa, position_mm, isppa_w_cm2, mechanical_index}}`).
-    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let d = PyDict::new(py);
-        d.set_item("target_mm", self.metrics.target_mm.to_vec())?;
-        metrics_items(&d, self.metrics.m.as_ref())?;
-        let f = &self.focus;
-        let plane = point_mm(f.plane.position);
-        d.set_item("plane_peak_pa", f.plane.pressure)?;
-        d.set_item("plane_peak_x_mm", plane[0])?;
-        d.set_item("plane_peak_y_mm", plane[1])?;
-        d.set_item("plane_peak_to_axis_mm", f.peak_to_axis() * 1e3)?;
-        hottest_items(&d, "plane", &f.plane)?;
-        let axis = point_mm(f.axis.position);
-        d.set_item("axis_peak_pa", f.axis.pressure)?;
-        d.set_item("axis_peak_z_mm", axis[2])?;
-        d.set_item("axis_peak_mm", axis.to_vec())?;
-        hottest_items(&d, "axis", &f.axis)?;
-        match &self.hottest {
-            Some(places) => {
-                let h = PyDict::new(py);
-                for p in places {
-                    h.set_item(&p.tissue, fields_dict(Bound::new(py, p.clone())?.as_any())?)?;
-                }
-                d.set_item("hottest", h)?;
-            }
-            None => d.set_item("hottest", py.None())?,
-        }
+    /// The JSON of `arfi field`'s focus: the focal metrics' `to_dict()` (`target_mm`, then their
+    /// keys, None without a closed focal region), then the attributes in `_fields` (`hottest` as
+    /// `{tissue: {pressure_pa, position_mm, isppa_w_cm2, mechanical_index}}`).
+    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+        let d = fields_dict(Bound::new(slf.py(), slf.get().metrics.clone())?.as_any())?;
+        d.update(fields_dict(slf.as_any())?.as_mapping())?;
         Ok(d)
     }
 

@@ -26,9 +26,15 @@ pub(crate) fn fields_dict<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, P
     Ok(d)
 }
 
-/// A getter's value in JSON-ready form.
+/// A getter's value in JSON-ready form (a dict's values too).
 fn plain<'py>(v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-    if v.hasattr("to_dict")? {
+    if let Ok(dict) = v.cast::<PyDict>() {
+        let out = PyDict::new(v.py());
+        for (k, x) in dict.iter() {
+            out.set_item(k, plain(&x)?)?;
+        }
+        Ok(out.into_any())
+    } else if v.hasattr("to_dict")? {
         v.call_method0("to_dict")
     } else if v.hasattr("tolist")? {
         v.call_method0("tolist")
