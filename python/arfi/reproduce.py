@@ -145,7 +145,7 @@ def run_study(
         s = seed + r
         say(f"repeat {r + 1}/{repeats}: calibrating")
         cal = sim.calibrate(sim.arfi_image(noise_rad=noise, seed=10_000 + s))
-        model = sim.with_calibration(cal.broadening_width_mm, cal.amplitude)
+        model = sim.calibrated(cal)
         elements, groups_truth, applied = study_aberration(sim, case, s)
         say(f"repeat {r + 1}/{repeats}: estimating ({method})")
         images, known = study_images(sim, applied, noise, s, diversity)
@@ -337,7 +337,7 @@ def _figures(
     # Figure 2: calibration — force without broadening vs measured calibration image, profiles.
     force = sim.with_calibration(0.0, 1.0).arfi_image()
     cal_img = run0["calibration_image"]
-    model = sim.with_calibration(run0["calibration"].broadening_width_mm, run0["calibration"].amplitude).arfi_image()
+    model = sim.calibrated(run0["calibration"]).arfi_image()
     fig, ax = plt.subplots(2, 2, figsize=(10, 8))
     for k, (img, title) in enumerate(
         [

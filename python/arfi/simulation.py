@@ -118,6 +118,14 @@ class Simulation:
         is shared, so this is cheap."""
         return self._wrap(self.scenario, self._core.with_calibration(float(broadening_width_mm), float(amplitude)))
 
+    def calibrated(self, calibration: Calibration) -> Simulation:
+        """The same simulation with ``calibration``'s width and amplitude (from :meth:`calibrate`
+        or :meth:`Calibration.load`), once checked that it was fitted for this scenario and
+        frequency where it records them (``ValueError`` otherwise)."""
+        if not isinstance(calibration, Calibration):
+            raise ValueError(f"calibration: must be an arfi.Calibration, got {type(calibration).__name__}")
+        return self._wrap(self.scenario, self._core.calibrated(calibration))
+
     def with_element_amplitudes(self, amplitudes: ArrayLike) -> Simulation:
         """The same simulation with each element driven at ``amplitudes`` (one per element, >= 0)
         times the scenario's amplitude: e.g. a CT prediction's ``transmission``, so that a model of

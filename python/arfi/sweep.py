@@ -54,7 +54,7 @@ def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
     sim = _simulation(scenario_toml)
     s = trial.seed
     cal = sim.calibrate(sim.arfi_image(noise_rad=trial.noise_rad, seed=10_000 + s))
-    model = sim.with_calibration(cal.broadening_width_mm, cal.amplitude)
+    model = sim.calibrated(cal)
     _, groups_truth, applied = study_aberration(sim, trial.case, s)
     images, known = study_images(sim, applied, trial.noise_rad, s, trial.images - 1)
     est = model.estimate(images, known, method=trial.method, seed=s)

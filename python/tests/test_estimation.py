@@ -1,10 +1,12 @@
 import json
+import os
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+import arfi
 from arfi.cli import main
 from arfi.estimation import phase_error
 
@@ -40,6 +42,59 @@ def test_calibration_recovers_the_scenario_width(sim):
     assert sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=3), None, 2**64).broadening_width_mm == pytest.approx(
         c.broadening_width_mm, abs=0.01
     )
+
+
+def test_calibration_is_saved_loaded_and_applied_only_where_it_was_fitted(tmp_path, sim):
+    c = sim.calibrate(sim.arfi_image(noise_rad=0.02, seed=4))
+    assert (c.scenario, c.frequency_hz) == (sim.scenario.name, sim.frequency_hz)
+    path = tmp_path / "cal.json"
+    c.save(path)
+    # Written whole with the user's umask (shared files, not a temporary file's 0600), keys as
+    # `arfi calibrate --json`.
+    assert path.stat().st_mode & 0o777 == 0o666 & ~_umask()
+    assert list(json.loads(path.read_text())) == list(c.to_dict())
+    back = arfi.Calibration.load(str(path))
+    assert back.to_dict() == c.to_dict()
+    np.testing.assert_array_equal(sim.calibrated(back).arfi_image(), sim.calibrated(c).arfi_image())
+    # A hand-written calibration (W = 0: no broadening) records no fit and applies anywhere.
+    hand = arfi.Calibration(0.0, sim.amplitude)
+    assert (hand.cost, hand.n_pixels, hand.noise_rad, hand.scenario) == (None, None, None, None)
+    assert sim.calibrated(hand).arfi_image().max() > sim.calibrated(c).arfi_image().max()
+    # Fitted for another scenario or frequency: refused, naming both.
+    for other in (
+        arfi.Calibration(2.7, sim.amplitude, scenario="other"),
+        arfi.Calibration(2.7, sim.amplitude, frequency_hz=sim.frequency_hz / 2),
+    ):
+        with pytest.raises(ValueError, match=f'calibration: made for .* not scenario "{sim.scenario.name}"'):
+            sim.calibrated(other)
+    with pytest.raises(ValueError, match="calibration: must be an arfi.Calibration"):
+        sim.calibrated({"broadening_width_mm": 2.7})  # type: ignore[arg-type]
+    for bad, match in (
+        ({"broadening_width_mm": -1.0, "amplitude": 1.0}, "broadening_width_mm: must be a finite number >= 0"),
+        ({"broadening_width_mm": 1.0, "amplitude": 0.0}, "amplitude: must be a finite number > 0"),
+        ({"broadening_width_mm": 1.0, "amplitude": 1.0, "frequency_hz": -5.0}, "frequency_hz"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            arfi.Calibration(**bad)
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ValueError, match=f"{path}: not a calibration file .*{match}"):
+            arfi.Calibration.load(path)
+    for text in ("[2.7, 1e-6]", "{", '{"amplitude": 1}'):
+        path.write_text(text)
+        with pytest.raises(ValueError, match="not a calibration file"):
+            arfi.Calibration.load(path)
+    with pytest.raises(FileNotFoundError, match="absent.json: no such file"):
+        arfi.Calibration.load(tmp_path / "absent.json")
+    # A save that cannot be made leaves nothing behind.
+    with pytest.raises(ValueError, match="cannot write"):
+        c.save(tmp_path / "no" / "cal.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cal.json"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def test_estimate_rejects_bad_arguments(sim, ideal):

@@ -2,6 +2,7 @@
 //! convert units (m to mm) in one place. `to_dict` writes the JSON from the same getters, so an
 //! attribute and its JSON key are one name.
 
+use crate::error::to_py;
 use crate::support::{EstimatePriorCheck, EstimateSupport};
 use has_core::inverse::calibrate::Calibration;
 use has_core::inverse::element::nuisance::FittedNuisance;
@@ -10,6 +11,7 @@ use has_core::inverse::estimate::workflow::{EstimateReport, Method, Recommended}
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use std::path::PathBuf;
 
 /// Millimetres of a shift in metres.
 fn mm(shift: [f64; 3]) -> [f64; 3] {
@@ -46,7 +48,8 @@ fn plain<'py>(v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
     }
 }
 
-/// The broadening filter fitted to a no-aberration image (paper Eq. 2).
+/// The broadening filter fitted to a no-aberration image (paper Eq. 2), with the scenario and
+/// frequency it was fitted for.
 #[pyclass(module = "arfi._core", name = "Calibration", frozen)]
 pub(crate) struct CoreCalibration(pub(crate) Calibration);
 
@@ -55,7 +58,28 @@ impl CoreCalibration {
     /// The attributes `to_dict` writes, in order.
     #[classattr]
     #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 5] = ["broadening_width_mm", "amplitude", "cost", "n_pixels", "noise_rad"];
+    const FIELDS: [&'static str; 7] = ["broadening_width_mm", "amplitude", "cost", "n_pixels", "noise_rad", "scenario", "frequency_hz"];
+
+    /// A calibration written by hand: width W (mm, >= 0; 0 is no broadening) and amplitude
+    /// (rad·m³/N, > 0); `scenario` and `frequency_hz`, when given, are checked where it is applied.
+    #[new]
+    #[pyo3(signature = (broadening_width_mm, amplitude, *, scenario=None, frequency_hz=None))]
+    fn new(broadening_width_mm: f64, amplitude: f64, scenario: Option<String>, frequency_hz: Option<f64>) -> PyResult<Self> {
+        let c = Calibration::new(broadening_width_mm * 1e-3, amplitude).and_then(|c| c.fitted_for(scenario, frequency_hz));
+        Ok(CoreCalibration(c.map_err(to_py)?))
+    }
+
+    /// The calibration in the JSON file at `path` (as `save` or `arfi calibrate --json` write
+    /// it; only `broadening_width_mm` and `amplitude` are required).
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        Ok(CoreCalibration(Calibration::load(&path).map_err(to_py)?))
+    }
+
+    /// Writes the calibration as JSON at `path`, whole or not at all.
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        self.0.save(&path).map_err(to_py)
+    }
 
     /// Gaussian width W (mm).
     #[getter]
@@ -69,22 +93,34 @@ impl CoreCalibration {
         self.0.amplitude
     }
 
-    /// The squared difference over the mask at the fit (rad²).
+    /// The squared difference over the mask at the fit (rad²); None when not recorded.
     #[getter]
-    fn cost(&self) -> f64 {
-        self.0.cost
+    fn cost(&self) -> Option<f64> {
+        self.0.cost.is_finite().then_some(self.0.cost)
     }
 
-    /// Masked pixels the cost sums over.
+    /// Masked pixels the cost sums over; None when not recorded.
     #[getter]
-    fn n_pixels(&self) -> usize {
-        self.0.n_pixels
+    fn n_pixels(&self) -> Option<usize> {
+        (self.0.n_pixels > 0).then_some(self.0.n_pixels)
     }
 
-    /// Noise level of the image background (rad).
+    /// Noise level of the image background (rad); None when not recorded.
     #[getter]
-    fn noise_rad(&self) -> f64 {
-        self.0.noise
+    fn noise_rad(&self) -> Option<f64> {
+        self.0.noise.is_finite().then_some(self.0.noise)
+    }
+
+    /// The scenario's name it was fitted for; None: not recorded (applies to any).
+    #[getter]
+    fn scenario(&self) -> Option<String> {
+        self.0.scenario.clone()
+    }
+
+    /// The frequency it was fitted at (Hz); None: not recorded (applies to any).
+    #[getter]
+    fn frequency_hz(&self) -> Option<f64> {
+        self.0.frequency
     }
 
     /// The result as a dict of its attributes (the JSON `arfi calibrate` writes).
@@ -92,16 +128,10 @@ impl CoreCalibration {
         fields_dict(slf.as_any())
     }
 
-    fn __repr__(&self) -> String {
-        let c = &self.0;
-        format!(
-            "Calibration(broadening_width_mm={:.3}, amplitude={:.6e}, cost={:.4}, n_pixels={}, noise_rad={:.4})",
-            self.broadening_width_mm(),
-            c.amplitude,
-            c.cost,
-            c.n_pixels,
-            c.noise
-        )
+    fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
+        let d = fields_dict(slf.as_any())?;
+        let parts = d.iter().map(|(k, v)| Ok(format!("{k}={}", v.repr()?))).collect::<PyResult<Vec<_>>>()?;
+        Ok(format!("Calibration({})", parts.join(", ")))
     }
 }
 

@@ -369,6 +369,12 @@ impl CoreSimulation {
         Ok(inner.into())
     }
 
+    /// The same simulation with `calibration`'s width and amplitude, once checked that it was
+    /// fitted for this scenario and frequency (where it records them).
+    fn calibrated(&self, calibration: &CoreCalibration) -> PyResult<Self> {
+        Ok(calibration.0.applied_to(&self.inner).map_err(to_py)?.into())
+    }
+
     /// The same simulation with each element driven at `amplitudes` (one per element) times the
     /// scenario's amplitude; the plan is shared, the steered source projected again.
     fn with_element_amplitudes(&self, py: Python<'_>, amplitudes: PyReadonlyArray1<'_, f64>) -> PyResult<Self> {

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from arfi.report import fit_report
 
-        model = sim.with_calibration(c.broadening_width_mm, c.amplitude).arfi_image(known)
+        model = sim.calibrated(c).arfi_image(known)
         page = fit_report(args.report, sim, "calibrate", image, model, {"image": args.image, **c.to_dict()})
         print(f"calibrate: report -> {page}")
     print(
@@ -51,12 +51,6 @@ def run(args: argparse.Namespace) -> int:
     )
     finish(
         args,
-        {
-            **c.to_dict(),
-            "scenario": sim.scenario.name,
-            "frequency_hz": sim.scenario.to_dict()["frequency_hz"],
-            "image": args.image,
-            "seconds": time.perf_counter() - t,
-        },
+        {**c.to_dict(), "image": args.image, "seconds": time.perf_counter() - t},
     )
     return 0

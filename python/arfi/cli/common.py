@@ -11,7 +11,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from arfi import _core
-from arfi.estimation import METHODS
+from arfi.estimation import METHODS, Calibration
 from arfi.io import read_arfi_image, read_phases, write_json
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
@@ -171,26 +171,18 @@ def calibrated_simulation(
 ) -> Simulation:
     """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
     applied when given; ``source`` as :class:`Simulation` takes it."""
+    path = getattr(args, "calibration", None)
+    try:  # the file read before the simulation is built
+        cal = Calibration.load(path) if path else None
+    except (FileNotFoundError, ValueError) as e:
+        raise type(e)(f"--calibration: {e}") from None
     sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None), source=source)
-    if getattr(args, "calibration", None):
-        path = Path(args.calibration)
-        if not path.is_file():
-            raise FileNotFoundError(f"--calibration: {path}: no such file")
-        try:
-            cal = json.loads(path.read_text(encoding="utf-8"))
-            width, amplitude = float(cal["broadening_width_mm"]), float(cal["amplitude"])
-        except (ValueError, KeyError, TypeError) as e:
-            raise ValueError(f"--calibration: {path}: not a calibration file ({e})") from None
-        if cal.get("scenario") not in (None, sim.scenario.name) or cal.get("frequency_hz") not in (
-            None,
-            sim.scenario.to_dict()["frequency_hz"],
-        ):
-            raise ValueError(
-                f"--calibration: {path}: made for scenario {cal.get('scenario')!r} at {cal.get('frequency_hz')} Hz, "
-                f"not {sim.scenario.name!r}"
-            )
-        sim = sim.with_calibration(width, amplitude)
-    return sim
+    if cal is None:
+        return sim
+    try:
+        return sim.calibrated(cal)
+    except ValueError as e:
+        raise ValueError(f"--calibration: {path}: {str(e).removeprefix('calibration: ')}") from None
 
 
 def npy_path(path: str, option: str) -> str:

@@ -12,19 +12,25 @@ use crate::physics::mr::noise_floor;
 use crate::simulation::Simulation;
 use ndarray::Array2;
 
-/// The fitted broadening and amplitude.
+/// The fitted broadening and amplitude, with the scenario and frequency they were fitted for (a
+/// width and an amplitude belong to one array, one MR protocol and one frequency: applied to
+/// another they would be silently wrong).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Calibration {
     /// Gaussian width W (m).
     pub broadening_width: f64,
     /// Scale from broadened force density (N/m³) to ARFI phase (rad).
     pub amplitude: f64,
-    /// Final squared difference over the mask (rad²) and its pixel count.
+    /// Final squared difference over the mask (rad²); NaN when not recorded (a hand-written file).
     pub cost: f64,
-    /// Number of masked pixels the cost sums over.
+    /// Number of masked pixels the cost sums over; 0 when not recorded.
     pub n_pixels: usize,
-    /// Noise level of the image background (rad).
+    /// Noise level of the image background (rad); NaN when not recorded.
     pub noise: f64,
+    /// The scenario's name it was fitted for; None when not recorded (applies to any).
+    pub scenario: Option<String>,
+    /// The frequency it was fitted at (Hz); None when not recorded (applies to any).
+    pub frequency: Option<f64>,
 }
 
 /// Fits W (searched in `[0, max_width]`, m, at most the MR field of view) and A to a measured image of the beam steered with
@@ -94,5 +100,13 @@ pub fn calibrate(sim: &Simulation, image: &Array2<f64>, known: &[f64], mask_frac
         return Err(HasError::invalid("image", "the calibration image does not resemble the simulated focus (no positive amplitude fits)"));
     }
     let noise = noise_floor(image, &[u, v]);
-    Ok(Calibration { broadening_width: w, amplitude, cost, n_pixels: mask.len(), noise })
+    Ok(Calibration {
+        broadening_width: w,
+        amplitude,
+        cost,
+        n_pixels: mask.len(),
+        noise,
+        scenario: Some(sim.name.clone()),
+        frequency: Some(sim.frequency),
+    })
 }
