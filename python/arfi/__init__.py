@@ -19,11 +19,14 @@ from arfi.estimation import Calibration, Estimate, EstimateOptions, EstimateSupp
 from arfi.io import read_arfi_image, read_phases, write_arfi_image
 from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
+from arfi.prediction_estimate import PredictionEstimate, estimate_with_prediction
 from arfi.scenario import Scenario
 from arfi.simulation import Field, FieldFocus, FocalMetrics, HottestPlace, Section, Simulation
 from arfi.volume import IntensityVolume, PressureVolume
 
 __all__ = [
+    "PredictionEstimate",
+    "estimate_with_prediction",
     "Scenario",
     "Simulation",
     "Field",

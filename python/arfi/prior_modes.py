@@ -105,6 +105,50 @@ class ModesResult:
         s = [f[1] for f in found if f is not None]
         return {"shift_mm": v[:3], "shift_std_mm": s[:3], "turn_deg": v[3:], "turn_std_deg": s[3:]}
 
+    def summary_lines(self) -> list[str]:
+        """The fit in words: the fitted modes (the registration's pose, the bone speed, a user's)
+        and the images' verdict, then whether the prior moves and why not."""
+        parts = []
+        pose = self.pose()
+        if pose is not None:
+            tri = lambda v: "(" + ", ".join(f"{x:+.2f}" for x in v) + ")"  # noqa: E731
+            std = {m.name: m.std for m in self.modes}
+            parts.append(
+                f"head shifted {tri(pose['shift_mm'])} +- {tri(pose['shift_std_mm'])} mm and turned "
+                f"{tri(pose['turn_deg'])} +- {tri(pose['turn_std_deg'])} deg off the CT's registration (prior "
+                f"+-{std['shift_x']:g} mm, +-{std['turn_x']:g} deg)"
+            )
+        for m, v, s in zip(self.modes, self.values, self.std):
+            if pose is not None and m.name in POSE_NAMES:
+                continue
+            what = "bone speed" if m.name == "bone_speed" else m.name
+            tail = " of the conversion's" if m.name == "bone_speed" else ""
+            parts.append(f"{what} {v:+.1f} +- {s:.1f} {m.unit}{tail} (prior +-{m.std:g} {m.unit})")
+        lines = [
+            "prediction's modes from the images on the head with the CT's bone: "
+            + "; ".join(parts)
+            + f", image scale {self.scale:.3f}, misfit {self.misfit:.2f} ({self.misfit_at_zero:.2f} with the "
+            f"prediction as it is) over {self.n_pixels} pixels, {self.iterations} iterations"
+            + ("" if self.converged else " (not converged: the iterations ran out or a step failed)")
+            + f", the model with bone built and marched in {self.seconds:.1f} s; the images' chi-squared falls by "
+            f"{self.evidence:.1f} ({self.threshold:.1f} needed to move the prior: the 95 % point of noise alone, as "
+            "many degrees of freedom as modes)"
+        ]
+        at_edge = [m.name for m, edge in zip(self.modes, self.at_bound) if edge]
+        if at_edge:
+            lines.append(
+                f"PRIOR NOT MOVED: {', '.join(at_edge)} at the fit's end (four prior spreads): check the CT's "
+                "conversion and registration against the images (arfi diagnose)"
+            )
+        elif not self.supported:
+            lines.append(
+                "PRIOR NOT MOVED: the images do not support it (the modes explain no more of them than as many "
+                "free coefficients explain of noise)"
+            )
+        else:
+            lines.append("prior moved along the modes by the fitted values")
+        return lines
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON of ``arfi estimate``'s ``prior_modes_fit``."""
         d: dict[str, Any] = {

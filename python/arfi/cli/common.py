@@ -76,31 +76,6 @@ def prediction_json(path: str, option: str) -> dict[str, Any]:
     return d
 
 
-def read_transmission(path: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Per-element amplitudes from ``--prior-transmission`` (finite and non-negative), and the
-    target (mm) they were predicted for: the JSON of ``arfi predict`` (its ``transmission`` and
-    ``target_mm``), or a vector file (.npy or text; no target)."""
-    name = "--prior-transmission"
-    target = None
-    if path.endswith(".json"):
-        p = Path(path)
-        d = prediction_json(path, name)
-        try:
-            values = np.asarray(d["transmission"], dtype=np.float64)
-            target = None if d.get("target_mm") is None else np.asarray(d["target_mm"], dtype=np.float64)
-        except (ValueError, KeyError, TypeError) as e:
-            raise ValueError(f"{name}: {p}: not the JSON of arfi predict (no 'transmission': {e})") from None
-        if values.ndim != 1 or values.size == 0 or not np.all(np.isfinite(values)):
-            raise ValueError(f"{name}: {p}: 'transmission' must be a non-empty list of finite numbers")
-        if target is not None and (target.shape != (3,) or not np.all(np.isfinite(target))):
-            raise ValueError(f"{name}: {p}: 'target_mm' must be three finite numbers")
-    else:
-        values = read_phases(path, name)
-    if np.any(values < 0) or not np.any(values > 0):
-        raise ValueError(f"{name}: {path}: transmissions must be non-negative, and not all zero")
-    return values, target
-
-
 def finish(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Writes ``--json`` when asked."""
     if args.json:
@@ -166,16 +141,22 @@ def estimate_options(**values: Any) -> _core.EstimateOptions:
         raise
 
 
+def read_calibration(args: argparse.Namespace) -> Calibration | None:
+    """The ``--calibration`` file, if given (errors name the option)."""
+    path = getattr(args, "calibration", None)
+    try:
+        return Calibration.load(path) if path else None
+    except (FileNotFoundError, ValueError) as e:
+        raise type(e)(f"--calibration: {e}") from None
+
+
 def calibrated_simulation(
     args: argparse.Namespace, scenario: Scenario | None = None, source: _core.CoreSourceModel | None = None
 ) -> Simulation:
     """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
     applied when given; ``source`` as :class:`Simulation` takes it."""
+    cal = read_calibration(args)  # before the simulation is built
     path = getattr(args, "calibration", None)
-    try:  # the file read before the simulation is built
-        cal = Calibration.load(path) if path else None
-    except (FileNotFoundError, ValueError) as e:
-        raise type(e)(f"--calibration: {e}") from None
     sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None), source=source)
     if cal is None:
         return sim

@@ -7,40 +7,25 @@ import sys
 import time
 from typing import Any
 
-import numpy as np
-
-from arfi import _core, prior_modes
+from arfi import prior_modes
 from arfi.cli.common import (
     UsageError,
     add_calibration,
     add_common,
     add_method,
     add_report,
-    calibrated_simulation,
     estimate_options,
     finish,
     load_scenario,
     npy_path,
     prediction_json,
+    read_calibration,
     read_image,
     read_optional_phases,
-    read_transmission,
     save_npy,
 )
-from arfi.scenario import Scenario
-
-TARGET_TOLERANCE_MM = 0.5
-"""How far the focus may lie from the target a ``--prior-transmission`` was predicted for: a
-fraction of the focal spot's width (2.3 mm at 650 kHz), over which each element's wave crosses
-the same bone."""
-
-#: The option that sets each of the prediction's modes' prior std, and the key of the JSON of
-#: arfi predict that holds that mode.
-MODE_KEYS = {
-    "--prior-bone-speed-std-percent": "bone_speed_sensitivity_rad_per_percent",
-    "--prior-pose-std-mm": "pose_sensitivity_rad_per_mm",
-    "--prior-pose-std-deg": "pose_sensitivity_rad_per_deg",
-}
+from arfi.io import read_phases
+from arfi.prediction_estimate import estimate_with_prediction
 
 
 def register(sub: Any) -> None:
@@ -250,19 +235,47 @@ def run(args: argparse.Namespace) -> int:
         fit_nuisance=args.fit_nuisance,
         suggest=bool(args.suggest),
     )
-    transmission, predicted_at = read_transmission(args.prior_transmission) if args.prior_transmission else (None, None)
-    if transmission is not None:
-        check_transmission(args, transmission, predicted_at, outline)
+    path = args.prior_transmission
+    prediction, transmission = None, None
+    if path and path.endswith(".json"):
+        prediction = prediction_json(path, "--prior-transmission")
+    elif path:
+        transmission = read_phases(path, "--prior-transmission")
+    user_modes = []
+    if args.prior_modes:
+        try:
+            user_modes = prior_modes.read_modes(args.prior_modes, outline.n_elements)
+        except (FileNotFoundError, ValueError) as err:
+            raise UsageError(f"--prior-modes: {err}") from None
+    calibration = read_calibration(args)
     pairs = [read_image(outline, p, args.groups) for p in args.image]
-    modes, source = fit_modes(args, scenario, prior, pairs)
-    moved = modes is not None and modes.prior_moved
-    if modes is not None and moved:
-        prior = modes.prior
-        options = options.replace(prior=prior)
-    sim = calibrated_simulation(args, scenario, source)
-    if transmission is not None:
-        sim = sim.with_element_amplitudes(transmission / transmission.mean())
-    e = sim.estimate([p[0] for p in pairs], [p[1] for p in pairs], options, progress=sys.stderr.isatty())
+    r = estimate_with_prediction(
+        scenario,
+        [p[0] for p in pairs],
+        [p[1] for p in pairs],
+        options,
+        prediction=prediction,
+        transmission=transmission,
+        calibration=calibration,
+        groups=args.groups,
+        bone_speed_std_percent=args.prior_bone_speed_std_percent,
+        pose_std_mm=args.prior_pose_std_mm,
+        pose_std_deg=args.prior_pose_std_deg,
+        modes=user_modes,
+        log=lambda line: print(f"estimate: {line}", flush=True),
+        progress=sys.stderr.isatty(),
+        names={
+            "prediction": f"--prior-transmission: {path}" if path else "--prior-transmission",
+            "transmission": f"--prior-transmission: {path}",
+            "groups": "--groups",
+            "bone_speed_std_percent": "--prior-bone-speed-std-percent",
+            "pose_std_mm": "--prior-pose-std-mm",
+            "pose_std_deg": "--prior-pose-std-deg",
+            "modes": "--prior-modes",
+            "prior": "--prior",
+        },
+    )
+    e, sim, moved = r.estimate, r.simulation, r.prior_moved
     total = time.perf_counter() - t
     kind = "element" if len(e.phases_rad) == sim.n_elements else "group"
     print(
@@ -435,196 +448,10 @@ def run(args: argparse.Namespace) -> int:
     prior_settings = (
         {"prior_std_rad": args.prior_std_rad, "prior_correlation_mm": args.prior_correlation_mm} if e.prior_used else {}
     )
-    if modes is not None:
-        prior_settings.update(modes_json(modes))
-    if transmission is not None:
-        prior_settings["prior_transmission"] = args.prior_transmission
+    if path:
+        prior_settings["prior_transmission"] = path
     finish(
         args,
-        {**e.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total},
+        {**r.to_dict(), **prior_settings, "images": args.image, "groups": len(e.phases_rad), "seconds_total": total},
     )
     return 0
-
-
-def check_transmission(
-    args: argparse.Namespace, transmission: np.ndarray, predicted_at: np.ndarray | None, outline: _core.ScenarioOutline
-) -> None:
-    """``--prior-transmission`` holds one value per element of the scenario's array, predicted at
-    its focus."""
-    outline.check_per_element(len(transmission), f"--prior-transmission: {args.prior_transmission}")
-    # Each element's transmission is its wave's at the point predicted for; a focus elsewhere
-    # (beyond a fraction of the focal spot) crosses the skull elsewhere.
-    if predicted_at is not None and np.linalg.norm(predicted_at - np.asarray(outline.focus_mm)) > TARGET_TOLERANCE_MM:
-        x, y, z = predicted_at
-        fx, fy, fz = outline.focus_mm
-        raise ValueError(
-            f"--prior-transmission: {args.prior_transmission}: predicted for the target ({x:.1f}, {y:.1f}, {z:.1f}) "
-            f"mm, but the scenario focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at the focus (arfi predict "
-            "--scenario of the same focus, or --target-mm)"
-        )
-
-
-def fit_modes(
-    args: argparse.Namespace,
-    scenario: Scenario,
-    prior: np.ndarray | None,
-    pairs: list[tuple[np.ndarray, np.ndarray | None]],
-) -> tuple[prior_modes.ModesResult | None, _core.CoreSourceModel | None]:
-    """The prediction's error modes (pose, bone speed, ``--prior-modes``) fitted to the images on
-    the head with the CT's bone (:mod:`arfi.prior_modes`), by default wherever the prediction's
-    JSON holds them and the estimate is per element; the result's ``prior`` is the prediction
-    moved by them and ``prior_moved`` whether it is to be used. None when there is nothing to
-    fit. The model with bone is built and dropped here, its memory handed back, before the
-    estimation's own model is built, so that the two plans are never held at once; its source
-    model (the array projected onto the grid, shared by the estimation's model) is returned
-    with the result."""
-    stds = {
-        "--prior-bone-speed-std-percent": args.prior_bone_speed_std_percent,
-        "--prior-pose-std-mm": args.prior_pose_std_mm,
-        "--prior-pose-std-deg": args.prior_pose_std_deg,
-    }
-    for option, std in stds.items():
-        if std is not None and not (np.isfinite(std) and std >= 0):
-            raise UsageError(f"{option}: must be a finite number >= 0, got {std:g}")
-    explicit = [o for o, v in stds.items() if v] + (["--prior-modes"] if args.prior_modes else [])
-    first = explicit[0] if explicit else None
-    if prior is None:
-        if first:
-            raise UsageError(f"{first}: needs --prior (the prediction the modes belong to)")
-        return None, None
-    if args.groups != len(prior):
-        if first:
-            raise UsageError(f"{first}: fitted for per-element estimates only (--groups {len(prior)})")
-        return None, None
-    path = args.prior_transmission
-    prediction = prediction_json(path, "--prior-transmission") if path and path.endswith(".json") else {}
-    for option, key in MODE_KEYS.items():
-        if stds[option] and key not in prediction:
-            raise UsageError(
-                f"{option}: needs --prior-transmission with the JSON of arfi predict --json holding '{key}'"
-                + (
-                    f" ({path} has none: predict again"
-                    + (" with --pose-sensitivity)" if key.startswith("pose") else " with the current arfi)")
-                    if prediction
-                    else ""
-                )
-            )
-    try:
-        modes = prior_modes.prediction_modes(
-            prediction,
-            len(prior),
-            pose_std_mm=args.prior_pose_std_mm,
-            pose_std_deg=args.prior_pose_std_deg,
-            bone_speed_std_percent=(
-                prior_modes.BONE_SPEED_STD_PERCENT
-                if args.prior_bone_speed_std_percent is None
-                else args.prior_bone_speed_std_percent
-            ),
-        )
-    except ValueError as e:
-        raise UsageError(f"{option_of(str(e), stds)}: {e}") from None
-    if args.prior_modes:
-        try:
-            modes += prior_modes.read_modes(args.prior_modes, len(prior))
-        except (FileNotFoundError, ValueError) as e:
-            raise UsageError(f"--prior-modes: {e}") from None
-    if not modes:
-        return None, None
-    if scenario.to_dict().get("ct") is None:
-        if first:
-            raise UsageError(f"{first}: needs a [ct] scenario (the modes are fitted on the head with the CT's bone)")
-        return None, None
-    # Said before it runs: the fit builds and marches a second model, through the skull.
-    by_default = args.prior_bone_speed_std_percent is None and any(m.name == "bone_speed" for m in modes)
-    print(
-        f"estimate: fitting the prediction's modes ({', '.join(m.name for m in modes)}) to the images first, on a "
-        "model of the head with the CT's bone"
-        + (
-            " (the bone speed by default where the --prior-transmission JSON holds its sensitivity; "
-            "--prior-bone-speed-std-percent 0 skips it)"
-            if by_default
-            else ""
-        ),
-        flush=True,
-    )
-    skull = calibrated_simulation(args, scenario.with_ct_bone())
-    result = prior_modes.fit_prior_modes(
-        skull, [p[0] for p in pairs], [p[1] for p in pairs], prior, modes, noise_rad=args.noise_rad
-    )
-    source = skull.source_model()
-    del skull
-    _core.release_freed()
-    at_edge = [m.name for m, edge in zip(result.modes, result.at_bound) if edge]
-    print(
-        f"estimate: {modes_text(result)}, image scale {result.scale:.3f}, misfit {result.misfit:.2f} "
-        f"({result.misfit_at_zero:.2f} with the prediction as it is) over {result.n_pixels} pixels, "
-        f"{result.iterations} "
-        f"iterations{'' if result.converged else ' (not converged: the iterations ran out or a step failed)'}, the "
-        f"model with bone built and marched in {result.seconds:.1f} s; the images' chi-squared falls by "
-        f"{result.evidence:.1f} ({result.threshold:.1f} needed to move the prior: the 95 % point of noise alone, as "
-        "many degrees of freedom as modes)"
-    )
-    if at_edge:
-        print(
-            f"estimate: PRIOR NOT MOVED: {', '.join(at_edge)} at the fit's end (four prior spreads): check the CT's "
-            "conversion and registration against the images (arfi diagnose)"
-        )
-    elif not result.supported:
-        print(
-            "estimate: PRIOR NOT MOVED: the images do not support it (the modes explain no more of them than as many "
-            "free coefficients explain of noise)"
-        )
-    else:
-        print("estimate: prior moved along the modes by the fitted values")
-    return result, source
-
-
-def option_of(message: str, stds: dict[str, float | None]) -> str:
-    """The option a malformed mode of the prediction belongs to: the one that asked for it, else
-    the file it came from."""
-    for option, key in MODE_KEYS.items():
-        if stds[option] and message.startswith(key):
-            return option
-    return "--prior-transmission"
-
-
-def modes_text(r: prior_modes.ModesResult) -> str:
-    """The fitted modes in words: the registration's pose, the bone speed, a user's modes."""
-    parts = []
-    pose = r.pose()
-    if pose is not None:
-        tri = lambda v: "(" + ", ".join(f"{x:+.2f}" for x in v) + ")"  # noqa: E731
-        std = {m.name: m.std for m in r.modes}
-        parts.append(
-            f"head shifted {tri(pose['shift_mm'])} +- {tri(pose['shift_std_mm'])} mm and turned "
-            f"{tri(pose['turn_deg'])} +- {tri(pose['turn_std_deg'])} deg off the CT's registration (prior "
-            f"+-{std['shift_x']:g} mm, +-{std['turn_x']:g} deg)"
-        )
-    for m, v, s in zip(r.modes, r.values, r.std):
-        if pose is not None and m.name in prior_modes.POSE_NAMES:
-            continue
-        what = "bone speed" if m.name == "bone_speed" else m.name
-        tail = " of the conversion's" if m.name == "bone_speed" else ""
-        parts.append(f"{what} {v:+.1f} +- {s:.1f} {m.unit}{tail} (prior +-{m.std:g} {m.unit})")
-    return "prediction's modes from the images on the head with the CT's bone: " + "; ".join(parts)
-
-
-def modes_json(r: prior_modes.ModesResult) -> dict[str, Any]:
-    """The JSON keys of a modes fit: ``prior_modes_fit`` (every mode, the pose) and, where the
-    bone speed was among them, ``bone_speed_fit`` with its percent."""
-    d: dict[str, Any] = {"prior_modes_fit": r.to_dict()}
-    bone = r.value("bone_speed")
-    if bone is not None:
-        std_prior = next(m.std for m in r.modes if m.name == "bone_speed")
-        d["prior_bone_speed_std_percent"] = std_prior
-        d["bone_speed_fit"] = {
-            "percent": bone[0],
-            "std_percent": bone[1],
-            "std_percent_prior": std_prior,
-            "scale": r.scale,
-            "misfit": r.misfit,
-            "n_pixels": r.n_pixels,
-            "prior_moved": r.prior_moved,
-            "seconds": r.seconds,
-        }
-    return d
