@@ -152,8 +152,8 @@ def estimate_with_prediction(
             f"fitting the prediction's modes ({', '.join(m.name for m in to_fit)}) to the images first, on a model "
             "of the head with the CT's bone"
             + (
-                " (the bone speed by default where the prediction holds its sensitivity; a bone-speed std of 0 "
-                "skips it)"
+                " (the bone speed by default where the prediction holds its sensitivity; "
+                f"{nm['bone_speed_std_percent']}=0 skips it)"
                 if by_default
                 else ""
             )
