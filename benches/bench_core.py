@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     print(
         f"arfi {res['arfi_version']} core benchmarks — {args.date}, {cores} cores ({res['machine']['cpu']}), Python "
-        f"{res['machine']['python']}, default scenario, grid {g['nx']} x {g['ny']} x {g['nz']}; median of {repeats}\n"
+        f"{res['machine']['python']}, default scenario, grid {g.nx} x {g.ny} x {g.nz}; median of {repeats}\n"
     )
     print("| operation | measured | target | ratio to target |")
     print("| --- | --- | --- | --- |")

@@ -165,15 +165,15 @@ def bowl(patch_mm: float, elements: bool) -> dict[str, Any]:
     plane = sim.source_field()
     g = sim.grid
     k = 2 * np.pi * sim.scenario.to_dict()["frequency_hz"] / 1500.0
-    x = (np.arange(g["nx"]) - g["nx"] // 2) * g["dx_mm"] * 1e-3
-    y = (np.arange(g["ny"]) - g["ny"] // 2) * g["dy_mm"] * 1e-3
+    x = (np.arange(g.nx) - g.nx // 2) * g.dx_mm * 1e-3
+    y = (np.arange(g.ny) - g.ny // 2) * g.dy_mm * 1e-3
     xx, yy = np.meshgrid(x, y)
     p_face = float(field.surface_pressure_pa)
     if elements:
         pos, area = disc_patches(sim.element_positions_mm * 1e-3, 85e-3, 5e-3, patch_mm * 1e-3)
     else:
         pos, area = cap_patches(85e-3, 80e-3, patch_mm * 1e-3)
-    source_targets = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, g["z0_mm"] * 1e-3)], axis=1)
+    source_targets = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, g.z0_mm * 1e-3)], axis=1)
     numpy_source_s, numpy_plane = timed(lambda: rayleigh(source_targets, pos, area, k, p_face).reshape(xx.shape))
     a, b = np.abs(plane).ravel(), np.abs(numpy_plane).ravel()
     focal_targets = np.concatenate(
@@ -187,7 +187,7 @@ def bowl(patch_mm: float, elements: bool) -> dict[str, Any]:
     return {
         "case": "85 mm bowl, aperture 80 mm, 550 kHz, lossless water"
         + (", 256 disc elements of 5 mm" if elements else ""),
-        "grid": f"{g['nx']} x {g['ny']} x {g['nz']}, dx {g['dx_mm']:.3f} mm",
+        "grid": f"{g.nx} x {g.ny} x {g.nz}, dx {g.dx_mm:.3f} mm",
         "patches": len(pos),
         "patch_mm": patch_mm,
         "arfi_simulation_s": sim_s,
@@ -209,7 +209,7 @@ def plate() -> dict[str, Any]:
     g = sim.grid
     return {
         "case": "500 kHz bowl R 64 mm, aperture 64 mm, through a 6.5 mm cortical plate at 30 mm",
-        "grid": f"{g['nx']} x {g['ny']} x {g['nz']}, dx {g['dx_mm']:.3f} mm",
+        "grid": f"{g.nx} x {g.ny} x {g.nz}, dx {g.dx_mm:.3f} mm",
         "propagation": sim.propagation_summary(),
         "arfi_field_end_to_end_s": seconds,
         "peak_memory_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -72,7 +72,7 @@ def run(frequency_hz: float, elements: int, voxel_mm: float) -> dict[str, float 
         "frequency_hz": frequency_hz,
         "elements": elements,
         "voxel_mm": voxel_mm,
-        "grid": f"{grid['nx']} x {grid['ny']} x {grid['nz']}, {grid['dx_mm']:.3f} mm",
+        "grid": f"{grid.nx} x {grid.ny} x {grid.nz}, {grid.dx_mm:.3f} mm",
         "predict_s": t_predict,
         "predict_peak_gib": peak,
         "simulation_build_s": t_build,

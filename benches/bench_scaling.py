@@ -63,7 +63,7 @@ def one(config: dict) -> dict:
         sim = arfi.Simulation(arfi.Scenario.from_toml(scenario(config.get("grid", {}))))
         out["build_s"] = time.perf_counter() - t
         g = sim._core.grid
-        out["nx"], out["ny"], out["nz"] = g["nx"], g["ny"], g["nz"]
+        out["nx"], out["ny"], out["nz"] = g.nx, g.ny, g.nz
         out["field_s"] = median_time(sim.field, repeats)
     else:  # groups, threads_estimate
         sim = arfi.Simulation(groups=config["groups"])

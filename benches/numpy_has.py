@@ -73,9 +73,7 @@ class Grid:
     @classmethod
     def from_simulation(cls, sim) -> Grid:
         g = sim._core.grid
-        return cls(
-            g["nx"], g["ny"], g["nz"], g["dx_mm"] * 1e-3, g["dy_mm"] * 1e-3, g["dz_mm"] * 1e-3, g["z0_mm"] * 1e-3
-        )
+        return cls(g.nx, g.ny, g.nz, g.dx_mm * 1e-3, g.dy_mm * 1e-3, g.dz_mm * 1e-3, g.z0_mm * 1e-3)
 
     def x(self) -> np.ndarray:
         return (np.arange(self.nx) - self.nx // 2) * self.dx

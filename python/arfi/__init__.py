@@ -21,10 +21,23 @@ from arfi.loop import LoopResult, loop2
 from arfi.prediction import Prediction, predict
 from arfi.prediction_estimate import PredictionEstimate, estimate_with_prediction
 from arfi.scenario import Scenario
-from arfi.simulation import Field, FieldFocus, FocalMetrics, HottestPlace, Section, Simulation
+from arfi.simulation import (
+    Field,
+    FieldFocus,
+    FocalMetrics,
+    Grid,
+    HottestPlace,
+    Propagation,
+    Reverberation,
+    Section,
+    Simulation,
+)
 from arfi.volume import IntensityVolume, PressureVolume
 
 __all__ = [
+    "Grid",
+    "Propagation",
+    "Reverberation",
     "PredictionEstimate",
     "estimate_with_prediction",
     "Scenario",

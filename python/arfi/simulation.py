@@ -73,6 +73,10 @@ Section = _core.Section
 FocalMetrics = _core.FocalMetrics
 FieldFocus = _core.FieldFocus
 HottestPlace = _core.HottestPlace
+# What a simulation's plan is made of (typed; ``to_dict()`` for JSON).
+Grid = _core.Grid
+Propagation = _core.Propagation
+Reverberation = _core.Reverberation
 
 
 class Simulation:
@@ -191,18 +195,10 @@ class Simulation:
         return float(self._core.amplitude)
 
     @property
-    def propagation(self) -> dict[str, Any]:
-        """How changes of medium are crossed: ``interfaces`` (``"angular"``: plane-wave
-        coefficients of every angular-spectrum component, exact at planar interfaces, with total
-        reflection beyond the critical angle; ``"normal-incidence"``: ``T = 2·Z2/(Z1+Z2)`` per
-        pixel), ``screen`` (``"oblique"``: each pixel's wave crosses its slab along the line to the
-        focus; ``"vertical"``: along z, the original HAS screen), ``reflections`` (waves sent back towards the source
-        added),
-        ``shear`` (shear waves carried through solids whose faces lie on the planes or on planar walls
-        tilted against them, with mode conversion at each such face) and ``reverberation``
-        (``None``, or the z of the first and last interface between which the waves bouncing
-        inside layers are added, and the round trips added)."""
-        return dict(self._core.propagation)
+    def propagation(self) -> Propagation:
+        """How changes of medium are crossed (:class:`Propagation`: ``interfaces``, ``screen``,
+        ``reflections``, ``shear``, ``reverberation``)."""
+        return self._core.propagation
 
     @property
     def has_ct(self) -> bool:
@@ -214,26 +210,26 @@ class Simulation:
         p = self.propagation
         text = (
             "angle-dependent interface transmission (plane-wave coefficients on the angular spectrum)"
-            if p["interfaces"] == "angular"
+            if p.interfaces == "angular"
             else "normal-incidence interface transmission (T = 2·Z2/(Z1+Z2) per pixel)"
         )
-        if p["screen"] == "vertical":
+        if p.screen == "vertical":
             text += ", vertical phase screen (original HAS)"
-        r = p["reverberation"]
+        r = p.reverberation
         if r is not None:
             text += (
-                f", reverberation between z = {r['first_interface_z_mm']:.1f} and {r['last_interface_z_mm']:.1f} mm "
-                f"({r['round_trips']} round trips)"
+                f", reverberation between z = {r.first_interface_z_mm:.1f} and {r.last_interface_z_mm:.1f} mm "
+                f"({r.round_trips} round trips)"
             )
-        text += ", reflections towards the source added" if p["reflections"] else ""
+        text += ", reflections towards the source added" if p.reflections else ""
         ct_shear = bool(((self.scenario.to_dict().get("ct") or {}).get("bone_shear_sound_speed_m_s") or 0) > 0)
-        if p.get("shear"):
+        if p.shear:
             text += (
                 "; shear waves carried through solids whose faces lie on the march's planes (material regions, and a "
                 "CT's faces between layers) or on planar walls tilted against them (a CT's), with mode conversion at "
                 "each such face"
             )
-        if self.has_shear and (ct_shear or not p.get("shear")):
+        if self.has_shear and (ct_shear or not p.shear):
             text += (
                 "; compressional waves only through a CT's other faces (curved, or on planes that also hold other "
                 "jumps), a voxel map's other faces and faces crossed pixel by pixel: the shear speeds the scenario "
@@ -246,7 +242,7 @@ class Simulation:
         """Whether the scenario gives a solid a shear wave (a material's ``shear_sound_speed_m_s``
         or ``[ct] bone_shear_sound_speed_m_s`` above 0). The march carries it where the solid's faces
         lie on its planes (a CT's where they lie between layers) or on planar walls tilted against
-        them (``propagation["shear"]``); the
+        them (``propagation.shear``); the
         full-wave engine everywhere."""
         d = self.scenario.to_dict()
         ct = d.get("ct") or {}
@@ -260,9 +256,10 @@ class Simulation:
         return float(self._core.noise_rad)
 
     @property
-    def grid(self) -> dict[str, Any]:
-        """nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm."""
-        return dict(self._core.grid)
+    def grid(self) -> Grid:
+        """The grid the march runs on (:class:`Grid`: ``nx``, ``ny``, ``nz``, ``dx_mm``, ``dy_mm``,
+        ``dz_mm``, ``z0_mm``)."""
+        return self._core.grid
 
     @property
     def mr_affine_mm(self) -> NDArray[np.float64]:

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from arfi import textured_caps
+from arfi import _core, textured_caps
 
 #: The stored references.
 REFERENCES = Path(__file__).resolve().parent / "data" / "fullwave_caps.json"
@@ -90,7 +90,7 @@ class FullWaveResult:
         name: str,
         description: str,
         m: dict[str, Any],
-        grid: dict[str, Any],
+        grid: _core.Grid,
         seconds: float,
         tolerances: tuple[float, float, float, float],
         engine: dict[str, Any],
@@ -111,8 +111,8 @@ class FullWaveResult:
             correlation=m["correlation"],
             axis=m["axis"],
             focal_line=m["focal_line"],
-            step_mm=float(grid["dz_mm"]),
-            spacing_mm=float(grid["dx_mm"]),
+            step_mm=grid.dz_mm,
+            spacing_mm=grid.dx_mm,
             seconds=seconds,
             tolerances=tolerances,
             engine=f"{engine['engine']} {engine['engine_version']}",

@@ -46,12 +46,12 @@ def _plate_ct(path: Path, sim: Simulation, rotate: bool) -> np.ndarray:
     60 mm voxels across, air elsewhere. With ``rotate``, the volume's axes are a quarter turn about
     z from RAS and the returned transform turns them back: the field must not change."""
     g = sim.grid
-    dz = g["dz_mm"]
-    a = int(round((30.0 - g["z0_mm"]) / dz))
-    z_first = g["z0_mm"] + (a - 5 + 0.5) * dz
+    dz = g.dz_mm
+    a = int(round((30.0 - g.z0_mm) / dz))
+    z_first = g.z0_mm + (a - 5 + 0.5) * dz
     nk = int((95.0 - z_first) / dz)
     z = z_first + dz * np.arange(nk)
-    lo, hi = g["z0_mm"] + a * dz, g["z0_mm"] + (a + 4) * dz
+    lo, hi = g.z0_mm + a * dz, g.z0_mm + (a + 4) * dz
     column = np.where((z > lo) & (z < hi), PLATE_HU, -1000.0)
     data = np.broadcast_to(column, (3, 3, nk))
     affine = np.array([[-60.0, 0, 0, 60.0], [0, -60.0, 0, 60.0], [0, 0, dz, z_first], [0, 0, 0, 1]])
@@ -72,12 +72,12 @@ def test_a_plate_ct_written_by_nibabel_gives_the_field_of_the_plate_as_a_region(
     water = Simulation(Scenario.from_toml(GRID))
     g = water.grid
     p = _plate_properties()
-    a = int(round((30.0 - g["z0_mm"]) / g["dz_mm"]))
+    a = int(round((30.0 - g.z0_mm) / g.dz_mm))
     region = (
         f'{GRID}[[material]]\nname = "water"\nsound_speed_m_s = 1500\ndensity_kg_m3 = 1000\n'
         f'[[material]]\nname = "bone"\nsound_speed_m_s = {p[0]!r}\ndensity_kg_m3 = {p[1]!r}\n'
         f'attenuation_db_cm_mhz = {p[2]!r}\n[[region]]\nmaterial = "bone"\nshape = "slab"\n'
-        f"z_min_mm = {g['z0_mm'] + a * g['dz_mm']!r}\nz_max_mm = {g['z0_mm'] + (a + 4) * g['dz_mm']!r}\n"
+        f"z_min_mm = {g.z0_mm + a * g.dz_mm!r}\nz_max_mm = {g.z0_mm + (a + 4) * g.dz_mm!r}\n"
     )
     reference = Simulation(Scenario.from_toml(region)).field()
     peak = np.abs(reference.pressure).max()
@@ -93,7 +93,7 @@ def test_a_plate_ct_written_by_nibabel_gives_the_field_of_the_plate_as_a_region(
         # The medium where a report draws it: in the plate its HU (stored through a uint8 slope:
         # within one step of 8.63 HU) and the conversion's c and rho by hand; far outside the CT, NaN
         # HU and the scenario's water.
-        inside = g["z0_mm"] + (a + 2) * g["dz_mm"]
+        inside = g.z0_mm + (a + 2) * g.dz_mm
         m = sim.properties_at([[0.0, 0.0, inside], [0.0, 0.0, 1e4]])
         assert abs(m["hu"][0] - PLATE_HU) < 8.7 and np.isnan(m["hu"][1])
         c, rho, _ = _plate_properties()

@@ -183,7 +183,7 @@ def test_fdtd_in_water_agrees_with_the_exact_march_and_writes_the_same_outputs(t
     assert b["axis_pressure"].shape == a["axis_pressure"].shape
     pa, pb = abs(a["axis_pressure"]).max(), abs(b["axis_pressure"]).max()
     assert abs(pb / pa - 1) < 0.04, (pa, pb)
-    assert abs(fdtd["axis_peak_z_mm"] - march["axis_peak_z_mm"]) <= sim.grid["dz_mm"] + 1e-9
+    assert abs(fdtd["axis_peak_z_mm"] - march["axis_peak_z_mm"]) <= sim.grid.dz_mm + 1e-9
     # Along the axis over the focal zone (|p| above 0.7 of its peak, -3 dB) point by point, 4 %
     # (the pre-focal interference is more sensitive to the engine's phase error: +4 % at -4 dB).
     near = abs(a["axis_pressure"]) > 0.7 * pa
@@ -221,9 +221,9 @@ def test_a_solid_material_gives_its_shear_wave_and_the_march_carries_it_on_its_p
     assert props["shear_sound_speed_m_s"].tolist() == [1500.0, 0.0]
     # 10 dB/cm/MHz at 250 kHz, linear: 2.5 dB/cm = 28.8 Np/m.
     assert props["shear_attenuation_np_m"][0] == pytest.approx(2.5 * 100 * np.log(10) / 20)
-    assert sim.has_shear and sim.propagation["shear"] and "shear waves carried" in sim.propagation_summary()
+    assert sim.has_shear and sim.propagation.shear and "shear waves carried" in sim.propagation_summary()
     water, _ = small_sim(tmp_path)
-    assert not water.propagation["shear"]
+    assert not water.propagation.shear
     assert not water.has_shear and "shear" not in water.propagation_summary()
 
 
@@ -268,7 +268,7 @@ def test_ct_bone_shear_follows_the_solid_fraction_and_is_bounded_by_the_dense_bo
     assert props["shear_sound_speed_m_s"][0] == pytest.approx(750.0) and props["shear_sound_speed_m_s"][1] == 0.0
     # A CT's faces between layers convert on the march's planes, and the summary says so.
     summary = sim.propagation_summary()
-    assert sim.has_shear and sim.propagation["shear"] and "a CT's faces between layers" in summary, summary
+    assert sim.has_shear and sim.propagation.shear and "a CT's faces between layers" in summary, summary
     # The same layer turned 20° about y: its planar walls convert, and the summary says where.
     z, x = np.meshgrid(10.0 + np.arange(41), -30.0 + np.arange(61), indexing="ij")
     tilted = np.where(np.abs((z - 30.0) * np.cos(np.radians(20)) + x * np.sin(np.radians(20))) <= 5.0, 1000.0, -1000.0)
@@ -277,9 +277,7 @@ def test_ct_bone_shear_follows_the_solid_fraction_and_is_bounded_by_the_dense_bo
     )
     sim = arfi.Simulation(arfi.Scenario.load(scenario(1500.0)))
     summary = sim.propagation_summary()
-    assert sim.propagation["shear"] and "planar walls tilted" in summary and "not carried by the march" in summary, (
-        summary
-    )
+    assert sim.propagation.shear and "planar walls tilted" in summary and "not carried by the march" in summary, summary
     # The dense bone's 2900 m/s allows up to 2511 m/s.
     assert main(["field", "--scenario", scenario(2600.0), "--out", str(tmp_path / "f.npz")]) == 2
     err = capsys.readouterr().err.strip()

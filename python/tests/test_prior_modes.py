@@ -119,7 +119,7 @@ def test_a_shift_mode_predicts_a_prediction_through_a_ct_registered_shifted(head
         c = predict(moved(head, shift)).skull_responses * np.conj(h)
         return np.angle(c * np.exp(-1j * np.angle(np.sum(c))))
 
-    for axis, cell in ((0, sim.grid["dx_mm"]), (2, sim.grid["dz_mm"])):
+    for axis, cell in ((0, sim.grid.dx_mm), (2, sim.grid.dz_mm)):
         shift = np.array([cell if k == axis else 0.0 for k in range(3)]).tolist()
         ref = 0.5 * (change(tuple(shift)) - change(tuple(-v for v in shift)))
         mode = g[axis] * cell

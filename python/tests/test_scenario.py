@@ -108,7 +108,7 @@ matrix = [20, 20]
 amplitude_rad_m3_per_n = 1.0
 """
     sim = arfi.Simulation(arfi.Scenario.from_toml(text))
-    assert sim.n_elements == 32 and sim.grid["z0_mm"] > 4.0
+    assert sim.n_elements == 32 and sim.grid.z0_mm > 4.0
     f = sim.field()
     focus = f.focus()
     assert 43.0 < focus.axis_peak_z_mm < 50.0

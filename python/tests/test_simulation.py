@@ -56,7 +56,7 @@ def test_noise_is_seeded(sim, ideal):
 def test_field_on_the_focal_plane(sim):
     f = sim.field()
     assert f.pressure.shape == (len(f.y_mm), len(f.x_mm))
-    assert f.z_mm == pytest.approx(85.0, abs=sim.grid["dz_mm"] / 2)
+    assert f.z_mm == pytest.approx(85.0, abs=sim.grid.dz_mm / 2)
     typed = f.focus()
     focus = typed.to_dict()
     # The typed result's attributes are the JSON's keys (the focal metrics under focal_metrics).
@@ -66,7 +66,7 @@ def test_field_on_the_focal_plane(sim):
     for key in set(focus) - set(arfi.FocalMetrics._fields):
         value = getattr(typed, key)
         assert (list(value) if isinstance(value, (list, tuple)) else value) == focus[key], key
-    assert abs(focus["plane_peak_x_mm"]) <= sim.grid["dx_mm"] and abs(focus["plane_peak_y_mm"]) <= sim.grid["dy_mm"]
+    assert abs(focus["plane_peak_x_mm"]) <= sim.grid.dx_mm and abs(focus["plane_peak_y_mm"]) <= sim.grid.dy_mm
     # The keys `arfi field` writes to its JSON, in order; no hotter place than the focus in water.
     metrics = [
         "focal_peak_mm",
@@ -226,18 +226,30 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
 
     sim = arfi.Simulation(arfi.Scenario.from_toml(PLATE))
     p = sim.propagation
-    assert p["interfaces"] == "angular" and p["screen"] == "oblique" and p["reflections"] is False
-    r = p["reverberation"]
+    assert p.interfaces == "angular" and p.screen == "oblique" and p.reflections is False
+    r = p.reverberation
+    assert r is not None
     # Between the plate's faces (the grid puts each on the nearest plane, within one step).
-    assert (
-        abs(r["first_interface_z_mm"] - 15.0) <= sim.grid["dz_mm"]
-        and abs(r["last_interface_z_mm"] - 21.5) <= sim.grid["dz_mm"]
-    )
-    assert r["round_trips"] >= 1
+    assert abs(r.first_interface_z_mm - 15.0) <= sim.grid.dz_mm and abs(r.last_interface_z_mm - 21.5) <= sim.grid.dz_mm
+    assert r.round_trips >= 1
+    # The JSON form (arfi field's "propagation") is the attributes, nested ones as dicts.
+    assert p.to_dict() == {
+        "interfaces": "angular",
+        "screen": "oblique",
+        "reflections": False,
+        "shear": p.shear,
+        "reverberation": {
+            "first_interface_z_mm": r.first_interface_z_mm,
+            "last_interface_z_mm": r.last_interface_z_mm,
+            "round_trips": r.round_trips,
+        },
+    }
+    assert sim.grid.to_dict() == {k: getattr(sim.grid, k) for k in arfi.Grid._fields}
+    assert sim.grid == arfi.Simulation(arfi.Scenario.from_toml(PLATE)).grid and "dz_mm=" in repr(sim.grid)
     normal = arfi.Simulation(
         arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\ninterfaces = "normal-incidence"\n[medium]'))
     )
-    assert normal.propagation == {
+    assert normal.propagation.to_dict() == {
         "interfaces": "normal-incidence",
         "screen": "oblique",
         "reflections": False,
@@ -247,7 +259,7 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
     vertical = arfi.Simulation(
         arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\nscreen = "vertical"\n[medium]'))
     )
-    assert vertical.propagation["screen"] == "vertical"
+    assert vertical.propagation.screen == "vertical"
     with pytest.raises(ValueError, match="grid.screen"):
         arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\nscreen = "slanted"\n[medium]'))
     scenario = tmp_path / "plate.toml"

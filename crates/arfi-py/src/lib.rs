@@ -11,6 +11,7 @@ mod focal;
 mod interrupt;
 mod mode_fit;
 mod phase;
+mod plan;
 mod prediction;
 mod results;
 mod scenario;
@@ -40,6 +41,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<mode_fit::CoreModeFit>()?;
     m.add_class::<mode_fit::CoreModesFit>()?;
     m.add_class::<results::CoreCalibration>()?;
+    m.add_class::<plan::CoreGrid>()?;
+    m.add_class::<plan::CorePropagation>()?;
+    m.add_class::<plan::CoreReverberation>()?;
     m.add_class::<results::CoreEstimate>()?;
     m.add_class::<estimate_options::EstimateOptions>()?;
     m.add_class::<results::NuisanceFit>()?;

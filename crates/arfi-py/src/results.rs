@@ -28,6 +28,15 @@ pub(crate) fn fields_dict<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, P
     Ok(d)
 }
 
+/// `name(field=value, ...)` over the attributes its class lists in `_fields`.
+pub(crate) fn fields_repr(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<String> {
+    let mut parts = Vec::new();
+    for field in obj.getattr("_fields")?.extract::<Vec<String>>()? {
+        parts.push(format!("{field}={}", obj.getattr(field.as_str())?.repr()?));
+    }
+    Ok(format!("{name}({})", parts.join(", ")))
+}
+
 /// A getter's value in JSON-ready form (a dict's values too).
 fn plain<'py>(v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
     if let Ok(dict) = v.cast::<PyDict>() {
@@ -129,9 +138,7 @@ impl CoreCalibration {
     }
 
     fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
-        let d = fields_dict(slf.as_any())?;
-        let parts = d.iter().map(|(k, v)| Ok(format!("{k}={}", v.repr()?))).collect::<PyResult<Vec<_>>>()?;
-        Ok(format!("Calibration({})", parts.join(", ")))
+        fields_repr(slf.as_any(), "Calibration")
     }
 }
 

@@ -9,6 +9,7 @@ use crate::field::{CoreField, CoreSection};
 use crate::focal::{CoreFocalMetrics, MetricsMm};
 use crate::interrupt::run_interruptible;
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
+use crate::plan::{CoreGrid, CorePropagation};
 use crate::results::{CoreCalibration, CoreEstimate};
 use crate::scenario::parse_scenario;
 use crate::scenario::{mr_affine_array, mr_volume_shape};
@@ -120,29 +121,10 @@ impl CoreSimulation {
     fn frequency_hz(&self) -> f64 {
         self.inner.frequency
     }
-    /// How changes of medium are crossed: dict with `interfaces` ("angular" or
-    /// "normal-incidence"), `screen` ("oblique" or "vertical"), `reflections` (bool), `shear` (bool: the march carries
-    /// shear waves through solids whose faces lie on its planes) and `reverberation` (None, or dict with
-    /// `first_interface_z_mm`, `last_interface_z_mm`, `round_trips`).
+    /// How changes of medium are crossed (see `Propagation`).
     #[getter]
-    fn propagation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let p = self.inner.propagation();
-        let d = PyDict::new(py);
-        d.set_item("interfaces", p.interfaces)?;
-        d.set_item("screen", p.screen)?;
-        d.set_item("reflections", p.reflections)?;
-        d.set_item("shear", p.shear)?;
-        match p.reverberation {
-            None => d.set_item("reverberation", py.None())?,
-            Some((a, b, n)) => {
-                let r = PyDict::new(py);
-                r.set_item("first_interface_z_mm", a * 1e3)?;
-                r.set_item("last_interface_z_mm", b * 1e3)?;
-                r.set_item("round_trips", n)?;
-                d.set_item("reverberation", r)?;
-            }
-        }
-        Ok(d)
+    fn propagation(&self) -> CorePropagation {
+        self.inner.propagation().into()
     }
     #[getter]
     fn noise_rad(&self) -> f64 {
@@ -171,19 +153,10 @@ impl CoreSimulation {
             self.inner.transducer.elements.iter().map(|e| e.reference_point().iter().map(|v| v * 1e3).collect()).collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
-    /// Grid: dict with nx, ny, nz, dx_mm, dy_mm, dz_mm, z0_mm.
+    /// The grid the march runs on (see `Grid`).
     #[getter]
-    fn grid<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let g = &self.inner.grid;
-        let d = PyDict::new(py);
-        d.set_item("nx", g.nx)?;
-        d.set_item("ny", g.ny)?;
-        d.set_item("nz", g.nz)?;
-        d.set_item("dx_mm", g.dx * 1e3)?;
-        d.set_item("dy_mm", g.dy * 1e3)?;
-        d.set_item("dz_mm", g.dz * 1e3)?;
-        d.set_item("z0_mm", g.z0 * 1e3)?;
-        Ok(d)
+    fn grid(&self) -> CoreGrid {
+        CoreGrid::of(&self.inner)
     }
     /// MR geometry: affine (4x4, mm), volume shape, plane.
     #[getter]

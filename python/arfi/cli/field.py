@@ -351,7 +351,7 @@ def run(args: argparse.Namespace) -> int:
             "surface_pressure_pa": f.surface_pressure_pa,
             **summary_values,
             **{v.key: written.get(v.key) for v in VOLUMES},
-            "propagation": sim.propagation,
+            "propagation": sim.propagation.to_dict(),
             "engine": args.engine,
             "fdtd": None if fdtd is None or march is None else fdtd_json(fdtd, march.focal_metrics),
             "seconds": time.perf_counter() - t,
