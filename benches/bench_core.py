@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             "python": platform.python_version(),
         },
         "arfi_version": getattr(arfi, "__version__", "?"),
-        "grid": {k: g[k] for k in ("nx", "ny", "nz")},
+        "grid": {"nx": g.nx, "ny": g.ny, "nz": g.nz},
         "repeats": repeats,
         "import_s": import_s,
         "simulation_build_s": {"median": med(build), "min": min(build), "first": build[0], "all": build},

@@ -24,7 +24,7 @@ from arfi import _core, prior_modes
 from arfi.estimation import Calibration, Estimate, EstimateOptions
 from arfi.prior_modes import BONE_SPEED_STD_PERCENT, ModesResult, PriorMode
 from arfi.scenario import Scenario
-from arfi.simulation import Images, Known, Simulation
+from arfi.simulation import Images, Known, Simulation, images_and_known
 
 __all__ = ["BONE_SPEED_STD_PERCENT", "PredictionEstimate", "TARGET_TOLERANCE_MM", "estimate_with_prediction"]
 
@@ -44,8 +44,11 @@ NAMES = {
         "pose_std_mm",
         "pose_std_deg",
         "modes",
+        "calibration",
+        "images",
+        "known",
     )
-} | {"prior": "options.prior"}
+} | {"prior": "options.prior", "pose_sensitivity": "arfi.predict(..., pose_sensitivity=True)"}
 
 #: Each mode's prior-std parameter and the key of the prediction's JSON that holds that mode.
 MODE_KEYS = {
@@ -117,7 +120,8 @@ def estimate_with_prediction(
 ) -> PredictionEstimate:
     """The hybrid estimate of ``scenario``'s aberration from ``images`` (each with its ``known``
     phases) with a CT-based prediction (see the module docs): ``options.prior`` is the prediction's
-    phases; ``prediction`` (an :class:`arfi.Prediction` or the JSON of ``arfi predict``, predicted
+    phases (as ``arfi predict --out-phases`` writes them: a prediction does not set it by itself);
+    ``prediction`` (an :class:`arfi.Prediction` or the JSON of ``arfi predict``, predicted
     at the scenario's focus) gives the transmission and the modes, or ``transmission`` (one value
     per element, >= 0) alone. ``bone_speed_std_percent`` (default :data:`BONE_SPEED_STD_PERCENT`
     where the prediction holds the bone speed's sensitivity; 0 skips it), ``pose_std_mm``,
@@ -139,12 +143,23 @@ def estimate_with_prediction(
     say = log or (lambda _: None)
     nm = {**NAMES, **(names or {})}
     outline = scenario.outline()
-    d, drive = _prediction_parts(prediction, transmission, outline, nm)
+    if groups is not None and not (isinstance(groups, (int, np.integer)) and 1 <= groups <= outline.n_elements):
+        raise ValueError(f"{nm['groups']}: must be an integer between 1 and {outline.n_elements}, got {groups!r}")
+    if calibration is not None:
+        outline.check_calibration(calibration, nm["calibration"])
+    image_list, known_list = images_and_known(images, known)
+    for i, image in enumerate(image_list):
+        outline.check_image(image.shape, outline.mr_affine_mm, f"{nm['images']}[{i}]")
+    for i, k in enumerate(known_list):
+        if k is not None:
+            outline.known_per_element(k, f"{nm['known']}[{i}]", groups)
     prior = options.prior
+    if prior is not None:
+        outline.check_prior(prior, nm["prior"], groups)
+    d, drive = _prediction_parts(prediction, transmission, outline, nm)
     stds = {"bone_speed_std_percent": bone_speed_std_percent, "pose_std_mm": pose_std_mm, "pose_std_deg": pose_std_deg}
     to_fit = _modes_to_fit(scenario, d, prior, groups, stds, list(modes), outline, nm)
     fit, source = None, None
-    image_list, known_list = _as_lists(images, known)
     if to_fit:
         assert prior is not None  # _modes_to_fit fits none without one
         by_default = bone_speed_std_percent is None and any(m.name == "bone_speed" for m in to_fit)
@@ -175,23 +190,8 @@ def estimate_with_prediction(
 
 
 def _calibrated(sim: Simulation, calibration: Calibration | None) -> Simulation:
+    """``sim`` with ``calibration`` applied (checked against the scenario before the build)."""
     return sim if calibration is None else sim.calibrated(calibration)
-
-
-def _as_lists(images: Images, known: Known) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64] | None]]:
-    """One image or several, and their known phases, as two lists of the same length (the
-    checks of :meth:`Simulation.estimate`'s own apply later)."""
-    many = isinstance(images, (list, tuple))
-    image_list = [np.asarray(i, dtype=np.float64) for i in (images if many else [images])]  # type: ignore[union-attr]
-    if known is None:
-        known_list: list[NDArray[np.float64] | None] = [None] * len(image_list)
-    elif many:
-        known_list = [None if k is None else np.asarray(k, dtype=np.float64) for k in known]  # type: ignore[union-attr]
-    else:
-        known_list = [np.asarray(known, dtype=np.float64)]
-    if len(known_list) != len(image_list):
-        raise ValueError(f"known: {len(known_list)} entries for {len(image_list)} images")
-    return image_list, known_list
 
 
 def _prediction_parts(
@@ -219,7 +219,7 @@ def _prediction_parts(
             raise ValueError(
                 f"{nm['prediction']}: must be an arfi.Prediction or its JSON, got {type(prediction).__name__}"
             )
-        if "transmission" not in d:
+        if d.get("transmission") is None:
             raise ValueError(f"{nm['prediction']}: holds no 'transmission' (not the JSON of arfi predict)")
         name, values = f"{nm['prediction']}: 'transmission'", d["transmission"]
     if values is None:
@@ -249,7 +249,7 @@ def _prediction_parts(
             fx, fy, fz = focus
             raise ValueError(
                 f"{nm['prediction']}: predicted for the target ({x:.1f}, {y:.1f}, {z:.1f}) mm, but the scenario "
-                f"focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at the focus"
+                f"focuses at ({fx:.1f}, {fy:.1f}, {fz:.1f}) mm: predict at the focus (or the focus at the target)"
             )
     return d, drive
 
@@ -281,18 +281,23 @@ def _modes_to_fit(
     n_elements = outline.n_elements
     n_groups = outline.n_default_groups if groups is None else groups
     if len(prior) != n_elements or n_groups != n_elements:
-        if first:
+        if first and n_groups != n_elements:
             raise ValueError(f"{first}: fitted for per-element estimates only ({nm['groups']} {n_elements})")
+        if first:
+            raise ValueError(
+                f"{first}: fitted for per-element estimates only ({nm['prior']} has {len(prior)} values, one per "
+                f"group; give one per element, {n_elements})"
+            )
         return []
     for name, key in MODE_KEYS.items():
         if stds[name] and key not in prediction:
             raise ValueError(
-                f"{nm[name]}: needs {nm['prediction']} (an arfi.Prediction or the JSON of arfi predict) holding '{key}'"
+                f"{nm[name]}: needs {nm['prediction']} holding '{key}'"
                 + (
                     " (this one has none: predict again"
-                    + (" with pose_sensitivity)" if key.startswith("pose") else " with the current arfi)")
+                    + (f" with {nm['pose_sensitivity']})" if key.startswith("pose") else " with the current arfi)")
                     if prediction
-                    else ""
+                    else " (an arfi.Prediction or the JSON of arfi predict)"
                 )
             )
     try:

@@ -54,8 +54,10 @@ def test_calibration_is_saved_loaded_and_applied_only_where_it_was_fitted(tmp_pa
     assert path.stat().st_mode & 0o777 == 0o666 & ~_umask()
     assert list(json.loads(path.read_text())) == list(c.to_dict())
     back = arfi.Calibration.load(str(path))
-    assert back.to_dict() == c.to_dict()
-    np.testing.assert_array_equal(sim.calibrated(back).arfi_image(), sim.calibrated(c).arfi_image())
+    # Every value as written (the width through mm and back: within rounding).
+    assert back.broadening_width_mm == pytest.approx(c.broadening_width_mm, rel=1e-15)
+    assert {**back.to_dict(), "broadening_width_mm": 0} == {**c.to_dict(), "broadening_width_mm": 0}
+    np.testing.assert_allclose(sim.calibrated(back).arfi_image(), sim.calibrated(c).arfi_image(), rtol=1e-12)
     # A hand-written calibration (W = 0: no broadening) records no fit and applies anywhere.
     hand = arfi.Calibration(0.0, sim.amplitude)
     assert (hand.cost, hand.n_pixels, hand.noise_rad, hand.scenario) == (None, None, None, None)
@@ -86,8 +88,10 @@ def test_calibration_is_saved_loaded_and_applied_only_where_it_was_fitted(tmp_pa
     with pytest.raises(FileNotFoundError, match="absent.json: no such file"):
         arfi.Calibration.load(tmp_path / "absent.json")
     # A save that cannot be made leaves nothing behind.
-    with pytest.raises(ValueError, match="cannot write"):
+    with pytest.raises(FileNotFoundError, match="its folder does not exist"):
         c.save(tmp_path / "no" / "cal.json")
+    with pytest.raises(ValueError, match="cannot write"):
+        c.save(tmp_path)  # a folder
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cal.json"]
 
 
@@ -188,7 +192,11 @@ def test_cli_estimate_reads_known_phases_from_the_sidecar(tmp_path, sim):
         ("zero", ["estimate", "--image", "{d}/zero.nii.gz"], "no positive pixel"),
         ("shifted", ["estimate", "--image", "{d}/shifted.nii.gz"], "affine"),
         ("badside", ["estimate", "--image", "{d}/badside.nii.gz"], "applied_phases_rad"),
-        ("badcal", ["estimate", "--image", "{d}/good.nii.gz", "--calibration", "{d}/cal.json"], "calibration"),
+        (
+            "badcal",
+            ["estimate", "--image", "{d}/good.nii.gz", "--calibration", "{d}/cal.json"],
+            "--calibration: {d}/cal.json: made for scenario",
+        ),
         ("none", ["estimate", "--image", "{d}/x.nii.gz", "--method", "simplex"], "invalid choice"),
         (
             "good",
@@ -231,4 +239,4 @@ def test_bad_estimation_input_is_one_line_exit_2(tmp_path, sim, ideal, setup, ar
     )
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and match in lines[0], r.stderr
+    assert len(lines) == 1 and match.format(d=tmp_path) in lines[0], r.stderr

@@ -2,7 +2,8 @@
 
 The modes' fit on a head is exercised through the command line (test_prior_modes.py,
 test_cli.py's bone-speed cases), which calls this function; here: its result against the
-simulation it says it used, and its refusals, each before any model is built."""
+simulation it says it used, and its refusals, each before any model is built (no simulation is
+made: the build is patched to fail)."""
 
 import numpy as np
 import pytest
@@ -40,8 +41,13 @@ def test_a_transmission_drives_the_model_and_the_result_says_what_it_used(sim, i
     np.testing.assert_allclose(same.estimate.phases_rad, r.estimate.phases_rad)
 
 
-def test_bad_requests_name_the_parameter_as_the_caller_knows_it(sim, ideal):
+def test_bad_requests_name_the_parameter_as_the_caller_knows_it(sim, ideal, monkeypatch):
     n = sim.n_elements
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("a model was built before the request was checked")
+
+    monkeypatch.setattr(arfi._core, "CoreSimulation", no_build)
     scenario = sim.scenario
     prior = arfi.EstimateOptions(prior=np.zeros(n), prior_std_rad=0.3)
     ones = np.ones(n)
@@ -64,17 +70,29 @@ def test_bad_requests_name_the_parameter_as_the_caller_knows_it(sim, ideal):
         (dict(options=prior, groups=n, modes=["x"]), "modes: must be arfi.prior_modes.PriorMode"),
         (dict(options={"method": "lbfgs"}), "options: must be an arfi.EstimateOptions"),
         (dict(calibration={"broadening_width_mm": 2.7}), "calibration: must be an arfi.Calibration"),
+        (dict(calibration=arfi.Calibration(2.7, 1e-6, scenario="other")), 'calibration: made for scenario "other"'),
+        (dict(groups=0), "groups: must be an integer between 1 and"),
+        (dict(images=np.zeros((10, 10))), r"images\[0\]"),
+        (dict(known=np.zeros(5)), r"known\[0\]"),
+        (dict(options=arfi.EstimateOptions(prior=np.zeros(7), prior_std_rad=0.3)), "options.prior: has 7 values"),
+        (
+            dict(options=prior, groups=16, prediction={"transmission": None}),
+            "prediction: holds no 'transmission'",
+        ),
     ]
     for kwargs, match in cases:
         options = kwargs.pop("options", None)
+        images = kwargs.pop("images", ideal)
+        known = kwargs.pop("known", None)
         with pytest.raises(ValueError, match=match):
-            arfi.estimate_with_prediction(scenario, ideal, None, options, **kwargs)  # type: ignore[arg-type]
+            arfi.estimate_with_prediction(scenario, images, known, options, **kwargs)  # type: ignore[arg-type]
     # Renamed for a caller that knows the parameters by other names (arfi estimate's options).
     with pytest.raises(ValueError, match="--prior-pose-std-mm: needs --prior "):
         arfi.estimate_with_prediction(
             scenario, ideal, pose_std_mm=1.5, names={"pose_std_mm": "--prior-pose-std-mm", "prior": "--prior"}
         )
     # A mode left to its default is skipped quietly where it cannot apply (group estimate).
+    monkeypatch.undo()
     r = arfi.estimate_with_prediction(
         scenario,
         ideal,

@@ -36,6 +36,9 @@ def test_result_classes_write_every_attribute_to_json_once():
         _core.DiagnosisStep,
         _core.EffectCandidate,
         _core.AlternativeFit,
+        _core.Grid,
+        _core.Propagation,
+        _core.Reverberation,
     ):
         getters = {n for n, v in vars(cls).items() if type(v).__name__ == "getset_descriptor" and not n.startswith("_")}
         images = {"models", "models_initial", "models_final"}  # model images stay out of the JSON

@@ -1,6 +1,7 @@
 //! Scenario files: parse, validate and write them back as complete TOML or JSON.
 
 use crate::error::{invalid, to_py};
+use crate::results::CoreCalibration;
 use has_core::physics::mr::MrGeometry;
 use has_core::scenario::{Outline, Scenario};
 use ndarray::Array2;
@@ -138,6 +139,12 @@ impl CoreOutline {
     #[pyo3(signature = (prior, name="prior", groups=None))]
     fn check_prior(&self, prior: PyReadonlyArray1<'_, f64>, name: &str, groups: Option<usize>) -> PyResult<()> {
         self.inner.check_prior(name, &prior.as_array().to_vec(), groups).map_err(to_py)
+    }
+    /// Checks that `calibration` was fitted for this scenario and frequency (where it records
+    /// them), before anything is built; an error names `name`.
+    #[pyo3(signature = (calibration, name="calibration"))]
+    fn check_calibration(&self, calibration: &CoreCalibration, name: &str) -> PyResult<()> {
+        self.inner.check_calibration(&calibration.0).map_err(|e| to_py(e.naming(name)))
     }
     /// Per-element values (e.g. transmissions): a ValueError naming `name` unless one per element.
     #[pyo3(signature = (n_values, name))]

@@ -155,15 +155,12 @@ def calibrated_simulation(
 ) -> Simulation:
     """The simulation of ``scenario`` (default: the ``--scenario``), with the calibration file
     applied when given; ``source`` as :class:`Simulation` takes it."""
-    cal = read_calibration(args)  # before the simulation is built
-    path = getattr(args, "calibration", None)
-    sim = Simulation(scenario or load_scenario(args), groups=getattr(args, "groups", None), source=source)
-    if cal is None:
-        return sim
-    try:
-        return sim.calibrated(cal)
-    except ValueError as e:
-        raise ValueError(f"--calibration: {path}: {str(e).removeprefix('calibration: ')}") from None
+    scenario = scenario or load_scenario(args)
+    cal = read_calibration(args)
+    if cal is not None:  # before the simulation is built
+        scenario.outline().check_calibration(cal, f"--calibration: {args.calibration}")
+    sim = Simulation(scenario, groups=getattr(args, "groups", None), source=source)
+    return sim if cal is None else sim.calibrated(cal)
 
 
 def npy_path(path: str, option: str) -> str:

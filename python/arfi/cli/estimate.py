@@ -219,8 +219,6 @@ def run(args: argparse.Namespace) -> int:
     # head takes tens of seconds and gigabytes).
     outline = scenario.outline()
     prior = read_optional_phases(args.prior, "--prior")
-    if prior is not None:
-        outline.check_prior(prior, f"--prior: {args.prior}", args.groups)
     options = estimate_options(
         method=args.method,
         max_evaluations=args.max_evaluations,
@@ -265,14 +263,22 @@ def run(args: argparse.Namespace) -> int:
         log=lambda line: print(f"estimate: {line}", flush=True),
         progress=sys.stderr.isatty(),
         names={
-            "prediction": f"--prior-transmission: {path}" if path else "--prior-transmission",
+            "prediction": (
+                f"--prior-transmission: {path}"
+                if prediction is not None
+                else "--prior-transmission with the JSON of arfi predict"
+            ),
             "transmission": f"--prior-transmission: {path}",
+            "calibration": f"--calibration: {args.calibration}",
+            "images": "--image",
+            "known": "applied_phases_rad of --image",
+            "pose_sensitivity": "arfi predict --pose-sensitivity",
             "groups": "--groups",
             "bone_speed_std_percent": "--prior-bone-speed-std-percent",
             "pose_std_mm": "--prior-pose-std-mm",
             "pose_std_deg": "--prior-pose-std-deg",
             "modes": "--prior-modes",
-            "prior": "--prior",
+            "prior": f"--prior: {args.prior}" if args.prior else "--prior",
         },
     )
     e, sim, moved = r.estimate, r.simulation, r.prior_moved

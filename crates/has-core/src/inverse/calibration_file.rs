@@ -115,19 +115,38 @@ impl Calibration {
     pub fn save(&self, path: &Path) -> Result<()> {
         let name = path.display().to_string();
         let file = path.file_name().ok_or_else(|| HasError::invalid("path", format!("{name}: not a file name")))?;
-        let tmp = path.with_file_name(format!(".{}.{}.tmp", file.to_string_lossy(), std::process::id()));
-        let written = std::fs::write(&tmp, self.to_json()).and_then(|_| std::fs::rename(&tmp, path));
-        written.map_err(|e| {
+        static SAVES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = path.with_file_name(format!(".{}.{}.{n}.tmp", file.to_string_lossy(), std::process::id()));
+        let write = || -> std::io::Result<()> {
+            use std::io::Write;
+            // A new file (never one already there, nor a link's target), on disk before the rename.
+            let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+            f.write_all(self.to_json().as_bytes())?;
+            f.sync_all()?;
+            std::fs::rename(&tmp, path)
+        };
+        write().map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
-            HasError::BadFile { path: name, reason: format!("cannot write: {e}") }
+            if e.kind() == std::io::ErrorKind::NotFound {
+                HasError::FileNotFound { path: name, named_by: Some("its folder does not exist".into()) }
+            } else {
+                HasError::BadFile { path: name, reason: format!("cannot write: {e}") }
+            }
         })
     }
 
     /// Checks that the calibration was fitted for `sim`'s scenario and frequency (where it
     /// records them): W and the amplitude depend on the array, the MR protocol and the frequency.
     pub fn check_for(&self, sim: &Simulation) -> Result<()> {
-        let scenario_differs = self.scenario.as_deref().is_some_and(|s| s != sim.name);
-        let frequency_differs = self.frequency.is_some_and(|f| (f - sim.frequency).abs() > 1e-9 * sim.frequency);
+        self.check_against(&sim.name, sim.frequency)
+    }
+
+    /// Checks that the calibration was fitted for the scenario named `scenario` at `frequency`
+    /// (Hz), where it records them.
+    pub fn check_against(&self, scenario: &str, frequency: f64) -> Result<()> {
+        let scenario_differs = self.scenario.as_deref().is_some_and(|s| s != scenario);
+        let frequency_differs = self.frequency.is_some_and(|f| (f - frequency).abs() > 1e-9 * frequency);
         if scenario_differs || frequency_differs {
             let made = match (&self.scenario, self.frequency) {
                 (Some(s), Some(f)) => format!("scenario {s:?} at {f} Hz"),
@@ -137,7 +156,7 @@ impl Calibration {
             };
             return Err(HasError::invalid(
                 "calibration",
-                format!("made for {made}, not scenario {:?} at {} Hz: calibrate on this scenario's image", sim.name, sim.frequency),
+                format!("made for {made}, not scenario {scenario:?} at {frequency} Hz: calibrate on this scenario's image"),
             ));
         }
         Ok(())
@@ -174,6 +193,18 @@ mod tests {
         assert!(!text.contains("cost") && !text.contains("scenario"), "{text}");
         let back = Calibration::from_json(&text, "c.json").unwrap();
         assert!(back.cost.is_nan() && back.n_pixels == 0 && back.scenario.is_none());
+    }
+
+    #[test]
+    fn a_calibration_applies_only_where_it_was_fitted() {
+        let c = Calibration::new(2e-3, 1.0).unwrap().fitted_for(Some("a".into()), Some(5e5)).unwrap();
+        assert!(c.check_against("a", 5e5).is_ok());
+        let e = c.check_against("b", 5e5).unwrap_err().to_string();
+        assert!(e.starts_with("calibration: made for scenario \"a\" at 500000 Hz, not scenario \"b\""), "{e}");
+        assert!(c.check_against("a", 6.5e5).is_err());
+        // What a calibration does not record is not checked.
+        assert!(Calibration::new(2e-3, 1.0).unwrap().check_against("any", 1.0).is_ok());
+        assert!(Calibration::new(2e-3, 1.0).unwrap().fitted_for(None, Some(0.0)).is_err());
     }
 
     #[test]

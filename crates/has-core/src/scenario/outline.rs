@@ -12,6 +12,8 @@ use crate::physics::mr::MrGeometry;
 /// A scenario's array, focus and MR geometry, read without its CT or grid.
 #[derive(Debug, Clone)]
 pub struct Outline {
+    name: String,
+    frequency: f64,
     n_elements: usize,
     default_groups: Vec<usize>,
     focus: [f64; 3],
@@ -26,11 +28,24 @@ impl Scenario {
         if focus.iter().any(|v| !v.is_finite()) {
             return Err(HasError::invalid("focus.position_mm", format!("must be finite, got {:?}", self.focus.position_mm)));
         }
-        Ok(Outline { n_elements: transducer.elements.len(), default_groups: transducer.default_groups(), focus, mr: self.mr_geometry()? })
+        Ok(Outline {
+            name: self.name.clone(),
+            frequency: self.frequency_hz,
+            n_elements: transducer.elements.len(),
+            default_groups: transducer.default_groups(),
+            focus,
+            mr: self.mr_geometry()?,
+        })
     }
 }
 
 impl Outline {
+    /// Checks that `calibration` was fitted for this scenario and frequency (where it records
+    /// them), before a simulation is built to apply it.
+    pub fn check_calibration(&self, calibration: &crate::inverse::calibrate::Calibration) -> Result<()> {
+        calibration.check_against(&self.name, self.frequency)
+    }
+
     /// Number of elements of the array.
     pub fn n_elements(&self) -> usize {
         self.n_elements
