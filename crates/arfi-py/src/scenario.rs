@@ -144,7 +144,7 @@ impl CoreOutline {
     /// them), before anything is built; an error names `name`.
     #[pyo3(signature = (calibration, name="calibration"))]
     fn check_calibration(&self, calibration: &CoreCalibration, name: &str) -> PyResult<()> {
-        self.inner.check_calibration(&calibration.0).map_err(|e| to_py(e.naming(name)))
+        calibration.0.check_for_outline(&self.inner).map_err(|e| to_py(e.naming(name)))
     }
     /// Per-element values (e.g. transmissions): a ValueError naming `name` unless one per element.
     #[pyo3(signature = (n_values, name))]

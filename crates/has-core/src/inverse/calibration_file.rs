@@ -7,6 +7,7 @@
 
 use crate::error::{HasError, Result};
 use crate::inverse::calibrate::Calibration;
+use crate::scenario::Outline;
 use crate::simulation::Simulation;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -140,6 +141,12 @@ impl Calibration {
     /// records them): W and the amplitude depend on the array, the MR protocol and the frequency.
     pub fn check_for(&self, sim: &Simulation) -> Result<()> {
         self.check_against(&sim.name, sim.frequency)
+    }
+
+    /// [`Calibration::check_for`] from the scenario's [`Outline`], before a simulation is built
+    /// to apply it.
+    pub fn check_for_outline(&self, outline: &Outline) -> Result<()> {
+        self.check_against(outline.name(), outline.frequency())
     }
 
     /// Checks that the calibration was fitted for the scenario named `scenario` at `frequency`

@@ -40,10 +40,14 @@ impl Scenario {
 }
 
 impl Outline {
-    /// Checks that `calibration` was fitted for this scenario and frequency (where it records
-    /// them), before a simulation is built to apply it.
-    pub fn check_calibration(&self, calibration: &crate::inverse::calibrate::Calibration) -> Result<()> {
-        calibration.check_against(&self.name, self.frequency)
+    /// The scenario's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The drive frequency, Hz.
+    pub fn frequency(&self) -> f64 {
+        self.frequency
     }
 
     /// Number of elements of the array.
