@@ -58,6 +58,40 @@ def axis_labels(sim: Any) -> dict[str, str]:
     return {"xlabel": f"{sim.mr_plane[0]} (mm)", "ylabel": f"{sim.mr_plane[1]} (mm)"}
 
 
+#: |p| below this fraction of the colour scale's top is not drawn over the medium.
+BEAM_FLOOR = 0.02
+#: |p| above this fraction of the colour scale's top is drawn opaque; below it the beam fades
+#: (opacity ∝ √(|p| / this)), so that the converging beam stays visible in the brain without hiding
+#: the anatomy where it is weak.
+BEAM_OPAQUE = 0.3
+
+
+def beam_rgba(p: NDArray[np.float64], vmax: float, cmap: str = "inferno") -> NDArray[np.float64]:
+    """``p`` (≥ 0) as RGBA on ``cmap`` scaled 0..``vmax``: opaque above ``BEAM_OPAQUE`` of
+    ``vmax``, fading below it, clear below ``BEAM_FLOOR``."""
+    import matplotlib
+
+    f = np.clip(np.nan_to_num(np.asarray(p, dtype=np.float64)) / vmax, 0.0, 1.0)
+    rgba = np.array(matplotlib.colormaps[cmap](f), dtype=np.float64)
+    rgba[..., 3] = np.where(f < BEAM_FLOOR, 0.0, np.sqrt(np.minimum(f / BEAM_OPAQUE, 1.0)))
+    return rgba
+
+
+def show_beam(ax: Any, p: NDArray[np.float64], vmax: float, extent: Sequence[float]) -> Any:
+    """``p`` drawn over what ``ax`` shows (:func:`beam_rgba`); returns a mappable for its colour
+    bar (``inferno``, 0..``vmax``)."""
+    import matplotlib
+
+    ax.imshow(beam_rgba(p, vmax), origin="lower", extent=extent, interpolation="nearest")
+    return matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0.0, vmax), "inferno")
+
+
+def mark_target(ax: Any, u: float, w: float) -> None:
+    """The target as an open circle (12 pt across, larger than a focus of a few mm in the views
+    drawn here) so that the focus inside it stays visible."""
+    ax.plot(u, w, marker="o", ms=12, mfc="none", mec="c", mew=1.2, ls="none", label="target")
+
+
 def show_image(
     fig: Any,
     ax: Any,
@@ -110,9 +144,11 @@ def focal_box_mm(
 
 
 def element_map(fig: Any, ax: Any, sim: Any, phases: ArrayLike, title: str) -> None:
-    """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π]);
-    ``phases`` per element or per group."""
+    """The transducer's elements (x, y in mm) coloured by phase (rad, wrapped to [-π, π], a cyclic
+    colour map on a grey ground); ``phases`` per element or per group."""
     per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
+    # The cyclic map is near white at 0 rad: a grey ground keeps those elements visible.
+    ax.set_facecolor("0.55")
     element_values(
         fig,
         ax,
@@ -136,7 +172,7 @@ def element_values(fig: Any, ax: Any, sim: Any, values: NDArray[np.float64], tit
 
 
 def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, columns: slice) -> tuple[Any, Any]:
-    """One drive's |p| on an x–z section (MPa, shown where above 10 % of ``vmax_pa``) over the
+    """One drive's |p| on an x–z section (MPa, fading below 30 % of ``vmax_pa``: :func:`beam_rgba`) over the
     sound speed (grey, m/s), x across (the ``columns`` shown) and z up from the source plane, in
     mm. Returns the two images (for colour bars)."""
     x, z = section.x_mm[columns], section.z_mm
@@ -145,16 +181,8 @@ def show_section(ax: Any, section: Any, drive: int, title: str, vmax_pa: float, 
     c = section.sound_speed_m_s[:, columns]
     bg = ax.imshow(c, origin="lower", extent=extent, cmap="Greys", vmin=1300.0, vmax=max(3000.0, float(c.max())))
     p = np.abs(section.pressure[drive][:, columns]) / 1e6
-    im = ax.imshow(
-        np.ma.masked_less(p, 0.1 * vmax_pa / 1e6),
-        origin="lower",
-        extent=extent,
-        cmap="inferno",
-        vmin=0.0,
-        vmax=vmax_pa / 1e6,
-        alpha=0.9,
-    )
-    ax.set(title=title, xlabel="x (mm)", ylabel="z (mm)")
+    im = show_beam(ax, p, vmax_pa / 1e6, extent)
+    ax.set(title=title, xlabel="x (mm)", ylabel="z (mm)", xlim=extent[:2], ylim=extent[2:])
     return bg, im
 
 
@@ -162,7 +190,7 @@ def section_figure(section: Any, titles: Sequence[str], target_mm: Sequence[floa
     """A row of x–z sections, one per drive, on one pressure scale: that of the focal region
     (the largest |p| within 15 mm of the target's (x, z); the field in the water, scalp or skull,
     often stronger, is drawn saturated), cropped across to where the medium differs from the
-    source plane's or the beam exceeds 10 % of its peak (10 mm margin)."""
+    source plane's or the beam exceeds 10 % of its peak (10 mm margin); the target circled."""
     plt = pyplot()
     p = np.abs(section.pressure).max(axis=(0, 1))
     c = section.sound_speed_m_s
@@ -174,6 +202,7 @@ def section_figure(section: Any, titles: Sequence[str], target_mm: Sequence[floa
     vmax = float(np.abs(section.pressure[:, near]).max()) if near.any() else float(np.abs(section.pressure).max())
     for k, t in enumerate(titles):
         bg, im = show_section(ax[0][k], section, k, t, vmax, columns)
+        mark_target(ax[0][k], target_mm[0], target_mm[2])
     fig.colorbar(im, ax=ax[0].tolist(), label="|p| (MPa)", shrink=0.8, extend="max")
     fig.colorbar(bg, ax=ax[0].tolist(), label="sound speed (m/s)", shrink=0.8)
     return fig
@@ -326,8 +355,8 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
     """|p| (MPa) of ``field``'s beam on the three grid planes through the target (x–z, y–z, x–y,
     in mm), from the field's own march (``sim.field(..., volume=True)``): over the CT in HU
     (grey) with a ``[ct]``, else over the sound speed; the colour scale set by the focal peak
-    (hotter places, a scalp or a skull, saturate), shown where above 10 % of it, with its -6 dB
-    lobe contoured (cyan) and the target (+). The top row shows the whole grid, the bottom row the
+    (hotter places, a scalp or a skull, saturate), fading below 30 % of it (:func:`beam_rgba`), with
+    its -6 dB lobe contoured (cyan) and the target circled. The top row shows the whole grid, the bottom row the
     same planes around the target (at least 10 mm each way, three -6 dB widths across and 1.5
     along the beam). The whole grid's |p| is a view of the field's own memory (no copy)."""
     plt = pyplot()
@@ -371,18 +400,10 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
                 vmin=-200.0 if hu else 1300.0,
                 vmax=2000.0 if hu else max(3000.0, float(np.nanmax(medium))),
             )
-            im = axis.imshow(
-                np.ma.masked_less(plane, 0.1 * peak),
-                origin="lower",
-                extent=extent,
-                cmap="inferno",
-                vmin=0.0,
-                vmax=peak,
-                alpha=0.85,
-            )
+            im = show_beam(axis, plane, peak, extent)
             axis.contour(uu, ww, focal, levels=[peak / 2], colors="c", linewidths=0.8)
-            axis.plot(t["xyz".index(u)], t["xyz".index(w)], "c+", ms=10)
-            axis.set(xlabel=f"{u} (mm)", ylabel=f"{w} (mm)", aspect="equal")
+            mark_target(axis, t["xyz".index(u)], t["xyz".index(w)])
+            axis.set(xlabel=f"{u} (mm)", ylabel=f"{w} (mm)", aspect="equal", xlim=extent[:2], ylim=extent[2:])
         ax[0][n].set_title(f"{u}–{w} plane through the target ({at} = {t['xyz'.index(at)]:.1f} mm)")
         ax[1][n].set(
             title="around the target",
@@ -397,8 +418,9 @@ def orthogonal_sections(sim: Any, field: Any) -> Any:
 def field_report(
     out: str | Path, sim: Any, field: Any, values: dict[str, Any], phases: ArrayLike | None = None
 ) -> Path:
-    """Report of a simulated field made with ``volume=True``: |p| (MPa) on the plane, axes in
-    mm, its colour scale set by the focal peak near the target (hotter places saturate); |p| along
+    """Report of a simulated field made with ``volume=True``: |p| (MPa) on the plane around the
+    target (circled), axes in mm, its colour scale set by the focal peak near the target (hotter
+    places saturate); |p| along
     the beam's axis (the line from the array's centre through the target) with the target's depth
     marked; with ``phases``, the element map of the phases added to the steering; the beam on the
     three planes through the target over the CT or the sound speed (:func:`orthogonal_sections`)."""
@@ -416,12 +438,22 @@ def field_report(
         vmax=focus.plane_peak_pa / 1e6,
         extent=[x[0] - dx / 2, x[-1] + dx / 2, y[0] - dy / 2, y[-1] + dy / 2],
     )
-    ax[0].plot(focus.plane_peak_x_mm, focus.plane_peak_y_mm, "c+", ms=10)
-    ax[0].set(title=f"|p| on the plane z = {field.z_mm:.1f} mm (+: focal peak)", xlabel="x (mm)", ylabel="y (mm)")
+    # Around the target: the whole plane is in the sections below, and a hotter ring of water or
+    # skull far from it would draw the eye away from the focus.
+    t = field.target_mm
+    across = (focus.focal_metrics.fwhm_6db_mm or (20.0, 5.0))[1]
+    reach = max(10.0, 3.0 * across)
+    mark_target(ax[0], t[0], t[1])
+    ax[0].set(
+        title=f"|p| on the plane z = {field.z_mm:.1f} mm around the target (o)",
+        xlabel="x (mm)",
+        ylabel="y (mm)",
+        xlim=(max(x[0], t[0] - reach), min(x[-1], t[0] + reach)),
+        ylim=(max(y[0], t[1] - reach), min(y[-1], t[1] + reach)),
+    )
     fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)", extend="max")
     ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)
     ax[1].axvline(field.target_mm[2], color="0.5", ls="--", lw=0.8)
-    t = field.target_mm
     ax[1].set(
         title=f"|p| on the line from the array's centre to ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}) mm (--: target)",
         xlabel="z (mm)",

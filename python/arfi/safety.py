@@ -10,13 +10,39 @@ pressure amplitude; I_SPPA is ``p² / (2·rho·c)`` with the tissue's rho and c.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any
+from typing import Any, Literal
 
 #: Default limit of the mechanical index.
 MI_LIMIT = 1.9
 #: Default limit of I_SPPA (W/cm²).
 ISPPA_LIMIT_W_CM2 = 190.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Exceedance:
+    """One exposure above its limit: ``quantity`` (``"mechanical_index"`` or ``"isppa_w_cm2"``)
+    of ``value`` above ``limit`` at ``where`` (``"focal peak"`` or ``"hottest place"``) in
+    ``tissue``."""
+
+    where: Literal["focal peak", "hottest place"]
+    tissue: str | None
+    quantity: Literal["mechanical_index", "isppa_w_cm2"]
+    value: float
+    limit: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON entry: the field names as keys."""
+        return dataclasses.asdict(self)
+
+    def text(self) -> str:
+        """``MI 2.12 at the hottest place (skull) > 1.9``."""
+        if self.quantity == "mechanical_index":
+            shown = f"MI {self.value:.2f}"
+        else:
+            shown = f"I_SPPA {self.value:.1f} W/cm²"
+        return f"{shown} at the {self.where} ({self.tissue}) > {self.limit:g}"
 
 
 def check_limit(value: float, name: str) -> float:
@@ -26,22 +52,21 @@ def check_limit(value: float, name: str) -> float:
     return float(value)
 
 
-def exceeded(
-    focus: Any, mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2
-) -> list[dict[str, Any]]:
-    """The exposures above the limits, one entry each (``where``, ``tissue``, ``quantity``,
-    ``value``, ``limit``): the mechanical index and I_SPPA at the focal peak
+def exceeded(focus: Any, mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = ISPPA_LIMIT_W_CM2) -> list[Exceedance]:
+    """The exposures above the limits, one :class:`Exceedance` each: the mechanical index and I_SPPA at the focal peak
     (``focus.focal_metrics``), and at the hottest place of each tissue class (``focus.hottest``)
     unless that place is the focus itself (``is_focus``). ``focus`` is ``Field.focus()``."""
     mi_limit = check_limit(mi_limit, "mi_limit")
     isppa_limit_w_cm2 = check_limit(isppa_limit_w_cm2, "isppa_limit_w_cm2")
-    rows: list[dict[str, Any]] = []
+    rows: list[Exceedance] = []
 
-    def flag(where: str, tissue: str | None, exposure: Any) -> None:
-        for quantity, limit in (("mechanical_index", mi_limit), ("isppa_w_cm2", isppa_limit_w_cm2)):
-            value = getattr(exposure, quantity)
-            if value > limit:
-                rows.append({"where": where, "tissue": tissue, "quantity": quantity, "value": value, "limit": limit})
+    def flag(where: Literal["focal peak", "hottest place"], tissue: str | None, exposure: Any) -> None:
+        mi = float(exposure.mechanical_index)
+        if mi > mi_limit:
+            rows.append(Exceedance(where, tissue, "mechanical_index", mi, mi_limit))
+        isppa = float(exposure.isppa_w_cm2)
+        if isppa > isppa_limit_w_cm2:
+            rows.append(Exceedance(where, tissue, "isppa_w_cm2", isppa, isppa_limit_w_cm2))
 
     m = focus.focal_metrics
     if m.focal_peak_pa is not None:
@@ -52,13 +77,6 @@ def exceeded(
     return rows
 
 
-def summary(rows: list[dict[str, Any]]) -> str:
+def summary(rows: list[Exceedance]) -> str:
     """One line naming each exposure above its limit (``rows`` from :func:`exceeded`, not empty)."""
-    name = {"mechanical_index": "MI", "isppa_w_cm2": "I_SPPA"}
-    value = {"mechanical_index": "{:.2f}", "isppa_w_cm2": "{:.1f} W/cm²"}
-    parts = [
-        f"{name[r['quantity']]} {value[r['quantity']].format(r['value'])} at the {r['where']} ({r['tissue']}) > "
-        f"{r['limit']:g}"
-        for r in rows
-    ]
-    return "above the safety lines: " + "; ".join(parts)
+    return "above the safety lines: " + "; ".join(r.text() for r in rows)

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from arfi.cli import main
-from arfi.safety import exceeded
+from arfi.safety import exceeded, summary
 
 
 def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
@@ -33,7 +33,7 @@ def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
     rows = exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)
     # The focus: MI 1.70 and 46 W/cm², within; the skull's 1.5 MPa at 0.5 MHz: MI 2.12, above 1.9
     # (its 19 W/cm² within); the brain's hottest sample is the focus itself, not flagged again.
-    assert rows == [
+    assert [r.to_dict() for r in rows] == [
         {
             "where": "hottest place",
             "tissue": "skull",
@@ -42,14 +42,15 @@ def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():
             "limit": 1.9,
         }
     ]
-    assert [(r["where"], r["quantity"]) for r in exceeded(focus, mi_limit=1.5, isppa_limit_w_cm2=40.0)] == [
+    assert summary(rows) == "above the safety lines: MI 2.12 at the hottest place (skull) > 1.9"
+    assert [(r.where, r.quantity) for r in exceeded(focus, mi_limit=1.5, isppa_limit_w_cm2=40.0)] == [
         ("focal peak", "mechanical_index"),
         ("focal peak", "isppa_w_cm2"),
         ("hottest place", "mechanical_index"),
     ]
     # A place in the focal peak's tissue hotter than the peak (a side lobe) is flagged.
     hottest["brain"] = place(1.4e6, 1.6e6)
-    assert [r["tissue"] for r in exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)] == ["skull", "brain"]
+    assert [r.tissue for r in exceeded(focus, mi_limit=1.9, isppa_limit_w_cm2=190.0)] == ["skull", "brain"]
     # No closed focal region: only the hottest places are checked; a field without a volume has none.
     none = SimpleNamespace(focal_metrics=SimpleNamespace(focal_peak_pa=None), hottest=None)
     assert exceeded(none, mi_limit=0.1) == []

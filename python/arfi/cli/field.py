@@ -330,7 +330,11 @@ def run(args: argparse.Namespace) -> int:
     rows = exceeded(focus, *limits)
     if rows:
         lines.insert(-1, f"field: {summary(rows)}")
-    summary_values["safety"] = {"mechanical_index_limit": limits[0], "isppa_limit_w_cm2": limits[1], "exceeded": rows}
+    summary_values["safety"] = {
+        "mechanical_index_limit": limits[0],
+        "isppa_limit_w_cm2": limits[1],
+        "exceeded": [r.to_dict() for r in rows],
+    }
     print("\n".join(lines))
     if args.report:
         from arfi.report import field_report
