@@ -7,7 +7,7 @@ A head phantom (``arfi phantom --array hemisphere --thickness-mm 4 12``), 256 el
 its registration: ``mild`` (10 %, 1.5 mm along x: the tutorial's) or ``harsh`` (25 %, 3 mm along
 x and 4 degrees about y through the target). Three images (in focus, defocused by +-5 mm) at
 0.02 rad noise, taken with the prediction's reference steering. Estimates, each with a prior of
-``--prior-std-rad`` correlated over 30 mm and a fitted image scale:
+``--prior-std-rad`` correlated over 30 mm and a fitted amplitude scale:
 
 * ``without-bone`` (the README's and the tutorial's): the head with its bone read as soft tissue,
   the elements weighted by the prediction's transmission, the prediction as the prior;

@@ -127,7 +127,7 @@ class ModesResult:
         lines = [
             "prediction's modes from the images on the head with the CT's bone: "
             + "; ".join(parts)
-            + f", image scale {self.scale:.3f}, misfit {self.misfit:.2f} ({self.misfit_at_zero:.2f} with the "
+            + f", amplitude scale {self.scale:.3f}, misfit {self.misfit:.2f} ({self.misfit_at_zero:.2f} with the "
             f"prediction as it is) over {self.n_pixels} pixels, {self.iterations} iterations"
             + ("" if self.converged else " (not converged: the iterations ran out or a step failed)")
             + f", the model with bone built and marched in {self.seconds:.1f} s; the images' chi-squared falls by "

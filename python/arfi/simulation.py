@@ -529,7 +529,7 @@ class Simulation:
     def fit_mode(self, images: Images, known: Known, mode: ArrayLike) -> _core.ModeFit:
         """The coefficient ``c`` of a prior ``mode`` (rad per element for c = 1; standard normal a
         priori) that best explains the images, each taken with its ``known`` phases added: image
-        ``k`` is this model's with ``c * mode + known_k`` added, one image scale fitted, ``c``
+        ``k`` is this model's with ``c * mode + known_k`` added, one amplitude scale fitted, ``c``
         searched at steps of one (one march per image each) out to +-3, then by successive
         parabolic steps (``bracketed`` is false when the best lies at +-3). Meant for
         a CT prediction's bone-speed mode on the head with the CT's bone driven with the
@@ -547,7 +547,7 @@ class Simulation:
         """The coefficients ``c`` of several prior ``modes`` (rows: rad per element for c_m = 1;
         each standard normal a priori) that best explain the images jointly, each taken with its
         ``known`` phases: image ``k`` is this model's with ``sum_m c_m * modes[m] + known_k``
-        added, one image scale fitted, by Gauss-Newton with the images' exact derivatives along
+        added, one amplitude scale fitted, by Gauss-Newton with the images' exact derivatives along
         each mode (one batch march of every image and its derivatives per iteration, a few
         iterations). Meant for a CT prediction's pose and bone-speed modes on the head with the
         CT's bone (:mod:`arfi.prior_modes`). Returns ``coefficients``, ``std`` and

@@ -50,6 +50,8 @@ def test_amplitude_and_backgrounds_are_fitted_with_the_element_phases(small: arf
     assert np.allclose(n.offset_rad, offsets, atol=0.005), n
     assert abs(n.slope_x_rad_per_mm[0] - 2e-4) < 1e-4, n
     assert abs(n.scale - 0.9) < 0.05, n
+    # One amplitude scale: the estimate's is the one its nuisance fit applied.
+    assert fitted.scale == n.scale and plain.scale == 1.0
     # Not fitted: the model's values.
     assert n.broadening_width_mm == pytest.approx(2.7) and (n.dx_mm, n.dy_mm) == (0.0, 0.0)
     # The residual is the noise: within 10 % of its expectation.

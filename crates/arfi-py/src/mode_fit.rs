@@ -23,7 +23,7 @@ impl CoreModeFit {
         self.0.std
     }
 
-    /// The fitted image scale.
+    /// The fitted amplitude scale (the images' amplitude over the model's).
     #[getter]
     fn scale(&self) -> f64 {
         self.0.scale
@@ -96,7 +96,7 @@ impl CoreModesFit {
         self.0.covariance.clone()
     }
 
-    /// The fitted image scale.
+    /// The fitted amplitude scale (the images' amplitude over the model's).
     #[getter]
     fn scale(&self) -> f64 {
         self.0.scale

@@ -248,7 +248,8 @@ impl CoreEstimate {
         self.report.n_pixels
     }
 
-    /// The images' amplitude over the model's (1 unless fitted: `fit_amplitude`).
+    /// The amplitude scale at the estimate: the images' amplitude over the model's (1 unless
+    /// fitted: `fit_amplitude`, or per element the fitted nuisance's).
     #[getter]
     fn scale(&self) -> f64 {
         self.report.scale

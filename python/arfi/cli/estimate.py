@@ -138,10 +138,11 @@ def register(sub: Any) -> None:
         help="each element's predicted transmission through the skull: the JSON of arfi predict (its "
         "'transmission'), or .npy or text with one value per element. The model then drives each element at its "
         "transmission relative to the mean, so that a model of the head without its skull weighs the elements as the "
-        "skull does (the skull's overall loss is the image scale's: --fit-nuisance amplitude). The JSON's 'target_mm' "
-        "must lie within 0.5 mm of the scenario's focus. For a per-element estimate with --prior, the JSON also turns "
-        "on the fit of the prediction's bone-speed mode before the estimate (a second model, of the head with its "
-        "bone, built and marched; announced when it starts; --prior-bone-speed-std-percent 0 leaves it out)",
+        "skull does (the skull's overall loss is the amplitude scale's: --fit-nuisance amplitude). "
+        "The JSON's 'target_mm' must lie within 0.5 mm of the scenario's focus. For a per-element estimate with "
+        "--prior, the JSON also turns on the fit of the prediction's bone-speed mode before the estimate (a second "
+        "model, of the head with its bone, built and marched; announced when it starts; "
+        "--prior-bone-speed-std-percent=0 leaves it out)",
     )
     p.add_argument(
         "--prior-bone-speed-std-percent",

@@ -351,7 +351,7 @@ fn smooth_field(positions: &[[f64; 3]], std_rad: f64, length: f64, seed: u64) ->
     (0..positions.len()).map(|e| modes.iter().zip(&a).map(|(w, c)| w[e] * c).sum()).collect()
 }
 
-/// Per element with a smooth prior and a fitted image scale, the transcranial case of the
+/// Per element with a smooth prior and a fitted amplitude scale, the transcranial case of the
 /// README (a CT prediction as prior ±0.5 rad over 40 mm, three images at 0.02 rad, the images
 /// weaker than the bone-free model by the skull's transmission, `--fit-nuisance amplitude`):
 /// the estimate must never end below the prediction alone by more than the noise explains.

@@ -5,7 +5,7 @@
 //! The estimation's model of a head reads its bone as soft tissue: its focal spot is not shaped
 //! by a skull, and a per-element fit that may move along the mode reshapes the spot with it
 //! (on a good prediction it moved twice the true bone-speed error). Here the phases stay the
-//! prediction's and only the mode's coefficient `c` and one image scale `a` are fitted, on the
+//! prediction's and only the mode's coefficient `c` and one amplitude scale `a` are fitted, on the
 //! model through the CT's bone driven with the reference steering (the prediction is what that
 //! model already holds): image `k` is simulated with the added phases `c·m + known_k` and
 //!
@@ -51,7 +51,7 @@ pub struct ModeFit {
     /// Its posterior standard deviation, from the parabola's curvature (`J` is minus twice the
     /// log posterior: `J ≈ J(ĉ) + (c − ĉ)²/std²`).
     pub std: f64,
-    /// The fitted image scale at `c`.
+    /// The fitted amplitude scale (the images' amplitude over the model's) at `c`.
     pub scale: f64,
     /// `χ²` per pixel at `c`: about 1 when the model explains the images to their noise.
     pub misfit: f64,

@@ -59,7 +59,7 @@ pub struct ModesFit {
     pub coefficients: Vec<f64>,
     /// Their posterior covariance (row-major, `M x M`).
     pub covariance: Vec<Vec<f64>>,
-    /// The fitted image scale.
+    /// The fitted amplitude scale (the images' amplitude over the model's).
     pub scale: f64,
     /// `χ²` per pixel at the fitted coefficients: about 1 when the model explains the images.
     pub misfit: f64,

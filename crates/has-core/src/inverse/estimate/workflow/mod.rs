@@ -175,7 +175,8 @@ pub struct EstimateReport {
     pub noise: f64,
     /// Pixels the estimate was fitted on.
     pub n_pixels: usize,
-    /// The fitted amplitude scale (1 unless `fit_amplitude`; per element: 1).
+    /// The amplitude scale at the estimate: the images' amplitude over the model's (1 unless
+    /// fitted: `fit_amplitude`, or per element the fitted nuisance's, its `scale`).
     pub scale: f64,
     /// The default-group warm start of a per-element estimate.
     pub group_phases: Option<Vec<f64>>,

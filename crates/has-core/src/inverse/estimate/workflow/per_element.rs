@@ -334,6 +334,7 @@ fn search_and_assess(
     let conflict = check.as_ref().is_some_and(|c| c.conflict);
     let recommendation =
         recommend(&elements.phases, request.prior.as_ref(), (assessment.mismatch, conflict), support.as_ref(), group_elements.as_deref());
+    let scale = fitted.as_ref().map_or(1.0, |n| n.scale);
     let report = EstimateReport {
         image_cost,
         nuisance: fitted,
@@ -341,7 +342,7 @@ fn search_and_assess(
         assessment,
         noise: model.noise,
         n_pixels,
-        scale: 1.0,
+        scale,
         group_phases,
         underdetermined,
         kept_prediction,
