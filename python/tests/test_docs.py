@@ -10,6 +10,7 @@ is not skipped by a visible annotation runs (exit 0, no exception). Tutorial ste
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -60,3 +61,21 @@ def test_a_placeholder_in_a_command_is_found(tmp_path):
     (tmp_path / "doc.md").write_text("```bash\narfi sweep ... --out s   # ok...\n# sweep: printed...\n```\n")
     steps = run_docs.steps(str(tmp_path / "doc.md"))
     assert len(run_docs.placeholders(steps[0])) == 1
+
+
+def test_the_readme_shows_what_the_main_job_prints(tmp_path, capsys):
+    """The README's block of the main job's output is what the job prints (its seeds are fixed),
+    the time apart."""
+    from arfi.cli import main
+
+    text = (run_docs.ROOT / "README.md").read_text()
+    block = text[text.index("What the main job prints") :].split("```")[1]
+    shown = [line for line in block.splitlines() if line.startswith("reproduce:")]
+    assert len(shown) == 3, block
+    assert main(["reproduce", "--case", "16", "--repeats", "3", "--out", str(tmp_path / "results")]) == 0
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("reproduce:")]
+
+    def untimed(lines):
+        return [re.sub(r" in [0-9.]+ s -> \S+$", " in T s", line) for line in lines]
+
+    assert untimed(printed) == untimed(shown)
