@@ -13,7 +13,7 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -43,14 +43,55 @@ class Trial:
     """16 group aberrations or 1024 element aberrations (estimated on 16 groups)."""
 
 
+@dataclass(frozen=True)
+class TrialResult:
+    """One trial's outcome: the corrected focus scored on noise-free images."""
+
+    trial: Trial
+    recovered_fraction: float
+    """Corrected over ideal focal ARFI."""
+    gain: float
+    """Corrected over aberrated focal ARFI, minus 1."""
+    phase_error_rad: float
+    """RMS of the wrapped difference between the estimated and true group phases."""
+    ambiguous: bool
+    evaluations: int
+    seconds: float
+    broadening_width_mm: float
+    """The calibration's W."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row of ``sweep.csv`` and ``sweep.json``: the trial's fields, then the outcome's."""
+        return {**asdict(self.trial), **{f.name: getattr(self, f.name) for f in fields(self) if f.name != "trial"}}
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """The trials of one (method, images, noise) over their seeds: means and spreads."""
+
+    method: str
+    images: int
+    noise_rad: float
+    trials: int
+    recovered_fraction_mean: float
+    recovered_fraction_std: float
+    gain_mean: float
+    phase_error_rad_mean: float
+    ambiguous_fraction: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row of ``summary.csv`` and ``sweep.json``."""
+        return asdict(self)
+
+
 @lru_cache(maxsize=4)
 def _simulation(scenario_toml: str | None) -> Simulation:
     """One simulation per scenario per process (a worker runs many trials)."""
     return Simulation(None if scenario_toml is None else Scenario.from_toml(scenario_toml))
 
 
-def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
-    """Runs one trial (in whatever process calls it) and returns its row."""
+def run_trial(trial: Trial, scenario_toml: str | None = None) -> TrialResult:
+    """Runs one trial (in whatever process calls it)."""
     sim = _simulation(scenario_toml)
     s = trial.seed
     cal = sim.calibrate(sim.arfi_image(noise_rad=trial.noise_rad, seed=10_000 + s))
@@ -61,16 +102,16 @@ def run_trial(trial: Trial, scenario_toml: str | None = None) -> dict[str, Any]:
     focal_ideal = sim.focal_arfi(sim.arfi_image())[0]
     focal_aberrated = sim.focal_arfi(sim.arfi_image(applied))[0]
     focal_corrected = sim.focal_arfi(sim.arfi_image(applied - est.phases_rad[sim.groups]))[0]
-    return {
-        **asdict(trial),
-        "recovered_fraction": recovered_fraction(focal_corrected, focal_ideal),
-        "gain": gain(focal_corrected, focal_aberrated),
-        "phase_error_rad": phase_error(est.phases_rad, groups_truth),
-        "ambiguous": bool(est.ambiguous),
-        "evaluations": int(est.evaluations),
-        "seconds": float(est.seconds),
-        "broadening_width_mm": float(cal.broadening_width_mm),
-    }
+    return TrialResult(
+        trial=trial,
+        recovered_fraction=recovered_fraction(focal_corrected, focal_ideal),
+        gain=gain(focal_corrected, focal_aberrated),
+        phase_error_rad=phase_error(est.phases_rad, groups_truth),
+        ambiguous=bool(est.ambiguous),
+        evaluations=int(est.evaluations),
+        seconds=float(est.seconds),
+        broadening_width_mm=float(cal.broadening_width_mm),
+    )
 
 
 def trials(
@@ -152,9 +193,9 @@ def run_sweep(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool | None = None,
-) -> list[dict[str, Any]]:
+) -> list[TrialResult]:
     """Runs the trials on dask.distributed (an existing cluster at ``scheduler``, or a local one)
-    and returns their rows in the order of ``points``."""
+    and returns their results in the order of ``points``."""
     as_completed = _distributed().as_completed
     toml = None if scenario is None else scenario.to_toml()
     client, cluster = _client(scheduler, workers or os.cpu_count() or 1)
@@ -162,7 +203,7 @@ def run_sweep(
     try:
         futures = client.map(run_trial, list(points), scenario_toml=toml, pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
-        rows: list[dict[str, Any] | None] = [None] * len(points)
+        rows: list[TrialResult | None] = [None] * len(points)
         for f in as_completed(futures):
             rows[index[f.key]] = f.result()
             bar.advance()
@@ -173,41 +214,41 @@ def run_sweep(
     return [r for r in rows if r is not None]
 
 
-def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def summarise(rows: Sequence[TrialResult]) -> list[SweepPoint]:
     """Mean and standard deviation of the metrics per (method, images, noise)."""
-    groups: dict[tuple[str, int, float], list[dict[str, Any]]] = {}
+    groups: dict[tuple[str, int, float], list[TrialResult]] = {}
     for r in rows:
-        groups.setdefault((r["method"], r["images"], r["noise_rad"]), []).append(r)
+        groups.setdefault((r.trial.method, r.trial.images, r.trial.noise_rad), []).append(r)
     out = []
     for (method, images, noise), rs in sorted(groups.items()):
-        rec = np.array([r["recovered_fraction"] for r in rs])
+        rec = np.array([r.recovered_fraction for r in rs])
         out.append(
-            {
-                "method": method,
-                "images": images,
-                "noise_rad": noise,
-                "trials": len(rs),
-                "recovered_fraction_mean": float(rec.mean()),
-                "recovered_fraction_std": float(rec.std()),
-                "gain_mean": float(np.mean([r["gain"] for r in rs])),
-                "phase_error_rad_mean": float(np.mean([r["phase_error_rad"] for r in rs])),
-                "ambiguous_fraction": float(np.mean([r["ambiguous"] for r in rs])),
-            }
+            SweepPoint(
+                method=method,
+                images=images,
+                noise_rad=noise,
+                trials=len(rs),
+                recovered_fraction_mean=float(rec.mean()),
+                recovered_fraction_std=float(rec.std()),
+                gain_mean=float(np.mean([r.gain for r in rs])),
+                phase_error_rad_mean=float(np.mean([r.phase_error_rad for r in rs])),
+                ambiguous_fraction=float(np.mean([r.ambiguous for r in rs])),
+            )
         )
     return out
 
 
-def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
+def plot(summary: Sequence[SweepPoint], path: Path) -> None:
     """Recovered fraction against noise, one line per number of images, one panel per method."""
     plt = pyplot()
-    methods = sorted({s["method"] for s in summary})
+    methods = sorted({s.method for s in summary})
     fig, axes = plt.subplots(1, len(methods), figsize=(4.5 * len(methods), 3.6), squeeze=False, sharey=True)
     for ax, method in zip(axes[0], methods):
-        for images in sorted({s["images"] for s in summary}):
+        for images in sorted({s.images for s in summary}):
             pts = sorted(
-                (s["noise_rad"], s["recovered_fraction_mean"], s["recovered_fraction_std"])
+                (s.noise_rad, s.recovered_fraction_mean, s.recovered_fraction_std)
                 for s in summary
-                if s["method"] == method and s["images"] == images
+                if s.method == method and s.images == images
             )
             x, y, e = (np.array(v) for v in zip(*pts))
             ax.errorbar(x, y, yerr=e, marker="o", capsize=3, label=f"{images} image{'s' if images > 1 else ''}")
@@ -218,15 +259,26 @@ def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
     save_figure(fig, path)
 
 
-def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
+def sweep_json(rows: Sequence[TrialResult], summary: Sequence[SweepPoint]) -> dict[str, Any]:
+    """The JSON document of a sweep: ``trials`` and ``summary`` (the CSV files' rows) and
+    ``files``."""
+    return {
+        "trials": [r.to_dict() for r in rows],
+        "summary": [p.to_dict() for p in summary],
+        "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"],
+    }
+
+
+def write_results(rows: Sequence[TrialResult], out: Path) -> list[SweepPoint]:
     """``sweep.csv`` (one row per trial), ``summary.csv``, ``sweep.png``, ``report.html`` and
-    ``sweep.json`` in ``out``."""
+    ``sweep.json`` in ``out``; returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
-    atomic_write_text(out / "sweep.csv", csv_text(rows))
-    atomic_write_text(out / "summary.csv", csv_text(summary))
+    points = [p.to_dict() for p in summary]
+    atomic_write_text(out / "sweep.csv", csv_text([r.to_dict() for r in rows]))
+    atomic_write_text(out / "summary.csv", csv_text(points))
     plot(summary, out / "sweep.png")
-    table = rows_table_html(summary, list(summary[0]))
+    table = rows_table_html(points, list(points[0]))
     write_html(
         out / "report.html",
         "arfi sweep",
@@ -234,10 +286,5 @@ def write_results(rows: Sequence[dict[str, Any]], out: Path) -> dict[str, Any]:
         f"number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
         + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]),
     )
-    result = {
-        "trials": list(rows),
-        "summary": summary,
-        "files": ["sweep.csv", "summary.csv", "sweep.png", "report.html"],
-    }
-    write_json(out / "sweep.json", result)
-    return result
+    write_json(out / "sweep.json", sweep_json(rows, summary))
+    return summary

@@ -8,7 +8,7 @@ import pytest
 from distributed import LocalCluster  # a test dependency (pyproject's [test]): missing is a failure
 
 from arfi.cli import main
-from arfi.sweep import Trial, run_sweep, run_trial, summarise, trials
+from arfi.sweep import Trial, TrialResult, run_trial, summarise, trials
 
 
 def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):
@@ -46,10 +46,7 @@ def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):
     # A trial's result does not depend on the worker process that ran it.
     here = run_trial(Trial(0.05, 2, "lbfgs", 0))
     there = d["trials"][3]
-    assert (
-        there["recovered_fraction"] == here["recovered_fraction"]
-        and there["phase_error_rad"] == here["phase_error_rad"]
-    )
+    assert there["recovered_fraction"] == here.recovered_fraction and there["phase_error_rad"] == here.phase_error_rad
 
 
 def test_existing_cluster_via_scheduler_address(tmp_path):
@@ -81,23 +78,28 @@ def test_existing_cluster_via_scheduler_address(tmp_path):
 
 def test_more_images_recover_more_in_the_summary():
     rows = [
-        {
-            "method": "lbfgs",
-            "images": k,
-            "noise_rad": 0.02,
-            "recovered_fraction": f,
-            "gain": 0.0,
-            "phase_error_rad": 0.0,
-            "ambiguous": a,
-        }
-        for k, f, a in [(1, 0.5, True), (1, 0.7, True), (3, 0.95, False), (3, 0.97, False)]
+        TrialResult(Trial(0.02, k, "lbfgs", seed), f, 0.0, 0.0, a, 10, 0.1, 2.7)
+        for seed, (k, f, a) in enumerate([(1, 0.5, True), (1, 0.7, True), (3, 0.95, False), (3, 0.97, False)])
     ]
     s = summarise(rows)
-    assert [(x["images"], x["trials"]) for x in s] == [(1, 2), (3, 2)]
-    assert s[0]["recovered_fraction_mean"] == pytest.approx(0.6) and s[0]["recovered_fraction_std"] == pytest.approx(
-        0.1
-    )
-    assert s[0]["ambiguous_fraction"] == 1.0 and s[1]["ambiguous_fraction"] == 0.0
+    assert [(x.images, x.trials) for x in s] == [(1, 2), (3, 2)]
+    assert s[0].recovered_fraction_mean == pytest.approx(0.6) and s[0].recovered_fraction_std == pytest.approx(0.1)
+    assert s[0].ambiguous_fraction == 1.0 and s[1].ambiguous_fraction == 0.0
+    # A row is the trial's fields, then the outcome's (the CSV's columns).
+    assert list(rows[0].to_dict()) == [
+        "noise_rad",
+        "images",
+        "method",
+        "seed",
+        "case",
+        "recovered_fraction",
+        "gain",
+        "phase_error_rad",
+        "ambiguous",
+        "evaluations",
+        "seconds",
+        "broadening_width_mm",
+    ]
 
 
 @pytest.mark.parametrize(
@@ -127,7 +129,6 @@ def test_trials_cover_every_combination_in_order():
     t = trials([0.01, 0.02], [1, 3], ["lbfgs", "pso"], 2)
     assert len(t) == 16 and t[0] == Trial(0.01, 1, "lbfgs", 0) and t[-1] == Trial(0.02, 3, "pso", 1)
     assert np.all([isinstance(x, Trial) for x in t])
-    assert run_sweep  # imported for the API
 
 
 def test_progress_draws_on_a_terminal_only():

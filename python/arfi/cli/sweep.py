@@ -57,20 +57,20 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.sweep import run_sweep, trials, write_results
+    from arfi.sweep import run_sweep, sweep_json, trials, write_results
 
     points = trials(args.noise_levels, args.images, args.methods, args.seeds, args.case, args.seed)
     scenario = Scenario.load(args.scenario) if args.scenario else None
     t = time.perf_counter()
     rows = run_sweep(points, scenario, args.scheduler, args.workers)
-    result = write_results(rows, Path(args.out))
-    for s in result["summary"]:
+    summary = write_results(rows, Path(args.out))
+    for s in summary:
         print(
-            f"sweep: {s['method']:>11}, {s['images']} image(s), noise {s['noise_rad']:g} rad: recovered "
-            f"{s['recovered_fraction_mean']:.2f} ± {s['recovered_fraction_std']:.2f} ({s['trials']} trials)"
+            f"sweep: {s.method:>11}, {s.images} image(s), noise {s.noise_rad:g} rad: recovered "
+            f"{s.recovered_fraction_mean:.2f} ± {s.recovered_fraction_std:.2f} ({s.trials} trials)"
         )
     print(
         f"sweep: {len(rows)} trials in {time.perf_counter() - t:.0f} s -> {args.out}/sweep.csv, summary.csv, sweep.png"
     )
-    finish(args, {**result, "seconds": time.perf_counter() - t})
+    finish(args, {**sweep_json(rows, summary), "seconds": time.perf_counter() - t})
     return 0
