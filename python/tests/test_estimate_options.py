@@ -89,7 +89,7 @@ def test_an_estimate_takes_the_options_or_the_same_as_keywords(sim, ideal):
         sim.estimate(image, None, options, seed=2)
     with pytest.raises(ValueError, match="options: must be an EstimateOptions"):
         sim.estimate(image, None, {"method": "lbfgs"})  # type: ignore[arg-type]
-    with pytest.raises(TypeError, match="bogus"):
+    with pytest.raises(ValueError, match="^bogus: is not an estimate option"):
         sim.estimate(image, bogus=1)
 
 

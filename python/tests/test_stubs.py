@@ -71,13 +71,32 @@ def test_stub_signatures_are_the_extensions():
             obj = getattr(obj, part, None)
         if obj is None or (fn.name.startswith("__") and fn.name != "__init__"):
             continue
-        sig = inspect.signature(obj)
-        runtime = [
-            (p.name, None if p.default is p.empty else p.default)
-            for p in sig.parameters.values()
-            if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD) and p.name not in ("self", "cls")
-        ]
+        if path == ["EstimateOptions"]:  # keywords by name, each defaulting to None: the core's options
+            runtime = [(name, None) for name, *_ in _core.EstimateOptions._options]
+        else:
+            sig = inspect.signature(obj)
+            runtime = [
+                (p.name, None if p.default is p.empty else p.default)
+                for p in sig.parameters.values()
+                if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD) and p.name not in ("self", "cls")
+            ]
         checked += 1
         if runtime != _stub_parameters(fn):
             wrong.append(f"{'.'.join(path)}: stub {_stub_parameters(fn)}, extension {runtime}")
     assert checked > 80 and not wrong, wrong
+
+
+def test_the_options_part_of_the_stub_is_generated_from_the_extensions_options():
+    # EstimateOptions's constructor and attributes are the core's option list; an option added
+    # there reaches the stub by running python/tests/stubgen.py, not by hand.
+    import stubgen
+
+    stub = inspect.getfile(_core).rsplit("/", 1)[0] + "/_core.pyi"
+    text = open(stub, encoding="utf-8").read()
+    assert stubgen.updated(text, _core.EstimateOptions._options) == text, "run python python/tests/stubgen.py"
+    # The generator sees a change: one more option makes another stub.
+    more = [*_core.EstimateOptions._options, ("new_option_mm", "number", True, "a new option")]
+    assert "def new_option_mm(self) -> float | None:" in stubgen.updated(text, more)
+    names = [name for name, *_ in _core.EstimateOptions._options]
+    assert names == list(_core.EstimateOptions._fields) and {"method", "prior", "fit_nuisance"} <= set(names)
+    assert all(f"{name} (" in _core.EstimateOptions.describe() for name in names)

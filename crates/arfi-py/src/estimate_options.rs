@@ -1,218 +1,124 @@
-//! What to estimate with: the core's `EstimateRequest` as a typed, validated Python value. Each
-//! option is checked once, when the options are made (by the core's own rules), and its getter
-//! reads it back in the unit of its name.
+//! What to estimate with: the core's `EstimateRequest` as a typed, validated Python value. The
+//! options are the core's (`has_core::inverse::estimate::workflow::OPTIONS`: name, kind, meaning):
+//! this binding converts each by its kind, so an option added to the core needs no code here, and
+//! `_core.pyi` is generated from the same list (`python python/tests/stubgen.py`).
 
 use crate::convert::{count, names, number, phases, rows};
 use crate::error::{invalid, to_py};
 use crate::results::fields_dict;
-use has_core::inverse::element::nuisance::Nuisance;
-use has_core::inverse::estimate::workflow::{EstimateRequest, Method};
-use has_core::inverse::prior::Prior;
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use has_core::inverse::estimate::workflow::{option_spec, EstimateRequest, OptionKind, OptionValue, OPTIONS};
+use numpy::{IntoPyArray, PyArray2};
+use pyo3::exceptions::PyAttributeError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict, PyList};
 
-/// Options of a hybrid estimate (every one optional; an unknown or ill-formed one is an error
-/// naming it).
-///
-/// - `method`: `"lbfgs"` (analytic gradient, seeded multi-start; the default), `"nelder-mead"`
-///   (the paper's: zero start, <= 8000 evaluations) or `"pso"`.
-/// - `max_evaluations`, `time_limit_s` (per stage), `starts` (L-BFGS only): the search's limits.
-///   Per element `max_evaluations` (default 200; 120 when `fit_nuisance` fits W or the shift)
-///   bounds the fit on the element basis.
-/// - `seed` (default 0): the random starts, the swarm and the ambiguity assessment.
-/// - `fit_amplitude`: fit one amplitude scale for all images.
-/// - `threshold` (default 0.9): a rival solution counts as ambiguous when it would leave less than
-///   this fraction of the ideal focus after the estimate's correction.
-/// - `noise_rad`: the images' noise standard deviation (rad) where it is known (e.g. the standard
-///   deviation of the difference of two reference acquisitions over sqrt(2)); by default each
-///   image's floor is estimated from its background, which counts pixel-scale structure there as
-///   noise. The misfit, `model_mismatch`, `prior_check` and the posterior's weights use it.
-/// - `prior` (rad, per element or per group, in the sign of the estimate: subtracting it
-///   corrects) with `prior_std_rad`, the expected error of each predicted phase: the estimate is
-///   then the posterior optimum (the images' cost as a Gaussian likelihood at the noise plus a
-///   von Mises prior `(1 - cos(phi - prior)) / prior_std_rad**2` per phase).
-/// - `prior_correlation_mm`: the prediction's errors are a smooth field over the aperture,
-///   correlated over this length; a per-element estimate then corrects the prediction by smooth
-///   fields only (reduced-rank Gaussian random field, Solin & Särkkä 2020).
-/// - `prior_modes` (per element, with `prior_correlation_mm`): error modes of known shape, shape
-///   `(modes, n_elements)` in rad, each the change of the predicted phases when one input of the
-///   prediction is off by one standard deviation; each mode's coefficient (standard normal a
-///   priori) is fitted with the smooth corrections.
-/// - `fit_nuisance`: what else the images may differ in from the model, fitted with per-element
-///   phases (a list or a comma-separated string of `"amplitude"`, `"broadening"`,
-///   `"registration_shift"`, `"background_phase"`, or `"all"`); group estimates fit the
-///   amplitude only.
-/// - `suggest` (per element): also choose the next image to take (a focus shift).
+/// Options of a hybrid estimate, by keyword (each optional: `None` or absent is the default; an
+/// unknown or ill-formed one is a `ValueError` naming it), checked when made by the core's rules.
+/// Each reads back as an attribute in the unit of its name; `EstimateOptions.describe()` says
+/// what each means.
 #[pyclass(module = "arfi._core", frozen)]
 pub(crate) struct EstimateOptions(pub(crate) EstimateRequest);
+
+/// The name of an option kind, as the stubs and `describe` write it.
+fn kind_name(kind: OptionKind) -> &'static str {
+    match kind {
+        OptionKind::Flag => "flag",
+        OptionKind::Count => "count",
+        OptionKind::Number => "number",
+        OptionKind::Text => "text",
+        OptionKind::Names => "names",
+        OptionKind::Values => "values",
+        OptionKind::Rows => "rows",
+    }
+}
+
+/// A Python value as option `name` of `kind` (`None`: not given).
+fn from_py(v: &Bound<'_, PyAny>, name: &str, kind: OptionKind) -> PyResult<Option<OptionValue>> {
+    let v = Some(v);
+    Ok(match kind {
+        OptionKind::Flag => match v.filter(|v| !v.is_none()) {
+            None => None,
+            Some(b) if b.is_instance_of::<PyBool>() => Some(OptionValue::Flag(b.is_truthy()?)),
+            Some(b) => return Err(invalid(name, format!("must be True or False, got {}", b.repr()?))),
+        },
+        OptionKind::Count => count(v, name)?.map(|n| OptionValue::Count(n as u64)),
+        OptionKind::Number => number(v, name)?.map(OptionValue::Number),
+        OptionKind::Text => {
+            match v.filter(|v| !v.is_none()) {
+                None => None,
+                Some(t) => Some(OptionValue::Text(t.extract().map_err(|_| {
+                    invalid(name, format!("must be a string, got {}", t.repr().map(|r| r.to_string()).unwrap_or_default()))
+                })?)),
+            }
+        }
+        OptionKind::Names => v.filter(|v| !v.is_none()).map(|_| names(v, name).map(OptionValue::Names)).transpose()?,
+        OptionKind::Values => phases(v, name)?.map(OptionValue::Values),
+        OptionKind::Rows => rows(v, name)?.map(OptionValue::Rows),
+    })
+}
+
+/// An option's value as Python reads it (arrays for values and rows).
+fn to_py_value<'py>(py: Python<'py>, value: Option<OptionValue>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        None => py.None().into_bound(py),
+        Some(OptionValue::Flag(b)) => PyBool::new(py, b).to_owned().into_any(),
+        Some(OptionValue::Count(n)) => n.into_pyobject(py)?.into_any(),
+        Some(OptionValue::Number(x)) => x.into_pyobject(py)?.into_any(),
+        Some(OptionValue::Text(t)) => t.into_pyobject(py)?.into_any(),
+        Some(OptionValue::Names(n)) => PyList::new(py, n)?.into_any(),
+        Some(OptionValue::Values(v)) => v.into_pyarray(py).into_any(),
+        Some(OptionValue::Rows(r)) => PyArray2::from_vec2(py, &r).map_err(|e| invalid(name, e.to_string()))?.into_any(),
+    })
+}
 
 #[pymethods]
 impl EstimateOptions {
     /// The options `to_dict` writes and `replace` takes, in order.
     #[classattr]
-    #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 14] = [
-        "method",
-        "max_evaluations",
-        "time_limit_s",
-        "seed",
-        "starts",
-        "fit_amplitude",
-        "threshold",
-        "noise_rad",
-        "prior",
-        "prior_std_rad",
-        "prior_correlation_mm",
-        "prior_modes",
-        "fit_nuisance",
-        "suggest",
-    ];
+    fn _fields() -> Vec<&'static str> {
+        OPTIONS.iter().map(|o| o.name).collect()
+    }
+
+    /// Each option as `(name, kind, optional, meaning)`: what the stubs and `describe` are made
+    /// from.
+    #[classattr]
+    fn _options() -> Vec<(&'static str, &'static str, bool, &'static str)> {
+        OPTIONS.iter().map(|o| (o.name, kind_name(o.kind), o.optional, o.doc)).collect()
+    }
 
     #[new]
-    #[pyo3(signature = (
-        *,
-        method="lbfgs",
-        max_evaluations=None,
-        time_limit_s=None,
-        seed=None,
-        starts=None,
-        fit_amplitude=false,
-        threshold=None,
-        noise_rad=None,
-        prior=None,
-        prior_std_rad=None,
-        prior_correlation_mm=None,
-        prior_modes=None,
-        fit_nuisance=None,
-        suggest=false,
-    ))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        method: &str,
-        max_evaluations: Option<&Bound<'_, PyAny>>,
-        time_limit_s: Option<&Bound<'_, PyAny>>,
-        seed: Option<&Bound<'_, PyAny>>,
-        starts: Option<&Bound<'_, PyAny>>,
-        fit_amplitude: bool,
-        threshold: Option<&Bound<'_, PyAny>>,
-        noise_rad: Option<&Bound<'_, PyAny>>,
-        prior: Option<&Bound<'_, PyAny>>,
-        prior_std_rad: Option<&Bound<'_, PyAny>>,
-        prior_correlation_mm: Option<&Bound<'_, PyAny>>,
-        prior_modes: Option<&Bound<'_, PyAny>>,
-        fit_nuisance: Option<&Bound<'_, PyAny>>,
-        suggest: bool,
-    ) -> PyResult<Self> {
-        let prior = Prior::from_parts(
-            phases(prior, "prior")?,
-            number(prior_std_rad, "prior_std_rad")?,
-            number(prior_correlation_mm, "prior_correlation_mm")?.map(|l| l * 1e-3),
-            rows(prior_modes, "prior_modes")?,
-        )
-        .map_err(to_py)?;
-        let request = EstimateRequest {
-            method: Method::parse(method).map_err(to_py)?,
-            max_evaluations: count(max_evaluations, "max_evaluations")?,
-            time_limit_s: number(time_limit_s, "time_limit_s")?,
-            seed: count(seed, "seed")?.unwrap_or(0) as u64,
-            starts: count(starts, "starts")?,
-            fit_amplitude,
-            noise_rad: number(noise_rad, "noise_rad")?,
-            nuisance: Nuisance::parse(&names(fit_nuisance, "fit_nuisance")?).map_err(to_py)?,
-            threshold: number(threshold, "threshold")?.unwrap_or(EstimateRequest::default().threshold),
-            prior,
-            suggest,
-        };
-        request.check().map_err(to_py)?;
-        Ok(EstimateOptions(request))
-    }
-
-    /// The search method: `"lbfgs"`, `"nelder-mead"` or `"pso"`.
-    #[getter]
-    fn method(&self) -> &'static str {
-        self.0.method.name()
-    }
-
-    /// The evaluation limit (None: the method's default).
-    #[getter]
-    fn max_evaluations(&self) -> Option<usize> {
-        self.0.max_evaluations
-    }
-
-    /// The wall-clock limit per stage (s; None: none).
-    #[getter]
-    fn time_limit_s(&self) -> Option<f64> {
-        self.0.time_limit_s
-    }
-
-    /// The seed of the random starts, the swarm and the ambiguity assessment.
-    #[getter]
-    fn seed(&self) -> u64 {
-        self.0.seed
-    }
-
-    /// L-BFGS starts (None: 20).
-    #[getter]
-    fn starts(&self) -> Option<usize> {
-        self.0.starts
-    }
-
-    /// Whether one amplitude scale for all images is fitted.
-    #[getter]
-    fn fit_amplitude(&self) -> bool {
-        self.0.fit_amplitude
-    }
-
-    /// The fraction of the ideal focus below which a rival solution makes the estimate ambiguous.
-    #[getter]
-    fn threshold(&self) -> f64 {
-        self.0.threshold
-    }
-
-    /// The images' noise (rad) where it is known (None: each image's background floor).
-    #[getter]
-    fn noise_rad(&self) -> Option<f64> {
-        self.0.noise_rad
-    }
-
-    /// The predicted aberration (rad), or None.
-    #[getter]
-    fn prior<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
-        self.0.prior.as_ref().map(|p| p.mean().to_vec().into_pyarray(py))
-    }
-
-    /// The expected error of each predicted phase (rad), or None.
-    #[getter]
-    fn prior_std_rad(&self) -> Option<f64> {
-        self.0.prior.as_ref().map(Prior::std_rad)
-    }
-
-    /// The length over which the prediction's errors are correlated (mm), or None.
-    #[getter]
-    fn prior_correlation_mm(&self) -> Option<f64> {
-        self.0.prior.as_ref().and_then(Prior::correlation_length).map(|l| l * 1e3)
-    }
-
-    /// The prior's error modes, shape (modes, n_elements) in rad, or None.
-    #[getter]
-    fn prior_modes<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
-        match self.0.prior.as_ref().map(Prior::modes).filter(|m| !m.is_empty()) {
-            Some(m) => Ok(Some(PyArray2::from_vec2(py, m).map_err(|e| invalid("prior_modes", e.to_string()))?)),
-            None => Ok(None),
+    #[pyo3(signature = (**options))]
+    fn new(options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut given: Vec<(String, OptionValue)> = Vec::new();
+        for (k, v) in options.into_iter().flat_map(|d| d.iter()) {
+            let name: String = k.extract()?;
+            let spec = option_spec(&name).map_err(to_py)?;
+            if let Some(value) = from_py(&v, spec.name, spec.kind)? {
+                given.push((name, value));
+            }
         }
+        let given: Vec<(&str, OptionValue)> = given.iter().map(|(n, v)| (n.as_str(), v.clone())).collect();
+        Ok(EstimateOptions(EstimateRequest::from_options(&given).map_err(to_py)?))
     }
 
-    /// The nuisance parameters fitted with per-element phases (names as `diagnose` reports them).
-    #[getter]
-    fn fit_nuisance(&self) -> Vec<&'static str> {
-        self.0.nuisance.names()
+    /// Option `name`'s value, in the unit of its name (`None`: unset, the default).
+    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        if option_spec(name).is_err() {
+            return Err(PyAttributeError::new_err(format!("'EstimateOptions' object has no attribute '{name}'")));
+        }
+        to_py_value(py, self.0.option(name).map_err(to_py)?, name)
     }
 
-    /// Whether a per-element estimate also suggests the next acquisition.
-    #[getter]
-    fn suggest(&self) -> bool {
-        self.0.suggest
+    fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
+        let mut names: Vec<String> = slf.get_type().dir()?.extract()?;
+        names.extend(OPTIONS.iter().map(|o| o.name.to_string()));
+        Ok(names)
+    }
+
+    /// What each option means, one line each: `name (kind): meaning`.
+    #[staticmethod]
+    fn describe() -> String {
+        OPTIONS.iter().map(|o| format!("{} ({}): {}", o.name, kind_name(o.kind), o.doc)).collect::<Vec<_>>().join("\n")
     }
 
     /// The same options with `changes` (keyword options as the constructor takes them), checked
@@ -222,9 +128,7 @@ impl EstimateOptions {
         let options = fields_dict(slf.as_any())?;
         if let Some(c) = changes {
             for (k, _) in c.iter() {
-                if !Self::FIELDS.contains(&k.extract::<String>()?.as_str()) {
-                    return Err(invalid(k.to_string(), format!("is not an estimate option (options: {})", Self::FIELDS.join(", "))));
-                }
+                option_spec(&k.extract::<String>()?).map_err(to_py)?;
             }
             options.update(c.as_mapping())?;
         }
@@ -236,22 +140,27 @@ impl EstimateOptions {
         fields_dict(slf.as_any())
     }
 
-    fn __repr__(&self) -> String {
-        let r = &self.0;
-        let mut parts = vec![format!("method='{}'", r.method.name())];
-        let mut opt = |name: &str, v: Option<String>| parts.extend(v.map(|v| format!("{name}={v}")));
-        opt("max_evaluations", r.max_evaluations.map(|v| v.to_string()));
-        opt("time_limit_s", r.time_limit_s.map(|v| v.to_string()));
-        opt("seed", (r.seed != 0).then(|| r.seed.to_string()));
-        opt("starts", r.starts.map(|v| v.to_string()));
-        opt("fit_amplitude", r.fit_amplitude.then(|| "True".into()));
-        opt("noise_rad", r.noise_rad.map(|v| v.to_string()));
-        opt("prior", r.prior.as_ref().map(|p| format!("<{} phases>", p.mean().len())));
-        opt("prior_std_rad", r.prior.as_ref().map(|p| p.std_rad().to_string()));
-        opt("prior_correlation_mm", r.prior.as_ref().and_then(|p| p.correlation_length()).map(|l| (l * 1e3).to_string()));
-        opt("prior_modes", r.prior.as_ref().filter(|p| !p.modes().is_empty()).map(|p| format!("<{} modes>", p.modes().len())));
-        opt("fit_nuisance", r.nuisance.any().then(|| format!("{:?}", r.nuisance.names())));
-        opt("suggest", r.suggest.then(|| "True".into()));
-        format!("EstimateOptions({})", parts.join(", "))
+    /// The options that differ from the defaults (the method always; arrays by their size).
+    fn __repr__(&self) -> PyResult<String> {
+        let default = EstimateRequest::default();
+        let mut parts = Vec::new();
+        for o in OPTIONS {
+            let value = self.0.option(o.name).map_err(to_py)?;
+            if o.name != "method" && value == default.option(o.name).map_err(to_py)? {
+                continue;
+            }
+            let shown = match value {
+                None => "None".to_string(),
+                Some(OptionValue::Flag(b)) => if b { "True" } else { "False" }.to_string(),
+                Some(OptionValue::Count(n)) => n.to_string(),
+                Some(OptionValue::Number(x)) => format!("{x:?}"),
+                Some(OptionValue::Text(t)) => format!("'{t}'"),
+                Some(OptionValue::Names(n)) => format!("[{}]", n.iter().map(|x| format!("'{x}'")).collect::<Vec<_>>().join(", ")),
+                Some(OptionValue::Values(v)) => format!("<{} values>", v.len()),
+                Some(OptionValue::Rows(r)) => format!("<{} rows>", r.len()),
+            };
+            parts.push(format!("{}={shown}", o.name));
+        }
+        Ok(format!("EstimateOptions({})", parts.join(", ")))
     }
 }

@@ -3,8 +3,9 @@
 //! default groups), with or without a predicted aberration as prior, apply the limits, and assess
 //! the answer (ambiguity, misfit, and the phases to apply). What the CLI, the Python API and Rust
 //! users run. The group path is here, the per-element one in `per_element`, the recommendation in
-//! `support`.
+//! `support`, the request's options by name in `options`.
 
+mod options;
 mod per_element;
 mod prior_check;
 mod support;
@@ -21,6 +22,7 @@ use crate::phase::point_reflection;
 use crate::simulation::Simulation;
 use std::sync::atomic::AtomicBool;
 
+pub use options::{option_spec, OptionKind, OptionSpec, OptionValue, OPTIONS};
 use per_element::{element_prior, estimate_per_element};
 pub use per_element::{one_acquisition, REPEAT_TOLERANCE_RAD, VIEW_ROUNDS};
 pub use prior_check::{prior_check, PriorCheck, CONFLICT_Z, PRIOR_CHECK_DRAWS};
