@@ -303,6 +303,7 @@ class EstimateOptions:
         prior_correlation_mm: float | None = None,
         prior_modes: ArrayLike | None = None,
         fit_nuisance: str | Sequence[str] | None = None,
+        prior_conflict_z: float | None = None,
         suggest: bool | None = None,
     ) -> None: ...
     @property
@@ -353,6 +354,11 @@ class EstimateOptions:
         """What else the images may differ in from the model, fitted with per-element phases:
         'amplitude', 'broadening', 'registration_shift', 'background_phase' or 'all'; group
         estimates fit the amplitude only."""
+    @property
+    def prior_conflict_z(self) -> float:
+        """Per element with a searched prior: the images conflict with the prediction (the prediction
+        is recommended) when their chi-squared at it lies more than this many standard deviations
+        above what truths within the prior's std give (default 3)."""
     @property
     def suggest(self) -> bool:
         """Per element, also choose the next image to take (a focus shift)."""

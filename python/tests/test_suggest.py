@@ -328,7 +328,7 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
     np.save(tmp_path / "prior.npy", prediction)
     known = [None] + [sim.focus_shift_phases((0.0, 0.0, dz)) for dz in (5.0, -5.0)]
 
-    def estimate(moved: bool) -> tuple[dict, str]:
+    def estimate(moved: bool, *options: str) -> tuple[dict, str]:
         paths = []
         for i, k in enumerate(known):
             image = sim.arfi_image(truth + (0.0 if k is None else k), noise_rad=0.02, seed=10 + i)
@@ -360,6 +360,7 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
                     str(tmp_path / "out.npy"),
                     "--json",
                     str(tmp_path / "e.json"),
+                    *options,
                 ]
             )
             == 0
@@ -372,6 +373,11 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
     assert not result["model_mismatch"] and result["recommended"] == "prediction", result["misfit"]
     assert "PRIOR CONFLICT" in out and "NOT to be applied" in out and "out.npy" in out, out
     assert np.allclose(np.load(tmp_path / "out.npy"), prediction)
+    # A user who trusts the images further sets the threshold above the check's z: the same
+    # images are then no conflict, and the estimate is what is recommended.
+    trusting, out = estimate(True, "--prior-conflict-z", f"{check['z'] + 1.0:.1f}")
+    assert trusting["prior_check"]["z"] == check["z"] and not trusting["prior_check"]["conflict"]
+    assert trusting["recommended"] == "estimate" and "PRIOR CONFLICT" not in out, trusting["recommended"]
     result, out = estimate(moved=False)
     assert not result["prior_check"]["conflict"] and result["recommended"] == "estimate", result["prior_check"]
     assert "PRIOR CONFLICT" not in out

@@ -132,6 +132,14 @@ def register(sub: Any) -> None:
         "correct the prediction by smooth fields only; default: independent errors)",
     )
     p.add_argument(
+        "--prior-conflict-z",
+        type=float,
+        metavar="Z",
+        help="per element with --prior: the images conflict with the prediction, which is then recommended (a "
+        "PRIOR CONFLICT line), when their chi-squared at it lies more than Z standard deviations above what truths "
+        "within --prior-std-rad give (default 3)",
+    )
+    p.add_argument(
         "--prior-transmission",
         dest="prior_transmission",
         metavar="T",
@@ -231,6 +239,7 @@ def run(args: argparse.Namespace) -> int:
         prior=prior,
         prior_std_rad=args.prior_std_rad,
         prior_correlation_mm=args.prior_correlation_mm,
+        prior_conflict_z=args.prior_conflict_z,
         fit_nuisance=args.fit_nuisance,
         suggest=bool(args.suggest),
     )

@@ -110,6 +110,10 @@ pub struct EstimateRequest {
     /// per default group of the array) and its expected error: the estimate is then the
     /// posterior optimum (see [`crate::inverse::prior`]).
     pub prior: Option<Prior>,
+    /// Per element with a searched prior: the prior check flags a conflict when the images'
+    /// `chi²` at the prediction lies more than this many standard deviations of its null above
+    /// the null's mean ([`CONFLICT_Z`] by default; [`prior_check`]).
+    pub prior_conflict_z: f64,
     /// Per element: also suggest the next acquisition, the focus shift whose image is expected
     /// to raise the focus most ([`crate::inverse::estimate::information`]; a posterior covariance over all elements per
     /// candidate shift).
@@ -129,6 +133,7 @@ impl Default for EstimateRequest {
             nuisance: Nuisance::default(),
             threshold: 0.9,
             prior: None,
+            prior_conflict_z: CONFLICT_Z,
             suggest: false,
         }
     }
@@ -152,6 +157,7 @@ impl EstimateRequest {
         if !(self.threshold.is_finite() && (0.0..=1.0).contains(&self.threshold)) {
             return Err(HasError::invalid("threshold", format!("must be a fraction of the ideal focus in [0, 1], got {}", self.threshold)));
         }
+        crate::error::require_positive("prior_conflict_z", self.prior_conflict_z)?;
         let est = estimator(self, self.method, None)?;
         if let Some(n) = self.max_evaluations {
             est.with_max_evaluations(n)?;

@@ -141,6 +141,14 @@ pub const OPTIONS: &[OptionSpec] = &[
         "what else the images may differ in from the model, fitted with per-element phases: 'amplitude', \
          'broadening', 'registration_shift', 'background_phase' or 'all'; group estimates fit the amplitude only",
     ),
+    spec(
+        "prior_conflict_z",
+        OptionKind::Number,
+        false,
+        "per element with a searched prior: the images conflict with the prediction (the prediction is \
+         recommended) when their chi-squared at it lies more than this many standard deviations above what truths \
+         within the prior's std give (default 3)",
+    ),
     spec("suggest", OptionKind::Flag, false, "per element, also choose the next image to take (a focus shift)"),
 ];
 
@@ -193,6 +201,7 @@ impl EstimateRequest {
                 ("prior_correlation_mm", OptionValue::Number(l)) => correlation = Some(l * 1e-3),
                 ("prior_modes", OptionValue::Rows(m)) => modes = Some(m),
                 ("fit_nuisance", OptionValue::Names(n)) => r.nuisance = Nuisance::parse(&n)?,
+                ("prior_conflict_z", OptionValue::Number(z)) => r.prior_conflict_z = z,
                 ("suggest", OptionValue::Flag(f)) => r.suggest = f,
                 (name, _) => unreachable!("option {name} is declared but not read"),
             }
@@ -220,6 +229,7 @@ impl EstimateRequest {
             "prior_correlation_mm" => prior.and_then(Prior::correlation_length).map(|l| V::Number(l * 1e3)),
             "prior_modes" => prior.map(Prior::modes).filter(|m| !m.is_empty()).map(|m| V::Rows(m.to_vec())),
             "fit_nuisance" => Some(V::Names(self.nuisance.names().into_iter().map(String::from).collect())),
+            "prior_conflict_z" => Some(V::Number(self.prior_conflict_z)),
             "suggest" => Some(V::Flag(self.suggest)),
             name => unreachable!("option {name} is declared but not written"),
         })

@@ -328,7 +328,7 @@ fn search_and_assess(
     // With a prior: do the images agree with the prediction as the prior states it? Where they
     // do not, the search's move absorbs what the model cannot form.
     let check = match &prior {
-        Some(p) if !kept_prediction => Some(prior_check(&cost, model.noise, p, &positions, request.seed)?),
+        Some(p) if !kept_prediction => Some(prior_check(&cost, model.noise, p, &positions, request.seed, request.prior_conflict_z)?),
         _ => None,
     };
     let conflict = check.as_ref().is_some_and(|c| c.conflict);

@@ -26,7 +26,8 @@ use rand_distr::{Distribution, Normal};
 /// or 1.5 times as wide at 7.8 or more.
 pub const PRIOR_CHECK_DRAWS: usize = 40;
 
-/// Standard deviations of the null above its mean at which the prediction's cost conflicts.
+/// Standard deviations of the null above its mean at which the prediction's cost conflicts, by
+/// default (`EstimateRequest::prior_conflict_z`).
 pub const CONFLICT_Z: f64 = 3.0;
 
 /// The prior-predictive check of a per-element estimate with a prior.
@@ -46,7 +47,7 @@ pub struct PriorCheck {
     /// `(chi2_prediction - null_mean) / n_pixels`: how much more than the noise per pixel the
     /// images leave unexplained at the prediction.
     pub excess_per_pixel: f64,
-    /// The images conflict with the prediction as the prior states it: `z` above [`CONFLICT_Z`]
+    /// The images conflict with the prediction as the prior states it: `z` above `conflict_z`
     /// and the excess material (above `MATERIAL_MISFIT - 1`, the misfit rule's: smaller
     /// residuals act as a little more noise).
     pub conflict: bool,
@@ -55,12 +56,20 @@ pub struct PriorCheck {
 }
 
 /// The check of the images in `cost` (its view and linear nuisance as fitted) against `prior`
-/// with noise `noise` (rad), [`PRIOR_CHECK_DRAWS`] seeded draws of the prior's own errors:
+/// with noise `noise` (rad), a conflict beyond `conflict_z` standard deviations of the null
+/// ([`CONFLICT_Z`] by default), [`PRIOR_CHECK_DRAWS`] seeded draws of the prior's own errors:
 /// independent per element with its std, or for a smooth prior its field over the elements'
 /// `positions` (m; `W·a`, `a ~ N(0, 1)`, [`error_modes`]), plus its modes of known shape
 /// (`a·g`). Drawn otherwise the null would be wrong, not wider: independent errors weaken the
 /// focus, which a fitted scale absorbs, where smooth ones move and reshape it.
-pub fn prior_check(cost: &ElementCost, noise: f64, prior: &Prior, positions: &[[f64; 3]], seed: u64) -> Result<PriorCheck> {
+pub fn prior_check(
+    cost: &ElementCost,
+    noise: f64,
+    prior: &Prior,
+    positions: &[[f64; 3]],
+    seed: u64,
+    conflict_z: f64,
+) -> Result<PriorCheck> {
     let sigma = noise.max(MIN_NOISE_RAD);
     let mean = prior.mean();
     let n = cost.n_pixels();
@@ -113,7 +122,7 @@ pub fn prior_check(cost: &ElementCost, noise: f64, prior: &Prior, positions: &[[
         null_std,
         z,
         excess_per_pixel,
-        conflict: z > CONFLICT_Z && excess_per_pixel > MATERIAL_MISFIT - 1.0,
+        conflict: z > conflict_z && excess_per_pixel > MATERIAL_MISFIT - 1.0,
         draws: PRIOR_CHECK_DRAWS,
     })
 }
