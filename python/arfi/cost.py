@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from arfi.validate import as_phases
+from arfi.checks import as_phases
 
 
 @dataclass(frozen=True)

@@ -6,23 +6,7 @@ that is hotter; ``Simulation.tissue_classes`` names the tissue a place lies in.
 
 from __future__ import annotations
 
-from typing import Any
-
 from arfi._core import FocalMetrics
-
-#: The drives a CT-based prediction compares, by the names of its focal pressures, as a reader
-#: names them (the printed focal-metrics lines and the report's titles).
-DRIVE_LABELS = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
-
-
-def drive_labels(scenario: Any) -> dict[str, str]:
-    """:data:`DRIVE_LABELS` true to ``scenario``: where it steers by straight rays through the head
-    without its bone (``[ct] steer_without_bone``), its straight-ray steering is the uncorrected
-    drive, and is called so."""
-    ct = scenario.to_dict().get("ct") or {}
-    if ct.get("steer_without_bone"):
-        return {**DRIVE_LABELS, "ray_steering": "straight-ray steering without bone (the uncorrected drive)"}
-    return dict(DRIVE_LABELS)
 
 
 def metrics_text(m: FocalMetrics) -> str:

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from arfi.checks import as_phases
 from arfi.estimation import Estimate, phase_error
 from arfi.simulation import Simulation
-from arfi.validate import as_phases
 
 
 @dataclass(frozen=True)

@@ -2,20 +2,35 @@
 
 from __future__ import annotations
 
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi.checks import as_point_mm
 from arfi.scenario import Scenario
 from arfi.simulation import Section, Simulation
-from arfi.validate import as_point_mm
 
 #: What the scenario's CT bone does to each element's wave at the target (the extension's typed
 #: result: ``phases_rad``, ``transmission``, the focal pressures ``*_pa``, ``pressure_with``,
 #: ``correction_rad``; ``to_dict()`` is the JSON of ``arfi predict``).
 Prediction = _core.Prediction
+
+
+#: The drives a CT-based prediction compares, by the names of its focal pressures, as a reader
+#: names them (the printed focal-metrics lines and the report's titles).
+DRIVE_LABELS = {"uncorrected": "uncorrected", "ray_steering": "straight-ray CT steering", "corrected": "corrected"}
+
+
+def drive_labels(scenario: Any) -> dict[str, str]:
+    """:data:`DRIVE_LABELS` true to ``scenario``: where it steers by straight rays through the head
+    without its bone (``[ct] steer_without_bone``), its straight-ray steering is the uncorrected
+    drive, and is called so."""
+    ct = scenario.to_dict().get("ct") or {}
+    if ct.get("steer_without_bone"):
+        return {**DRIVE_LABELS, "ray_steering": "straight-ray steering without bone (the uncorrected drive)"}
+    return dict(DRIVE_LABELS)
 
 
 def predict(
@@ -56,7 +71,7 @@ def predict(
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:
-    """The drives a prediction compares (:data:`arfi.focal.DRIVE_LABELS`), as phases added to its kept
+    """The drives a prediction compares (:data:`DRIVE_LABELS`), as phases added to its kept
     simulation's steering (rad, per element): ``uncorrected`` (the reference steering toward the
     target, the head read without bone), ``ray_steering`` (the scenario's straight-ray CT steering
     toward the target) and ``corrected`` (the reference steering minus the prediction). Needs a

@@ -472,16 +472,13 @@ def field_report(
 
 
 def predict_report(
-    out: str | Path, prediction: Any, values: dict[str, Any], section: Any, labels: dict[str, str] | None = None
+    out: str | Path, prediction: Any, values: dict[str, Any], section: Any, labels: dict[str, str]
 ) -> Path:
     """Report of a CT-based prediction made with ``keep_simulation=True``: the beam through the
     skull on the x–z section through the target for each drive it compares (``section`` from
     ``arfi.prediction.compared_section``: uncorrected, straight-ray CT steering, corrected, in the
-    order of ``arfi.focal.DRIVE_LABELS``, or ``labels``); the element maps of the predicted phase and of the
-    transmission."""
-    from arfi.focal import DRIVE_LABELS
-
-    labels = DRIVE_LABELS if labels is None else labels
+    order and with the names of ``labels``, ``arfi.prediction.drive_labels(scenario)``); the
+    element maps of the predicted phase and of the transmission."""
     sim = prediction.kept_simulation()
     plt = pyplot()
     out = _report_dir(out)

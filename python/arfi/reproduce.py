@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from arfi.checks import as_count, as_number
 from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, defocused_images, focus_of
@@ -28,7 +29,6 @@ from arfi.loop import loop2
 from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
-from arfi.validate import as_count, as_number
 
 #: Largest first seed of a study: each acquisition's seed is derived from it (e.g. ``60_000 + 100·seed + k``)
 #: and must stay a 64-bit seed.

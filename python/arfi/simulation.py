@@ -10,12 +10,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi.checks import as_count, as_image, as_number, as_phases, as_point_mm, real_array
 from arfi.cost import CostModel
 from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
 from arfi.progress import callback
 from arfi.scenario import Scenario
-from arfi.validate import as_count, as_image, as_number, as_phases, as_point_mm, real_array
 from arfi.volume import PressureVolume
 
 #: One MR-ARFI image (2-D, or a list of rows) or several (a sequence of 2-D arrays, or a 3-D stack).

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from arfi.checks import as_count
 from arfi.estimation import METHODS, gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.progress import Progress
@@ -27,7 +28,6 @@ from arfi.report import figure_html, pyplot, rows_table_html, save_figure, write
 from arfi.reproduce import MAX_STUDY_SEED, study_aberration, study_images
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
-from arfi.validate import as_count
 
 
 @dataclass(frozen=True)

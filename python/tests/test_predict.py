@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from arfi.cli import main
-from arfi.focal import DRIVE_LABELS
-from arfi.prediction import compared_drives, compared_section, focal_metrics, predict
+from arfi.prediction import DRIVE_LABELS, compared_drives, compared_section, focal_metrics, predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

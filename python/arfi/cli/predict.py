@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
-from arfi.focal import drive_labels, metrics_text
-from arfi.prediction import compared_section, focal_metrics, predict
+from arfi.focal import metrics_text
+from arfi.prediction import compared_section, drive_labels, focal_metrics, predict
 
 
 def register(sub: Any) -> None:
