@@ -465,7 +465,9 @@ impl CoreSimulation {
         let measurements = measurements(images, known)?;
         let options = DiagnoseOptions::new(threshold, max_iterations, effects.as_deref(), time_limit_s).map_err(to_py)?;
         let cancel = AtomicBool::new(false);
-        let r = run_interruptible(py, &cancel, || diagnose(&self.inner, &measurements, &options, Some(&cancel)))?.map_err(to_py)?;
+        let r =
+            run_interruptible(py, &cancel, || diagnose(&self.inner, &measurements, &options, &Control::default().with_cancel(&cancel)))?
+                .map_err(to_py)?;
         Ok(CoreDiagnosis(r))
     }
 
@@ -495,7 +497,8 @@ impl CoreSimulation {
         let measurements = measurements(images, known)?;
         let mode = mode.as_array().to_vec();
         let cancel = AtomicBool::new(false);
-        let fit = run_interruptible(py, &cancel, || fit_mode(&self.inner, &mode, &measurements, Some(&cancel)))?.map_err(to_py)?;
+        let fit = run_interruptible(py, &cancel, || fit_mode(&self.inner, &mode, &measurements, &Control::default().with_cancel(&cancel)))?
+            .map_err(to_py)?;
         Ok(CoreModeFit(fit))
     }
 
@@ -514,8 +517,10 @@ impl CoreSimulation {
         let measurements = measurements(images, known)?;
         let modes: Vec<Vec<f64>> = modes.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
         let cancel = AtomicBool::new(false);
-        let fit = run_interruptible(py, &cancel, || fit_modes_with_noise(&self.inner, &modes, &measurements, noise_rad, Some(&cancel)))?
-            .map_err(to_py)?;
+        let fit = run_interruptible(py, &cancel, || {
+            fit_modes_with_noise(&self.inner, &modes, &measurements, noise_rad, &Control::default().with_cancel(&cancel))
+        })?
+        .map_err(to_py)?;
         Ok(CoreModesFit(fit))
     }
 

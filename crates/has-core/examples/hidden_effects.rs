@@ -15,6 +15,7 @@ use has_core::physics::aberration::SkullScreen;
 use has_core::physics::mr::add_noise;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
+use has_core::Control;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::TAU;
@@ -83,7 +84,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 meas.push(Measurement { image, known });
             }
             let t = std::time::Instant::now();
-            let d = diagnose(&s, &meas, &DiagnoseOptions::default(), None)?;
+            let d = diagnose(&s, &meas, &DiagnoseOptions::default(), &Control::default())?;
             let names: Vec<&str> = d.steps.iter().map(|st| st.effect.name()).collect();
             let all_named = hidden.iter().all(|h| d.steps.iter().any(|st| st.effect == *h));
             let all_identified = hidden.iter().all(|h| d.steps.iter().any(|st| st.effect == *h || st.equivalent.contains(h)));

@@ -38,6 +38,7 @@ pub mod section;
 pub mod simulation;
 pub mod validation;
 
+pub use control::Control;
 pub use error::{HasError, Result};
 pub use inverse::diagnose::{diagnose, Diagnosis};
 pub use inverse::estimate::{Estimate, Estimator};

@@ -11,6 +11,7 @@ use has_core::physics::aberration::SkullScreen;
 use has_core::physics::mr::add_noise;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
+use has_core::Control;
 use ndarray::Array2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -29,7 +30,7 @@ fn run(model: &Simulation, image: &Array2<f64>) -> Diagnosis {
 
 fn run_all(model: &Simulation, measurements: &[Measurement], options: &DiagnoseOptions) -> Diagnosis {
     let t = std::time::Instant::now();
-    let d = diagnose(model, measurements, options, None).expect("diagnose");
+    let d = diagnose(model, measurements, options, &Control::default()).expect("diagnose");
     let params: Vec<_> = d
         .steps
         .iter()

@@ -8,6 +8,7 @@ use has_core::inverse::diagnose::{diagnose, effect_images, DiagnoseOptions, Effe
 use has_core::inverse::estimate::Estimator;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
+use has_core::Control;
 use ndarray::Array2;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -122,7 +123,7 @@ proptest! {
             prop_assert!(e.is_ok_and(|e| e.cost.is_finite() && e.phases.iter().all(|p| p.is_finite())));
         }
         let options = DiagnoseOptions { effects: vec![Effect::Amplitude, Effect::RegistrationShift], max_iterations: 5, ..Default::default() };
-        if let Ok(d) = diagnose(s, &m, &options, None) {
+        if let Ok(d) = diagnose(s, &m, &options, &Control::default()) {
             prop_assert!(d.cost_final.is_finite() && d.cost_final <= d.cost_initial);
         }
     }

@@ -6,6 +6,7 @@
 use has_core::inverse::cost::Measurement;
 use has_core::inverse::prior::mode_fit::{fit_mode, ModeFit};
 use has_core::physics::aberration::SkullScreen;
+use has_core::Control;
 use has_core::{Scenario, Simulation};
 use std::sync::OnceLock;
 
@@ -40,7 +41,7 @@ fn images(c: f64, seed: u64) -> Vec<Measurement> {
 }
 
 fn fit(c: f64, seed: u64) -> ModeFit {
-    fit_mode(sim(), &mode(), &images(c, seed), None).unwrap()
+    fit_mode(sim(), &mode(), &images(c, seed), &Control::default()).unwrap()
 }
 
 #[test]
@@ -76,12 +77,12 @@ fn a_coefficient_beyond_the_search_is_not_bracketed() {
 #[test]
 fn a_fit_is_stopped_by_its_cancel_flag() {
     let cancel = std::sync::atomic::AtomicBool::new(true);
-    let e = fit_mode(sim(), &mode(), &images(0.0, 7), Some(&cancel)).unwrap_err();
+    let e = fit_mode(sim(), &mode(), &images(0.0, 7), &Control::default().with_cancel(&cancel)).unwrap_err();
     assert!(matches!(e, has_core::HasError::Interrupted), "{e}");
 }
 
 #[test]
 fn a_mode_of_the_wrong_length_is_named() {
-    let e = fit_mode(sim(), &[0.0; 3], &images(0.0, 5), None).unwrap_err();
+    let e = fit_mode(sim(), &[0.0; 3], &images(0.0, 5), &Control::default()).unwrap_err();
     assert!(e.to_string().contains("mode"), "{e}");
 }

@@ -12,6 +12,7 @@ use has_core::inverse::cost::Measurement;
 use has_core::inverse::prior::mode_fit::fit_mode;
 use has_core::inverse::prior::modes_fit::{fit_modes, fit_modes_with_noise};
 use has_core::physics::aberration::SkullScreen;
+use has_core::Control;
 use has_core::{Scenario, Simulation};
 use std::sync::OnceLock;
 
@@ -53,7 +54,7 @@ fn images(modes: &[Vec<f64>], c: &[f64], seed: u64) -> Vec<Measurement> {
 fn the_joint_fit_finds_the_coefficients_the_images_were_made_with() {
     let g = modes(0.3);
     for (c, seed) in [(vec![0.8, -0.5, 0.3], 1), (vec![0.5, 0.4, -0.7], 2), (vec![-1.2, 0.6, 1.0], 3)] {
-        let f = fit_modes(sim(), &g, &images(&g, &c, seed), None).unwrap();
+        let f = fit_modes(sim(), &g, &images(&g, &c, seed), &Control::default()).unwrap();
         let std = f.std();
         println!(
             "truth {c:?}: fitted {:?} +- {std:?}, misfit {:.3} (at zero {:.2}), {} iterations",
@@ -77,7 +78,7 @@ fn images_of_the_prediction_as_it_is_do_not_support_moving_it() {
     // three free coefficients find in noise: below the 95 % point of chi²(3), 7.8, in 95 % of
     // noise draws (this draw: 1.8).
     let g = modes(0.3);
-    let f = fit_modes(sim(), &g, &images(&g, &[0.0; 3], 8), None).unwrap();
+    let f = fit_modes(sim(), &g, &images(&g, &[0.0; 3], 8), &Control::default()).unwrap();
     println!("at zero: evidence {:.2}, coefficients {:?}", f.evidence, f.coefficients);
     assert!(!f.supported && f.evidence >= 0.0, "{f:?}");
 }
@@ -89,7 +90,8 @@ fn one_mode_fitted_jointly_agrees_with_the_one_mode_search() {
     // the posterior's spread: they agree within half a standard deviation.
     let g = vec![modes(0.5).remove(0)];
     let meas = images(&g, &[0.7], 4);
-    let (joint, one) = (fit_modes(sim(), &g, &meas, None).unwrap(), fit_mode(sim(), &g[0], &meas, None).unwrap());
+    let (joint, one) =
+        (fit_modes(sim(), &g, &meas, &Control::default()).unwrap(), fit_mode(sim(), &g[0], &meas, &Control::default()).unwrap());
     println!("joint {:.4} +- {:.4}, search {:.4} +- {:.4}", joint.coefficients[0], joint.std()[0], one.coefficient, one.std);
     assert!((joint.coefficients[0] - one.coefficient).abs() < 0.5 * one.std, "{joint:?} against {one:?}");
     assert!((joint.std()[0] / one.std - 1.0).abs() < 0.25, "{joint:?} against {one:?}");
@@ -99,14 +101,14 @@ fn one_mode_fitted_jointly_agrees_with_the_one_mode_search() {
 fn modes_of_the_wrong_length_or_not_finite_are_named() {
     let g = modes(0.3);
     let meas = images(&g, &[0.0; 3], 5);
-    let e = fit_modes(sim(), &[vec![0.0; 3]], &meas, None).unwrap_err().to_string();
+    let e = fit_modes(sim(), &[vec![0.0; 3]], &meas, &Control::default()).unwrap_err().to_string();
     assert!(e.starts_with("modes") && e.contains("mode 0 has 3 values"), "{e}");
     let mut bad = g.clone();
     bad[1][4] = f64::NAN;
-    assert!(fit_modes(sim(), &bad, &meas, None).unwrap_err().to_string().starts_with("modes"));
-    assert!(fit_modes(sim(), &[], &meas, None).unwrap_err().to_string().starts_with("modes"));
+    assert!(fit_modes(sim(), &bad, &meas, &Control::default()).unwrap_err().to_string().starts_with("modes"));
+    assert!(fit_modes(sim(), &[], &meas, &Control::default()).unwrap_err().to_string().starts_with("modes"));
     let cancel = std::sync::atomic::AtomicBool::new(true);
-    assert!(matches!(fit_modes(sim(), &g, &meas, Some(&cancel)).unwrap_err(), has_core::HasError::Interrupted));
+    assert!(matches!(fit_modes(sim(), &g, &meas, &Control::default().with_cancel(&cancel)).unwrap_err(), has_core::HasError::Interrupted));
 }
 
 /// The images' noise where it is known replaces the background floor: chi-squared at zero (which
@@ -116,14 +118,14 @@ fn modes_of_the_wrong_length_or_not_finite_are_named() {
 fn a_known_noise_replaces_the_background_floor() {
     let g = modes(0.3);
     let meas = images(&g, &[0.5, 0.0, -0.3], 6);
-    let floor = fit_modes(sim(), &g, &meas, None).unwrap();
+    let floor = fit_modes(sim(), &g, &meas, &Control::default()).unwrap();
     let given = 1.5 * floor.noise;
-    let known = fit_modes_with_noise(sim(), &g, &meas, Some(given), None).unwrap();
+    let known = fit_modes_with_noise(sim(), &g, &meas, Some(given), &Control::default()).unwrap();
     assert_eq!(known.noise, given);
     let expected = floor.misfit_at_zero * (floor.noise / given).powi(2);
     assert!((known.misfit_at_zero / expected - 1.0).abs() < 1e-9, "{} against {expected}", known.misfit_at_zero);
     for bad in [0.0, -0.01, f64::NAN] {
-        let e = fit_modes_with_noise(sim(), &g, &meas, Some(bad), None).unwrap_err().to_string();
+        let e = fit_modes_with_noise(sim(), &g, &meas, Some(bad), &Control::default()).unwrap_err().to_string();
         assert!(e.starts_with("noise_rad"), "{e}");
     }
 }

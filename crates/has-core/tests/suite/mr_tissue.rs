@@ -139,7 +139,7 @@ fn diagnose_names_nothing_on_noise_through_the_plate() {
     let mut image = sim.arfi_image(&[]).unwrap();
     add_noise(&mut image, 0.02, 3).unwrap();
     let imaged = image.iter().filter(|v| v.is_finite()).count();
-    let d = diagnose(&sim, &[Measurement { image, known: vec![] }], &DiagnoseOptions::default(), None).unwrap();
+    let d = diagnose(&sim, &[Measurement { image, known: vec![] }], &DiagnoseOptions::default(), &Control::default()).unwrap();
     println!("diagnose: {} steps, {} pixels of {}", d.steps.len(), d.n_pixels, 40 * 60);
     assert_eq!(d.n_pixels, imaged);
     assert!(d.steps.is_empty(), "named {:?}", d.steps.iter().map(|s| s.effect).collect::<Vec<_>>());

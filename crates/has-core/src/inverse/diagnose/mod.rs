@@ -18,6 +18,7 @@
 //! slice normal; field effects (`phase_aberration`, `element_dropout`, `sound_speed`,
 //! `attenuation` of the material at the focus) march the field again.
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{masks_and_box, Measurement};
 use crate::inverse::estimate::Stop;
@@ -180,8 +181,8 @@ impl Diagnosis {
 }
 
 /// Runs the workflow on measured images (each with the known phases added for it), starting
-/// from the simulation's model. `cancel`, when set by another thread, ends the run promptly
-/// with [`HasError::Interrupted`].
+/// from the simulation's model. `control`'s cancel flag, when set by another thread, ends the
+/// run promptly with [`HasError::Interrupted`].
 ///
 /// The paper's story: a model without broadening meets an image broadened with W = 2.7 mm
 /// (compiled, not run here: `tests/suite/diagnose.rs` runs this diagnosis and checks it).
@@ -190,23 +191,18 @@ impl Diagnosis {
 /// use has_core::physics::mr::add_noise;
 /// use has_core::inverse::cost::Measurement;
 /// use has_core::inverse::diagnose::{diagnose, DiagnoseOptions, Effect};
-/// use has_core::{Scenario, Simulation};
+/// use has_core::{Control, Scenario, Simulation};
 /// let sim = Simulation::new(&Scenario::default())?; // W = 2.7 mm
 /// let mut image = sim.arfi_image(&[])?;
 /// add_noise(&mut image, 0.02, 1)?;
 /// let unbroadened = sim.with_calibration(0.0, sim.amplitude()?)?;
-/// let d = diagnose(&unbroadened, &[Measurement { image, known: vec![] }], &DiagnoseOptions::default(), None)?;
+/// let d = diagnose(&unbroadened, &[Measurement { image, known: vec![] }], &DiagnoseOptions::default(), &Control::default())?;
 /// assert_eq!(d.steps[0].effect, Effect::Broadening);
 /// # Ok::<(), has_core::HasError>(())
 /// ```
-pub fn diagnose(
-    sim: &Simulation,
-    measurements: &[Measurement],
-    options: &DiagnoseOptions,
-    cancel: Option<&AtomicBool>,
-) -> Result<Diagnosis> {
+pub fn diagnose(sim: &Simulation, measurements: &[Measurement], options: &DiagnoseOptions, control: &Control) -> Result<Diagnosis> {
     let never = AtomicBool::new(false);
-    let cancel = cancel.unwrap_or(&never);
+    let cancel = control.cancel().unwrap_or(&never);
     let deadline = options.time_limit.map(|t| Instant::now() + t);
     let noise = masks_and_box(sim, measurements, sim.mask_fraction, 3)?.noise;
     if !(noise > 0.0) {

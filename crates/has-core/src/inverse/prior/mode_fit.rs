@@ -17,6 +17,7 @@
 //! inside, then at the vertices of successive parabolas through the best and its neighbours,
 //! until a step is short against the posterior's spread.
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{imaged_pixels, masks_and_box, Measurement};
 use crate::inverse::element::{image_known_per_element, BACKGROUND_MARGIN};
@@ -81,10 +82,11 @@ struct Point {
 /// on `sim`, the model through the CT's bone driven with the reference steering (see the module
 /// docs). The pixel box is the estimation's ([`masks_and_box`] at the scenario's mask fraction,
 /// [`BACKGROUND_MARGIN`] pixels around the masks); every pixel imaged in both the measured and
-/// the model image counts. `cancel`, when set by another thread, ends the fit before the next
-/// coefficient ([`HasError::Interrupted`]). An error when no pixel is imaged in both, or the model
+/// the model image counts. `control`'s cancel flag, when set by another thread, ends the fit
+/// before the next coefficient ([`HasError::Interrupted`]). An error when no pixel is imaged in both, or the model
 /// gives no force there.
-pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement], cancel: Option<&AtomicBool>) -> Result<ModeFit> {
+pub fn fit_mode(sim: &Simulation, mode: &[f64], measurements: &[Measurement], control: &Control) -> Result<ModeFit> {
+    let cancel = control.cancel();
     let n = sim.n_elements();
     if mode.len() != n {
         return Err(HasError::invalid("mode", format!("has {} values for {n} elements", mode.len())));

@@ -27,6 +27,7 @@
 //! unchecked fit moved the prediction the wrong way.
 
 use super::mode_fit::Setting;
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Measurement;
 use crate::inverse::linear::spd_inverse;
@@ -107,10 +108,10 @@ struct Linearised {
 /// Fits the coefficients of `modes` (each rad per element for a coefficient of 1: the mode
 /// times its prior standard deviation) to `measurements` on `sim`, the model through the CT's
 /// bone driven with the reference steering (see the module docs); pixels as
-/// [`super::mode_fit::fit_mode`] takes them. `cancel`, when set by another thread, ends the fit
-/// before the next batch of marches ([`HasError::Interrupted`]).
-pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measurement], cancel: Option<&AtomicBool>) -> Result<ModesFit> {
-    fit_modes_with_noise(sim, modes, measurements, None, cancel)
+/// [`super::mode_fit::fit_mode`] takes them. `control`'s cancel flag, when set by another thread,
+/// ends the fit before the next batch of marches ([`HasError::Interrupted`]).
+pub fn fit_modes(sim: &Simulation, modes: &[Vec<f64>], measurements: &[Measurement], control: &Control) -> Result<ModesFit> {
+    fit_modes_with_noise(sim, modes, measurements, None, control)
 }
 
 /// [`fit_modes`] with the images' noise `noise_rad` (rad) where it is known, instead of the
@@ -121,8 +122,9 @@ pub fn fit_modes_with_noise(
     modes: &[Vec<f64>],
     measurements: &[Measurement],
     noise_rad: Option<f64>,
-    cancel: Option<&AtomicBool>,
+    control: &Control,
 ) -> Result<ModesFit> {
+    let cancel = control.cancel();
     let n = sim.n_elements();
     if modes.is_empty() {
         return Err(HasError::invalid("modes", "none given"));
