@@ -245,7 +245,11 @@ def test_propagation_says_which_interface_model_ran_and_where_it_reverberates(tm
         },
     }
     assert sim.grid.to_dict() == {k: getattr(sim.grid, k) for k in arfi.Grid._fields}
-    assert sim.grid == arfi.Simulation(arfi.Scenario.from_toml(PLATE)).grid and "dz_mm=" in repr(sim.grid)
+    same = arfi.Simulation(arfi.Scenario.from_toml(PLATE))
+    assert sim.grid == same.grid and "dz_mm=" in repr(sim.grid)
+    # Frozen values: equal ones hash alike, so they key dicts and sets.
+    assert hash(sim.grid) == hash(same.grid) and hash(sim.propagation) == hash(same.propagation)
+    assert len({sim.grid, same.grid, arfi.Simulation().grid}) == 2 and p in {same.propagation: 1}
     normal = arfi.Simulation(
         arfi.Scenario.from_toml(PLATE.replace("[medium]", '[grid]\ninterfaces = "normal-incidence"\n[medium]'))
     )

@@ -40,6 +40,11 @@ impl CoreGrid {
         fields_dict(slf.as_any())
     }
 
+    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
+    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
+        slf.repr()?.hash()
+    }
+
     fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
         fields_repr(slf.as_any(), "Grid")
     }
@@ -65,6 +70,11 @@ impl CoreReverberation {
     /// The reverberation as a dict of its attributes.
     fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
         fields_dict(slf.as_any())
+    }
+
+    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
+    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
+        slf.repr()?.hash()
     }
 
     fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
@@ -116,6 +126,11 @@ impl CorePropagation {
     /// The propagation as a dict of its attributes (`reverberation` a dict or None).
     fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
         fields_dict(slf.as_any())
+    }
+
+    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
+    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
+        slf.repr()?.hash()
     }
 
     fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
