@@ -78,11 +78,10 @@ class Scenario:
         with the reference steering (``steer_without_bone = true``): the skull ``arfi predict``
         marches, steered as the estimation's model (``without_bone = true``) is. A scenario
         without ``[ct]`` raises ``ValueError``."""
-        d = self.to_dict()
-        if not d.get("ct"):
-            raise ValueError(f"scenario {self.name!r}: has no [ct]: a model with the CT's bone needs a CT of the head")
-        d["ct"] = {**d["ct"], "without_bone": False, "steer_without_bone": True}
-        return Scenario.from_dict(d, self._base_dir)
+        s = Scenario.__new__(Scenario)
+        s._base_dir = self._base_dir
+        s._toml = _core.scenario_with_ct_bone(self._toml, self._base_dir)
+        return s
 
     def outline(self) -> _core.ScenarioOutline:
         """What the scenario fixes before a simulation is built: the array's elements and default

@@ -378,5 +378,5 @@ def test_a_mode_is_fitted_on_the_head_with_its_bone(head):
     assert 0.8 < fit.misfit < 1.2 and len(fit.tried) >= 4, fit
     with pytest.raises(ValueError, match="mode"):
         skull.fit_mode(images, known, mode[:5])
-    with pytest.raises(ValueError, match=r"\[ct\]"):
+    with pytest.raises(ValueError, match=r'^scenario "vyas2014-phantom": has no \[ct\]: a model with the CT'):
         Scenario.default().with_ct_bone()

@@ -23,7 +23,10 @@ mod volume;
 use has_core::inverse::estimate::workflow::Method;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use scenario::{contiguous_groups, default_scenario_toml, normalize_scenario, scenario_json, scenario_outline, scenario_toml_with_grid};
+use scenario::{
+    contiguous_groups, default_scenario_toml, normalize_scenario, scenario_json, scenario_outline, scenario_toml_with_grid,
+    scenario_with_ct_bone,
+};
 
 /// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`): call
 /// after dropping a simulation whose HAS plan is large, before building the next.
@@ -67,6 +70,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_with_ct_bone, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_outline, m)?)?;
     m.add_function(wrap_pyfunction!(contiguous_groups, m)?)?;
     m.add_class::<scenario::CoreOutline>()?;

@@ -49,6 +49,14 @@ pub(crate) fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) ->
     parse_scenario(text, format, base_dir)?.to_json().map_err(to_py)
 }
 
+/// The head of a `[ct]` scenario with the CT's bone, driven with the reference steering, as
+/// complete TOML (`Scenario::with_ct_bone`).
+#[pyfunction]
+#[pyo3(signature = (text, base_dir=None))]
+pub(crate) fn scenario_with_ct_bone(text: &str, base_dir: Option<&str>) -> PyResult<String> {
+    parse_scenario(text, "toml", base_dir)?.with_ct_bone().and_then(|s| s.to_toml()).map_err(to_py)
+}
+
 /// A parsed scenario whose values have also been checked together (`Scenario::resolve`).
 fn validated_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Scenario> {
     let s = parse_scenario(text, format, base_dir)?;

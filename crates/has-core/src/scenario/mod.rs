@@ -448,6 +448,21 @@ fn phantom_medium() -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
 }
 
 impl Scenario {
+    /// The head of this `[ct]` scenario with the CT's bone (`without_bone = false`) driven with
+    /// the reference steering (`steer_without_bone = true`): the skull a CT-based prediction
+    /// marches, steered as the estimation's model (`without_bone = true`) is. An error for a
+    /// scenario without `[ct]`.
+    pub fn with_ct_bone(&self) -> Result<Scenario> {
+        let Some(ct) = &self.ct else {
+            return Err(HasError::invalid(
+                format!("scenario {:?}", self.name),
+                "has no [ct]: a model with the CT's bone needs a CT of the head",
+            ));
+        };
+        let ct = CtSpec { without_bone: Some(false), steer_without_bone: Some(true), ..ct.clone() };
+        Ok(Scenario { ct: Some(ct), ..self.clone() })
+    }
+
     /// The medium when the file names no material or region: the paper's phantom experiment, or
     /// water around a CT.
     fn default_medium(&self) -> (Vec<MaterialSpec>, MediumSpec, Vec<RegionSpec>) {
