@@ -39,7 +39,7 @@ def predict(
     bone_speed_sensitivity: bool = False,
     keep_simulation: bool = False,
     pose_sensitivity: bool = False,
-) -> tuple[Prediction, CoreSimulation | None]: ...
+) -> tuple[Prediction, tuple[CoreSimulation, str] | None]: ...
 
 class ScenarioOutline:
     """What a scenario fixes before a simulation is built, with the simulation's own rules for

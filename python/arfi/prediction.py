@@ -54,7 +54,7 @@ def predict(
     through the skull, side by side, no plan; needs a curved array). ``keep_simulation`` keeps the skull's simulation as
     :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
-    prediction, core = _core.predict(
+    prediction, kept = _core.predict(
         scenario.to_toml(),
         "toml",
         scenario.base_dir,
@@ -63,11 +63,10 @@ def predict(
         bool(keep_simulation),
         bool(pose_sensitivity),
     )
-    if core is None:
+    if kept is None:
         return prediction
-    fields_only = scenario.to_dict()
-    fields_only.setdefault("arfi", {}).setdefault("amplitude_rad_m3_per_n", 1.0)
-    return prediction.with_simulation(Simulation._wrap(Scenario.from_dict(fields_only, scenario.base_dir), core))
+    core, built_from = kept
+    return prediction.with_simulation(Simulation._wrap(Scenario.from_toml(built_from, scenario.base_dir), core))
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:

@@ -3,7 +3,7 @@
 use crate::error::{invalid, to_py};
 use crate::scenario::parse_scenario;
 use crate::simulation::CoreSimulation;
-use has_core::prediction::{predict_scenario_with, PoseSensitivity, Prediction, PredictionOptions};
+use has_core::prediction::{predict_scenario_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -28,7 +28,7 @@ pub(crate) fn predict(
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
     pose_sensitivity: bool,
-) -> PyResult<(CorePrediction, Option<CoreSimulation>)> {
+) -> PyResult<(CorePrediction, Option<(CoreSimulation, String)>)> {
     let scenario = parse_scenario(text, format, base_dir)?;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
     let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
@@ -39,7 +39,12 @@ pub(crate) fn predict(
         pose: run.pose_sensitivity,
         simulation: None,
     };
-    Ok((prediction, run.simulation.map(CoreSimulation::from)))
+    // The kept simulation with the scenario (as TOML) it was built from.
+    let kept = match run.simulation {
+        Some(sim) => Some((CoreSimulation::from(sim), with_amplitude(scenario).to_toml().map_err(to_py)?)),
+        None => None,
+    };
+    Ok((prediction, kept))
 }
 
 /// What the scenario's CT bone does to each element's wave at the target, by reciprocity.

@@ -118,7 +118,7 @@ pub struct PredictionRun {
     pub bone_speed_sensitivity: Option<Vec<f64>>,
     /// The modes of the CT's registration (see [`pose_sensitivity`]).
     pub pose_sensitivity: Option<PoseSensitivity>,
-    /// The skull's simulation.
+    /// The skull's simulation, built from [`with_amplitude`] of the scenario.
     pub simulation: Option<Simulation>,
 }
 
@@ -198,8 +198,9 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
 }
 
 /// `scenario` with the ARFI amplitude given (1 unless it sets one), so that its simulation is
-/// not calibrated from an ideal image: for predictions, which make none.
-fn with_amplitude(mut scenario: Scenario) -> Scenario {
+/// not calibrated from an ideal image: for predictions, which make none. The scenario of the
+/// skull's simulation a [`PredictionRun`] keeps.
+pub fn with_amplitude(mut scenario: Scenario) -> Scenario {
     scenario.arfi.amplitude_rad_m3_per_n.get_or_insert(1.0);
     scenario
 }
