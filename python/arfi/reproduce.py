@@ -389,6 +389,7 @@ def _figures(
             pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s"
         )
         ax[k].set(aspect="equal", xlabel="x (mm)", ylabel="y (mm)", title=title)
+        ax[k].set_facecolor("0.55")  # the cyclic map's ends are near white
         fig.colorbar(sc, ax=ax[k], label="phase (rad)")
     figs["fig4"] = save_figure(fig, out / "fig4_aberrations.png")
 
