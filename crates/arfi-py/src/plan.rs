@@ -7,6 +7,39 @@ use has_core::simulation::{Propagation, Simulation};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+/// The methods of a frozen value class: its `_fields` (what `to_dict` writes, in order),
+/// `to_dict`, `__repr__` and a `__hash__` that agrees with `==` (the repr's, which lists every
+/// field exactly).
+macro_rules! value_methods {
+    ($class:ty, $name:literal, [$($field:literal),+ $(,)?]) => {
+        #[pymethods]
+        impl $class {
+            /// The attributes `to_dict` writes, in order.
+            #[classattr]
+            fn _fields() -> Vec<&'static str> {
+                vec![$($field),+]
+            }
+
+            /// The value as a dict of its attributes (nested values as dicts).
+            fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
+                fields_dict(slf.as_any())
+            }
+
+            fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
+                slf.repr()?.hash()
+            }
+
+            fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
+                fields_repr(slf.as_any(), $name)
+            }
+        }
+    };
+}
+
+value_methods!(CoreGrid, "Grid", ["nx", "ny", "nz", "dx_mm", "dy_mm", "dz_mm", "z0_mm"]);
+value_methods!(CoreReverberation, "Reverberation", ["first_interface_z_mm", "last_interface_z_mm", "round_trips"]);
+value_methods!(CorePropagation, "Propagation", ["interfaces", "screen", "reflections", "shear", "reverberation"]);
+
 /// The grid the march runs on (mm): `nx` x `ny` points spaced `dx_mm`, `dy_mm` on each plane,
 /// `nz` planes `dz_mm` apart from `z0_mm` (the source plane's z).
 #[pyclass(module = "arfi._core", name = "Grid", frozen, eq, get_all, skip_from_py_object)]
@@ -28,28 +61,6 @@ impl CoreGrid {
     }
 }
 
-#[pymethods]
-impl CoreGrid {
-    /// The attributes `to_dict` writes, in order.
-    #[classattr]
-    #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 7] = ["nx", "ny", "nz", "dx_mm", "dy_mm", "dz_mm", "z0_mm"];
-
-    /// The grid as a dict of its attributes.
-    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
-        fields_dict(slf.as_any())
-    }
-
-    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
-    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
-        slf.repr()?.hash()
-    }
-
-    fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
-        fields_repr(slf.as_any(), "Grid")
-    }
-}
-
 /// The layers between which waves bouncing inside them are added: the z (mm) of the first and
 /// last interface, and the round trips added.
 #[pyclass(module = "arfi._core", name = "Reverberation", frozen, eq, get_all, skip_from_py_object)]
@@ -58,28 +69,6 @@ pub(crate) struct CoreReverberation {
     first_interface_z_mm: f64,
     last_interface_z_mm: f64,
     round_trips: usize,
-}
-
-#[pymethods]
-impl CoreReverberation {
-    /// The attributes `to_dict` writes, in order.
-    #[classattr]
-    #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 3] = ["first_interface_z_mm", "last_interface_z_mm", "round_trips"];
-
-    /// The reverberation as a dict of its attributes.
-    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
-        fields_dict(slf.as_any())
-    }
-
-    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
-    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
-        slf.repr()?.hash()
-    }
-
-    fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
-        fields_repr(slf.as_any(), "Reverberation")
-    }
 }
 
 /// How the march crosses changes of medium: `interfaces` (`"angular"`: plane-wave coefficients
@@ -113,27 +102,5 @@ impl From<Propagation> for CorePropagation {
                 round_trips: n,
             }),
         }
-    }
-}
-
-#[pymethods]
-impl CorePropagation {
-    /// The attributes `to_dict` writes, in order.
-    #[classattr]
-    #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 5] = ["interfaces", "screen", "reflections", "shear", "reverberation"];
-
-    /// The propagation as a dict of its attributes (`reverberation` a dict or None).
-    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
-        fields_dict(slf.as_any())
-    }
-
-    /// Equal values hash alike (the hash of the repr, which lists every field exactly).
-    fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
-        slf.repr()?.hash()
-    }
-
-    fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
-        fields_repr(slf.as_any(), "Propagation")
     }
 }
