@@ -71,7 +71,7 @@ def beam_rgba(p: NDArray[np.float64], vmax: float, cmap: str = "inferno") -> NDA
     ``vmax``, fading below it, clear below ``BEAM_FLOOR``."""
     import matplotlib
 
-    f = np.clip(np.nan_to_num(np.asarray(p, dtype=np.float64)) / vmax, 0.0, 1.0)
+    f = np.clip(np.nan_to_num(np.asarray(p, dtype=np.float64)) / max(vmax, np.finfo(float).tiny), 0.0, 1.0)
     rgba = np.array(matplotlib.colormaps[cmap](f), dtype=np.float64)
     rgba[..., 3] = np.where(f < BEAM_FLOOR, 0.0, np.sqrt(np.minimum(f / BEAM_OPAQUE, 1.0)))
     return rgba
@@ -448,9 +448,12 @@ def field_report(
         title=f"|p| on the plane z = {field.z_mm:.1f} mm around the target (o)",
         xlabel="x (mm)",
         ylabel="y (mm)",
-        xlim=(max(x[0], t[0] - reach), min(x[-1], t[0] + reach)),
-        ylim=(max(y[0], t[1] - reach), min(y[-1], t[1] + reach)),
     )
+    # Around the target where it lies on the plane's grid; the whole plane where it does not.
+    for lim, axis, c in ((ax[0].set_xlim, x, t[0]), (ax[0].set_ylim, y, t[1])):
+        lo, hi = max(axis[0], c - reach), min(axis[-1], c + reach)
+        if lo < hi:
+            lim(lo, hi)
     fig.colorbar(im, ax=ax[0], label="pressure amplitude (MPa)", extend="max")
     ax[1].plot(field.axis_z_mm, np.abs(field.axis_pressure) / 1e6)
     ax[1].axvline(field.target_mm[2], color="0.5", ls="--", lw=0.8)

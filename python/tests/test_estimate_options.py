@@ -30,6 +30,15 @@ def test_options_read_back_in_the_units_of_their_names():
     assert (d.method, d.seed, d.threshold, d.prior, d.fit_nuisance, d.suggest) == ("lbfgs", 0, 0.9, None, [], False)
 
 
+def test_numpy_values_are_taken_and_unknown_attributes_are_attribute_errors():
+    o = EstimateOptions(fit_amplitude=np.True_, suggest=np.bool_(False), seed=np.uint8(3), threshold=np.float32(0.5))
+    assert (o.fit_amplitude, o.suggest, o.seed, o.threshold) == (True, False, 3, 0.5)
+    with pytest.raises(AttributeError, match="nope"):
+        o.nope  # noqa: B018
+    assert not hasattr(o, "nope") and "prior_conflict_z" in dir(o)
+    assert "prior_conflict_z (number):" in EstimateOptions.describe()
+
+
 def test_to_dict_and_replace_make_the_same_options_again():
     o = EstimateOptions(prior=[0.5, -0.5], prior_std_rad=0.4, starts=3, fit_amplitude=True)
     again = EstimateOptions(**o.to_dict())
@@ -71,6 +80,9 @@ def test_to_dict_and_replace_make_the_same_options_again():
         ({"prior": [0.0], "prior_std_rad": 0.3, "prior_modes": [[0.0], [np.inf]]}, "prior_modes"),
         ({"fit_nuisance": "bogus"}, 'fit_nuisance: unknown nuisance parameter "bogus"'),
         ({"prior_conflict_z": 0.0}, "prior_conflict_z: must be a finite number > 0"),
+        ({"fit_amplitude": 1}, "fit_amplitude: must be True or False, got 1"),
+        ({"suggest": "yes"}, "suggest: must be True or False"),
+        ({"method": 1}, "method: must be a string, got 1"),
     ],
 )
 def test_bad_options_are_refused_naming_the_option(options, message):

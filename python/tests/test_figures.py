@@ -25,6 +25,8 @@ def test_the_beam_fades_with_its_amplitude_instead_of_vanishing_below_a_threshol
     np.testing.assert_allclose(rgba[-1, :3], matplotlib.colormaps["inferno"](1.0)[:3])
     np.testing.assert_allclose(rgba[100, :3], matplotlib.colormaps["inferno"](0.5)[:3])
     assert np.all(beam_rgba(np.array([np.nan]), 1.0)[:, 3] == 0.0)
+    # A field without pressure (a scale of 0) draws nothing rather than NaN.
+    assert np.all(beam_rgba(np.zeros(3), 0.0)[:, 3] == 0.0)
 
 
 def test_sections_circle_the_target_and_phase_maps_have_a_grey_ground() -> None:

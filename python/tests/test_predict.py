@@ -138,6 +138,10 @@ def test_predicted_phases_applied_by_the_forward_march_give_the_predicted_focus(
     # The kept simulation is the skull's: the same march as a fresh one, to the bit.
     kept = p.simulation.field(p.correction_rad(sim.steering_phases_rad), p.target_mm[2])
     assert np.array_equal(kept.pressure, f.pressure)
+    # Its scenario is the one it was built from: the head's, with the ARFI amplitude given (a
+    # prediction makes no ideal image to calibrate it from).
+    built_from = p.simulation.scenario.to_dict()
+    assert built_from["arfi"]["amplitude_rad_m3_per_n"] == 1.0 and built_from["ct"] == scenario.to_dict()["ct"]
     assert predict(scenario).simulation is None
     with pytest.raises(ValueError, match="target_mm"):
         predict(scenario, [0.0, 1.0])
@@ -368,7 +372,8 @@ def test_a_mode_is_fitted_on_the_head_with_its_bone(head):
     # standard deviations, allowing for the prior's pull towards zero (a factor 1 / (1 + std^2));
     # a mode of the wrong length and a scenario without [ct] are named.
     skull = Simulation(Scenario.load(head / "head.toml").with_ct_bone(), groups=256)
-    assert skull.scenario.to_dict()["ct"]["steer_without_bone"] is True
+    ct = skull.scenario.to_dict()["ct"]
+    assert ct["steer_without_bone"] is True and ct["without_bone"] is False
     rng = np.random.default_rng(5)
     mode = np.convolve(rng.normal(size=256 + 15), np.ones(16) / 4.0, mode="valid")  # smooth, about 1 rad RMS
     known = [None] + [skull.focus_shift_phases((0.0, 0.0, dz)) for dz in (5.0, -5.0)]

@@ -369,7 +369,7 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
 
     result, out = estimate(moved=True)
     check = result["prior_check"]
-    assert check["conflict"] and check["z"] > 3.0 and check["draws"] == 40, check
+    assert check["conflict"] and check["z"] > 3.0 and check["draws"] == 40 and check["conflict_z"] == 3.0, check
     assert not result["model_mismatch"] and result["recommended"] == "prediction", result["misfit"]
     assert "PRIOR CONFLICT" in out and "NOT to be applied" in out and "out.npy" in out, out
     assert np.allclose(np.load(tmp_path / "out.npy"), prediction)
@@ -377,6 +377,7 @@ def test_cli_images_the_model_cannot_form_about_the_prediction_recommend_it(tmp_
     # images are then no conflict, and the estimate is what is recommended.
     trusting, out = estimate(True, "--prior-conflict-z", f"{check['z'] + 1.0:.1f}")
     assert trusting["prior_check"]["z"] == check["z"] and not trusting["prior_check"]["conflict"]
+    assert trusting["prior_check"]["conflict_z"] == float(f"{check['z'] + 1.0:.1f}")
     assert trusting["recommended"] == "estimate" and "PRIOR CONFLICT" not in out, trusting["recommended"]
     result, out = estimate(moved=False)
     assert not result["prior_check"]["conflict"] and result["recommended"] == "estimate", result["prior_check"]

@@ -38,8 +38,11 @@ fn from_py(v: &Bound<'_, PyAny>, name: &str, kind: OptionKind) -> PyResult<Optio
     Ok(match kind {
         OptionKind::Flag => match v.filter(|v| !v.is_none()) {
             None => None,
-            Some(b) if b.is_instance_of::<PyBool>() => Some(OptionValue::Flag(b.is_truthy()?)),
-            Some(b) => return Err(invalid(name, format!("must be True or False, got {}", b.repr()?))),
+            // Python's and NumPy's booleans (PyO3's conversion); integers are refused.
+            Some(b) => match b.extract::<bool>() {
+                Ok(f) => Some(OptionValue::Flag(f)),
+                Err(_) => return Err(invalid(name, format!("must be True or False, got {}", b.repr()?))),
+            },
         },
         OptionKind::Count => count(v, name)?.map(|n| OptionValue::Count(n as u64)),
         OptionKind::Number => number(v, name)?.map(OptionValue::Number),

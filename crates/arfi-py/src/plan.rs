@@ -8,8 +8,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// The methods of a frozen value class: its `_fields` (what `to_dict` writes, in order),
-/// `to_dict`, `__repr__` and a `__hash__` that agrees with `==` (the repr's, which lists every
-/// field exactly).
+/// `to_dict`, `__repr__` and a `__hash__` that agrees with `==` (that of the tuple of its fields:
+/// Python hashes -0.0 as 0.0).
 macro_rules! value_methods {
     ($class:ty, $name:literal, [$($field:literal),+ $(,)?]) => {
         #[pymethods]
@@ -26,7 +26,8 @@ macro_rules! value_methods {
             }
 
             fn __hash__(slf: &Bound<'_, Self>) -> PyResult<isize> {
-                slf.repr()?.hash()
+                let values = [$(slf.getattr($field)?),+];
+                pyo3::types::PyTuple::new(slf.py(), values)?.hash()
             }
 
             fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {

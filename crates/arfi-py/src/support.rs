@@ -92,7 +92,8 @@ impl EstimatePriorCheck {
     /// The attributes `to_dict` writes, in order.
     #[classattr]
     #[pyo3(name = "_fields")]
-    const FIELDS: [&'static str; 7] = ["chi2_prediction", "null_mean", "null_std", "z", "excess_per_pixel", "conflict", "draws"];
+    const FIELDS: [&'static str; 8] =
+        ["chi2_prediction", "null_mean", "null_std", "z", "excess_per_pixel", "conflict", "conflict_z", "draws"];
 
     /// `chi²` of the images at the prediction (cost over the noise's variance).
     #[getter]
@@ -128,6 +129,12 @@ impl EstimatePriorCheck {
     #[getter]
     fn conflict(&self) -> bool {
         self.0.conflict
+    }
+
+    /// The threshold on `z` the conflict was judged by (`prior_conflict_z`).
+    #[getter]
+    fn conflict_z(&self) -> f64 {
+        self.0.conflict_z
     }
 
     /// Draws of the prior made.

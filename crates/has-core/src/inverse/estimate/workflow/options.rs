@@ -203,7 +203,7 @@ impl EstimateRequest {
                 ("fit_nuisance", OptionValue::Names(n)) => r.nuisance = Nuisance::parse(&n)?,
                 ("prior_conflict_z", OptionValue::Number(z)) => r.prior_conflict_z = z,
                 ("suggest", OptionValue::Flag(f)) => r.suggest = f,
-                (name, _) => unreachable!("option {name} is declared but not read"),
+                (name, _) => return Err(HasError::invalid(name, "is declared in OPTIONS but not read by from_options")),
             }
         }
         r.prior = Prior::from_parts(mean, std, correlation, modes)?;
@@ -231,7 +231,7 @@ impl EstimateRequest {
             "fit_nuisance" => Some(V::Names(self.nuisance.names().into_iter().map(String::from).collect())),
             "prior_conflict_z" => Some(V::Number(self.prior_conflict_z)),
             "suggest" => Some(V::Flag(self.suggest)),
-            name => unreachable!("option {name} is declared but not written"),
+            name => return Err(HasError::invalid(name, "is declared in OPTIONS but not written by option")),
         })
     }
 }
@@ -255,6 +255,7 @@ mod tests {
             ("prior_correlation_mm", OptionValue::Number(20.0)),
             ("prior_modes", OptionValue::Rows(vec![vec![1.0, -1.0]])),
             ("fit_nuisance", OptionValue::Names(vec!["amplitude".into()])),
+            ("prior_conflict_z", OptionValue::Number(5.0)),
             ("suggest", OptionValue::Flag(true)),
         ];
         let r = EstimateRequest::from_options(&given).unwrap();
@@ -266,7 +267,22 @@ mod tests {
                 _ => assert_eq!(&back, value, "{name}"),
             }
         }
-        // Every declared option is read and written (the match arms cover the list).
+        // Every declared option is read and written: each alone, with a value of its kind, is
+        // taken or refused by its own rule, never for want of a match arm.
+        for o in OPTIONS {
+            let value = match o.kind {
+                OptionKind::Flag => OptionValue::Flag(true),
+                OptionKind::Count => OptionValue::Count(3),
+                OptionKind::Number => OptionValue::Number(0.5),
+                OptionKind::Text => OptionValue::Text("lbfgs".into()),
+                OptionKind::Names => OptionValue::Names(vec![]),
+                OptionKind::Values => OptionValue::Values(vec![0.0]),
+                OptionKind::Rows => OptionValue::Rows(vec![vec![0.0]]),
+            };
+            if let Err(e) = EstimateRequest::from_options(&[(o.name, value)]) {
+                assert!(!e.to_string().contains("is declared in OPTIONS"), "{e}");
+            }
+        }
         let d = EstimateRequest::default();
         assert!(OPTIONS.iter().all(|o| d.option(o.name).unwrap().is_none() == o.optional));
         assert_eq!(EstimateRequest::from_options(&[]).unwrap(), d);

@@ -51,6 +51,8 @@ pub struct PriorCheck {
     /// and the excess material (above `MATERIAL_MISFIT - 1`, the misfit rule's: smaller
     /// residuals act as a little more noise).
     pub conflict: bool,
+    /// The threshold on `z` the conflict was judged by.
+    pub conflict_z: f64,
     /// Draws made.
     pub draws: usize,
 }
@@ -123,6 +125,7 @@ pub fn prior_check(
         z,
         excess_per_pixel,
         conflict: z > conflict_z && excess_per_pixel > MATERIAL_MISFIT - 1.0,
+        conflict_z,
         draws: PRIOR_CHECK_DRAWS,
     })
 }
