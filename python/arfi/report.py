@@ -64,26 +64,30 @@ BEAM_FLOOR = 0.02
 #: (opacity ∝ √(|p| / this)), so that the converging beam stays visible in the brain without hiding
 #: the anatomy where it is weak.
 BEAM_OPAQUE = 0.3
+#: The beam's colour map (0 to the focal scale).
+BEAM_CMAP = "inferno"
+#: The ground under cyclic phase maps, whose ends (or middle, shifted) are near white.
+PHASE_GROUND = "0.55"
 
 
-def beam_rgba(p: NDArray[np.float64], vmax: float, cmap: str = "inferno") -> NDArray[np.float64]:
-    """``p`` (≥ 0) as RGBA on ``cmap`` scaled 0..``vmax``: opaque above ``BEAM_OPAQUE`` of
+def beam_rgba(p: NDArray[np.float64], vmax: float) -> NDArray[np.float64]:
+    """``p`` (≥ 0) as RGBA on ``BEAM_CMAP`` scaled 0..``vmax``: opaque above ``BEAM_OPAQUE`` of
     ``vmax``, fading below it, clear below ``BEAM_FLOOR``."""
     import matplotlib
 
     f = np.clip(np.nan_to_num(np.asarray(p, dtype=np.float64)) / max(vmax, np.finfo(float).tiny), 0.0, 1.0)
-    rgba = np.array(matplotlib.colormaps[cmap](f), dtype=np.float64)
+    rgba = np.array(matplotlib.colormaps[BEAM_CMAP](f), dtype=np.float64)
     rgba[..., 3] = np.where(f < BEAM_FLOOR, 0.0, np.sqrt(np.minimum(f / BEAM_OPAQUE, 1.0)))
     return rgba
 
 
 def show_beam(ax: Any, p: NDArray[np.float64], vmax: float, extent: Sequence[float]) -> Any:
     """``p`` drawn over what ``ax`` shows (:func:`beam_rgba`); returns a mappable for its colour
-    bar (``inferno``, 0..``vmax``)."""
+    bar (``BEAM_CMAP``, 0..``vmax``)."""
     import matplotlib
 
     ax.imshow(beam_rgba(p, vmax), origin="lower", extent=extent, interpolation="nearest")
-    return matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0.0, vmax), "inferno")
+    return matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0.0, vmax), BEAM_CMAP)
 
 
 def mark_target(ax: Any, u: float, w: float) -> None:
@@ -148,7 +152,7 @@ def element_map(fig: Any, ax: Any, sim: Any, phases: ArrayLike, title: str) -> N
     colour map on a grey ground); ``phases`` per element or per group."""
     per_element = np.asarray(sim.element_phases(np.asarray(phases, dtype=np.float64)))
     # The cyclic map is near white at 0 rad: a grey ground keeps those elements visible.
-    ax.set_facecolor("0.55")
+    ax.set_facecolor(PHASE_GROUND)
     element_values(
         fig,
         ax,

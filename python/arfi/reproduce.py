@@ -26,7 +26,7 @@ from arfi.estimation import gain, phase_error, recovered_fraction
 from arfi.io import atomic_write_text, csv_text, write_json
 from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, defocused_images, focus_of
 from arfi.loop import loop2
-from arfi.report import figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
+from arfi.report import PHASE_GROUND, figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -389,7 +389,7 @@ def _figures(
             pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s"
         )
         ax[k].set(aspect="equal", xlabel="x (mm)", ylabel="y (mm)", title=title)
-        ax[k].set_facecolor("0.55")  # the cyclic map's ends are near white
+        ax[k].set_facecolor(PHASE_GROUND)
         fig.colorbar(sc, ax=ax[k], label="phase (rad)")
     figs["fig4"] = save_figure(fig, out / "fig4_aberrations.png")
 

@@ -59,14 +59,16 @@ def exceeded(focus: Any, mi_limit: float = MI_LIMIT, isppa_limit_w_cm2: float = 
     mi_limit = check_limit(mi_limit, "mi_limit")
     isppa_limit_w_cm2 = check_limit(isppa_limit_w_cm2, "isppa_limit_w_cm2")
     rows: list[Exceedance] = []
+    limits: tuple[tuple[Literal["mechanical_index", "isppa_w_cm2"], float], ...] = (
+        ("mechanical_index", mi_limit),
+        ("isppa_w_cm2", isppa_limit_w_cm2),
+    )
 
     def flag(where: Literal["focal peak", "hottest place"], tissue: str | None, exposure: Any) -> None:
-        mi = float(exposure.mechanical_index)
-        if mi > mi_limit:
-            rows.append(Exceedance(where, tissue, "mechanical_index", mi, mi_limit))
-        isppa = float(exposure.isppa_w_cm2)
-        if isppa > isppa_limit_w_cm2:
-            rows.append(Exceedance(where, tissue, "isppa_w_cm2", isppa, isppa_limit_w_cm2))
+        for quantity, limit in limits:
+            value = float(getattr(exposure, quantity))
+            if value > limit:
+                rows.append(Exceedance(where, tissue, quantity, value, limit))
 
     m = focus.focal_metrics
     if m.focal_peak_pa is not None:

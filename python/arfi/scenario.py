@@ -56,9 +56,15 @@ class Scenario:
             text = json.dumps(data, allow_nan=False)
         except (TypeError, ValueError) as e:
             raise ValueError(f"scenario: cannot be written as JSON: {e}") from None
+        base = None if base_dir is None else str(base_dir)
+        return cls._normalized(_core.normalize_scenario(text, "json", base), base)
+
+    @classmethod
+    def _normalized(cls, toml: str, base_dir: str | None) -> Scenario:
+        """A scenario of TOML the core has already normalised and checked (not parsed again)."""
         s = cls.__new__(cls)
-        s._base_dir = None if base_dir is None else str(base_dir)
-        s._toml = _core.normalize_scenario(text, "json", s._base_dir)
+        s._base_dir = base_dir
+        s._toml = toml
         return s
 
     def to_toml(self, chosen_grid: bool = False) -> str:
@@ -78,10 +84,7 @@ class Scenario:
         with the reference steering (``steer_without_bone = true``): the skull ``arfi predict``
         marches, steered as the estimation's model (``without_bone = true``) is. A scenario
         without ``[ct]`` raises ``ValueError``."""
-        s = Scenario.__new__(Scenario)
-        s._base_dir = self._base_dir
-        s._toml = _core.scenario_with_ct_bone(self._toml, self._base_dir)
-        return s
+        return Scenario._normalized(_core.scenario_with_ct_bone(self._toml, self._base_dir), self._base_dir)
 
     def outline(self) -> _core.ScenarioOutline:
         """What the scenario fixes before a simulation is built: the array's elements and default

@@ -274,8 +274,9 @@ def write_results(rows: Sequence[TrialResult], out: Path) -> list[SweepPoint]:
     ``sweep.json`` in ``out``; returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows)
-    points = [p.to_dict() for p in summary]
-    atomic_write_text(out / "sweep.csv", csv_text([r.to_dict() for r in rows]))
+    doc = sweep_json(rows, summary)
+    points = doc["summary"]
+    atomic_write_text(out / "sweep.csv", csv_text(doc["trials"]))
     atomic_write_text(out / "summary.csv", csv_text(points))
     plot(summary, out / "sweep.png")
     table = rows_table_html(points, list(points[0]))
@@ -286,5 +287,5 @@ def write_results(rows: Sequence[TrialResult], out: Path) -> list[SweepPoint]:
         f"number of images and ARFI noise, mean and standard deviation over seeds.</p>{table}"
         + figure_html(out, [("recovered fraction against noise and images", "sweep.png")]),
     )
-    write_json(out / "sweep.json", sweep_json(rows, summary))
+    write_json(out / "sweep.json", doc)
     return summary

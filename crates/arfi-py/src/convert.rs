@@ -77,6 +77,18 @@ fn real<'py>(value: Option<&Bound<'py, PyAny>>, name: &str, rows: bool) -> PyRes
     }
 }
 
+/// A flag: Python's or NumPy's `True`/`False` (not an integer); `None` when not given.
+pub(crate) fn flag(value: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<bool>> {
+    let Some(v) = given(value) else { return Ok(None) };
+    v.extract::<bool>().map(Some).map_err(|_| invalid(name, format!("must be True or False, got {}", repr(v))))
+}
+
+/// A string; `None` when not given.
+pub(crate) fn text(value: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<String>> {
+    let Some(v) = given(value) else { return Ok(None) };
+    v.extract::<String>().map(Some).map_err(|_| invalid(name, format!("must be a string, got {}", repr(v))))
+}
+
 /// Phases (rad): a 1-D array-like of real numbers; `None` when not given.
 pub(crate) fn phases(value: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Vec<f64>>> {
     Ok(real(value, name, false)?.map(|mut rows| rows.remove(0)))

@@ -3,7 +3,7 @@
 //! this binding converts each by its kind, so an option added to the core needs no code here, and
 //! `_core.pyi` is generated from the same list (`python python/tests/stubgen.py`).
 
-use crate::convert::{count, names, number, phases, rows};
+use crate::convert::{count, flag, names, number, phases, rows, text};
 use crate::error::{invalid, to_py};
 use crate::results::fields_dict;
 use has_core::inverse::estimate::workflow::{option_spec, EstimateRequest, OptionKind, OptionValue, OPTIONS};
@@ -19,41 +19,14 @@ use pyo3::types::{PyBool, PyDict, PyList};
 #[pyclass(module = "arfi._core", frozen)]
 pub(crate) struct EstimateOptions(pub(crate) EstimateRequest);
 
-/// The name of an option kind, as the stubs and `describe` write it.
-fn kind_name(kind: OptionKind) -> &'static str {
-    match kind {
-        OptionKind::Flag => "flag",
-        OptionKind::Count => "count",
-        OptionKind::Number => "number",
-        OptionKind::Text => "text",
-        OptionKind::Names => "names",
-        OptionKind::Values => "values",
-        OptionKind::Rows => "rows",
-    }
-}
-
 /// A Python value as option `name` of `kind` (`None`: not given).
 fn from_py(v: &Bound<'_, PyAny>, name: &str, kind: OptionKind) -> PyResult<Option<OptionValue>> {
     let v = Some(v);
     Ok(match kind {
-        OptionKind::Flag => match v.filter(|v| !v.is_none()) {
-            None => None,
-            // Python's and NumPy's booleans (PyO3's conversion); integers are refused.
-            Some(b) => match b.extract::<bool>() {
-                Ok(f) => Some(OptionValue::Flag(f)),
-                Err(_) => return Err(invalid(name, format!("must be True or False, got {}", b.repr()?))),
-            },
-        },
+        OptionKind::Flag => flag(v, name)?.map(OptionValue::Flag),
         OptionKind::Count => count(v, name)?.map(|n| OptionValue::Count(n as u64)),
         OptionKind::Number => number(v, name)?.map(OptionValue::Number),
-        OptionKind::Text => {
-            match v.filter(|v| !v.is_none()) {
-                None => None,
-                Some(t) => Some(OptionValue::Text(t.extract().map_err(|_| {
-                    invalid(name, format!("must be a string, got {}", t.repr().map(|r| r.to_string()).unwrap_or_default()))
-                })?)),
-            }
-        }
+        OptionKind::Text => text(v, name)?.map(OptionValue::Text),
         OptionKind::Names => v.filter(|v| !v.is_none()).map(|_| names(v, name).map(OptionValue::Names)).transpose()?,
         OptionKind::Values => phases(v, name)?.map(OptionValue::Values),
         OptionKind::Rows => rows(v, name)?.map(OptionValue::Rows),
@@ -86,21 +59,19 @@ impl EstimateOptions {
     /// from.
     #[classattr]
     fn _options() -> Vec<(&'static str, &'static str, bool, &'static str)> {
-        OPTIONS.iter().map(|o| (o.name, kind_name(o.kind), o.optional, o.doc)).collect()
+        OPTIONS.iter().map(|o| (o.name, o.kind.name(), o.optional, o.doc)).collect()
     }
 
     #[new]
     #[pyo3(signature = (**options))]
     fn new(options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut given: Vec<(String, OptionValue)> = Vec::new();
+        let mut given: Vec<(&str, OptionValue)> = Vec::new();
         for (k, v) in options.into_iter().flat_map(|d| d.iter()) {
-            let name: String = k.extract()?;
-            let spec = option_spec(&name).map_err(to_py)?;
+            let spec = option_spec(&k.extract::<String>()?).map_err(to_py)?;
             if let Some(value) = from_py(&v, spec.name, spec.kind)? {
-                given.push((name, value));
+                given.push((spec.name, value));
             }
         }
-        let given: Vec<(&str, OptionValue)> = given.iter().map(|(n, v)| (n.as_str(), v.clone())).collect();
         Ok(EstimateOptions(EstimateRequest::from_options(&given).map_err(to_py)?))
     }
 
@@ -121,18 +92,15 @@ impl EstimateOptions {
     /// What each option means, one line each: `name (kind): meaning`.
     #[staticmethod]
     fn describe() -> String {
-        OPTIONS.iter().map(|o| format!("{} ({}): {}", o.name, kind_name(o.kind), o.doc)).collect::<Vec<_>>().join("\n")
+        OPTIONS.iter().map(|o| format!("{} ({}): {}", o.name, o.kind.name(), o.doc)).collect::<Vec<_>>().join("\n")
     }
 
     /// The same options with `changes` (keyword options as the constructor takes them), checked
-    /// again.
+    /// again by the constructor (an unknown name included).
     #[pyo3(signature = (**changes))]
     fn replace<'py>(slf: &Bound<'py, Self>, changes: Option<&Bound<'py, PyDict>>) -> PyResult<Bound<'py, PyAny>> {
         let options = fields_dict(slf.as_any())?;
         if let Some(c) = changes {
-            for (k, _) in c.iter() {
-                option_spec(&k.extract::<String>()?).map_err(to_py)?;
-            }
             options.update(c.as_mapping())?;
         }
         slf.get_type().call((), Some(&options))

@@ -46,6 +46,21 @@ pub enum OptionValue {
     Rows(Vec<Vec<f64>>),
 }
 
+impl OptionKind {
+    /// The kind's name, as help texts and stubs write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            OptionKind::Flag => "flag",
+            OptionKind::Count => "count",
+            OptionKind::Number => "number",
+            OptionKind::Text => "text",
+            OptionKind::Names => "names",
+            OptionKind::Values => "values",
+            OptionKind::Rows => "rows",
+        }
+    }
+}
+
 impl OptionValue {
     /// The kind of this value.
     pub fn kind(&self) -> OptionKind {
