@@ -226,14 +226,14 @@ fn bench_estimation(c: &mut Criterion) {
     // paper's estimator (restarted Nelder–Mead from zero, at most 8000 evaluations).
     g.measurement_time(Duration::from_secs(15));
     g.bench_function("nelder_mead_end_to_end", |b| {
-        b.iter(|| Estimator::nelder_mead().run(&model(&sim, black_box(&meas)).cost, None).unwrap())
+        b.iter(|| Estimator::nelder_mead().run(&model(&sim, black_box(&meas)).cost, Control::default()).unwrap())
     });
     g.measurement_time(Duration::from_secs(5));
     // The Nelder–Mead search alone on the prebuilt model.
-    g.bench_function("nelder_mead_run", |b| b.iter(|| Estimator::nelder_mead().run(black_box(&m.cost), None).unwrap()));
+    g.bench_function("nelder_mead_run", |b| b.iter(|| Estimator::nelder_mead().run(black_box(&m.cost), Control::default()).unwrap()));
     // Target: ≤ 5 s. Multi-start L-BFGS with the analytic gradient (20 starts + 20 second-round
     // starts, at most 40000 evaluations).
-    g.bench_function("lbfgs_run", |b| b.iter(|| Estimator::lbfgs().run(black_box(&m.cost), None).unwrap()));
+    g.bench_function("lbfgs_run", |b| b.iter(|| Estimator::lbfgs().run(black_box(&m.cost), Control::default()).unwrap()));
     g.finish();
 }
 

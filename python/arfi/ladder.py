@@ -73,7 +73,7 @@ class Rung:
     def mean_recovered_fraction(self) -> float:
         return float(np.mean(self.recovered_fractions))
 
-    def as_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "what": self.what,
@@ -196,9 +196,9 @@ def climb(
     rungs.add(RUNGS[4], focus(est.phases_rad[fitted.groups]), est.ambiguous, time.perf_counter() - t)
 
 
-def summary_line(ladder: list[dict[str, Any]], paper: float) -> str:
-    """One line: each rung's mean recovered fraction (``Rung.as_dict`` entries), next to the paper's."""
-    parts = ", ".join(f"{r['name']} {r['mean_recovered_fraction']:.2f}" for r in ladder)
+def summary_line(ladder: list[Rung], paper: float) -> str:
+    """One line: each rung's mean recovered fraction, next to the paper's."""
+    parts = ", ".join(f"{r.name} {r.mean_recovered_fraction:.2f}" for r in ladder)
     return f"recovered fraction by path: {parts} (paper {paper})"
 
 

@@ -34,10 +34,20 @@ from arfi.simulation import Simulation
 #: and must stay a 64-bit seed.
 MAX_STUDY_SEED = 10**17
 
+
+@dataclass(frozen=True)
+class PaperResult:
+    """What the paper reports for one case: the means over its repeats."""
+
+    recovered_fraction: float
+    gain: float
+    phase_error_rad: float
+
+
 #: The paper's results per case (Vyas et al. 2014, Table 1 and text).
 PAPER = {
-    16: {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42},
-    1024: {"recovered_fraction": 0.39, "gain": 0.52, "phase_error_rad": 2.10},
+    16: PaperResult(recovered_fraction=0.83, gain=0.44, phase_error_rad=0.42),
+    1024: PaperResult(recovered_fraction=0.39, gain=0.52, phase_error_rad=2.10),
 }
 
 
@@ -63,6 +73,83 @@ class Row:
     """Images the final estimate was fitted to (aberrated + diversity + loop-2 acquisitions)."""
     loop2_kept: int = 0
     """Loop 2: the acquisition whose correction was kept (0 = none measured better than no correction)."""
+
+
+@dataclass
+class RepeatRun:
+    """What one repeat produced, for the figures: the estimate, the correction applied, the
+    calibration, the aberration (per element and condensed to the groups) and its images."""
+
+    estimate: Any
+    correction: np.ndarray
+    calibration: Any
+    elements: np.ndarray
+    groups_truth: np.ndarray
+    measured: np.ndarray
+    aberrated: np.ndarray
+    corrected: np.ndarray
+    corrected_measured: np.ndarray
+    calibration_image: np.ndarray
+
+
+@dataclass
+class StudyResult:
+    """What :func:`run_study` gives (and writes as ``results.json``: :meth:`to_dict`)."""
+
+    case: int
+    repeats: int
+    method: str
+    noise_rad: float
+    seed: int
+    diversity_images: int
+    loop2_iterations: int
+    date: str
+    table: list[Row]
+    """The paper's Table 1, one row per repeat."""
+    paper: PaperResult
+    figures: dict[str, str]
+    """Figure name -> file name in the output folder."""
+    ladder: list[Rung]
+    """Every path to a correction on the same seeds (empty without the ladder)."""
+    seconds: float
+
+    @property
+    def mean_recovered_fraction(self) -> float:
+        return float(np.mean([r.recovered_fraction for r in self.table]))
+
+    @property
+    def mean_gain(self) -> float:
+        return float(np.mean([r.gain for r in self.table]))
+
+    @property
+    def mean_phase_error_rad(self) -> float:
+        return float(np.mean([r.phase_error_rad for r in self.table]))
+
+    @property
+    def ambiguous(self) -> int:
+        """Repeats whose estimate the method flags ambiguous."""
+        return sum(bool(r.ambiguous) for r in self.table)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``results.json``: the fields, the three means, the paper's values and each rung."""
+        return {
+            "case": self.case,
+            "repeats": self.repeats,
+            "method": self.method,
+            "noise_rad": self.noise_rad,
+            "seed": self.seed,
+            "diversity_images": self.diversity_images,
+            "loop2_iterations": self.loop2_iterations,
+            "date": self.date,
+            "table": [asdict(r) for r in self.table],
+            "mean_recovered_fraction": self.mean_recovered_fraction,
+            "mean_gain": self.mean_gain,
+            "mean_phase_error_rad": self.mean_phase_error_rad,
+            "paper": asdict(self.paper),
+            "figures": self.figures,
+            "ladder": [r.to_dict() for r in self.ladder],
+            "seconds": self.seconds,
+        }
 
 
 def _progress(enabled: bool) -> Callable[[str], None]:
@@ -107,7 +194,7 @@ def run_study(
     loop2_iterations: int = 0,
     progress: bool | None = None,
     ladder: bool = True,
-) -> dict[str, Any]:
+) -> StudyResult:
     """Runs the study and writes figures, ``table.csv``, ``results.json`` and ``report.html`` to
     ``out``. Returns the results (``table`` rows as in the paper plus the recovered fraction, gain
     and phase error).
@@ -138,7 +225,7 @@ def run_study(
     noise = sim.noise_rad if noise_rad is None else noise_rad
     ideal = sim.arfi_image()
     rows: list[Row] = []
-    runs: list[dict[str, Any]] = []
+    runs: list[RepeatRun] = []
     rungs = Ladder(case)
     paper_faithful = method == "nelder-mead" and not diversity and not loop2_iterations
     for r in range(repeats):
@@ -194,18 +281,18 @@ def run_study(
             )
         )
         runs.append(
-            {
-                "estimate": est,
-                "correction": correction,
-                "calibration": cal,
-                "elements": elements,
-                "groups_truth": groups_truth,
-                "measured": measured,
-                "aberrated": aberrated,
-                "corrected": corrected,
-                "corrected_measured": sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
-                "calibration_image": sim.arfi_image(noise_rad=noise, seed=10_000 + s),
-            }
+            RepeatRun(
+                estimate=est,
+                correction=correction,
+                calibration=cal,
+                elements=elements,
+                groups_truth=groups_truth,
+                measured=measured,
+                aberrated=aberrated,
+                corrected=corrected,
+                corrected_measured=sim.arfi_image(corrected_phases, noise_rad=noise, seed=30_000 + s),
+                calibration_image=sim.arfi_image(noise_rad=noise, seed=10_000 + s),
+            )
         )
         if ladder:
             say(f"repeat {r + 1}/{repeats}: the ladder (loop 2, diversity, prediction, prediction + MR-ARFI)")
@@ -234,28 +321,25 @@ def run_study(
     ladder_rungs = rungs.rungs() if ladder else []
     if ladder_rungs:
         figures["fig11"] = _ladder_figure(ladder_rungs, case, out)
-    summary = {
-        "case": case,
-        "repeats": repeats,
-        "method": method,
-        "noise_rad": noise,
-        "seed": seed,
-        "diversity_images": diversity,
-        "loop2_iterations": loop2_iterations,
-        "date": _dt.date.today().isoformat(),
-        "table": [asdict(r) for r in rows],
-        "mean_recovered_fraction": float(np.mean([r.recovered_fraction for r in rows])),
-        "mean_gain": float(np.mean([r.gain for r in rows])),
-        "mean_phase_error_rad": float(np.mean([r.phase_error_rad for r in rows])),
-        "paper": PAPER[case],
-        "figures": figures,
-        "ladder": [r.as_dict() for r in ladder_rungs],
-        "seconds": time.perf_counter() - t_start,
-    }
+    result = StudyResult(
+        case=case,
+        repeats=repeats,
+        method=method,
+        noise_rad=noise,
+        seed=seed,
+        diversity_images=diversity,
+        loop2_iterations=loop2_iterations,
+        date=_dt.date.today().isoformat(),
+        table=rows,
+        paper=PAPER[case],
+        figures=figures,
+        ladder=ladder_rungs,
+        seconds=time.perf_counter() - t_start,
+    )
     _write_table(out / "table.csv", rows)
-    write_json(out / "results.json", summary)
-    atomic_write_text(out / "report.html", _html(summary, out))
-    return summary
+    write_json(out / "results.json", result.to_dict())
+    atomic_write_text(out / "report.html", _html(result, out))
+    return result
 
 
 def _acquirer(sim: Simulation, applied: np.ndarray, noise: float, seed: int) -> Callable[[np.ndarray], np.ndarray]:
@@ -280,7 +364,7 @@ def _ladder_figure(rungs: list[Rung], case: int, out: Path) -> str:
     ax.bar(x, [r.mean_recovered_fraction for r in rungs], color="0.6")
     for i, r in enumerate(rungs):
         ax.plot([i] * len(r.recovered_fractions), r.recovered_fractions, "k.")
-    ax.axhline(PAPER[case]["recovered_fraction"], color="r", ls="--", label="paper")
+    ax.axhline(PAPER[case].recovered_fraction, color="r", ls="--", label="paper")
     ax.set_xticks(
         x,
         [r.name.replace(" + ", "\n+ ").replace(" alone", "\nalone").replace(" (paper)", "\n(paper)") for r in rungs],
@@ -294,18 +378,18 @@ def _ladder_figure(rungs: list[Rung], case: int, out: Path) -> str:
     return save_figure(fig, out / "fig11_ladder.png")
 
 
-def _ladder_html(ladder: list[dict[str, Any]], paper: float) -> str:
+def _ladder_html(ladder: list[Rung], paper: float) -> str:
     """The ladder as a table (empty without one)."""
     if not ladder:
         return ""
     rows = [
         {
-            "path": r["name"],
-            "what": r["what"],
-            "recovered_fraction": r["mean_recovered_fraction"],
-            "per_repeat": " ".join(f"{v:.2f}" for v in r["recovered_fractions"]),
-            "ambiguous": r["ambiguous"],
-            "seconds": r["seconds"],
+            "path": r.name,
+            "what": r.what,
+            "recovered_fraction": r.mean_recovered_fraction,
+            "per_repeat": " ".join(f"{v:.2f}" for v in r.recovered_fractions),
+            "ambiguous": r.ambiguous,
+            "seconds": r.seconds,
         }
         for r in ladder
     ]
@@ -323,7 +407,7 @@ def _write_table(path: Path, rows: list[Row]) -> None:
 
 
 def _figures(
-    sim: Simulation, case: int, rows: list[Row], runs: list[dict[str, Any]], ideal: np.ndarray, out: Path, method: str
+    sim: Simulation, case: int, rows: list[Row], runs: list[RepeatRun], ideal: np.ndarray, out: Path, method: str
 ) -> dict[str, str]:
     plt = pyplot()
     figs: dict[str, str] = {}
@@ -336,8 +420,8 @@ def _figures(
 
     # Figure 2: calibration — force without broadening vs measured calibration image, profiles.
     force = sim.with_calibration(0.0, 1.0).arfi_image()
-    cal_img = run0["calibration_image"]
-    model = sim.calibrated(run0["calibration"]).arfi_image()
+    cal_img = run0.calibration_image
+    model = sim.calibrated(run0.calibration).arfi_image()
     fig, ax = plt.subplots(2, 2, figsize=(10, 8))
     for k, (img, title) in enumerate(
         [
@@ -353,7 +437,7 @@ def _figures(
     ax[1, 0].set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="normalised", title="(c) without Gaussian filtering")
     ax[1, 1].plot(xs, cal_img[:, jy] / cal_img.max(), "k-", label="MR-ARFI (calibration)")
     ax[1, 1].plot(
-        xs, model[:, jy] / model.max(), "k:", label=f"simulated, W = {run0['calibration'].broadening_width_mm:.2f} mm"
+        xs, model[:, jy] / model.max(), "k:", label=f"simulated, W = {run0.calibration.broadening_width_mm:.2f} mm"
     )
     ax[1, 1].set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="normalised", title="(d) with Gaussian filtering")
     for k in range(2):
@@ -383,7 +467,7 @@ def _figures(
     pos = sim.element_positions_mm
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.5))
     for k, (ph, title) in enumerate(
-        [(run0["groups_truth"][sim.groups], "(c) 16-aberration"), (run0["elements"], "(d) 1024-aberration")]
+        [(run0.groups_truth[sim.groups], "(c) 16-aberration"), (run0.elements, "(d) 1024-aberration")]
     ):
         sc = ax[k].scatter(
             pos[:, 0], pos[:, 1], c=np.angle(np.exp(1j * ph)), cmap="twilight", vmin=-np.pi, vmax=np.pi, s=9, marker="s"
@@ -398,7 +482,7 @@ def _figures(
     xz["mr"].update({"plane": "xz", "fov_mm": [40.0, 60.0], "matrix": [80, 120], "slice_thickness_mm": 1.0})
     xz["arfi"]["broadening_width_mm"] = 0.0
     sxz = Simulation(Scenario.from_dict(xz))
-    pats = [sxz.arfi_image(), sxz.arfi_image(run0["groups_truth"][sim.groups]), sxz.arfi_image(run0["elements"])]
+    pats = [sxz.arfi_image(), sxz.arfi_image(run0.groups_truth[sim.groups]), sxz.arfi_image(run0.elements)]
     fig, ax = plt.subplots(1, 3, figsize=(14, 4), layout="constrained")
     az = sxz.mr_affine_mm
     zext = [
@@ -419,8 +503,8 @@ def _figures(
     for k, (img, title) in enumerate(
         [
             (sim.arfi_image(noise_rad=sim.noise_rad, seed=1), "ideal"),
-            (run0["measured"], f"aberrated ({case})"),
-            (run0["corrected_measured"], "corrected"),
+            (run0.measured, f"aberrated ({case})"),
+            (run0.corrected_measured, "corrected"),
         ]
     ):
         im = ax[k].imshow(img.T, origin="lower", extent=ext, cmap="viridis", vmin=-0.05, vmax=vmax)
@@ -431,8 +515,8 @@ def _figures(
     # Figure 7: transverse focal profiles.
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(xs, ideal[:, jy], "k:", label="ideal")
-    ax.plot(xs, run0["aberrated"][:, jy], "k--", label="aberrated")
-    ax.plot(xs, run0["corrected"][:, jy], "k-", label="corrected")
+    ax.plot(xs, run0.aberrated[:, jy], "k--", label="aberrated")
+    ax.plot(xs, run0.corrected[:, jy], "k-", label="corrected")
     ax.set(xlim=(-zoom, zoom), xlabel="x (mm)", ylabel="ARFI phase (rad)", title="transverse focal profile")
     ax.legend()
     figs["fig7"] = save_figure(fig, out / "fig7_profiles.png")
@@ -440,7 +524,7 @@ def _figures(
     # Figure 8: convergence.
     fig, ax = plt.subplots(figsize=(6, 4))
     for k, run in enumerate(runs):
-        h = run["estimate"].cost_history
+        h = run.estimate.cost_history
         ax.semilogy(np.arange(1, len(h) + 1), h, label=f"repeat {k + 1}")
     ax.set(xlabel="cost evaluation", ylabel="best cost J (rad²)", title=f"convergence ({method})")
     ax.legend()
@@ -448,12 +532,12 @@ def _figures(
 
     # Figure 9: applied vs estimated phases.
     fig, ax = plt.subplots(figsize=(7, 4))
-    t0 = run0["groups_truth"]
-    c0 = run0["correction"]
+    t0 = run0.groups_truth
+    c0 = run0.correction
     off = np.angle(np.sum(np.exp(1j * (t0 - c0))))
     if case == 1024:
-        e = np.arange(len(run0["elements"])) / len(run0["elements"]) * len(t0)
-        ax.plot(e, np.angle(np.exp(1j * (run0["elements"] - off))), color="0.7", lw=0.6, label="applied (per element)")
+        e = np.arange(len(run0.elements)) / len(run0.elements) * len(t0)
+        ax.plot(e, np.angle(np.exp(1j * (run0.elements - off))), color="0.7", lw=0.6, label="applied (per element)")
     ax.plot(np.arange(len(t0)) + 0.5, np.angle(np.exp(1j * (t0 - off))), "ko-", label="applied (group average)")
     ax.plot(np.arange(len(t0)) + 0.5, c0, "rx--", label="estimated (the correction applied)")
     ax.set(xlabel="group", ylabel="phase (rad)", title=f"phase error {rows[0].phase_error_rad:.2f} rad")
@@ -475,8 +559,8 @@ def _figures(
     return figs
 
 
-def _html(summary: dict[str, Any], out: Path) -> str:
-    rows = summary["table"]
+def _html(result: StudyResult, out: Path) -> str:
+    rows = [asdict(r) for r in result.table]
     cols = [
         "experiment",
         "repeat",
@@ -496,23 +580,23 @@ def _html(summary: dict[str, Any], out: Path) -> str:
     ]
 
     table = rows_table_html(rows, cols)
-    imgs = figure_html(out, [(name, name) for name in summary["figures"].values()])
-    p = summary["paper"]
+    imgs = figure_html(out, [(name, name) for name in result.figures.values()])
+    p = result.paper
     return f"""<!doctype html><html><head><meta charset="utf-8">
-<title>arfi reproduce: {summary["case"]}-aberration</title>
+<title>arfi reproduce: {result.case}-aberration</title>
 <style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #999;padding:3px 6px}}img{{max-width:100%}}</style></head>
-<body><h1>Hybrid simulation–MR-ARFI correction: {summary["case"]}-aberration case</h1>
+<body><h1>Hybrid simulation–MR-ARFI correction: {result.case}-aberration case</h1>
 <p>Vyas, Kaye &amp; Butts Pauly, Med Phys 41(3):032901 (2014), re-run in simulation with arfi on the embedded phantom
-scenario; method {html.escape(summary["method"])}, ARFI noise {summary["noise_rad"]} rad, {summary["repeats"]} repeats,
-{summary["diversity_images"]} added diversity images and {summary["loop2_iterations"]} loop-2 acquisitions per repeat
-(loop2_kept: which acquisition's correction was kept, 0 = none measured better than no correction), {summary["date"]}.
+scenario; method {html.escape(result.method)}, ARFI noise {result.noise_rad} rad, {result.repeats} repeats,
+{result.diversity_images} added diversity images and {result.loop2_iterations} loop-2 acquisitions per repeat
+(loop2_kept: which acquisition's correction was kept, 0 = none measured better than no correction), {result.date}.
 Rows marked ambiguous are estimates the
 method itself flags: clearly different solutions fit that image within the noise (one in-focus image hardly tells
 phi(u) from -phi(-u); images with known added phases tell them apart).</p>
-<p>Mean recovered fraction <b>{summary["mean_recovered_fraction"]:.2f}</b> (paper {p["recovered_fraction"]}), mean gain
-<b>{summary["mean_gain"]:+.0%}</b> (paper {p["gain"]:+.0%}), mean phase error <b>{summary["mean_phase_error_rad"]:.2f}
+<p>Mean recovered fraction <b>{result.mean_recovered_fraction:.2f}</b> (paper {p.recovered_fraction}), mean gain
+<b>{result.mean_gain:+.0%}</b> (paper {p.gain:+.0%}), mean phase error <b>{result.mean_phase_error_rad:.2f}
 rad</b>
-(paper {p["phase_error_rad"]} rad). Focal values are taken on noise-free simulated images.</p>
-{_ladder_html(summary["ladder"], p["recovered_fraction"])}<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
+(paper {p.phase_error_rad} rad). Focal values are taken on noise-free simulated images.</p>
+{_ladder_html(result.ladder, p.recovered_fraction)}<h2>Table 1</h2>{table}<h2>Figures</h2>{imgs}</body></html>
 """

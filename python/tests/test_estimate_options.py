@@ -79,7 +79,11 @@ def test_to_dict_and_replace_make_the_same_options_again():
         ({"prior": [0.0], "prior_std_rad": 0.3, "prior_correlation_mm": -1}, "prior_correlation_mm"),
         ({"prior": [0.0], "prior_std_rad": 0.3, "prior_modes": [[0.0], [np.inf]]}, "prior_modes"),
         ({"fit_nuisance": "bogus"}, 'fit_nuisance: unknown nuisance parameter "bogus"'),
-        ({"prior_conflict_z": 0.0}, "prior_conflict_z: must be a finite number > 0"),
+        (
+            {"prior_conflict_z": 0.0, "prior": [0.0], "prior_std_rad": 0.3},
+            "prior_conflict_z: must be a finite number > 0",
+        ),
+        ({"prior_conflict_z": 4.0}, "prior_conflict_z: was given without a prior"),
         ({"fit_amplitude": 1}, "fit_amplitude: must be True or False, got 1"),
         ({"suggest": "yes"}, "suggest: must be True or False"),
         ({"method": 1}, "method: must be a string, got 1"),

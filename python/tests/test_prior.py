@@ -54,6 +54,7 @@ def test_the_prior_makes_one_image_better_than_either_alone(sim, case):
         ({"prior": np.zeros(16), "prior_std_rad": float("inf")}, "prior_std_rad: must be a finite number"),
         ({"prior": np.zeros(16)}, "prior_std_rad: is required with a prior"),
         ({"prior_std_rad": 0.5}, "prior_std_rad: was given without a prior"),
+        ({"prior_conflict_z": 4.0}, "prior_conflict_z: was given without a prior"),
         ({"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": 0.0}, "prior_correlation_mm: must be"),
         (
             {"prior": np.zeros(16), "prior_std_rad": 0.5, "prior_correlation_mm": float("nan")},

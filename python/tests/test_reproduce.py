@@ -31,6 +31,10 @@ def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):
         == 0
     )
     r = json.loads(js.read_text())
+    # --json and results.json are the same typed result, its means over the table's rows.
+    assert json.loads((out / "results.json").read_text()) == r
+    assert r["paper"] == {"recovered_fraction": 0.83, "gain": 0.44, "phase_error_rad": 0.42}
+    assert r["mean_recovered_fraction"] == pytest.approx(r["table"][0]["recovered_fraction"])
     # The ladder: every path on the same seed, in order, each with its recovered fraction.
     ladder = {rung["name"]: rung for rung in r["ladder"]}
     assert list(ladder) == RUNGS and all(len(rung["recovered_fractions"]) == 1 for rung in r["ladder"])

@@ -69,7 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     // 16-group warm start then per-element L-BFGS.
     let gm = build_model(&sim, &measurements, sim.mask_fraction, 3)?;
-    let ge = Estimator::lbfgs().run(&gm.cost, None)?;
+    let ge = Estimator::lbfgs().run(&gm.cost, Control::default())?;
     let start = sim.element_phases(&ge.phases)?;
     let aberr = peak(&sim.arfi_image(&truth)?) / ideal;
     let corr = |est: &[f64]| -> Result<f64, Box<dyn std::error::Error>> {
@@ -79,7 +79,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let circ = sim.element_phases(&condense(&truth, &sim.groups)?)?;
     println!("aberrated {aberr:.3}; ideal 16-group {:.3}; 16-group estimate {:.3}", corr(&circ)?, corr(&start)?);
     let t = Instant::now();
-    let e = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(evals)?.with_start(start)?.run(&model.cost, None)?;
+    let e = Estimator::lbfgs().with_starts(1)?.with_max_evaluations(evals)?.with_start(start)?.run(&model.cost, Control::default())?;
     println!(
         "element L-BFGS: cost {:.3e} evals {} {:.1} s stop {} | recovered {:.3} phase error {:.3} rad",
         e.cost,

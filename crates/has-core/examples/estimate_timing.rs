@@ -14,6 +14,7 @@ use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
 use has_core::Complex64 as C64;
+use has_core::Control;
 use std::time::Instant;
 
 fn secs<T>(f: impl FnOnce() -> T) -> (f64, T) {
@@ -95,10 +96,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut assess_s = Vec::new();
     let (mut nm, mut lb) = (None, None);
     for _ in 0..repeats {
-        let (t, e) = secs(|| Estimator::nelder_mead().run(&model.cost, None));
+        let (t, e) = secs(|| Estimator::nelder_mead().run(&model.cost, Control::default()));
         nm_s.push(t);
         nm = Some(e?);
-        let (t, e) = secs(|| Estimator::lbfgs().with_twins(sigma.clone()).run(&model.cost, None));
+        let (t, e) = secs(|| Estimator::lbfgs().with_twins(sigma.clone()).run(&model.cost, Control::default()));
         lb_s.push(t);
         let e = e?;
         let (t, a) = secs(|| e.assess(&model, sigma.as_deref(), 0.9, seed));

@@ -6,6 +6,7 @@ use has_core::inverse::estimate::{condense, phase_error, point_reflection, Estim
 use has_core::physics::aberration::SkullScreen;
 use has_core::scenario::Scenario;
 use has_core::simulation::Simulation;
+use has_core::Control;
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -34,7 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let which = std::env::args().nth(4).unwrap_or_else(|| "all".into());
     let all = [Estimator::nelder_mead(), Estimator::lbfgs().with_twins(sigma.clone()), Estimator::particle_swarm()];
     for est in all.into_iter().filter(|e| which == "all" || format!("{:?}", e.method).to_lowercase().starts_with(&which)) {
-        let e = est.run(&model.cost, None)?;
+        let e = est.run(&model.cost, Control::default())?;
         let corrected: Vec<f64> = truth.iter().zip(&e.phases).map(|(t, p)| t - p).collect();
         let rec = peak(&sim.arfi_image(&corrected)?) / peak(&ideal);
         let a = e.assess(&model, sigma.as_deref(), 0.9, 0)?;

@@ -78,9 +78,60 @@ pub fn known_per_element(name: &str, known: &[f64], groups: &[usize], n_groups: 
     })
 }
 
+/// Whether an element-to-group map gives each element its own group, in element order (a
+/// per-element estimate).
+pub fn one_per_element(groups: &[usize]) -> bool {
+    groups.iter().enumerate().all(|(e, &g)| e == g)
+}
+
+/// How a prior's predicted phases (rad) are given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PriorLayout {
+    /// One per element.
+    PerElement,
+    /// One per group of the estimate's groups.
+    PerGroup,
+    /// One per default group of the array (as an image's known phases may be).
+    PerDefaultGroup,
+}
+
+/// The layout of `len` predicted phases for an estimate on `groups` (G = `n_groups`): a
+/// per-element estimate ([`one_per_element`]) takes them per element or per default group of
+/// the array, as it takes an image's known phases ([`known_per_element`]); a group estimate per
+/// element (each group then takes their circular mean) or per group. An error naming `name`
+/// lists the lengths that would do. The one rule for the estimate and for the checks made
+/// before building anything.
+pub fn prior_layout(name: &str, len: usize, groups: &[usize], n_groups: usize, default_groups: &[usize]) -> Result<PriorLayout> {
+    let n = groups.len();
+    let n_default = count(default_groups);
+    let (other, what) = if one_per_element(groups) { (n_default, "default group") } else { (n_groups, "group") };
+    match len {
+        l if l == n => Ok(PriorLayout::PerElement),
+        l if l == other && what == "group" => Ok(PriorLayout::PerGroup),
+        l if l == other => Ok(PriorLayout::PerDefaultGroup),
+        l => Err(HasError::invalid(name, format!("has {l} values; expected {n} (one per element) or {other} (one per {what})"))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_prior_is_laid_out_by_the_one_rule_of_its_estimate() {
+        let default = contiguous(8, 2).unwrap();
+        let elements: Vec<usize> = (0..8).collect();
+        let four = contiguous(8, 4).unwrap();
+        assert!(one_per_element(&elements) && !one_per_element(&four) && !one_per_element(&[1, 0]));
+        assert_eq!(prior_layout("p", 8, &elements, 8, &default).unwrap(), PriorLayout::PerElement);
+        assert_eq!(prior_layout("p", 2, &elements, 8, &default).unwrap(), PriorLayout::PerDefaultGroup);
+        assert_eq!(prior_layout("p", 8, &four, 4, &default).unwrap(), PriorLayout::PerElement);
+        assert_eq!(prior_layout("p", 4, &four, 4, &default).unwrap(), PriorLayout::PerGroup);
+        let e = prior_layout("prior", 2, &four, 4, &default).unwrap_err().to_string();
+        assert!(e.starts_with("prior: has 2 values; expected 8 (one per element) or 4 (one per group)"), "{e}");
+        let e = prior_layout("prior", 4, &elements, 8, &default).unwrap_err().to_string();
+        assert!(e.starts_with("prior: has 4 values; expected 8 (one per element) or 2 (one per default group)"), "{e}");
+    }
 
     #[test]
     fn phases_per_group_expand_to_their_elements_and_wrong_lengths_are_named() {

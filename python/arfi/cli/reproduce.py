@@ -75,24 +75,24 @@ def run(args: argparse.Namespace) -> int:
         ladder=args.ladder,
     )
     print(
-        f"reproduce: {s['case']}-aberration, {s['repeats']} repeats ({s['method']}): recovered fraction "
-        f"{s['mean_recovered_fraction']:.2f} (paper {s['paper']['recovered_fraction']}), gain {s['mean_gain']:+.0%} "
-        f"(paper {s['paper']['gain']:+.0%}), phase error {s['mean_phase_error_rad']:.2f} rad (paper "
-        f"{s['paper']['phase_error_rad']}) in {s['seconds']:.1f} s -> {args.out}/report.html"
+        f"reproduce: {s.case}-aberration, {s.repeats} repeats ({s.method}): recovered fraction "
+        f"{s.mean_recovered_fraction:.2f} (paper {s.paper.recovered_fraction}), gain {s.mean_gain:+.0%} "
+        f"(paper {s.paper.gain:+.0%}), phase error {s.mean_phase_error_rad:.2f} rad (paper "
+        f"{s.paper.phase_error_rad}) in {s.seconds:.1f} s -> {args.out}/report.html"
     )
-    flagged = sum(bool(r["ambiguous"]) for r in s["table"])
+    flagged = s.ambiguous
     if flagged and not (args.diversity or args.loop2):
         print(
-            f"reproduce: {flagged} of {len(s['table'])} estimates flagged ambiguous (other aberrations fit their image "
+            f"reproduce: {flagged} of {len(s.table)} estimates flagged ambiguous (other aberrations fit their image "
             "within the noise: one in-focus image hardly tells phi(u) from -phi(-u)); known diversity images "
             "(--diversity 3) or the paper's loop 2 (--loop2 3) resolve them"
         )
     elif flagged:
         print(
-            f"reproduce: {flagged} of {len(s['table'])} final estimates still flagged ambiguous: more images would "
+            f"reproduce: {flagged} of {len(s.table)} final estimates still flagged ambiguous: more images would "
             "narrow them"
         )
-    if s["ladder"]:
-        print("reproduce: " + summary_line(s["ladder"], s["paper"]["recovered_fraction"]))
-    finish(args, s)
+    if s.ladder:
+        print("reproduce: " + summary_line(s.ladder, s.paper.recovered_fraction))
+    finish(args, s.to_dict())
     return 0

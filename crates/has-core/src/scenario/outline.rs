@@ -101,17 +101,13 @@ impl Outline {
         grouping::known_per_element(name, known, &g, n_groups, &self.default_groups)
     }
 
-    /// A prior's predicted phases as the estimate takes them: a per-element estimate (one group
-    /// per element) per element, per group or per default group, as an image's known phases; a
-    /// group estimate per element or per group. An error naming `name` otherwise.
+    /// A prior's predicted phases as the estimate will take them ([`grouping::prior_layout`]:
+    /// a per-element estimate per element or per default group, a group estimate per element or
+    /// per group); finite. An error naming `name` otherwise.
     pub fn check_prior(&self, name: &str, prior: &[f64], groups: Option<usize>) -> Result<()> {
         let (g, n_groups) = self.grouped(groups)?;
-        if n_groups == self.n_elements {
-            grouping::known_per_element(name, prior, &g, n_groups, &self.default_groups)?;
-        } else {
-            grouping::per_element(name, prior, &g, n_groups)?;
-        }
-        Ok(())
+        crate::error::require_finite(name, prior)?;
+        grouping::prior_layout(name, prior.len(), &g, n_groups, &self.default_groups).map(|_| ())
     }
 
     /// Per-element values (e.g. transmissions), one per element of the array; an error naming

@@ -84,7 +84,7 @@ fn element_basis_images_gradient_and_estimate() {
         peak(&sim.arfi_image(&c).unwrap()) / ideal
     };
     let groups = build_model(&sim, &ms, sim.mask_fraction, 3).unwrap();
-    let g16 = Estimator::lbfgs().run(&groups.cost, None).unwrap();
+    let g16 = Estimator::lbfgs().run(&groups.cost, Control::default()).unwrap();
     let start = sim.element_phases(&g16.phases).unwrap();
     let e = Estimator::lbfgs()
         .with_starts(1)
@@ -93,7 +93,7 @@ fn element_basis_images_gradient_and_estimate() {
         .unwrap()
         .with_start(start)
         .unwrap()
-        .run(&model.cost, None)
+        .run(&model.cost, Control::default())
         .unwrap();
     let best16 = recovered(&condense(&truth, &sim.groups).unwrap());
     let per_element = recovered(&e.phases);

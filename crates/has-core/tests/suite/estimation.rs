@@ -100,7 +100,7 @@ fn noise_free_single_image_recovers_the_focus() {
     for seed in 1..=5 {
         let truth = group_truth(seed);
         let model = build_model(sim(), &measurements(&truth, 0.0, 1, seed), 0.05, 3).unwrap();
-        let e = lbfgs().run(&model.cost, None).unwrap();
+        let e = lbfgs().run(&model.cost, Control::default()).unwrap();
         fractions.push(recovered(&truth, &e.phases));
     }
     let mean = fractions.iter().sum::<f64>() / fractions.len() as f64;
@@ -114,7 +114,7 @@ fn four_diversity_images_at_0_02_rad_recover_the_focus() {
     for seed in 1..=5 {
         let truth = group_truth(seed);
         let model = build_model(sim(), &measurements(&truth, 0.02, 4, seed), 0.05, 3).unwrap();
-        let e = lbfgs().run(&model.cost, None).unwrap();
+        let e = lbfgs().run(&model.cost, Control::default()).unwrap();
         fractions.push(recovered(&truth, &e.phases));
     }
     let mean = fractions.iter().sum::<f64>() / fractions.len() as f64;
@@ -131,7 +131,7 @@ fn single_noisy_image_never_gives_a_silent_bad_answer() {
         for seed in 1..=5 {
             let truth = group_truth(seed);
             let model = build_model(s, &measurements(&truth, noise, 1, seed), 0.05, 3).unwrap();
-            let e = lbfgs().run(&model.cost, None).unwrap();
+            let e = lbfgs().run(&model.cost, Control::default()).unwrap();
             let a = e.assess(&model, sigma.as_deref(), 0.9, seed).unwrap();
             let r = recovered(&truth, &e.phases);
             eprintln!(
@@ -168,10 +168,11 @@ fn nelder_mead_from_zero_recovers_the_applied_phases_or_ends_at_a_true_local_min
     for seed in 1..=10 {
         let truth = SkullScreen { correlation_length: 1.0, peak_to_peak: 0.0, jitter: 0.4 }.phases(&vec![[0.0; 3]; 16], seed).unwrap();
         let model = build_model(s, &measurements(&truth, 0.0, 1, seed), 0.05, 3).unwrap();
-        let nm = Estimator::nelder_mead().run(&model.cost, None).unwrap();
+        let nm = Estimator::nelder_mead().run(&model.cost, Control::default()).unwrap();
         assert!(nm.evaluations <= 8000);
         let err = phase_error(&nm.phases, &truth);
-        let polish = Estimator::lbfgs().with_starts(1).unwrap().with_start(nm.phases.clone()).unwrap().run(&model.cost, None).unwrap();
+        let polish =
+            Estimator::lbfgs().with_starts(1).unwrap().with_start(nm.phases.clone()).unwrap().run(&model.cost, Control::default()).unwrap();
         let polished = phase_error(&polish.phases, &truth);
         eprintln!(
             "Nelder-Mead noise-free seed {seed}: recovered {:.4} (aberrated {:.4}), phase error {err:.3} rad, cost {:.2e}, {} evaluations; polished {polished:.3} rad",
@@ -188,7 +189,7 @@ fn nelder_mead_from_zero_recovers_the_applied_phases_or_ends_at_a_true_local_min
             assert!(polished > 0.2, "seed {seed}: Nelder-Mead stopped at {err:.3} rad with the truth downhill ({polished:.3})");
         }
         if seed == 3 {
-            let lb = lbfgs().run(&model.cost, None).unwrap();
+            let lb = lbfgs().run(&model.cost, Control::default()).unwrap();
             let e = phase_error(&lb.phases, &truth);
             eprintln!("L-BFGS noise-free seed 3: phase error {e:.2e} rad");
             assert!(e < 0.01, "phase error {e}");
@@ -223,15 +224,15 @@ fn evaluation_and_time_limits_are_honoured() {
     let s = sim();
     let truth = group_truth(4);
     let model = build_model(s, &measurements(&truth, 0.02, 1, 4), 0.05, 3).unwrap();
-    let e = Estimator::nelder_mead().with_max_evaluations(100).unwrap().run(&model.cost, None).unwrap();
+    let e = Estimator::nelder_mead().with_max_evaluations(100).unwrap().run(&model.cost, Control::default()).unwrap();
     assert_eq!(e.evaluations, 100);
     assert_eq!(e.stop.name(), "evaluation limit");
-    let e = Estimator::lbfgs().with_time_limit(0.05).unwrap().run(&model.cost, None).unwrap();
+    let e = Estimator::lbfgs().with_time_limit(0.05).unwrap().run(&model.cost, Control::default()).unwrap();
     assert!(e.seconds < 1.0, "{}", e.seconds);
     assert!(e.phases.len() == 16 && e.minima.iter().all(|m| m.phases.len() == 16));
     // Cancelled before the first evaluation: the start (zero) comes back, flagged.
     let cancel = std::sync::atomic::AtomicBool::new(true);
-    let e = Estimator::particle_swarm().run(&model.cost, Some(&cancel)).unwrap();
+    let e = Estimator::particle_swarm().run(&model.cost, Control::default().with_cancel(&cancel)).unwrap();
     assert_eq!(e.stop.name(), "interrupted");
     assert_eq!(e.phases, vec![0.0; 16]);
 }
@@ -242,8 +243,8 @@ fn estimation_is_deterministic() {
     let truth = group_truth(5);
     let model = build_model(s, &measurements(&truth, 0.02, 1, 5), 0.05, 3).unwrap();
     for est in [Estimator::nelder_mead(), Estimator::particle_swarm().with_seed(9), lbfgs().with_seed(9)] {
-        let a = est.run(&model.cost, None).unwrap();
-        let b = est.run(&model.cost, None).unwrap();
+        let a = est.run(&model.cost, Control::default()).unwrap();
+        let b = est.run(&model.cost, Control::default()).unwrap();
         assert_eq!(a.phases, b.phases);
         assert_eq!(a.cost, b.cost);
     }

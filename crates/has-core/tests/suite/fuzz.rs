@@ -119,7 +119,7 @@ proptest! {
         let _ = calibrate(s, &image, &known, 0.5, width);
         let m = [Measurement { image: image.clone(), known: known.clone() }];
         if let Ok(model) = build_model(s, &m, 0.5, 3) {
-            let e = Estimator::lbfgs().with_max_evaluations(20).expect("budget").run(&model.cost, None);
+            let e = Estimator::lbfgs().with_max_evaluations(20).expect("budget").run(&model.cost, Control::default());
             prop_assert!(e.is_ok_and(|e| e.cost.is_finite() && e.phases.iter().all(|p| p.is_finite())));
         }
         let options = DiagnoseOptions { effects: vec![Effect::Amplitude, Effect::RegistrationShift], max_iterations: 5, ..Default::default() };

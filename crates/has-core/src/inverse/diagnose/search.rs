@@ -6,6 +6,7 @@ use super::brent::brent;
 use super::effects::{params_of, FieldState, View, STEPS};
 use super::forward::{Forward, MAX_GROUPS};
 use super::{Candidate, Effect, Effects, Step, EQUIVALENCE};
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::{build_model, Measurement};
 use crate::inverse::estimate::{point_reflection, Estimator, PENALTY};
@@ -289,7 +290,7 @@ impl Context<'_> {
         let estimate = Estimator::lbfgs()
             .with_twins(point_reflection(&positions, &s.groups))
             .with_time_limit_opt(self.deadline.map(|d| d.saturating_duration_since(Instant::now()).max(Duration::from_millis(1))))
-            .run(&hybrid.cost, Some(self.cancel))?;
+            .run(&hybrid.cost, Control::default().with_cancel(self.cancel))?;
         Ok(estimate.phases.iter().enumerate().map(|(g, p)| p + f.group_phases.get(g).copied().unwrap_or(0.0)).collect())
     }
 

@@ -3,6 +3,7 @@
 //! and the known phases of the most informative next acquisition.
 
 use super::{centred, phase_error, solvers::lbfgs_run, twin, Estimate, Estimator, Frame, Minimum};
+use crate::control::Control;
 use crate::error::Result;
 use crate::inverse::cost::{ArfiKernel, Model, Objective};
 use crate::inverse::prior::{Posterior, MIN_NOISE_RAD};
@@ -99,7 +100,7 @@ impl Estimate {
             .with_twins(sigma.map(<[usize]>::to_vec))
             .with_seed(seed)
             .with_start(self.phases.clone())?
-            .run(objective, None)?;
+            .run(objective, Control::default())?;
         points.extend(explore.minima);
         if let Some(sig) = sigma {
             let frame = Frame::of(objective);

@@ -20,6 +20,7 @@ pub use assess::{chi2_95, misfit, propose_diversity, rival_solutions, Assessment
 use problem::Problem;
 use solvers::{lbfgs_run, restarted_nelder_mead};
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::inverse::cost::Objective;
 pub use crate::phase::{centred, condense, phase_error, point_reflection, twin, wrap};
@@ -29,7 +30,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use std::f64::consts::PI;
-use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 /// Cost returned in place of a non-finite one.
@@ -94,12 +94,12 @@ pub enum Method {
 ///
 /// ```
 /// use has_core::inverse::cost::{build_model, Measurement};
-/// use has_core::{phase::phase_error, Estimator, Scenario, Simulation};
+/// use has_core::{phase::phase_error, Control, Estimator, Scenario, Simulation};
 /// let sim = Simulation::new(&Scenario::default())?;
 /// let truth: Vec<f64> = (0..16).map(|g| 0.4 * (g as f64).sin()).collect();
 /// let image = sim.arfi_image(&truth)?; // noise-free, one image
 /// let model = build_model(&sim, &[Measurement { image, known: vec![] }], 0.05, 3)?;
-/// let estimate = Estimator::lbfgs().with_starts(4)?.run(&model.cost, None)?;
+/// let estimate = Estimator::lbfgs().with_starts(4)?.run(&model.cost, Control::default())?;
 /// assert!(phase_error(&estimate.phases, &truth) < 0.05);
 /// # Ok::<(), has_core::HasError>(())
 /// ```
@@ -199,8 +199,12 @@ impl Estimator {
         Ok(self)
     }
 
-    /// Runs the search on `cost`. `cancel`, when set by another thread, stops it promptly.
-    pub fn run(&self, cost: &dyn Objective, cancel: Option<&AtomicBool>) -> Result<Estimate> {
+    /// Runs the search on `cost`. `control`'s cancel flag, when set by another thread, stops it
+    /// promptly with [`Stop::Interrupted`] and the best point so far (not an error: the search's
+    /// own limits end it the same way); its progress is not reported (the number of evaluations
+    /// a search takes is not known ahead).
+    pub fn run(&self, cost: &dyn Objective, control: Control<'_>) -> Result<Estimate> {
+        let cancel = control.cancel();
         let g = cost.n_phases();
         if g < 2 {
             return Err(HasError::invalid("groups", "need at least two phases to estimate"));
@@ -419,6 +423,7 @@ impl Frame {
 mod tests {
     use super::*;
     use crate::inverse::cost::test_objectives::Cosines;
+    use std::sync::atomic::AtomicBool;
 
     #[test]
     fn every_method_stops_cleanly_at_any_evaluation_or_time_limit() {
@@ -427,13 +432,13 @@ mod tests {
         let cost = Cosines(vec![0.0, 0.3, -0.2, 0.5, 1.0, -1.0, 0.1, 0.4]);
         for method in [Estimator::nelder_mead(), Estimator::lbfgs(), Estimator::particle_swarm()] {
             for budget in [1, 2, 7, 8, 9, 30] {
-                let e = method.clone().with_max_evaluations(budget).unwrap().run(&cost, None).unwrap();
+                let e = method.clone().with_max_evaluations(budget).unwrap().run(&cost, Control::default()).unwrap();
                 assert!(e.evaluations <= budget && e.cost.is_finite(), "{budget}: {} evaluations", e.evaluations);
             }
-            let e = method.clone().with_time_limit(1e-9).unwrap().run(&cost, None).unwrap();
+            let e = method.clone().with_time_limit(1e-9).unwrap().run(&cost, Control::default()).unwrap();
             assert!(matches!(e.stop, Stop::TimeLimit | Stop::Converged), "{:?}", e.stop);
             let cancel = AtomicBool::new(true);
-            assert_eq!(method.run(&cost, Some(&cancel)).unwrap().stop, Stop::Interrupted);
+            assert_eq!(method.run(&cost, Control::default().with_cancel(&cancel)).unwrap().stop, Stop::Interrupted);
         }
     }
 }

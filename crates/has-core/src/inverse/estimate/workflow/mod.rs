@@ -12,6 +12,7 @@ mod support;
 
 use crate::control::Control;
 use crate::error::{HasError, Result};
+use crate::grouping::{self, PriorLayout};
 use crate::inverse::cost::{build_model, Measurement, Model, MAX_KERNEL_GROUPS};
 use crate::inverse::element::nuisance::{FittedNuisance, Nuisance};
 use crate::inverse::element::BasisCache;
@@ -20,10 +21,9 @@ use crate::inverse::estimate::{Assessment, Estimate, Estimator};
 use crate::inverse::prior::{Posterior, Prior};
 use crate::phase::point_reflection;
 use crate::simulation::Simulation;
-use std::sync::atomic::AtomicBool;
 
 pub use options::{option_spec, OptionKind, OptionSpec, OptionValue, OPTIONS};
-use per_element::{element_prior, estimate_per_element};
+use per_element::estimate_per_element;
 pub use per_element::{one_acquisition, REPEAT_TOLERANCE_RAD, VIEW_ROUNDS};
 pub use prior_check::{prior_check, PriorCheck, CONFLICT_Z, PRIOR_CHECK_DRAWS};
 pub use support::{converged, element_support, Recommendation, Recommended, Support, GROUPS_MARGIN};
@@ -253,7 +253,7 @@ fn recommend(
 
 /// Whether the simulation's groups are its elements, one each in order.
 fn per_element(sim: &Simulation) -> bool {
-    sim.n_groups == sim.n_elements() && sim.groups.iter().enumerate().all(|(e, &g)| e == g)
+    grouping::one_per_element(&sim.groups)
 }
 
 /// The estimator of `request` for groups paired by the point reflection `sigma`.
@@ -319,7 +319,7 @@ pub fn estimate_aberration_with(
         }
     }
     if per_element(sim) {
-        let prior = request.prior.as_ref().map(|p| element_prior(sim, p)).transpose()?;
+        let prior = request.prior.as_ref().map(|p| laid_out_prior(sim, p)).transpose()?;
         return estimate_per_element(sim, measurements, request, prior, basis, control);
     }
     if sim.n_groups > MAX_KERNEL_GROUPS {
@@ -343,7 +343,7 @@ pub fn estimate_aberration_with(
             ),
         ));
     }
-    let prior = request.prior.as_ref().map(|p| group_prior(sim, p)).transpose()?;
+    let prior = request.prior.as_ref().map(|p| laid_out_prior(sim, p)).transpose()?;
     let sigma = point_reflection(&sim.transducer.reference_points(), &sim.groups);
     let mut est = estimator(request, request.method, sigma.clone())?;
     if let Some(n) = request.max_evaluations {
@@ -352,7 +352,7 @@ pub fn estimate_aberration_with(
     let mut model = build_model(sim, measurements, sim.mask_fraction, 3)?;
     model.noise = request.noise(model.noise)?;
     model.cost.fit_amplitude = request.fitted_nuisance().amplitude;
-    let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, control.cancel())?;
+    let (estimate, assessment) = fit_groups(&model, est, prior.as_ref(), sigma.as_deref(), request, control)?;
     let recommendation = recommend(&estimate.phases, request.prior.as_ref(), (assessment.mismatch, false), None, None);
     Ok(EstimateReport {
         n_pixels: model.cost.n_pixels(),
@@ -381,29 +381,29 @@ fn fit_groups(
     prior: Option<&Prior>,
     sigma: Option<&[usize]>,
     request: &EstimateRequest,
-    cancel: Option<&AtomicBool>,
+    control: Control<'_>,
 ) -> Result<(Estimate, Assessment)> {
     let Some(prior) = prior else {
-        let estimate = est.run(&model.cost, cancel)?;
+        let estimate = est.run(&model.cost, control)?;
         let assessment = estimate.assess(model, sigma, request.threshold, request.seed)?;
         return Ok((estimate, assessment));
     };
     let posterior = Posterior::new(&model.cost, model.noise, prior)?;
     let est = if est.start.is_some() { est } else { est.with_start(prior.mean().to_vec())? };
-    let estimate = est.run(&posterior, cancel)?;
+    let estimate = est.run(&posterior, control)?;
     let assessment = estimate.assess_posterior(&posterior, model, sigma, request.threshold, request.seed)?;
     Ok((estimate, assessment))
 }
 
-/// The prior on `sim`'s groups: as given (one per group), or each group's circular mean of a
-/// per-element prior.
-fn group_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
-    match prior.mean().len() {
-        n if n == sim.n_groups => Ok(prior.clone()),
-        n if n == sim.n_elements() => prior.condensed(&sim.groups),
-        n => Err(HasError::invalid(
-            "prior",
-            format!("has {n} values; expected {} (one per element) or {} (one per group)", sim.n_elements(), sim.n_groups),
-        )),
+/// The prior on the estimate's phases ([`grouping::prior_layout`]): per element for a
+/// per-element estimate (one given per default group spread over its elements, as known phases
+/// are); per group for a group estimate (one given per element condensed to each group's
+/// circular mean).
+fn laid_out_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
+    let default = sim.transducer.default_groups();
+    match grouping::prior_layout("prior", prior.mean().len(), &sim.groups, sim.n_groups, &default)? {
+        PriorLayout::PerDefaultGroup => prior.with_mean(default.iter().map(|&g| prior.mean()[g]).collect()),
+        PriorLayout::PerElement if !per_element(sim) => prior.condensed(&sim.groups),
+        PriorLayout::PerElement | PriorLayout::PerGroup => Ok(prior.clone()),
     }
 }

@@ -222,6 +222,9 @@ impl EstimateRequest {
             }
         }
         r.prior = Prior::from_parts(mean, std, correlation, modes)?;
+        if r.prior.is_none() && given.iter().any(|(n, _)| *n == "prior_conflict_z") {
+            return Err(HasError::invalid("prior_conflict_z", "was given without a prior (it judges the images against one)"));
+        }
         r.check()?;
         Ok(r)
     }
@@ -312,6 +315,7 @@ mod tests {
         assert!(err(&[("seed", OptionValue::Number(1.0))]).contains("seed: must be an integer >= 0"));
         assert!(err(&[("seed", OptionValue::Count(1)), ("seed", OptionValue::Count(2))]).contains("seed: is given twice"));
         assert!(err(&[("prior_std_rad", OptionValue::Number(0.3))]).contains("prior_std_rad: was given without a prior"));
+        assert!(err(&[("prior_conflict_z", OptionValue::Number(4.0))]).contains("prior_conflict_z: was given without a prior"));
         assert!(err(&[("threshold", OptionValue::Number(1.5))]).contains("threshold: must be a fraction"));
         assert!(err(&[("method", OptionValue::Text("simplex".into()))]).contains("method"));
     }

@@ -7,7 +7,7 @@ use crate::error::{HasError, Result};
 use crate::inverse::cost::{build_model, Measurement, Objective};
 use crate::inverse::element::nuisance::{FittedNuisance, Nuisance};
 use crate::inverse::element::view_fit::fit_view;
-use crate::inverse::element::{known_per_element, BasisCache, ElementCost, ElementTerm};
+use crate::inverse::element::{BasisCache, ElementCost, ElementTerm};
 use crate::inverse::estimate::information::{
     error_covariance, expected_focus, focal_fields, suggest_focus_shift, ShiftSuggestion, Spread, CANDIDATE_SHIFTS_MM,
 };
@@ -20,18 +20,10 @@ use ndarray::Array2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use std::sync::atomic::AtomicBool;
 
 use super::prior_check::prior_check;
 use super::support::element_support;
 use super::{estimator, fit_groups, recommend, EstimateReport, EstimateRequest, Method, ELEMENT_EVALUATIONS, VIEW_ELEMENT_EVALUATIONS};
-
-/// The prior per element: as given, or spread from the groups (or the array's default groups)
-/// as known phases are ([`known_per_element`]).
-pub(super) fn element_prior(sim: &Simulation, prior: &Prior) -> Result<Prior> {
-    let mean = known_per_element(sim, prior.mean()).map_err(|e| e.naming("prior"))?;
-    prior.with_mean(mean)
-}
 
 /// Known per-element phases closer than this (rad, RMS after the common phase,
 /// [`phase_error`]) make the same acquisition. To first order a phase change of RMS `d` changes
@@ -107,7 +99,7 @@ fn search_elements(
     search: &Estimator,
     budget: usize,
     positions: &[[f64; 3]],
-    cancel: Option<&AtomicBool>,
+    control: Control<'_>,
 ) -> Result<(Estimate, ElementCost)> {
     let smooth = prior.filter(|p| p.correlation_length().is_some()).map(|p| SmoothErrors::new(p, positions)).transpose()?;
     let to_phases = |params: &[f64]| -> Vec<f64> {
@@ -129,9 +121,9 @@ fn search_elements(
         let share = (budget * (round + 1) / rounds - budget * round / rounds).max(1);
         let search = search.clone().with_max_evaluations(share)?.with_start(params)?;
         let e = match (&smooth, prior) {
-            (Some(s), _) => search.run(&s.posterior(&cost, noise)?, cancel)?,
-            (None, Some(p)) => search.run(&Posterior::new(&cost, noise, p)?, cancel)?,
-            (None, None) => search.run(&cost, cancel)?,
+            (Some(s), _) => search.run(&s.posterior(&cost, noise)?, control)?,
+            (None, Some(p)) => search.run(&Posterior::new(&cost, noise, p)?, control)?,
+            (None, None) => search.run(&cost, control)?,
         };
         params = e.phases.clone();
         done = Some(match done {
@@ -272,7 +264,7 @@ fn search_and_assess(
             let mut group_model = build_model(&grouped, measurements, sim.mask_fraction, 3)?;
             group_model.noise = request.noise(group_model.noise)?;
             group_model.cost.fit_amplitude = request.fit_amplitude;
-            let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, control.cancel())?;
+            let (group, assessment) = fit_groups(&group_model, est, None, sigma.as_deref(), request, control)?;
             WarmStart::Groups { elements: grouped.element_phases(&group.phases)?, groups: group.phases, assessment }
         }
     };
@@ -290,7 +282,7 @@ fn search_and_assess(
     let kept_prediction = prior.is_some() && single_acquisition;
     let (elements, cost) = match &prior {
         Some(p) if kept_prediction => keep_prediction(model.cost, model.noise, p, &nuisance, &positions)?,
-        _ => search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, control.cancel())?,
+        _ => search_elements(model.cost, model.noise, prior.as_ref(), start, &nuisance, &search, budget, &positions, control)?,
     };
     let fitted = nuisance.any().then(|| {
         let linear = cost.linear_at(&elements.phases);
@@ -309,10 +301,9 @@ fn search_and_assess(
     };
     let (group_phases, mut assessment) = match warm_start {
         WarmStart::Groups { groups, assessment, .. } => (Some(groups), assessment),
-        WarmStart::Prediction(p) => (
-            None,
-            element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, control.cancel())?,
-        ),
+        WarmStart::Prediction(p) => {
+            (None, element_posterior_assessment(&cost, model.noise, p, &elements, budget, request.threshold, request.seed, control)?)
+        }
     };
     // One acquisition cannot determine a phase per element (a kept prediction says so on its
     // own), nor, without a prior, can images that determine too few combinations of phases for
@@ -389,7 +380,7 @@ fn element_posterior_assessment(
     budget: usize,
     threshold: f64,
     seed: u64,
-    cancel: Option<&AtomicBool>,
+    control: Control<'_>,
 ) -> Result<Assessment> {
     let g = estimate.phases.len();
     let independent = Prior::new(prior.mean().to_vec(), prior.std_rad())?;
@@ -400,7 +391,7 @@ fn element_posterior_assessment(
     let mut ends = vec![estimate.phases.clone()];
     for _ in 0..POSTERIOR_STARTS {
         let start: Vec<f64> = prior.mean().iter().map(|m| wrap(m + normal.sample(&mut rng))).collect();
-        ends.push(search.clone().with_start(start)?.run(&posterior, cancel)?.phases);
+        ends.push(search.clone().with_start(start)?.run(&posterior, control)?.phases);
     }
     // Rivals are judged on the images' cost, as without a prior.
     let points: Vec<Minimum> = ends.into_iter().map(|phases| Minimum { cost: cost.cost(&phases), phases }).collect();
