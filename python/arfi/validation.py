@@ -39,7 +39,10 @@ import json
 import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
 
 from arfi import _core
 from arfi.io import atomic_write_text
@@ -65,6 +68,47 @@ CASES = (
 )
 
 
+class CaseResult(Protocol):
+    """One case's result, against an exact solution (:class:`arfi._core.ValidationResult`) or a
+    stored full-wave run (:class:`arfi.validation_fullwave.FullWaveResult`): each pair is
+    (simulated, reference)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def description(self) -> str: ...
+    @property
+    def focal_pressure(self) -> tuple[float, float]: ...
+    @property
+    def focal_z_mm(self) -> tuple[float, float]: ...
+    @property
+    def focal_pressure_error(self) -> float: ...
+    @property
+    def focal_position_error_mm(self) -> float: ...
+    @property
+    def axial_error(self) -> float: ...
+    @property
+    def correlation(self) -> float: ...
+    @property
+    def axis(self) -> NDArray[np.float64]: ...
+    @property
+    def focal_line(self) -> NDArray[np.float64]: ...
+    @property
+    def step_mm(self) -> float: ...
+    @property
+    def spacing_mm(self) -> float: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def tolerances(self) -> tuple[float, float, float, float]: ...
+    @property
+    def passed(self) -> bool: ...
+    @property
+    def engine(self) -> str:
+        """``exact``, or the full-wave engine of the stored run."""
+        ...
+
+
 def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
     """The cases asked for (all when None); ValueError naming ``name`` and an unknown case."""
     wanted = list(CASES if cases is None else cases)
@@ -74,7 +118,7 @@ def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
     return wanted
 
 
-def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[Any]:
+def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[CaseResult]:
     """Runs the named cases (all by default), each on its scenario's default grid, and returns
     their :class:`arfi._core.ValidationResult` (for the textured caps and the head a
     :class:`arfi.validation_fullwave.FullWaveResult`). Raises ValueError naming an unknown case,
@@ -95,7 +139,7 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
 
     # Read before any case runs: a missing reference is one line, not a lost run.
     head = validation_head.reference() if "head220" in wanted else None
-    results: list[Any] = []
+    results: list[CaseResult] = []
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as tmp:
         for case in _core.validation_cases(tmp):
             if case.name in wanted:
@@ -114,8 +158,8 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
     return results
 
 
-def summary(r: Any) -> dict[str, Any]:
-    """One result as JSON-ready values."""
+def case_json(r: CaseResult) -> dict[str, Any]:
+    """One result as ``arfi validate --json`` writes it."""
     return {
         "case": r.name,
         "description": r.description,
@@ -129,12 +173,12 @@ def summary(r: Any) -> dict[str, Any]:
         "spacing_mm": r.spacing_mm,
         "seconds": r.seconds,
         "tolerances": _tolerances(r),
-        "reference": _reference(r),
+        "reference": r.engine,
         "passed": r.passed,
     }
 
 
-def table(results: Sequence[Any]) -> str:
+def table(results: Sequence[CaseResult]) -> str:
     """The results as a Markdown table, with the suite's tolerances in its header (a case's own
     in brackets in its row, explained below the table)."""
     t = TOLERANCES
@@ -165,7 +209,7 @@ def table(results: Sequence[Any]) -> str:
             f"{r.focal_position_error_mm:+.2f}{z_tol} | {100 * r.axial_error:.1f} %{a_tol} | "
             f"{r.correlation:.4f}{c_tol} | {r.step_mm:.3f} | {'pass' if r.passed else 'FAIL'} |"
         )
-    if any(_tolerances(r) != t and _reference(r) == "exact" for r in results):
+    if any(_tolerances(r) != t and r.engine == "exact" for r in results):
         lines += [
             "",
             "A tolerance in brackets is the case's own: a plate tilted against the march's planes is held to the "
@@ -173,7 +217,7 @@ def table(results: Sequence[Any]) -> str:
             "the peaks, negative when the simulated one lies short); as a solid (tiltN_shear*, against the exact "
             "elastic plate) its focal pressure is held to the ITRUSST spread, 10 %.",
         ]
-    engines = sorted({_reference(r) for r in results} - {"exact"})
+    engines = sorted({r.engine for r in results} - {"exact"})
     if engines:
         lines += [
             "",
@@ -187,17 +231,12 @@ def table(results: Sequence[Any]) -> str:
     return "\n".join(lines)
 
 
-def _reference(r: Any) -> str:
-    """What a result is compared with: ``exact``, or the full-wave engine of a stored result."""
-    return str(getattr(r, "engine", "exact"))
-
-
-def _tolerances(r: Any) -> dict[str, float]:
+def _tolerances(r: CaseResult) -> dict[str, float]:
     """A result's tolerances, keyed as :data:`TOLERANCES`."""
     return dict(zip(TOLERANCES, r.tolerances))
 
 
-def figure(r: Any, path: Path) -> str:
+def figure(r: CaseResult, path: Path) -> str:
     """The case's axial profile and focal line, simulated over the reference (exact, or a stored
     full-wave result), as a PNG."""
     from arfi.report import pyplot, save_figure
@@ -205,7 +244,7 @@ def figure(r: Any, path: Path) -> str:
     plt = pyplot()
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.4))
     axis, line = r.axis, r.focal_line
-    reference = _reference(r)
+    reference = r.engine
     a.plot(axis[:, 0], axis[:, 2], "k-", lw=1.5, label=reference)
     a.plot(axis[:, 0], axis[:, 1], "C1.", ms=4, label="arfi (default grid)")
     ze = r.focal_z_mm[1]
@@ -218,7 +257,7 @@ def figure(r: Any, path: Path) -> str:
     return save_figure(fig, path)
 
 
-def write_report(out: str | Path, results: Sequence[Any]) -> Path:
+def write_report(out: str | Path, results: Sequence[CaseResult]) -> Path:
     """``out/report.html`` (the table, then each case's figure), ``out/validation.md`` (the table)
     and ``out/validation.json``; returns the HTML's path."""
     from arfi.report import figure_html, write_html
@@ -229,7 +268,7 @@ def write_report(out: str | Path, results: Sequence[Any]) -> Path:
     atomic_write_text(out / "validation.md", md + "\n")
     atomic_write_text(
         out / "validation.json",
-        json.dumps({"tolerances": TOLERANCES, "cases": [summary(r) for r in results]}, indent=2) + "\n",
+        json.dumps({"tolerances": TOLERANCES, "cases": [case_json(r) for r in results]}, indent=2) + "\n",
     )
     figures = [(f"{r.name}: {r.description}", figure(r, out / f"{r.name}.png")) for r in results]
     body = _markdown_table_html(md) + figure_html(out, figures)

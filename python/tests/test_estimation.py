@@ -61,6 +61,11 @@ def test_calibration_is_saved_loaded_and_applied_only_where_it_was_fitted(tmp_pa
     # A hand-written calibration (W = 0: no broadening) records no fit and applies anywhere.
     hand = arfi.Calibration(0.0, sim.amplitude)
     assert (hand.cost, hand.n_pixels, hand.noise_rad, hand.scenario) == (None, None, None, None)
+    # Its document leaves out what it does not record, as its file does.
+    assert hand.to_dict() == {"broadening_width_mm": 0.0, "amplitude": sim.amplitude}
+    hand.save(tmp_path / "hand.json")
+    assert json.loads((tmp_path / "hand.json").read_text()) == hand.to_dict()
+    (tmp_path / "hand.json").unlink()
     assert sim.calibrated(hand).arfi_image().max() > sim.calibrated(c).arfi_image().max()
     # Fitted for another scenario or frequency: refused, naming both.
     for other in (

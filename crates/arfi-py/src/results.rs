@@ -132,9 +132,10 @@ impl CoreCalibration {
         self.0.frequency
     }
 
-    /// The result as a dict of its attributes (the JSON `arfi calibrate` writes).
-    fn to_dict<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyDict>> {
-        fields_dict(slf.as_any())
+    /// The calibration file's document (what `save` writes and `arfi calibrate --json` starts
+    /// with): what was not recorded is left out, not None.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        Ok(py.import("json")?.call_method1("loads", (self.0.to_json(),))?.cast_into::<PyDict>()?)
     }
 
     fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {

@@ -172,6 +172,12 @@ impl CoreComparison {
         self.0.passed()
     }
 
+    /// What the march is compared with: `"exact"` (the case's exact solution).
+    #[getter]
+    fn engine(&self) -> &'static str {
+        "exact"
+    }
+
     fn __repr__(&self) -> String {
         let c = &self.0;
         format!(

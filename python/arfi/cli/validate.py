@@ -48,7 +48,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.validation import check_cases, summary, table, write_report
+    from arfi.validation import case_json, check_cases, table, write_report
     from arfi.validation import run as run_suite
 
     cases = check_cases(args.cases, "--case")
@@ -65,5 +65,5 @@ def run(args: argparse.Namespace) -> int:
         + (f" ({', '.join(failed)} fail)" if failed else "")
         + f" in {time.perf_counter() - t:.1f} s"
     )
-    finish(args, {"cases": [summary(r) for r in results], "passed": not failed})
+    finish(args, {"cases": [case_json(r) for r in results], "passed": not failed})
     return 1 if failed else 0
