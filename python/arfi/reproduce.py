@@ -131,24 +131,13 @@ class StudyResult:
         return sum(bool(r.ambiguous) for r in self.table)
 
     def to_dict(self) -> dict[str, Any]:
-        """``results.json``: the fields, the three means, the paper's values and each rung."""
+        """``results.json``: the fields (each rung with its mean), then the three means."""
         return {
-            "case": self.case,
-            "repeats": self.repeats,
-            "method": self.method,
-            "noise_rad": self.noise_rad,
-            "seed": self.seed,
-            "diversity_images": self.diversity_images,
-            "loop2_iterations": self.loop2_iterations,
-            "date": self.date,
-            "table": [asdict(r) for r in self.table],
+            **asdict(self),
+            "ladder": [r.to_dict() for r in self.ladder],
             "mean_recovered_fraction": self.mean_recovered_fraction,
             "mean_gain": self.mean_gain,
             "mean_phase_error_rad": self.mean_phase_error_rad,
-            "paper": asdict(self.paper),
-            "figures": self.figures,
-            "ladder": [r.to_dict() for r in self.ladder],
-            "seconds": self.seconds,
         }
 
 

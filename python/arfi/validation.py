@@ -39,14 +39,18 @@ import json
 import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Protocol
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING, Any
 
 from arfi import _core
 from arfi.io import atomic_write_text
 from arfi.textured_caps import CAPS
+
+if TYPE_CHECKING:
+    from arfi.validation_fullwave import FullWaveResult
+
+    #: One case's result: against an exact solution, or a stored full-wave run (its ``engine``
+    #: names which); each pair of values is (simulated, reference).
+    CaseResult = _core.ValidationResult | FullWaveResult
 
 #: The suite's tolerances: relative focal pressure, focal position (mm), axial profile
 #: (relative to the exact peak) and the smallest focal-plane correlation. Half the spread of the
@@ -66,47 +70,6 @@ CASES = (
     + tuple(c.name for c in CAPS)
     + ("head220",)
 )
-
-
-class CaseResult(Protocol):
-    """One case's result, against an exact solution (:class:`arfi._core.ValidationResult`) or a
-    stored full-wave run (:class:`arfi.validation_fullwave.FullWaveResult`): each pair is
-    (simulated, reference)."""
-
-    @property
-    def name(self) -> str: ...
-    @property
-    def description(self) -> str: ...
-    @property
-    def focal_pressure(self) -> tuple[float, float]: ...
-    @property
-    def focal_z_mm(self) -> tuple[float, float]: ...
-    @property
-    def focal_pressure_error(self) -> float: ...
-    @property
-    def focal_position_error_mm(self) -> float: ...
-    @property
-    def axial_error(self) -> float: ...
-    @property
-    def correlation(self) -> float: ...
-    @property
-    def axis(self) -> NDArray[np.float64]: ...
-    @property
-    def focal_line(self) -> NDArray[np.float64]: ...
-    @property
-    def step_mm(self) -> float: ...
-    @property
-    def spacing_mm(self) -> float: ...
-    @property
-    def seconds(self) -> float: ...
-    @property
-    def tolerances(self) -> tuple[float, float, float, float]: ...
-    @property
-    def passed(self) -> bool: ...
-    @property
-    def engine(self) -> str:
-        """``exact``, or the full-wave engine of the stored run."""
-        ...
 
 
 def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
