@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
 
     sim = arfi.Simulation()
     grid = numpy_has.Grid.from_simulation(sim)
-    scenario = json.loads(arfi._core.scenario_json(arfi._core.default_scenario_toml()))
+    scenario = arfi.Scenario.default().to_dict()
     medium = numpy_has.Medium(scenario, sim._core.frequency_hz)
     source = sim.source_field()
 

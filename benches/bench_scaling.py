@@ -47,7 +47,7 @@ SPACING_MM = 0.6818181818181819  # the default scenario's lateral spacing (lambd
 def scenario(grid: dict[str, float]) -> str:
     import arfi
 
-    text = arfi._core.default_scenario_toml()
+    text = arfi.Scenario.default().to_toml()
     lines = "".join(f"{k} = {v}\n" for k, v in grid.items())
     return text.replace("[grid]\n", "[grid]\n" + lines, 1)
 

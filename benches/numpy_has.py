@@ -106,7 +106,7 @@ class Slice:
 
 
 class Medium:
-    """Materials, regions and march options of a resolved scenario (``arfi._core.scenario_json``)."""
+    """Materials, regions and march options of a resolved scenario (``arfi.Scenario.to_dict``)."""
 
     def __init__(self, scenario: dict, frequency: float):
         self.materials = {m["name"]: m for m in scenario["material"]}

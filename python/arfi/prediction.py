@@ -55,9 +55,7 @@ def predict(
     :attr:`Prediction.simulation` (its plan stays in memory as long as the prediction does)."""
     target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
     prediction, kept = _core.predict(
-        scenario.to_toml(),
-        "toml",
-        scenario.base_dir,
+        scenario.core,
         target,
         bool(bone_speed_sensitivity),
         bool(keep_simulation),
@@ -66,7 +64,7 @@ def predict(
     if kept is None:
         return prediction
     core, built_from = kept
-    return prediction.with_simulation(Simulation._wrap(Scenario.from_toml(built_from, scenario.base_dir), core))
+    return prediction.with_simulation(Simulation._wrap(Scenario._of(built_from), core))
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:

@@ -131,13 +131,18 @@ class StudyResult:
         return sum(bool(r.ambiguous) for r in self.table)
 
     def to_dict(self) -> dict[str, Any]:
-        """``results.json``: the fields (each rung with its mean), then the three means."""
+        """``results.json``: the fields, the three means after the table, each rung with its mean."""
+        d = asdict(self)
+        head = list(d)[: list(d).index("table") + 1]
         return {
-            **asdict(self),
-            "ladder": [r.to_dict() for r in self.ladder],
+            **{k: d[k] for k in head},
             "mean_recovered_fraction": self.mean_recovered_fraction,
             "mean_gain": self.mean_gain,
             "mean_phase_error_rad": self.mean_phase_error_rad,
+            "paper": d["paper"],
+            "figures": d["figures"],
+            "ladder": [r.to_dict() for r in self.ladder],
+            "seconds": d["seconds"],
         }
 
 

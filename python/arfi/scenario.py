@@ -20,14 +20,13 @@ class Scenario:
     """
 
     def __init__(self, toml_text: str, base_dir: str | os.PathLike[str] | None = None):
-        self._base_dir = None if base_dir is None else str(base_dir)
-        self._toml = _core.normalize_scenario(toml_text, "toml", self._base_dir)
+        self._core = _core.CoreScenario(toml_text, "toml", None if base_dir is None else str(base_dir))
 
     @classmethod
     def default(cls) -> Scenario:
         """The embedded default: the paper's phantom experiment (550 kHz planar quadrant array of
         1024 elements focused at (0, 0, 85) mm into a cylindrical phantom in water)."""
-        return cls(_core.default_scenario_toml())
+        return cls._of(_core.CoreScenario.default())
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Scenario:
@@ -56,15 +55,13 @@ class Scenario:
             text = json.dumps(data, allow_nan=False)
         except (TypeError, ValueError) as e:
             raise ValueError(f"scenario: cannot be written as JSON: {e}") from None
-        base = None if base_dir is None else str(base_dir)
-        return cls._normalized(_core.normalize_scenario(text, "json", base), base)
+        return cls._of(_core.CoreScenario(text, "json", None if base_dir is None else str(base_dir)))
 
     @classmethod
-    def _normalized(cls, toml: str, base_dir: str | None) -> Scenario:
-        """A scenario of TOML the core has already normalised and checked (not parsed again)."""
+    def _of(cls, core: _core.CoreScenario) -> Scenario:
+        """The scenario the core holds (already checked: not parsed again)."""
         s = cls.__new__(cls)
-        s._base_dir = base_dir
-        s._toml = toml
+        s._core = core
         return s
 
     def to_toml(self, chosen_grid: bool = False) -> str:
@@ -73,40 +70,52 @@ class Scenario:
         last plane, absorbing layer, reflections, interface model): a template that simulates
         exactly as this scenario does; delete those keys to have them chosen from the wavelength,
         the aperture and the focus again after editing."""
-        return _core.scenario_toml_with_grid(self._toml, self._base_dir) if chosen_grid else self._toml
+        return self._core.to_toml(bool(chosen_grid))
 
     def to_dict(self) -> dict[str, Any]:
         """The scenario as a dict with every default written out."""
-        return json.loads(_core.scenario_json(self._toml, "toml", self._base_dir))
+        return dict(json.loads(self._core.to_json()))
 
     def with_ct_bone(self) -> Scenario:
         """The head of this ``[ct]`` scenario with the CT's bone (``without_bone = false``) driven
         with the reference steering (``steer_without_bone = true``): the skull ``arfi predict``
         marches, steered as the estimation's model (``without_bone = true``) is. A scenario
         without ``[ct]`` raises ``ValueError``."""
-        return Scenario._normalized(_core.scenario_with_ct_bone(self._toml, self._base_dir), self._base_dir)
+        return Scenario._of(self._core.with_ct_bone())
 
     def outline(self) -> _core.ScenarioOutline:
         """What the scenario fixes before a simulation is built: the array's elements and default
         groups, the focus and the MR geometry, with the simulation's own rules for phases
         (``element_phases``, ``known_per_element``) and image files (``check_image``). Read in
         milliseconds (no CT, no grid), so inputs are refused before a build of tens of seconds."""
-        return _core.scenario_outline(self._toml, "toml", self._base_dir)
+        return self._core.outline()
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the TOML (atomically: a failed write leaves no partial file)."""
-        atomic_write_text(Path(path), self._toml)
+        atomic_write_text(Path(path), self.to_toml())
 
     @property
     def name(self) -> str:
-        return str(self.to_dict()["name"])
+        return self._core.name
 
     @property
     def base_dir(self) -> str | None:
-        return self._base_dir
+        return self._core.base_dir
+
+    @property
+    def core(self) -> _core.CoreScenario:
+        """The checked scenario as the core holds it (what simulations and predictions take)."""
+        return self._core
 
     def __repr__(self) -> str:
         return f"Scenario(name={self.name!r})"
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, Scenario) and self._toml == other._toml
+        return isinstance(other, Scenario) and self.to_toml() == other.to_toml()
+
+    def __hash__(self) -> int:
+        return hash(self.to_toml())
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Pickled as its text and folder (the core's value is rebuilt, and checked, on load).
+        return (Scenario, (self.to_toml(), self.base_dir))

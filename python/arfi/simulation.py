@@ -100,7 +100,7 @@ class Simulation:
         self.scenario = scenario if scenario is not None else Scenario.default()
         if source is not None and not isinstance(source, _core.CoreSourceModel):
             raise ValueError(f"source: must be a Simulation.source_model(), got {type(source).__name__}")
-        self._core = _core.CoreSimulation(self.scenario.to_toml(), "toml", self.scenario.base_dir, source)
+        self._core = _core.CoreSimulation(self.scenario.core, source)
         if groups is not None:
             self._core = self._core.with_groups(_group_map(groups, self.n_elements))
 

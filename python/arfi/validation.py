@@ -39,18 +39,16 @@ import json
 import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from arfi import _core
 from arfi.io import atomic_write_text
 from arfi.textured_caps import CAPS
+from arfi.validation_fullwave import FullWaveResult
 
-if TYPE_CHECKING:
-    from arfi.validation_fullwave import FullWaveResult
-
-    #: One case's result: against an exact solution, or a stored full-wave run (its ``engine``
-    #: names which); each pair of values is (simulated, reference).
-    CaseResult = _core.ValidationResult | FullWaveResult
+#: One case's result: against an exact solution, or a stored full-wave run (its ``engine``
+#: names which); each pair of values is (simulated, reference).
+CaseResult = _core.ValidationResult | FullWaveResult
 
 #: The suite's tolerances: relative focal pressure, focal position (mm), axial profile
 #: (relative to the exact peak) and the smallest focal-plane correlation. Half the spread of the

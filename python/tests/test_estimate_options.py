@@ -40,6 +40,10 @@ def test_numpy_values_are_taken_and_unknown_attributes_are_attribute_errors():
 
 
 def test_to_dict_and_replace_make_the_same_options_again():
+    # Without a prior: the prior-only options come back unset (they would be refused without one).
+    plain = EstimateOptions(seed=3)
+    assert EstimateOptions(**plain.to_dict()).to_dict() == plain.to_dict()
+    assert plain.replace(seed=1).seed == 1 and plain.to_dict()["prior_conflict_z"] is None
     o = EstimateOptions(prior=[0.5, -0.5], prior_std_rad=0.4, starts=3, fit_amplitude=True)
     again = EstimateOptions(**o.to_dict())
     assert again.to_dict() == o.to_dict()

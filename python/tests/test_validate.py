@@ -29,6 +29,8 @@ def test_validate_writes_its_table_and_report_and_passes_the_layered_cases(tmp_p
     # The flat layered skull on its default grid: within the suite's 5 % and 0.5 mm.
     assert abs(bm4["focal_pressure_error"]) < 0.05 and abs(bm4["focal_position_error_mm"]) < 0.5
     assert bm4["step_mm"] == pytest.approx(0.5)
+    # Against its exact solution (the full-wave cases name their engine there).
+    assert {c["reference"] for c in result["cases"]} == {"exact"}
 
 
 def test_the_exit_status_says_whether_every_case_passed(tmp_path, monkeypatch, capsys):

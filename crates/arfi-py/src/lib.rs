@@ -23,10 +23,7 @@ mod volume;
 use has_core::inverse::estimate::workflow::Method;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use scenario::{
-    contiguous_groups, default_scenario_toml, normalize_scenario, scenario_json, scenario_outline, scenario_toml_with_grid,
-    scenario_with_ct_bone,
-};
+use scenario::contiguous_groups;
 
 /// Hands the memory the allocator holds free back to the system (glibc's `malloc_trim`): call
 /// after dropping a simulation whose HAS plan is large, before building the next.
@@ -66,14 +63,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<focal::HottestPlace>()?;
     m.add_class::<validation::CoreValidationCase>()?;
     m.add_class::<validation::CoreComparison>()?;
-    m.add_function(wrap_pyfunction!(default_scenario_toml, m)?)?;
-    m.add_function(wrap_pyfunction!(normalize_scenario, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_json, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_toml_with_grid, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_with_ct_bone, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_outline, m)?)?;
     m.add_function(wrap_pyfunction!(contiguous_groups, m)?)?;
     m.add_class::<scenario::CoreOutline>()?;
+    m.add_class::<scenario::CoreScenario>()?;
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;

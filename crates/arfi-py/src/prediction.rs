@@ -1,7 +1,7 @@
 //! `predict`: the CT-based prediction of each element's aberration, as a typed result.
 
 use crate::error::{invalid, to_py};
-use crate::scenario::parse_scenario;
+use crate::scenario::CoreScenario;
 use crate::simulation::CoreSimulation;
 use has_core::prediction::{predict_scenario_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
@@ -17,33 +17,27 @@ use pyo3::types::PyDict;
 /// `pose_sensitivity`, `pose_sensitivity_rad_per_mm` and `pose_sensitivity_rad_per_deg` (six
 /// more transposed marches through the skull, no plan).
 #[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false, pose_sensitivity=false))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scenario, target_mm=None, bone_speed_sensitivity=false, keep_simulation=false, pose_sensitivity=false))]
 pub(crate) fn predict(
     py: Python<'_>,
-    text: &str,
-    format: &str,
-    base_dir: Option<&str>,
+    scenario: &CoreScenario,
     target_mm: Option<[f64; 3]>,
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
     pose_sensitivity: bool,
-) -> PyResult<(CorePrediction, Option<(CoreSimulation, String)>)> {
-    let scenario = parse_scenario(text, format, base_dir)?;
+) -> PyResult<(CorePrediction, Option<(CoreSimulation, CoreScenario)>)> {
+    let scenario = &scenario.inner;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
     let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
-    let run = py.detach(|| predict_scenario_with(&scenario, target, options)).map_err(to_py)?;
+    let run = py.detach(|| predict_scenario_with(scenario, target, options)).map_err(to_py)?;
     let prediction = CorePrediction {
         prediction: run.prediction,
         bone_speed_sensitivity: run.bone_speed_sensitivity,
         pose: run.pose_sensitivity,
         simulation: None,
     };
-    // The kept simulation with the scenario (as TOML) it was built from.
-    let kept = match run.simulation {
-        Some(sim) => Some((CoreSimulation::from(sim), with_amplitude(scenario).to_toml().map_err(to_py)?)),
-        None => None,
-    };
+    // The kept simulation with the scenario it was built from.
+    let kept = run.simulation.map(|sim| (CoreSimulation::from(sim), CoreScenario { inner: with_amplitude(scenario.clone()) }));
     Ok((prediction, kept))
 }
 

@@ -64,7 +64,7 @@ pub(crate) struct CoreCalibration(pub(crate) Calibration);
 
 #[pymethods]
 impl CoreCalibration {
-    /// The attributes `to_dict` writes, in order.
+    /// Its attributes, in the order of its file's keys (`repr`).
     #[classattr]
     #[pyo3(name = "_fields")]
     const FIELDS: [&'static str; 7] = ["broadening_width_mm", "amplitude", "cost", "n_pixels", "noise_rad", "scenario", "frequency_hz"];

@@ -19,49 +19,72 @@ pub(crate) fn parse_scenario(text: &str, format: &str, base_dir: Option<&str>) -
     .map_err(to_py)
 }
 
-/// The default scenario (the paper's phantom experiment) as TOML, every value written out.
-#[pyfunction]
-pub(crate) fn default_scenario_toml() -> PyResult<String> {
-    Scenario::default().to_toml().map_err(to_py)
+/// A validated scenario, parsed once and handed to simulations and predictions as it is (what
+/// `arfi.Scenario` holds). Values in file units; `base_dir` resolves its relative paths.
+#[pyclass(module = "arfi._core", name = "CoreScenario", frozen)]
+pub(crate) struct CoreScenario {
+    pub(crate) inner: Scenario,
 }
 
-/// Parses and validates a scenario (`format` = "toml" | "json"), returning it as complete TOML.
-#[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None))]
-pub(crate) fn normalize_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
-    validated_scenario(text, format, base_dir)?.to_toml().map_err(to_py)
-}
+#[pymethods]
+impl CoreScenario {
+    /// Parses `text` (`format` = "toml" | "json") and checks its values together
+    /// (`Scenario::resolve`: the CT is read once here).
+    #[new]
+    #[pyo3(signature = (text, format="toml", base_dir=None))]
+    fn new(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Self> {
+        let inner = parse_scenario(text, format, base_dir)?;
+        inner.resolve().map_err(to_py)?;
+        Ok(CoreScenario { inner })
+    }
 
-/// Parses and validates a scenario, returning it as complete TOML with the `[grid]` it resolves
-/// to written out.
-#[pyfunction]
-#[pyo3(signature = (text, base_dir=None))]
-pub(crate) fn scenario_toml_with_grid(text: &str, base_dir: Option<&str>) -> PyResult<String> {
-    let s = parse_scenario(text, "toml", base_dir)?;
-    has_core::simulation::with_chosen_grid(&s).and_then(|s| s.to_toml()).map_err(to_py)
-}
+    /// The embedded default: the paper's phantom experiment.
+    #[staticmethod]
+    fn default() -> Self {
+        CoreScenario { inner: Scenario::default() }
+    }
 
-/// Parses a scenario, returning it as complete JSON (for `Scenario.to_dict`, whose text was
-/// validated as a whole when it was normalised: resolving it again would read its CT again).
-#[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None))]
-pub(crate) fn scenario_json(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<String> {
-    parse_scenario(text, format, base_dir)?.to_json().map_err(to_py)
-}
+    /// Complete TOML, every default written out; with `chosen_grid` the `[grid]` it resolves to
+    /// as well.
+    #[pyo3(signature = (chosen_grid=false))]
+    fn to_toml(&self, chosen_grid: bool) -> PyResult<String> {
+        if chosen_grid {
+            has_core::simulation::with_chosen_grid(&self.inner).and_then(|s| s.to_toml()).map_err(to_py)
+        } else {
+            self.inner.to_toml().map_err(to_py)
+        }
+    }
 
-/// The head of a `[ct]` scenario with the CT's bone, driven with the reference steering, as
-/// complete TOML (`Scenario::with_ct_bone`).
-#[pyfunction]
-#[pyo3(signature = (text, base_dir=None))]
-pub(crate) fn scenario_with_ct_bone(text: &str, base_dir: Option<&str>) -> PyResult<String> {
-    parse_scenario(text, "toml", base_dir)?.with_ct_bone().and_then(|s| s.to_toml()).map_err(to_py)
-}
+    /// Complete JSON, every default written out.
+    fn to_json(&self) -> PyResult<String> {
+        self.inner.to_json().map_err(to_py)
+    }
 
-/// A parsed scenario whose values have also been checked together (`Scenario::resolve`).
-fn validated_scenario(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<Scenario> {
-    let s = parse_scenario(text, format, base_dir)?;
-    s.resolve().map_err(to_py)?;
-    Ok(s)
+    /// The head of a `[ct]` scenario with the CT's bone, driven with the reference steering
+    /// (`Scenario::with_ct_bone`).
+    fn with_ct_bone(&self) -> PyResult<Self> {
+        Ok(CoreScenario { inner: self.inner.with_ct_bone().map_err(to_py)? })
+    }
+
+    /// The scenario's outline: its transducer and `[mr]` checked, its CT and grid not read.
+    fn outline(&self) -> PyResult<CoreOutline> {
+        Ok(CoreOutline { inner: self.inner.outline().map_err(to_py)? })
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.name
+    }
+
+    /// The folder its relative paths resolve against (None: the working directory).
+    #[getter]
+    fn base_dir(&self) -> Option<String> {
+        self.inner.base_dir.as_ref().map(|p| p.display().to_string())
+    }
+
+    fn __repr__(&self) -> String {
+        format!("CoreScenario(name={:?})", self.inner.name)
+    }
 }
 
 /// Shape of the MR image volume of `mr` (NIfTI order, a singleton along the slice normal).
@@ -82,13 +105,6 @@ pub(crate) fn mr_affine_array<'py>(py: Python<'py>, mr: &MrGeometry) -> Bound<'p
 #[pyclass(module = "arfi._core", name = "ScenarioOutline", frozen)]
 pub(crate) struct CoreOutline {
     inner: Outline,
-}
-
-/// The scenario's outline: its transducer and `[mr]` checked, its CT and grid not read.
-#[pyfunction]
-#[pyo3(signature = (text, format="toml", base_dir=None))]
-pub(crate) fn scenario_outline(text: &str, format: &str, base_dir: Option<&str>) -> PyResult<CoreOutline> {
-    Ok(CoreOutline { inner: parse_scenario(text, format, base_dir)?.outline().map_err(to_py)? })
 }
 
 #[pymethods]

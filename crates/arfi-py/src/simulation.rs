@@ -11,7 +11,7 @@ use crate::interrupt::run_interruptible;
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::plan::{CoreGrid, CorePropagation};
 use crate::results::{CoreCalibration, CoreEstimate};
-use crate::scenario::parse_scenario;
+use crate::scenario::CoreScenario;
 use crate::scenario::{mr_affine_array, mr_volume_shape};
 use crate::volume::{ct_arrays, grid_arrays, window_of_box_mm, VolumeArrays};
 use has_core::control::Control;
@@ -80,14 +80,14 @@ impl CoreSourceModel {
 #[pymethods]
 impl CoreSimulation {
     #[new]
-    #[pyo3(signature = (text, format="toml", base_dir=None, source=None))]
-    fn new(py: Python<'_>, text: &str, format: &str, base_dir: Option<&str>, source: Option<PyRef<'_, CoreSourceModel>>) -> PyResult<Self> {
-        let s = parse_scenario(text, format, base_dir)?;
+    #[pyo3(signature = (scenario, source=None))]
+    fn new(py: Python<'_>, scenario: &CoreScenario, source: Option<PyRef<'_, CoreSourceModel>>) -> PyResult<Self> {
+        let s = &scenario.inner;
         let kept = source.map(|k| k.inner.clone());
         let inner = py
             .detach(|| match &kept {
-                Some(k) => Simulation::new_reusing(&s, k),
-                None => Simulation::new(&s),
+                Some(k) => Simulation::new_reusing(s, k),
+                None => Simulation::new(s),
             })
             .map_err(to_py)?;
         Ok(inner.into())

@@ -1,6 +1,7 @@
 //! How a long computation is watched and stopped, passed as one value: a flag another thread may
-//! set to cancel it (the run then ends with [`HasError::Interrupted`] at its next check) and a
-//! progress callback `(done, total)`. `Control::default()` watches nothing.
+//! set to cancel it (the run then ends at its next check: with [`HasError::Interrupted`], or for
+//! a search, `Estimator::run`, with its best point so far and `Stop::Interrupted`) and a progress
+//! callback `(done, total)`. `Control::default()` watches nothing.
 
 use crate::error::{HasError, Result};
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -103,14 +103,24 @@ pub enum PriorLayout {
 /// before building anything.
 pub fn prior_layout(name: &str, len: usize, groups: &[usize], n_groups: usize, default_groups: &[usize]) -> Result<PriorLayout> {
     let n = groups.len();
-    let n_default = count(default_groups);
-    let (other, what) = if one_per_element(groups) { (n_default, "default group") } else { (n_groups, "group") };
-    match len {
-        l if l == n => Ok(PriorLayout::PerElement),
-        l if l == other && what == "group" => Ok(PriorLayout::PerGroup),
-        l if l == other => Ok(PriorLayout::PerDefaultGroup),
-        l => Err(HasError::invalid(name, format!("has {l} values; expected {n} (one per element) or {other} (one per {what})"))),
+    let per_element = one_per_element(groups);
+    let (other, what) = if per_element { (count(default_groups), "default group") } else { (n_groups, "group") };
+    // A group estimate reads a prior of G values per group, also where G = n (groups in another
+    // order than the elements).
+    if !per_element && len == n_groups {
+        return Ok(PriorLayout::PerGroup);
     }
+    if len == n {
+        return Ok(PriorLayout::PerElement);
+    }
+    if len == other && len > 0 {
+        return Ok(PriorLayout::PerDefaultGroup);
+    }
+    let mut sizes = format!("{n} (one per element)");
+    if other != n {
+        sizes += &format!(" or {other} (one per {what})");
+    }
+    Err(HasError::invalid(name, format!("has {len} values; expected {sizes}")))
 }
 
 #[cfg(test)]
@@ -131,6 +141,14 @@ mod tests {
         assert!(e.starts_with("prior: has 2 values; expected 8 (one per element) or 4 (one per group)"), "{e}");
         let e = prior_layout("prior", 4, &elements, 8, &default).unwrap_err().to_string();
         assert!(e.starts_with("prior: has 4 values; expected 8 (one per element) or 2 (one per default group)"), "{e}");
+        // Groups in another order than the elements: G = n values are per group.
+        let turned: Vec<usize> = (0..8).rev().collect();
+        assert_eq!(prior_layout("p", 8, &turned, 8, &default).unwrap(), PriorLayout::PerGroup);
+        // No values, or an array whose default groups are its elements: one size named.
+        let e = prior_layout("prior", 0, &elements, 8, &default).unwrap_err().to_string();
+        assert!(e.starts_with("prior: has 0 values; expected 8 (one per element) or 2"), "{e}");
+        let e = prior_layout("prior", 3, &elements, 8, &elements).unwrap_err().to_string();
+        assert_eq!(e, "prior: has 3 values; expected 8 (one per element)");
     }
 
     #[test]

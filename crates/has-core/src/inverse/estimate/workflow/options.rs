@@ -159,7 +159,7 @@ pub const OPTIONS: &[OptionSpec] = &[
     spec(
         "prior_conflict_z",
         OptionKind::Number,
-        false,
+        true,
         "per element with a searched prior: the images conflict with the prediction (the prediction is \
          recommended) when their chi-squared at it lies more than this many standard deviations above what truths \
          within the prior's std give (default 3)",
@@ -247,7 +247,7 @@ impl EstimateRequest {
             "prior_correlation_mm" => prior.and_then(Prior::correlation_length).map(|l| V::Number(l * 1e3)),
             "prior_modes" => prior.map(Prior::modes).filter(|m| !m.is_empty()).map(|m| V::Rows(m.to_vec())),
             "fit_nuisance" => Some(V::Names(self.nuisance.names().into_iter().map(String::from).collect())),
-            "prior_conflict_z" => Some(V::Number(self.prior_conflict_z)),
+            "prior_conflict_z" => prior.map(|_| V::Number(self.prior_conflict_z)),
             "suggest" => Some(V::Flag(self.suggest)),
             name => return Err(HasError::invalid(name, "is declared in OPTIONS but not written by option")),
         })
@@ -304,6 +304,19 @@ mod tests {
         let d = EstimateRequest::default();
         assert!(OPTIONS.iter().all(|o| d.option(o.name).unwrap().is_none() == o.optional));
         assert_eq!(EstimateRequest::from_options(&[]).unwrap(), d);
+        // What option() gives back makes the same request again, with a prior and without.
+        let again = |r: &EstimateRequest| {
+            let given: Vec<(&str, OptionValue)> = OPTIONS.iter().filter_map(|o| r.option(o.name).unwrap().map(|v| (o.name, v))).collect();
+            EstimateRequest::from_options(&given).unwrap()
+        };
+        assert_eq!(again(&d), d);
+        let with_prior = EstimateRequest::from_options(&[
+            ("prior", OptionValue::Values(vec![0.1, 0.2])),
+            ("prior_std_rad", OptionValue::Number(0.3)),
+            ("prior_conflict_z", OptionValue::Number(4.0)),
+        ])
+        .unwrap();
+        assert_eq!(again(&with_prior), with_prior);
         let starts = EstimateRequest::from_options(&[("starts", OptionValue::Count(3))]).unwrap();
         assert_eq!(starts.option("starts").unwrap(), Some(OptionValue::Count(3)));
     }
