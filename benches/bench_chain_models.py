@@ -43,8 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
+from arfi.analysis.prediction import predict
 from arfi.cli import main as arfi_main
-from arfi.prediction import predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

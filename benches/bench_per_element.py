@@ -4,7 +4,7 @@ aberrations) on the embedded default scenario, from Python.
 
 Workload per seed: the skull-like 1024-element aberration ``sim.skull_phases(seed)``, one noisy
 aberrated image and three with seeded random known group phases (0.02 rad noise), and a CT-like
-prediction (``arfi.ladder.predicted_aberration``: the aberration plus a smooth 5 rad peak-to-peak
+prediction (``arfi.analysis.ladder.predicted_aberration``: the aberration plus a smooth 5 rad peak-to-peak
 error over 15 mm and 0.3 rad per-element jitter). Times, end to end:
 
 * ``sim.with_groups(1024).estimate(images, known)``: the default-group warm start, the element
@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from arfi import Simulation
-from arfi.ladder import PREDICTION_CORRELATION_MM, PREDICTION_STD_RAD, predicted_aberration
+from arfi.analysis.ladder import PREDICTION_CORRELATION_MM, PREDICTION_STD_RAD, predicted_aberration
 
 TARGET_S = 60.0
 

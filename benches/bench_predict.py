@@ -27,8 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from arfi.analysis.prediction import predict
 from arfi.cli import main as arfi_main
-from arfi.prediction import predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

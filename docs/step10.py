@@ -8,7 +8,7 @@ into the tutorial
 * after each command, its printed lines as ``# ...`` lines (replacing those there), and after each
   command that took a second or more its wall-clock time (``# 12 s``);
 * the rows of the table "drive through the patient's skull": the focal |p| at the target through
-  the patient's skull (``arfi.prediction.predict`` of ``patient.toml``: its ``skull_responses``)
+  the patient's skull (``arfi.analysis.prediction.predict`` of ``patient.toml``: its ``skull_responses``)
   for the clinic's drive, the prediction's reference steering minus no phases, ``prior.npy``,
   ``estimate.npy`` and ``truth.npy`` (shifted from the patient's own reference steering to the
   clinic's), and ``truth.optimal_pa``;
@@ -133,7 +133,7 @@ def focal_table(folder: Path) -> list[tuple[str, float, float]]:
 
     import numpy as np
 
-    from arfi.prediction import predict
+    from arfi.analysis.prediction import predict
     from arfi.scenario import Scenario
 
     truth = predict(Scenario.load(folder / "patient.toml"))

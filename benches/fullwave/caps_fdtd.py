@@ -1,9 +1,9 @@
-"""The full-wave references of the textured caps (:mod:`arfi.textured_caps`): the ITRUSST bowl
+"""The full-wave references of the textured caps (:mod:`arfi.validation.textured_caps`): the ITRUSST bowl
 (500 kHz) through a three-layer skull cap about its focus, uniform or with a diploë textured over
 1 and 3 mm, computed by BabelViscoFDTD through ``arfi field --engine fdtd``'s code
-(:mod:`arfi.fullwave`) at 6 points per wavelength, with the calibration case: the suite's
+(:mod:`arfi.validation.fdtd`) at 6 points per wavelength, with the calibration case: the suite's
 homogeneous cortical shell, the engine's error where the exact answer is known, which ``arfi
-validate`` divides out. Writes ``python/arfi/data/fullwave_caps.json`` (merged: one entry per case
+validate`` divides out. Writes ``python/arfi/validation/data/fullwave_caps.json`` (merged: one entry per case
 and points per wavelength), which ``arfi validate`` compares the march with.
 
     python benches/fullwave/caps_fdtd.py [--case cap_uniform cap_texture1 cap_texture3 shell] [--ppw 6] [--solid]
@@ -24,10 +24,10 @@ import tempfile
 from pathlib import Path
 
 import arfi
-from arfi import fullwave, textured_caps
-from arfi.validation_fullwave import stored_parts
+from arfi.validation import fdtd, textured_caps
+from arfi.validation.fullwave_caps import stored_parts
 
-OUT = Path(__file__).resolve().parents[2] / "python" / "arfi" / "data" / "fullwave_caps.json"
+OUT = Path(__file__).resolve().parents[2] / "python" / "arfi" / "validation" / "data" / "fullwave_caps.json"
 
 
 def run(name: str, ppw: float, solid: bool) -> dict:
@@ -36,9 +36,9 @@ def run(name: str, ppw: float, solid: bool) -> dict:
         fingerprint = textured_caps.write_ct(cap, Path(d) / "cap.nii")
         sim = arfi.Simulation(arfi.Scenario.from_toml(textured_caps.scenario_toml(cap, "cap.nii", solid), base_dir=d))
         march = sim.field(volume=True)
-        r = fullwave.run(sim, march, None, fullwave.FdtdOptions(points_per_wavelength=ppw), progress=print)
+        r = fdtd.run(sim, march, None, fdtd.FdtdOptions(points_per_wavelength=ppw), progress=print)
         f = sim.field_from_volume(r.plane, r.z_mm, r.axis, r.magnitude)
-    fdtd, marched = stored_parts(f), stored_parts(march)
+    engine_parts, marched = stored_parts(f), stored_parts(march)
     return {
         "case": name,
         "description": cap.description,
@@ -52,11 +52,11 @@ def run(name: str, ppw: float, solid: bool) -> dict:
         if solid
         else None,
         "points_per_wavelength": ppw,
-        "fdtd": fdtd,
+        "fdtd": engine_parts,
         "march_when_made": {k: marched[k] for k in ("focal_pressure_p0", "focal_point_mm")},
         "engine": {
-            "engine": fullwave.ENGINE,
-            "engine_version": fullwave.ENGINE_VERSION,
+            "engine": fdtd.ENGINE,
+            "engine_version": fdtd.ENGINE_VERSION,
             "voxel_mm": r.plan.h_m * 1e3,
             "shape_xyz": list(r.plan.shape),
             "steps": r.plan.steps,

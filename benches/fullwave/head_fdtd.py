@@ -1,8 +1,8 @@
-"""The reference of ``arfi validate``'s case ``head220`` (:mod:`arfi.validation_head`): the head
+"""The reference of ``arfi validate``'s case ``head220`` (:mod:`arfi.validation.fullwave_head`): the head
 phantom at 220 kHz with the 256-element hemisphere, run by ``arfi field --engine fdtd``
 (BabelViscoFDTD) at 6 and 5 points per wavelength, the first scaled by the engine's error there
 (second order: ``p(h) = p + c·h²``), and beside it the march (``arfi field``) as it was when the runs were made.
-Writes ``python/arfi/data/fullwave_head.json``.
+Writes ``python/arfi/validation/data/fullwave_head.json``.
 
     python benches/fullwave/head_fdtd.py [--work DIR]
 
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from arfi import fullwave
-from arfi import validation_head as vh
+from arfi.validation import fdtd
+from arfi.validation import fullwave_head as vh
 
 PPW = (6.0, 5.0)
 
@@ -48,7 +48,7 @@ def run(work: Path, scenario: Path, engine: str, ppw: float | None = None) -> tu
 
 
 def parts(f: Any, j: dict[str, Any], cut: bool = True) -> dict[str, Any]:
-    """:func:`arfi.validation_head.parts` of a run's npz ``f`` and JSON ``j``."""
+    """:func:`arfi.validation.fullwave_head.parts` of a run's npz ``f`` and JSON ``j``."""
     return vh.parts(
         f["pressure"],
         f["x_mm"],
@@ -97,8 +97,8 @@ def main() -> None:
             "seed": vh.SEED,
             "ct_voxel_mm": vh.VOXEL_MM,
             "ct_sha256": sha,
-            "engine": fullwave.ENGINE,
-            "engine_version": fullwave.ENGINE_VERSION,
+            "engine": fdtd.ENGINE,
+            "engine_version": fdtd.ENGINE_VERSION,
             "reference": ref,
             "runs": runs,
             "march": march,

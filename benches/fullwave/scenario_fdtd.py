@@ -2,7 +2,7 @@
 (BM3, a slab region; as a fluid and as a solid of shear speed 1500 m/s) and turned 20° about y
 (read from a CT of 0.25 mm voxels), computed three
 ways: the exact angular-spectrum solution, arfi's march on its default grid, and the full-wave
-engine BabelViscoFDTD run by ``arfi field --engine fdtd``'s code (arfi.fullwave) on the same
+engine BabelViscoFDTD run by ``arfi field --engine fdtd``'s code (arfi.validation.fdtd) on the same
 scenario. Writes ``benches/results/fdtd_scenarios.json`` (merged: one entry per case and points
 per wavelength), which ``python/tests/test_fullwave_reference.py`` reads.
 
@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 import arfi
-from arfi import _core, fullwave
+from arfi import _core
+from arfi.validation import fdtd
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / "results" / "fdtd_scenarios.json"
@@ -59,7 +60,7 @@ def run(name: str, ppw: float) -> dict:
         toml = solid(case.scenario_toml) if name == "bm3_solid" else case.scenario_toml
         sim = arfi.Simulation(arfi.Scenario.from_toml(toml, base_dir=d))
         march = sim.field(volume=True)
-        r = fullwave.run(sim, march, None, fullwave.FdtdOptions(points_per_wavelength=ppw), progress=print)
+        r = fdtd.run(sim, march, None, fdtd.FdtdOptions(points_per_wavelength=ppw), progress=print)
         f = sim.field_from_volume(r.plane, r.z_mm, r.axis, r.magnitude)
     p0 = f.surface_pressure_pa
     fm, mm = f.focus(), march.focus()
@@ -90,8 +91,8 @@ def run(name: str, ppw: float) -> dict:
         "axis_read": "rms",
         "exact_line_z_mm_fdtd_p0": np.round(line[keep], 4).tolist(),
         "fdtd": {
-            "engine": fullwave.ENGINE,
-            "engine_version": fullwave.ENGINE_VERSION,
+            "engine": fdtd.ENGINE,
+            "engine_version": fdtd.ENGINE_VERSION,
             "voxel_mm": r.plan.h_m * 1e3,
             "shape_xyz": list(r.plan.shape),
             "steps": r.plan.steps,

@@ -14,12 +14,13 @@ Quick start::
 """
 
 from arfi._core import MemoryLimitError, ModeFit, ModesFit
+from arfi.analysis.loop import LoopResult, loop2
+from arfi.analysis.prediction import Prediction, predict
+from arfi.analysis.prediction_estimate import PredictionEstimate, estimate_with_prediction
 from arfi.cost import CostModel, CostTerm
 from arfi.estimation import Calibration, Estimate, EstimateOptions, EstimateSupport, NextAcquisition, NuisanceFit
-from arfi.io import read_arfi_image, read_phases, write_arfi_image
-from arfi.loop import LoopResult, loop2
-from arfi.prediction import Prediction, predict
-from arfi.prediction_estimate import PredictionEstimate, estimate_with_prediction
+from arfi.io.files import read_arfi_image, read_phases, write_arfi_image
+from arfi.io.volume import IntensityVolume, PressureVolume
 from arfi.scenario import Scenario
 from arfi.simulation import (
     Field,
@@ -32,7 +33,6 @@ from arfi.simulation import (
     Section,
     Simulation,
 )
-from arfi.volume import IntensityVolume, PressureVolume
 
 __all__ = [
     "Grid",

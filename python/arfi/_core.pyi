@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from arfi.io.volume import IntensityVolume, PressureVolume
 from arfi.simulation import Simulation
-from arfi.volume import IntensityVolume, PressureVolume
 
 def contiguous_groups(n_elements: int, groups: int) -> NDArray[np.int64]: ...
 def effect_library() -> tuple[list[str], list[tuple[str, str, str]]]: ...

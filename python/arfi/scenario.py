@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from arfi import _core
-from arfi.io import atomic_write_text
+from arfi.io.files import atomic_write_text
 
 
 class Scenario:

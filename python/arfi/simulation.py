@@ -10,13 +10,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
+from arfi._core import Diagnosis
 from arfi.checks import as_count, as_image, as_number, as_phases, as_point_mm, real_array
 from arfi.cost import CostModel
-from arfi.diagnose import Diagnosis
 from arfi.estimation import Calibration, Estimate
+from arfi.io.volume import PressureVolume
 from arfi.progress import callback
 from arfi.scenario import Scenario
-from arfi.volume import PressureVolume
 
 #: One MR-ARFI image (2-D, or a list of rows) or several (a sequence of 2-D arrays, or a 3-D stack).
 Images = ArrayLike | Sequence[ArrayLike]
@@ -550,7 +550,7 @@ class Simulation:
         added, one amplitude scale fitted, by Gauss-Newton with the images' exact derivatives along
         each mode (one batch march of every image and its derivatives per iteration, a few
         iterations). Meant for a CT prediction's pose and bone-speed modes on the head with the
-        CT's bone (:mod:`arfi.prior_modes`). Returns ``coefficients``, ``std`` and
+        CT's bone (:mod:`arfi.analysis.prior_modes`). Returns ``coefficients``, ``std`` and
         ``covariance`` (posterior), ``scale``, ``misfit`` and ``misfit_at_zero`` (chi-squared per
         pixel at the fit and with every coefficient zero), ``n_pixels``, ``noise_rad``,
         ``iterations`` and ``converged``. ``noise_rad``: the images' noise where it is known, as
@@ -578,7 +578,7 @@ class Simulation:
         per element or group; None = none). Names the effects missing from this model, in order,
         with their fitted parameters, until the residual is consistent with the noise of the
         image backgrounds. ``effects`` limits the library (default: all of
-        ``arfi.diagnose.EFFECTS``); ``threshold`` is the evidence (BIC gain, in units of the noise
+        ``arfi.analysis.diagnose.EFFECTS``); ``threshold`` is the evidence (BIC gain, in units of the noise
         variance) an effect needs, 0 being the plain BIC. ``max_iterations`` bounds each candidate's
         Nelder–Mead fit; after ``time_limit_s`` the effects added so far are returned with
         ``stop == "time limit"``. Ctrl-C stops the run within a second."""
@@ -599,7 +599,7 @@ class Simulation:
     ) -> list[NDArray[np.float64]]:
         """The model's MR-ARFI images (rad) with effects of the diagnosis library applied:
         ``effects`` maps parameter names, exactly as ``diagnose`` reports them, to values
-        (``arfi.diagnose.PARAMETERS`` lists them with their meaning: ``scale``,
+        (``arfi.analysis.diagnose.PARAMETERS`` lists them with their meaning: ``scale``,
         ``broadening_width_mm``, ``broadening_width_u_mm`` / ``broadening_width_v_mm``,
         ``dx_mm``, ``dz_mm``, ``group_phases_rad``, ``dead_groups``, ...); one image per entry of
         ``known``. A diagnosis's ``params`` fed back here give its model images."""

@@ -30,8 +30,8 @@ import nibabel as nib
 import numpy as np
 import pytest
 
+from arfi.analysis.prediction import predict
 from arfi.cli import main
-from arfi.prediction import predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

@@ -388,7 +388,8 @@ def test_fit_figures_crop_to_the_focal_spot_and_carry_a_warning(tmp_path):
     # box holds the spot and is far smaller than the field of view; a flagged estimate's warning
     # heads its page.
     import arfi
-    from arfi.report import fit_report, focal_box_mm, image_extent_mm
+    from arfi.reports.figures import focal_box_mm, image_extent_mm
+    from arfi.reports.html import fit_report
 
     sim = arfi.Simulation()
     image = sim.arfi_image(noise_rad=0.02, seed=1)
@@ -429,7 +430,7 @@ def test_the_reports_noise_and_lobe_come_from_the_core():
 def test_image_axes_follow_the_mr_plane():
     from types import SimpleNamespace
 
-    from arfi.report import axis_labels, image_extent_mm
+    from arfi.reports.figures import axis_labels, image_extent_mm
 
     a = np.eye(4)
     a[0, 0], a[2, 2], a[0, 3], a[2, 3] = 2.0, 0.5, -10.0, 80.0  # xz image: u along x, v along z

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from arfi.cli import main
-from arfi.phantom import head_phantom, placement
+from arfi.io.phantom import head_phantom, placement
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

@@ -8,7 +8,7 @@ import pytest
 
 import arfi
 from arfi.cli import main
-from arfi.io import write_arfi_image
+from arfi.io.files import write_arfi_image
 
 # The effects that act on the image alone (no march per evaluation), for tests of the bindings.
 IMAGE_SPACE = [
@@ -188,13 +188,13 @@ def test_reported_params_fed_to_effect_images_give_the_fitted_images(sim, effect
 def test_effect_images_names_the_known_parameters_when_one_is_unknown(sim):
     with pytest.raises(ValueError, match='unknown parameter "width_mm".*broadening_width_u_mm'):
         sim.effect_images({"width_mm": 2.0})
-    assert set(arfi.diagnose.PARAMETERS) >= {
+    assert set(arfi.analysis.diagnose.PARAMETERS) >= {
         "broadening_width_u_mm",
         "broadening_width_v_mm",
         "dead_groups",
         "group_phases_rad",
     }
-    assert {e for e, _ in arfi.diagnose.PARAMETERS.values()} == set(arfi.diagnose.EFFECTS)
+    assert {e for e, _ in arfi.analysis.diagnose.PARAMETERS.values()} == set(arfi.analysis.diagnose.EFFECTS)
 
 
 def test_effect_images_take_the_old_sound_speed_name_with_a_deprecation(sim) -> None:
@@ -204,4 +204,4 @@ def test_effect_images_take_the_old_sound_speed_name_with_a_deprecation(sim) -> 
     with pytest.warns(DeprecationWarning, match="sound_speed_m_per_s' is now 'sound_speed_m_s'"):
         old = sim.effect_images({"sound_speed_m_per_s": 1600.0})
     np.testing.assert_array_equal(new[0], old[0])
-    assert "sound_speed_m_s" in arfi.diagnose.PARAMETERS
+    assert "sound_speed_m_s" in arfi.analysis.diagnose.PARAMETERS

@@ -12,7 +12,7 @@ from pydicom.uid import ExplicitVRLittleEndian, MRImageStorage, generate_uid
 
 import arfi
 from arfi.cli import main
-from arfi.dicom import read_dicom_arfi
+from arfi.io.dicom import read_dicom_arfi
 
 # A rigid transform patient (LPS, mm) -> transducer frame: patient z -> frame x, patient y ->
 # frame -y, patient x -> frame z, and a translation.

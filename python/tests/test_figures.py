@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import matplotlib
 import numpy as np
 
-from arfi.report import BEAM_FLOOR, BEAM_OPAQUE, beam_rgba, element_map, pyplot, section_figure
+from arfi.reports.figures import BEAM_FLOOR, BEAM_OPAQUE, beam_rgba, element_map, pyplot, section_figure
 
 
 def test_the_beam_fades_with_its_amplitude_instead_of_vanishing_below_a_threshold() -> None:

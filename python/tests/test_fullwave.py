@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import arfi
-from arfi import fullwave
 from arfi.cli import main
+from arfi.validation import fdtd
 
 SMALL_BOWL = """
 name = "small bowl in water"
@@ -75,12 +75,12 @@ def test_a_volume_of_the_wrong_size_is_refused_naming_it(sim):
 def test_lagrange_weights_are_exact_for_cubics_and_pick_a_node_on_it():
     rng = np.random.default_rng(3)
     t = rng.uniform(2, 20, 200)
-    base, w = fullwave._lagrange(t)
+    base, w = fdtd._lagrange(t)
     nodes = base[:, None] + np.arange(4)[None, :]
     for coeffs in ([1, 0, 0, 0], [0.3, -2, 0.1, 0.05]):
         poly = np.polynomial.Polynomial(coeffs)
         assert np.allclose((w * poly(nodes)).sum(axis=1), poly(t), rtol=1e-10, atol=1e-9)
-    base, w = fullwave._lagrange(np.array([7.0]))
+    base, w = fdtd._lagrange(np.array([7.0]))
     assert base[0] + np.argmax(w[0]) == 7 and w[0].max() == 1.0
 
 
@@ -88,21 +88,21 @@ def test_the_plan_resolves_the_shortest_wavelength_and_holds_the_beam(tmp_path):
     sim, _ = small_sim(tmp_path)
     f = sim.field(volume=True)
     for ppw in (6.0, 9.0):
-        p = fullwave.plan(sim, f, fullwave.FdtdOptions(points_per_wavelength=ppw))
+        p = fdtd.plan(sim, f, fdtd.FdtdOptions(points_per_wavelength=ppw))
         assert p.h_m <= 1500.0 / 250e3 / ppw * (1 + 1e-9)
         assert p.dt_s * p.steps_per_period == pytest.approx(4e-6)
         # The focus and the source plane's aperture lie inside the box, away from its layer.
         lo = np.array(p.origin_m) + (p.pml_cells + 2) * p.h_m
         hi = np.array(p.origin_m) + (np.array(p.shape) - p.pml_cells - 3) * p.h_m
         assert (lo[:2] < -0.018).all() and (hi[:2] > 0.018).all() and lo[2] <= f.axis_z_mm[0] * 1e-3 < 0.04 < hi[2]
-        assert p.seconds > 0 and p.memory_bytes == p.voxels * fullwave.BYTES_PER_VOXEL
+        assert p.seconds > 0 and p.memory_bytes == p.voxels * fdtd.BYTES_PER_VOXEL
         assert "voxels of" in p.describe() and "about" in p.describe()
     with pytest.raises(ValueError, match="points_per_wavelength"):
-        fullwave.FdtdOptions(points_per_wavelength=2.0)
+        fdtd.FdtdOptions(points_per_wavelength=2.0)
 
 
 def test_without_the_engine_fdtd_is_one_line_and_nothing_written(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(fullwave, "engine_available", lambda: False)
+    monkeypatch.setattr(fdtd, "engine_available", lambda: False)
     out = tmp_path / "f.npz"
     assert main(["field", "--engine", "fdtd", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
@@ -111,8 +111,8 @@ def test_without_the_engine_fdtd_is_one_line_and_nothing_written(tmp_path, monke
 
 
 def test_a_grid_beyond_the_memory_is_refused_before_running(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(fullwave, "engine_available", lambda: True)
-    monkeypatch.setattr(fullwave, "available_memory_bytes", lambda: 50_000_000)
+    monkeypatch.setattr(fdtd, "engine_available", lambda: True)
+    monkeypatch.setattr(fdtd, "available_memory_bytes", lambda: 50_000_000)
     _, scenario = small_sim(tmp_path)
     out, js = tmp_path / "f.npz", tmp_path / "f.json"
     assert main(["field", "--engine", "fdtd", "--scenario", scenario, "--out", str(out), "--json", str(js)]) == 2
@@ -246,7 +246,7 @@ def test_an_impossible_shear_wave_is_one_line_and_exit_2(tmp_path, capsys, cs, a
 
 
 def test_ct_bone_shear_follows_the_solid_fraction_and_is_bounded_by_the_dense_bone(tmp_path, capsys):
-    from arfi.io import write_volume
+    from arfi.io.files import write_volume
 
     # A layer of 1000 HU (porosity 0.5 in the default conversion) from z = 20 to 40 mm in water.
     affine = np.eye(4)

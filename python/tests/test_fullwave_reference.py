@@ -89,16 +89,16 @@ def test_the_engine_run_through_arfi_agrees_with_the_exact_solution(row, exact):
 
 
 def test_the_head_reference_is_scaled_by_an_engine_error_that_the_exact_shell_confirms():
-    # arfi validate's head220 (arfi.validation_head): the engine's run at 6 points per wavelength
+    # arfi validate's head220 (arfi.validation.fullwave_head): the engine's run at 6 points per wavelength
     # scaled by its own error there, measured from two voxel sizes (second-order convergence). The
     # same engine at the same points per wavelength puts the exact cortical shell's focus 10.4 %
-    # too high (arfi/data/fullwave_caps.json): two measures of its error, on different media, agree
+    # too high (arfi/validation/data/fullwave_caps.json): two measures of its error, on different media, agree
     # within 2 % (measured 0.896 against 0.906), and both runs settled.
-    from arfi import validation_fullwave, validation_head
+    from arfi.validation import fullwave_caps, fullwave_head
 
-    head = validation_head.reference()
+    head = fullwave_head.reference()
     factor = head["reference"]["grid_factor"]
-    shell = validation_fullwave.grid_correction(validation_fullwave.references())
+    shell = fullwave_caps.grid_correction(fullwave_caps.references())
     assert abs(factor / shell - 1) <= 0.02, (factor, shell)
     assert [r["points_per_wavelength"] for r in head["runs"]] == [6.0, 5.0]
     assert all(r["fdtd"]["steady_change"] < 0.01 for r in head["runs"])
@@ -112,14 +112,14 @@ def test_the_head_comparison_reports_a_moved_focus_and_refuses_another_grid(tmp_
     # A march whose focus moved aside still gets its row (the plane and the axis are taken on the
     # reference's samples, not about the march's own focus); a reference on other samples is one
     # ValueError.
-    from arfi import validation_head
+    from arfi.validation import fullwave_head
 
-    ref = validation_head.reference()["reference"]
-    path, _ = validation_head.write_inputs(tmp_path)
-    march, _ = validation_head.march_parts(path)
+    ref = fullwave_head.reference()["reference"]
+    path, _ = fullwave_head.write_inputs(tmp_path)
+    march, _ = fullwave_head.march_parts(path)
     for dx in (-3.0, 3.0):
         moved = {**march, "focal_point_mm": [march["focal_point_mm"][0] + dx, *march["focal_point_mm"][1:]]}
-        m = validation_head.metrics(moved, ref)
+        m = fullwave_head.metrics(moved, ref)
         assert (
             abs(
                 abs(m["focal_position_error_mm"])
@@ -134,4 +134,4 @@ def test_the_head_comparison_reports_a_moved_focus_and_refuses_another_grid(tmp_
         )
     shifted = {**ref, "plane_x_mm": [v + 0.3 for v in ref["plane_x_mm"]]}
     with pytest.raises(ValueError, match="plane"):
-        validation_head.metrics(march, shifted)
+        fullwave_head.metrics(march, shifted)

@@ -23,7 +23,7 @@ from hypothesis.extra import numpy as hnp
 
 import arfi
 from arfi import cli
-from arfi.io import read_arfi_image, read_phases, write_arfi_image
+from arfi.io.files import read_arfi_image, read_phases, write_arfi_image
 
 TRIED: Counter[str] = Counter()
 DEADLINE = timedelta(seconds=60)

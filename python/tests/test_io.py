@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from arfi import io
+from arfi.io import files
 
 
 def mode(path) -> int:
@@ -33,10 +33,10 @@ def test_a_new_file_gets_the_mode_open_would_give_it(tmp_path, umask, mask):
     with open(reference, "w") as f:
         f.write("x")
     written = tmp_path / "written.json"
-    io.write_json(written, {"a": 1})
+    files.write_json(written, {"a": 1})
     assert mode(written) == mode(reference) == 0o666 & ~mask
     nifti = tmp_path / "v.nii.gz"
-    io.write_volume(nifti, np.zeros((2, 3, 4)), np.eye(4), "test")
+    files.write_volume(nifti, np.zeros((2, 3, 4)), np.eye(4), "test")
     assert mode(nifti) == 0o666 & ~mask
 
 
@@ -46,7 +46,7 @@ def test_a_rewritten_file_keeps_its_own_mode(tmp_path, umask):
     path = tmp_path / "shared.txt"
     path.write_text("old")
     os.chmod(path, 0o660)
-    io.atomic_write_text(path, "new")
+    files.atomic_write_text(path, "new")
     assert path.read_text() == "new" and mode(path) == 0o660
 
 

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from arfi.loop import loop2, robust_focal
+from arfi.analysis.loop import loop2, robust_focal
 
 NOISE = 0.02
 

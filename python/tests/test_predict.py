@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from arfi.analysis.prediction import DRIVE_LABELS, compared_drives, compared_section, focal_metrics, predict
 from arfi.cli import main
-from arfi.prediction import DRIVE_LABELS, compared_drives, compared_section, focal_metrics, predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import arfi
-from arfi.prior_modes import PriorMode
+from arfi.analysis.prior_modes import PriorMode
 
 
 def test_a_transmission_drives_the_model_and_the_result_says_what_it_used(sim, ideal):
@@ -67,7 +67,7 @@ def test_bad_requests_name_the_parameter_as_the_caller_knows_it(sim, ideal, monk
         (dict(options=prior, groups=n, pose_std_deg=-1.0), "pose_std_deg: must be a finite number >= 0"),
         (dict(options=prior, groups=n, bone_speed_std_percent=20.0), "bone_speed_std_percent: needs prediction"),
         (dict(options=prior, groups=n, modes=[mode]), r"modes: needs a \[ct\] scenario"),
-        (dict(options=prior, groups=n, modes=["x"]), "modes: must be arfi.prior_modes.PriorMode"),
+        (dict(options=prior, groups=n, modes=["x"]), "modes: must be arfi.analysis.prior_modes.PriorMode"),
         (dict(options={"method": "lbfgs"}), "options: must be an arfi.EstimateOptions"),
         (dict(calibration={"broadening_width_mm": 2.7}), "calibration: must be an arfi.Calibration"),
         (dict(calibration=arfi.Calibration(2.7, 1e-6, scenario="other")), 'calibration: made for scenario "other"'),

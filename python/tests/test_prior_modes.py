@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from arfi import prior_modes
+from arfi.analysis import prior_modes
+from arfi.analysis.prediction import predict
 from arfi.cli import main
-from arfi.prediction import predict
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -138,7 +138,7 @@ def images_with_modes(head: Path, d: Path, modes: np.ndarray, c: np.ndarray) -> 
     for k, dz in enumerate((0.0, 5.0, -5.0)):
         known = skull.focus_shift_phases((0.0, 0.0, dz))
         image = skull.arfi_image(known + c @ modes, 0.02, k + 1)
-        from arfi.io import write_arfi_image
+        from arfi.io.files import write_arfi_image
 
         write_arfi_image(
             d / f"m{k}.nii.gz", image, skull.mr_affine_mm, skull.mr_volume_shape, {"applied_phases_rad": known.tolist()}
@@ -236,7 +236,7 @@ def test_bad_modes_are_one_line_and_exit_2_with_nothing_written(head, tmp_path, 
         extra = ["--prior-pose-std-mm", "-1"]
     # Any image of the scenario's geometry: the refusal comes before the images are fitted.
     skull = Simulation(Scenario.load(head / "model.toml"))
-    from arfi.io import write_arfi_image
+    from arfi.io.files import write_arfi_image
 
     write_arfi_image(tmp_path / "a.nii.gz", skull.arfi_image(), skull.mr_affine_mm, skull.mr_volume_shape)
     out, js = tmp_path / "e.npy", tmp_path / "e.json"
@@ -318,7 +318,7 @@ def test_simulate_steering_from_a_prediction(head, tmp_path, capsys):
         )
         == 0
     )
-    from arfi.io import read_arfi_image
+    from arfi.io.files import read_arfi_image
 
     a, b = (read_arfi_image(p)[0] for p in out)
     assert np.allclose(a, b, atol=1e-5, equal_nan=True)

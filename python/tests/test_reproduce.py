@@ -2,9 +2,9 @@ import json
 
 import pytest
 
+from arfi.analysis.ladder import RUNGS
+from arfi.analysis.reproduce import run_study
 from arfi.cli import main
-from arfi.ladder import RUNGS
-from arfi.reproduce import run_study
 
 
 def test_reproduce_writes_table_figures_report_and_the_ladder(tmp_path, capsys):

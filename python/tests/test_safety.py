@@ -1,4 +1,4 @@
-"""Safety lines (:mod:`arfi.safety`): exposures above the limits a user sets are named, with the
+"""Safety lines (:mod:`arfi.analysis.safety`): exposures above the limits a user sets are named, with the
 place and the tissue, in ``arfi field``'s summary and JSON; within them nothing is printed."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import pytest
 
+from arfi.analysis.safety import exceeded, summary
 from arfi.cli import main
-from arfi.safety import exceeded, summary
 
 
 def test_each_exposure_above_its_limit_is_named_by_place_and_tissue():

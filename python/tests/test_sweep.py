@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from distributed import LocalCluster  # a test dependency (pyproject's [test]): missing is a failure
 
+from arfi.analysis.sweep import Trial, TrialResult, run_trial, summarise, trials
 from arfi.cli import main
-from arfi.sweep import Trial, TrialResult, run_trial, summarise, trials
 
 
 def test_local_cluster_sweep_writes_table_summary_and_plot(tmp_path, capsys):

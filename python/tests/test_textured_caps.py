@@ -1,5 +1,5 @@
-"""The textured caps (arfi.textured_caps) and their comparison with stored full-wave results
-(arfi.validation_fullwave).
+"""The textured caps (arfi.validation.textured_caps) and their comparison with stored full-wave results
+(arfi.validation.fullwave_caps).
 
 The CT must be the same on every machine, since the stored references were computed on it once:
 the random field comes from splitmix64, checked against its published first outputs (Vigna's
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import arfi
-from arfi import textured_caps as tc
-from arfi import validation_fullwave as vf
+from arfi.validation import fullwave_caps as vf
+from arfi.validation import textured_caps as tc
 
 
 def test_splitmix64_gives_its_published_outputs():
@@ -174,11 +174,11 @@ def test_the_comparison_reads_x_and_y_the_right_way_round_and_each_metric_can_fa
 
 
 def test_validate_without_the_stored_references_says_so_before_running_anything(tmp_path, monkeypatch):
-    from arfi import validation
+    from arfi.validation import suite
 
     monkeypatch.setattr(vf, "REFERENCES", tmp_path / "none.json")
     with pytest.raises(ValueError, match="no stored full-wave references .*caps_fdtd.py"):
-        validation.run(["water", "cap_uniform"], progress=lambda name: pytest.fail(f"{name} ran"))
+        suite.run(["water", "cap_uniform"], progress=lambda name: pytest.fail(f"{name} ran"))
 
 
 def test_each_stored_reference_was_made_on_the_ct_written_today():

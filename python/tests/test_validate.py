@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from arfi import validation
+from arfi.validation import suite
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
@@ -45,10 +45,10 @@ def test_the_exit_status_says_whether_every_case_passed(tmp_path, monkeypatch, c
     assert r.returncode == 0 and result["passed"] is True and "FAIL" not in r.stdout, r.stdout
     # The same run with one case failing: exit 1, the case named FAIL in its row and the summary,
     # and the JSON's "passed" false.
-    water = validation.run(["water"])[0]
+    water = suite.run(["water"])[0]
     failing = SimpleNamespace(**{k: getattr(water, k) for k in dir(water) if not k.startswith("_")})
     failing.name, failing.passed = "water", False
-    monkeypatch.setattr(validation, "run", lambda cases, progress=None: [water, failing])
+    monkeypatch.setattr(suite, "run", lambda cases, progress=None: [water, failing])
     assert main(["validate", "--case", "water", "--json", str(tmp_path / "f.json")]) == 1
     out = capsys.readouterr().out
     assert "| FAIL |" in out and "1 of 2 cases pass (water fail)" in out
@@ -60,8 +60,8 @@ def test_a_tilted_plate_is_held_to_its_own_tolerances_and_says_so(tmp_path):
     case = json.loads((tmp_path / "v.json").read_text())["cases"][0]
     own = case["tolerances"]
     # Looser than the suite's (the march's measured accuracy on bone met obliquely), and printed.
-    assert own["focal_pressure"] > validation.TOLERANCES["focal_pressure"]
-    assert own["focal_position_mm"] > validation.TOLERANCES["focal_position_mm"]
+    assert own["focal_pressure"] > suite.TOLERANCES["focal_pressure"]
+    assert own["focal_position_mm"] > suite.TOLERANCES["focal_position_mm"]
     assert (
         f"(±{100 * own['focal_pressure']:.0f} %)" in r.stdout
         and "A tolerance in brackets is the case's own" in r.stdout
@@ -90,7 +90,7 @@ def test_an_unknown_case_or_an_out_that_is_a_file_is_one_line_and_exit_2(tmp_pat
         r.returncode == 2 and r.stderr.strip() == f"arfi: error: --out: {tmp_path / 'file'} exists and is not a folder"
     )
     with pytest.raises(ValueError, match="cases: unknown bm9"):
-        validation.run(["bm9"])
+        suite.run(["bm9"])
 
 
 def _rows(md: str) -> dict[str, list[Any]]:
@@ -102,7 +102,7 @@ def _rows(md: str) -> dict[str, list[Any]]:
     for line in md.splitlines():
         raw = [c.strip() for c in line.strip().strip("|").split("|")]
         cells = [re.sub(r"\(.*?\)", "", c).strip() for c in raw]
-        if len(cells) == 9 and cells[0] in validation.CASES:
+        if len(cells) == 9 and cells[0] in suite.CASES:
             found = re.findall(r"[-+]?\d+\.\d+", " ".join(cells[1:8]))
             numbers = [(float(v), 10.0 ** -len(v.split(".")[1])) for v in found]
             own = re.findall(r"\(.*?\)", " ".join(raw[1:8]))
@@ -116,9 +116,9 @@ def test_the_documented_table_is_what_the_suite_prints_now():
     from pathlib import Path
 
     doc = (Path(__file__).parents[2] / "docs" / "validation.md").read_text(encoding="utf-8")
-    documented, now = _rows(doc), _rows(validation.table(validation.run()))
-    assert set(documented) == set(validation.CASES) == set(now)
-    for case in validation.CASES:
+    documented, now = _rows(doc), _rows(suite.table(suite.run()))
+    assert set(documented) == set(suite.CASES) == set(now)
+    for case in suite.CASES:
         for (d, unit), (n, _) in zip(documented[case][:-2], now[case][:-2]):
             assert abs(d - n) <= 1.01 * unit, f"{case}: documented {documented[case]}, now {now[case]}"
         # The case's own tolerances, in brackets, and whether it passed, exactly.

@@ -278,7 +278,7 @@ def test_a_gzipped_volume_is_written_in_parallel_members_that_every_reader_reads
     # multi-member files) and nibabel read back every value.
     import gzip
 
-    from arfi.io import ParallelGzip, save_nifti
+    from arfi.io.files import ParallelGzip, save_nifti
 
     monkeypatch.setattr(ParallelGzip, "BLOCK", 1000)
     data = np.random.default_rng(0).random((20, 30, 40), dtype=np.float32)
@@ -332,12 +332,12 @@ def test_a_field_whose_volume_does_not_fit_is_refused_and_arfi_field_goes_on_wit
 
 
 def test_a_failed_gzip_leaves_no_file(tmp_path, monkeypatch):
-    import arfi.io
+    import arfi.io.files
 
     def broken(block: bytes) -> bytes:
         raise OSError("disk full")
 
-    monkeypatch.setattr(arfi.io, "gzip_member", broken)
+    monkeypatch.setattr(arfi.io.files, "gzip_member", broken)
     with pytest.raises(OSError, match="disk full"):
-        arfi.io.save_nifti(tmp_path / "v.nii.gz", np.zeros((4, 5, 6), dtype=np.float32), np.eye(4), "test")
+        arfi.io.files.save_nifti(tmp_path / "v.nii.gz", np.zeros((4, 5, 6), dtype=np.float32), np.eye(4), "test")
     assert list(tmp_path.iterdir()) == []

@@ -227,7 +227,7 @@ impl CoreField {
                 _ => (unsafe { borrowed_grid_arrays(grid, magnitude, slf.clone().into_any()) }?, "transducer"),
             }
         };
-        py.import("arfi.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
+        py.import("arfi.io.volume")?.getattr("PressureVolume")?.call1((pressure, affine, frame))
     }
 
     /// The pulse-average intensity I = |p|² / (2·ρ·c) (W/cm²; its largest value is I_SPPA) of
@@ -251,7 +251,7 @@ impl CoreField {
             let affine = window_affine(grid, &window);
             (grid_arrays(py, PressureVolume { window, pressure: values, affine }), "transducer")
         };
-        py.import("arfi.volume")?.getattr("IntensityVolume")?.call1((intensity, affine, frame))
+        py.import("arfi.io.volume")?.getattr("IntensityVolume")?.call1((intensity, affine, frame))
     }
 
     /// Writes [`pressure_volume`](Self::pressure_volume)`(box_mm, in_ct)` as NIfTI (`.nii` or

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     sim = Simulation(scenario)
     c = sim.calibrate(image, known, args.max_width_mm)
     if args.report:
-        from arfi.report import fit_report
+        from arfi.reports.html import fit_report
 
         model = sim.calibrated(c).arfi_image(known)
         page = fit_report(args.report, sim, "calibrate", image, model, {"image": args.image, **c.to_dict()})

@@ -12,7 +12,7 @@ import numpy as np
 
 from arfi import _core
 from arfi.estimation import METHODS, Calibration
-from arfi.io import read_arfi_image, read_phases, write_json
+from arfi.io.files import read_arfi_image, read_phases, write_json
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -173,7 +173,7 @@ def npy_path(path: str, option: str) -> str:
 
 def save_npy(path: str, array: np.ndarray) -> None:
     """Writes a .npy file atomically (``path`` checked with :func:`npy_path`)."""
-    from arfi.io import atomic_path
+    from arfi.io.files import atomic_path
 
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:

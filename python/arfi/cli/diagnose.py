@@ -60,7 +60,8 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.diagnose import EFFECTS, params_text, write_report
+    from arfi.analysis.diagnose import EFFECTS
+    from arfi.reports.diagnose import params_text, write_report
 
     t = time.perf_counter()
     effects = None

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from arfi.cli.common import add_common, finish, load_scenario
-from arfi.io import arfi_image_path, read_phases, write_arfi_image
+from arfi.io.files import arfi_image_path, read_phases, write_arfi_image
 
 
 def register(sub: Any) -> None:
@@ -61,7 +61,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.dicom import read_dicom_arfi, read_transform
+    from arfi.io.dicom import read_dicom_arfi, read_transform
 
     out = args.out
     arfi_image_path(out)  # before reading the series

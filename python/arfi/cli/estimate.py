@@ -7,7 +7,8 @@ import sys
 import time
 from typing import Any
 
-from arfi import prior_modes
+from arfi.analysis import prior_modes
+from arfi.analysis.prediction_estimate import estimate_with_prediction
 from arfi.cli.common import (
     UsageError,
     add_calibration,
@@ -24,8 +25,7 @@ from arfi.cli.common import (
     read_optional_phases,
     save_npy,
 )
-from arfi.io import read_phases
-from arfi.prediction_estimate import estimate_with_prediction
+from arfi.io.files import read_phases
 
 
 def register(sub: Any) -> None:
@@ -424,7 +424,7 @@ def run(args: argparse.Namespace) -> int:
     if args.suggest:
         save_npy(args.suggest, e.suggested_phases_rad)
     if args.report:
-        from arfi.report import fit_report
+        from arfi.reports.html import fit_report
 
         image, known = pairs[0]
         model = sim.arfi_image(

@@ -11,13 +11,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from arfi._core import MemoryLimitError
+from arfi.analysis.focal import metrics_text
+from arfi.analysis.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
 from arfi.cli.common import add_common, add_report, finish, load_scenario, read_checked_phases
-from arfi.focal import metrics_text
-from arfi.fullwave import ENGINE_VERSION, FdtdOptions, FdtdResult
-from arfi.io import npz_path, volume_path, write_npz
-from arfi.safety import ISPPA_LIMIT_W_CM2, MI_LIMIT, check_limit, exceeded, summary
+from arfi.io.files import npz_path, volume_path, write_npz
+from arfi.io.volume import IntensityVolume, PressureVolume
 from arfi.simulation import Field, Simulation
-from arfi.volume import IntensityVolume, PressureVolume
+from arfi.validation.fdtd import ENGINE_VERSION, FdtdOptions, FdtdResult
 
 
 def register(sub: Any) -> None:
@@ -255,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
     limits = check_limit(args.mi_limit, "--mi-limit"), check_limit(args.isppa_limit_w_cm2, "--isppa-limit-w-cm2")
     fdtd_options = None
     if args.engine == "fdtd":
-        from arfi.fullwave import require_engine
+        from arfi.validation.fdtd import require_engine
 
         require_engine()
         try:
@@ -286,10 +286,10 @@ def run(args: argparse.Namespace) -> int:
             raise
         f, skipped = sim.field(phases, args.z_mm), str(e)
     if fdtd_options is not None:
-        from arfi import fullwave
+        from arfi.validation.fdtd import run as run_fdtd
 
         march = f
-        fdtd = fullwave.run(sim, march, phases, fdtd_options, progress=lambda m: print(m, flush=True))
+        fdtd = run_fdtd(sim, march, phases, fdtd_options, progress=lambda m: print(m, flush=True))
         f = sim.field_from_volume(fdtd.plane, fdtd.z_mm, fdtd.axis, fdtd.magnitude)
     # The volumes (from the field's own march) before anything is written: a box outside the
     # grid leaves no file behind.
@@ -337,7 +337,7 @@ def run(args: argparse.Namespace) -> int:
     }
     print("\n".join(lines))
     if args.report:
-        from arfi.report import field_report
+        from arfi.reports.html import field_report
 
         safety = (
             summary(rows) if rows else f"within the safety lines (MI <= {limits[0]:g}, I_SPPA <= {limits[1]:g} W/cm²)"

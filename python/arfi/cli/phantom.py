@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from arfi.cli.common import finish
-from arfi.io import atomic_write_text
+from arfi.io.files import atomic_write_text
 
 
 def register(sub: Any) -> None:
@@ -61,7 +61,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.phantom import array_focus_mm, head_phantom, placement, scenario_for
+    from arfi.io.phantom import array_focus_mm, head_phantom, placement, scenario_for
     from arfi.scenario import Scenario
 
     t = time.perf_counter()

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from arfi.analysis.focal import metrics_text
+from arfi.analysis.prediction import compared_section, drive_labels, focal_metrics, predict
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
-from arfi.focal import metrics_text
-from arfi.prediction import compared_section, drive_labels, focal_metrics, predict
 
 
 def register(sub: Any) -> None:
@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         result["focal_metrics"] = {name: m.to_dict() for name, m in metrics.items()}
         result["focal_metrics_seconds"] = metrics_seconds
     if args.report:
-        from arfi.report import predict_report
+        from arfi.reports.html import predict_report
 
         page = predict_report(
             args.report,

@@ -58,8 +58,8 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.ladder import summary_line
-    from arfi.reproduce import run_study
+    from arfi.analysis.ladder import summary_line
+    from arfi.analysis.reproduce import run_study
 
     if args.scenario:
         raise UsageError("arfi reproduce: runs on the embedded scenario (the paper's phantom); --scenario is not taken")

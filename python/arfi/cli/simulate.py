@@ -19,7 +19,7 @@ from arfi.cli.common import (
     prediction_json,
     read_checked_phases,
 )
-from arfi.io import arfi_image_path, write_arfi_image
+from arfi.io.files import arfi_image_path, write_arfi_image
 from arfi.simulation import Simulation
 
 
@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     write_arfi_image(out, image, sim.mr_affine_mm, sim.mr_volume_shape, sidecar)
     peak, pos = image_peak(sim, image)
     if args.report:
-        from arfi.report import image_report
+        from arfi.reports.html import image_report
 
         page = image_report(
             args.report,

@@ -57,7 +57,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.sweep import run_sweep, sweep_json, trials, write_results
+    from arfi.analysis.sweep import run_sweep, sweep_json, trials, write_results
 
     points = trials(args.noise_levels, args.images, args.methods, args.seeds, args.case, args.seed)
     scenario = Scenario.load(args.scenario) if args.scenario else None

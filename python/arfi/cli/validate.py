@@ -48,8 +48,8 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arfi.validation import case_json, check_cases, table, write_report
-    from arfi.validation import run as run_suite
+    from arfi.validation.suite import case_json, check_cases, table, write_report
+    from arfi.validation.suite import run as run_suite
 
     cases = check_cases(args.cases, "--case")
     if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from arfi.io import write_volume
+from arfi.io.files import write_volume
 
 
 class _OnVoxels:

@@ -1,6 +1,6 @@
 """``arfi sweep``: Monte-Carlo studies of the hybrid estimate on a dask.distributed cluster.
 
-Every trial is one repeat of the paper's study (``arfi.reproduce``) at one noise level, number
+Every trial is one repeat of the paper's study (``arfi.analysis.reproduce``) at one noise level, number
 of images (the aberrated one plus diversity images with seeded random known group phases),
 estimator and seed: calibrate on a noisy no-aberration image, estimate, correct, and score the
 corrected focus (recovered fraction, gain, phase error) on noise-free images. Trials are
@@ -20,12 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from arfi.analysis.reproduce import MAX_STUDY_SEED, study_aberration, study_images
 from arfi.checks import as_count
 from arfi.estimation import METHODS, gain, phase_error, recovered_fraction
-from arfi.io import atomic_write_text, csv_text, write_json
+from arfi.io.files import atomic_write_text, csv_text, write_json
 from arfi.progress import Progress
-from arfi.report import figure_html, pyplot, rows_table_html, save_figure, write_html
-from arfi.reproduce import MAX_STUDY_SEED, study_aberration, study_images
+from arfi.reports.figures import pyplot, save_figure
+from arfi.reports.html import figure_html, rows_table_html, write_html
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 

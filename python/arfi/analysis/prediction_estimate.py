@@ -4,7 +4,7 @@ The prediction (:func:`arfi.predict`, or the JSON of ``arfi predict --json``) gi
 three things: its phases as the prior (``options.prior``), its per-element transmission (each
 element of the model without bone driven at what the skull lets through there, so that the
 model's focus is as weak as the skull's and its elements weighted as through it), and its error
-modes (the head's pose, the CT conversion's bone speed; :mod:`arfi.prior_modes`), which are
+modes (the head's pose, the CT conversion's bone speed; :mod:`arfi.analysis.prior_modes`), which are
 fitted to the images first, on the head with the CT's bone, and move the prior where the images
 support it. Which modes are fitted is decided here: the bone speed by default wherever the
 prediction holds its sensitivity and the estimate is per element (:data:`BONE_SPEED_STD_PERCENT`
@@ -20,9 +20,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from arfi import _core, prior_modes
+from arfi import _core
+from arfi.analysis import prior_modes
+from arfi.analysis.prior_modes import BONE_SPEED_STD_PERCENT, ModesResult, PriorMode
 from arfi.estimation import Calibration, Estimate, EstimateOptions
-from arfi.prior_modes import BONE_SPEED_STD_PERCENT, ModesResult, PriorMode
 from arfi.scenario import Scenario
 from arfi.simulation import Images, Known, Simulation, images_and_known
 
@@ -126,7 +127,7 @@ def estimate_with_prediction(
     per element, >= 0) alone. ``bone_speed_std_percent`` (default :data:`BONE_SPEED_STD_PERCENT`
     where the prediction holds the bone speed's sensitivity; 0 skips it), ``pose_std_mm``,
     ``pose_std_deg`` (mm, degrees; the pose is fitted only when given) and ``modes`` (a user's,
-    :func:`arfi.prior_modes.read_modes`) are the modes' prior spreads. ``calibration`` is applied
+    :func:`arfi.analysis.prior_modes.read_modes`) are the modes' prior spreads. ``calibration`` is applied
     to both models (checked against the scenario), ``groups`` as :class:`Simulation` takes it.
     ``log`` receives what is done as it is done (the modes' fit announced before it runs: it
     builds and marches the head with its bone), ``progress`` is :meth:`Simulation.estimate`'s.
@@ -271,7 +272,9 @@ def _modes_to_fit(
             raise ValueError(f"{nm[name]}: must be a finite number >= 0, got {std:g}")
     for m in modes:
         if not isinstance(m, PriorMode):
-            raise ValueError(f"{nm['modes']}: must be arfi.prior_modes.PriorMode values, got {type(m).__name__}")
+            raise ValueError(
+                f"{nm['modes']}: must be arfi.analysis.prior_modes.PriorMode values, got {type(m).__name__}"
+            )
     asked = [n for n, v in stds.items() if v] + (["modes"] if modes else [])
     first = nm[asked[0]] if asked else None
     if prior is None:

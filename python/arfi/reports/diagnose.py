@@ -1,4 +1,5 @@
-"""Results of the model-discrepancy workflow (``arfi diagnose``) and its report."""
+"""The report of ``arfi diagnose`` (``--report``): per step the measured image, the model, the
+residual and the candidates' evidence, and the gap shrinking against the noise floor."""
 
 from __future__ import annotations
 
@@ -10,26 +11,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from arfi import _core
+from arfi._core import Diagnosis
+from arfi.io.files import atomic_write_text
+from arfi.reports.figures import axis_labels, focal_box_mm, image_extent_mm, pyplot, save_figure
+from arfi.reports.html import figure_html
 
-# Simulation is needed for an annotation only (write_report). A run-time import would be a
-# cycle: simulation imports this module at run time.
+# Simulation is needed for an annotation only.
 if TYPE_CHECKING:
     from arfi.simulation import Simulation
-
-_effects, _parameters = _core.effect_library()
-
-#: The effect library, in the order ties are broken (simpler first); from the Rust core's table.
-EFFECTS: tuple[str, ...] = tuple(_effects)
-
-#: Every parameter name ``diagnose`` reports and ``Simulation.effect_images`` accepts (units in
-#: the name), with its effect and meaning: ``{name: (effect, meaning)}``.
-PARAMETERS: dict[str, tuple[str, str]] = {name: (effect, meaning) for name, effect, meaning in _parameters}
-
-
-#: The outcome of ``Simulation.diagnose``: the effects added, in order, and the gap before and after
-#: (the extension's typed result; ``to_dict()`` is the JSON of ``arfi diagnose``).
-Diagnosis = _core.Diagnosis
 
 
 def evidence_bars(ax: Any, candidates: Sequence[Any], title: str) -> None:
@@ -49,9 +38,6 @@ def write_report(diagnosis: Diagnosis, sim: Simulation, images: list[NDArray[np.
     """Writes one PNG per step of ``diagnosis`` (measured image, model, residual, the candidates'
     evidence) and the gap plot (cost and residual RMS against the noise floor) to ``out``, with a
     self-contained ``report.html``; returns the HTML path."""
-    from arfi.io import atomic_write_text
-    from arfi.report import axis_labels, figure_html, focal_box_mm, image_extent_mm, pyplot, save_figure
-
     plt = pyplot()
 
     out = Path(out)

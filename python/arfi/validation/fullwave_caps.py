@@ -1,9 +1,9 @@
 """The march against stored full-wave results, for media with no exact solution: the textured
-skull caps of :mod:`arfi.textured_caps`.
+skull caps of :mod:`arfi.validation.textured_caps`.
 
 The references were computed once by BabelViscoFDTD (a viscoelastic staggered-grid FDTD code we
 did not write; ``benches/fullwave/caps_fdtd.py``, through ``arfi field --engine fdtd``'s code) and
-stored small in ``arfi/data/fullwave_caps.json``: the focal peak, ``|p|/p0`` along z through it and
+stored small in ``arfi/validation/data/fullwave_caps.json``: the focal peak, ``|p|/p0`` along z through it and
 on the focal plane about it. ``arfi validate`` writes each case's CT again (the same HU: the
 texture comes from a hash, not a random generator, and the CT's fingerprint is checked), marches it on the scenario's
 default grid
@@ -35,7 +35,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from arfi import _core, textured_caps
+from arfi import _core
+from arfi.validation import textured_caps
 
 #: The stored references.
 REFERENCES = Path(__file__).resolve().parent / "data" / "fullwave_caps.json"
@@ -96,7 +97,7 @@ class FullWaveResult:
         engine: dict[str, Any],
     ) -> FullWaveResult:
         """The result of a comparison ``m`` (the dict of :func:`compare_fields` or of
-        :func:`arfi.validation_head.metrics`), the march on ``grid`` (``Simulation.grid``) against
+        :func:`arfi.validation.fullwave_head.metrics`), the march on ``grid`` (``Simulation.grid``) against
         the full-wave ``engine`` (its stored ``engine`` and ``engine_version``)."""
         ps, pe = m["focal_pressure"]
         return cls(

@@ -46,7 +46,7 @@ class HeadPhantom:
         """Writes the volume as NIfTI-1 (``.nii`` or ``.nii.gz``), atomically."""
         import nibabel as nib
 
-        from arfi.io import atomic_path
+        from arfi.io.files import atomic_path
 
         p = Path(path)
         if not p.name.endswith((".nii", ".nii.gz")):

@@ -9,7 +9,7 @@ wavelength (``benches/fullwave/head_fdtd.py``, about 35 min): the reference is t
 points scaled by the engine's own error there, measured from the two runs as a second-order
 scheme converges (:func:`scaled`): 11.6 % too high, as the engine puts the validation suite's exact
 cortical shell 10.4 % too high at the same points per wavelength. Stored small in
-``arfi/data/fullwave_head.json`` (the focal peak, ``|p|/p0`` along the beam's axis and on the plane
+``arfi/validation/data/fullwave_head.json`` (the focal peak, ``|p|/p0`` along the beam's axis and on the plane
 z = 150 mm about it, on the march's own samples).
 
 Compared as the suite compares: focal pressure, the 3-D focal position (negative when the
@@ -56,7 +56,7 @@ LINE_MM = 15.0
 def write_inputs(folder: Path) -> tuple[Path, str]:
     """Writes the phantom's CT and the case's scenario into ``folder``; returns the scenario's
     path and the CT's SHA-256 (of its HU)."""
-    from arfi.phantom import head_phantom, scenario_for
+    from arfi.io.phantom import head_phantom, scenario_for
 
     head = head_phantom(SEED, VOXEL_MM)
     head.save(folder / "ct.nii.gz")
@@ -210,9 +210,9 @@ def march_parts(scenario: Path) -> tuple[dict[str, Any], Any]:
 
 def compare(stored: dict[str, Any] | None = None) -> Any:
     """The march on the case's default grid against the stored reference (or ``stored``, as
-    :func:`reference` gives it) (:class:`arfi.validation_fullwave.FullWaveResult`); ValueError when
+    :func:`reference` gives it) (:class:`arfi.validation.fullwave_caps.FullWaveResult`); ValueError when
     there is none, or when it was made on another CT than the one written now."""
-    from arfi.validation_fullwave import FullWaveResult
+    from arfi.validation.fullwave_caps import FullWaveResult
 
     stored = reference() if stored is None else stored
     t0 = time.perf_counter()

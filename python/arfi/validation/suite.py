@@ -24,9 +24,9 @@ aperture 64 mm; Aubry et al., JASA 152(2), 2022):
   tolerances too;
 - ``cap_uniform``, ``cap_texture1``, ``cap_texture3``: a three-layer skull cap about the focus read
   from a CT, its diploë uniform or textured over 1 and 3 mm, against stored full-wave results
-  (BabelViscoFDTD; :mod:`arfi.validation_fullwave`): no exact solution holds random bone;
+  (BabelViscoFDTD; :mod:`arfi.validation.fullwave_caps`): no exact solution holds random bone;
 - ``head220``: the head phantom with the 256-element hemisphere at 220 kHz, against a stored
-  full-wave result (:mod:`arfi.validation_head`).
+  full-wave result (:mod:`arfi.validation.fullwave_head`).
 
 Each case is compared on the beam axis and in the focal plane: focal peak pressure, its
 position, the axial profile from 10 mm before to 10 mm after the focus, and the focal plane's
@@ -42,9 +42,9 @@ from pathlib import Path
 from typing import Any
 
 from arfi import _core
-from arfi.io import atomic_write_text
-from arfi.textured_caps import CAPS
-from arfi.validation_fullwave import FullWaveResult
+from arfi.io.files import atomic_write_text
+from arfi.validation.fullwave_caps import FullWaveResult
+from arfi.validation.textured_caps import CAPS
 
 #: One case's result: against an exact solution, or a stored full-wave run (its ``engine``
 #: names which); each pair of values is (simulated, reference).
@@ -82,9 +82,9 @@ def check_cases(cases: Sequence[str] | None, name: str = "cases") -> list[str]:
 def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | None = None) -> list[CaseResult]:
     """Runs the named cases (all by default), each on its scenario's default grid, and returns
     their :class:`arfi._core.ValidationResult` (for the textured caps and the head a
-    :class:`arfi.validation_fullwave.FullWaveResult`). Raises ValueError naming an unknown case,
+    :class:`arfi.validation.fullwave_caps.FullWaveResult`). Raises ValueError naming an unknown case,
     or a missing stored reference before any case runs."""
-    from arfi.validation_fullwave import CALIBRATION, REFERENCE_PPW, compare, reference, references
+    from arfi.validation.fullwave_caps import CALIBRATION, REFERENCE_PPW, compare, reference, references
 
     wanted = check_cases(cases)
     caps = [c.name for c in CAPS if c.name in wanted]
@@ -96,10 +96,10 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
                 f"validate: no stored full-wave run of {', '.join(missing)} at {REFERENCE_PPW:g} points per wavelength "
                 "(benches/fullwave/caps_fdtd.py makes them)"
             )
-    from arfi import validation_head
+    from arfi.validation import fullwave_head
 
     # Read before any case runs: a missing reference is one line, not a lost run.
-    head = validation_head.reference() if "head220" in wanted else None
+    head = fullwave_head.reference() if "head220" in wanted else None
     results: list[CaseResult] = []
     with tempfile.TemporaryDirectory(prefix="arfi-validate-") as tmp:
         for case in _core.validation_cases(tmp):
@@ -115,7 +115,7 @@ def run(cases: Sequence[str] | None = None, progress: Callable[[str], None] | No
     if head is not None:
         if progress is not None:
             progress("head220")
-        results.append(validation_head.compare(head))
+        results.append(fullwave_head.compare(head))
     return results
 
 
@@ -200,7 +200,7 @@ def _tolerances(r: CaseResult) -> dict[str, float]:
 def figure(r: CaseResult, path: Path) -> str:
     """The case's axial profile and focal line, simulated over the reference (exact, or a stored
     full-wave result), as a PNG."""
-    from arfi.report import pyplot, save_figure
+    from arfi.reports.figures import pyplot, save_figure
 
     plt = pyplot()
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.4))
@@ -221,7 +221,7 @@ def figure(r: CaseResult, path: Path) -> str:
 def write_report(out: str | Path, results: Sequence[CaseResult]) -> Path:
     """``out/report.html`` (the table, then each case's figure), ``out/validation.md`` (the table)
     and ``out/validation.json``; returns the HTML's path."""
-    from arfi.report import figure_html, write_html
+    from arfi.reports.html import figure_html, write_html
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

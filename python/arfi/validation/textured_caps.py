@@ -20,7 +20,7 @@ scales it by ``1 - ψ``) and 8 dB/cm/MHz of shear loss: the values of the exact 
 The random field is made from a counter-based hash (splitmix64) of each voxel's index, not from a
 library's random generator, so that the same case gives the same CT on every machine and NumPy
 version (to the last bits of ``log``, ``cos`` and the FFT): the stored full-wave results
-(``arfi/data/fullwave_caps.json``, made by ``benches/fullwave/caps_fdtd.py``) record the
+(``arfi/validation/data/fullwave_caps.json``, made by ``benches/fullwave/caps_fdtd.py``) record the
 :func:`fingerprint` of the CT they were made on, and ``arfi validate`` refuses a CT that differs.
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from arfi.io import save_nifti
+from arfi.io.files import save_nifti
 
 #: CT voxel size (mm).
 VOXEL_MM = 0.25

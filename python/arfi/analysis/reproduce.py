@@ -21,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
+from arfi.analysis.ladder import EXTRA_IMAGES, Ladder, Rung, climb, defocused_images, focus_of
+from arfi.analysis.loop import loop2
 from arfi.checks import as_count, as_number
 from arfi.estimation import gain, phase_error, recovered_fraction
-from arfi.io import atomic_write_text, csv_text, write_json
-from arfi.ladder import EXTRA_IMAGES, Ladder, Rung, climb, defocused_images, focus_of
-from arfi.loop import loop2
-from arfi.report import PHASE_GROUND, figure_html, image_extent_mm, pyplot, rows_table_html, save_figure
+from arfi.io.files import atomic_write_text, csv_text, write_json
+from arfi.reports.figures import PHASE_GROUND, image_extent_mm, pyplot, save_figure
+from arfi.reports.html import figure_html, rows_table_html
 from arfi.scenario import Scenario
 from arfi.simulation import Simulation
 
@@ -200,7 +201,7 @@ def run_study(
     ``MAX_STUDY_SEED``); ``noise_rad`` defaults to the scenario's ARFI noise.
 
     ``ladder`` (default) also runs, for the same seeds, every path to a correction side by side
-    (:mod:`arfi.ladder`: the paper's single image, loop 2, diversity images, a CT-like prediction
+    (:mod:`arfi.analysis.ladder`: the paper's single image, loop 2, diversity images, a CT-like prediction
     alone, and the prediction with MR-ARFI), reported as ``ladder`` and in ``fig11_ladder.png``.
 
     Bad arguments raise ``ValueError`` naming them; ``out`` is created and written only once the

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from arfi.analysis.loop import loop2
 from arfi.estimation import recovered_fraction
-from arfi.loop import loop2
 from arfi.simulation import Simulation
 
 #: The prediction's error model: a smooth field over the aperture (15 mm correlation length,
