@@ -15,7 +15,7 @@ Quick start::
 
 from arfi._core import MemoryLimitError, ModeFit, ModesFit
 from arfi.analysis.loop import LoopResult, loop2
-from arfi.analysis.prediction import Prediction, predict
+from arfi.analysis.prediction import Prediction, predict, predict_targets
 from arfi.analysis.prediction_estimate import PredictionEstimate, estimate_with_prediction
 from arfi.cost import CostModel, CostTerm
 from arfi.estimation import Calibration, Estimate, EstimateOptions, EstimateSupport, NextAcquisition, NuisanceFit
@@ -57,6 +57,7 @@ __all__ = [
     "CostModel",
     "CostTerm",
     "predict",
+    "predict_targets",
     "Prediction",
     "ModeFit",
     "ModesFit",

@@ -32,6 +32,14 @@ def predict(
     keep_simulation: bool = False,
     pose_sensitivity: bool = False,
 ) -> tuple[Prediction, tuple[CoreSimulation, CoreScenario] | None]: ...
+def predict_targets(
+    scenario: CoreScenario,
+    targets_mm: Sequence[tuple[float, float, float]],
+    bone_speed_sensitivity: bool = False,
+    keep_simulation: bool = False,
+    pose_sensitivity: bool = False,
+    progress: Callable[[int, int], object] | None = None,
+) -> tuple[list[Prediction], tuple[CoreSimulation, CoreScenario] | None]: ...
 
 class CoreScenario:
     """A validated scenario, parsed once (what :class:`arfi.Scenario` holds)."""

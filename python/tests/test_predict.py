@@ -385,3 +385,89 @@ def test_a_mode_is_fitted_on_the_head_with_its_bone(head):
         skull.fit_mode(images, known, mode[:5])
     with pytest.raises(ValueError, match=r'^scenario "vyas2014-phantom": has no \[ct\]: a model with the CT'):
         Scenario.default().with_ct_bone()
+
+
+def test_predict_targets_equals_one_prediction_per_target(head, tmp_path, capsys):
+    # Three targets from one plan of each head: each equals arfi.predict at that target to the
+    # last bit (the same marches through the same plans); the CLI's --targets writes a row of
+    # phases per target and the JSON a list of single predictions' keys.
+    import arfi
+
+    scenario = Scenario.load(head / "head.toml")
+    focus = scenario.to_dict()["focus"]["position_mm"]
+    targets = [focus, [focus[0] + 8.0, focus[1] - 5.0, focus[2]], [focus[0], focus[1] + 6.0, focus[2] + 10.0]]
+    seen: list[tuple[int, int]] = []
+    many = arfi.predict_targets(
+        scenario, targets, bone_speed_sensitivity=True, progress=lambda d, t: seen.append((d, t))
+    )
+    assert seen[-1] == (9, 9) and len(seen) == 9  # per target: faster bone, reference and skull marches
+    for target, p in zip(targets, many):
+        alone = predict(scenario, target, bone_speed_sensitivity=True)
+        assert p.target_mm == pytest.approx(target, abs=1e-9)
+        assert np.array_equal(p.phases_rad, alone.phases_rad) and np.array_equal(p.transmission, alone.transmission)
+        assert p.to_dict() == alone.to_dict()
+    csv = tmp_path / "targets.csv"
+    csv.write_text("name,x_mm,y_mm,z_mm\n" + "".join(f"t{k},{x},{y},{z}\n" for k, (x, y, z) in enumerate(targets[:2])))
+    out, js = tmp_path / "p.npy", tmp_path / "p.json"
+    argv = [
+        "predict",
+        "--scenario",
+        str(head / "head.toml"),
+        "--out",
+        str(out),
+        "--json",
+        str(js),
+        "--targets",
+        str(csv),
+    ]
+    assert main([*argv, "--no-bone-speed-sensitivity"]) == 0
+    printed = capsys.readouterr().out
+    assert "predict: 2 targets, 256 elements, one plan of each head" in printed
+    assert "predict: target 1 (" in printed and "predict: target 1: corrected: focus in 3-D" in printed
+    rows = np.load(out)
+    assert rows.shape == (2, 256) and np.array_equal(rows[1], many[1].phases_rad)
+    result = json.loads(js.read_text())
+    assert np.allclose([e["target_mm"] for e in result["targets"]], targets[:2])
+    assert set(result["targets"][0]["focal_metrics"]) == {"uncorrected", "ray_steering", "corrected"}
+    assert result["targets"][1]["focal_pressure_pa"] == pytest.approx(many[1].to_dict()["focal_pressure_pa"])
+
+
+@pytest.mark.parametrize(
+    "content, expected",
+    [
+        ("", "holds no targets"),
+        ("x_mm,y_mm\n1,2\n", "lacks z_mm"),
+        ("x_mm,y_mm,z_mm\n", "holds no targets below its header"),
+        ("x_mm,y_mm,z_mm\n0,0,abc\n", "line 2: needs a number"),
+        ("x_mm,y_mm,z_mm\n0,0,nan\n", "line 2: the target must be finite"),
+        ("x_mm,y_mm,z_mm\n0,0,150\n0,0,-50\n", "target 1 (0.0, 0.0, -50.0) mm lies outside the grid"),
+        ("x_mm,y_mm,z_mm\n0,0,150\n110,0,150\n", "target 1 (110.0, 0.0, 150.0) mm lies outside the CT"),
+    ],
+)
+def test_a_bad_targets_file_is_one_line_and_nothing_written(head, tmp_path, capsys, content, expected):
+    csv = tmp_path / "targets.csv"
+    csv.write_text(content)
+    out = tmp_path / "p.npy"
+    argv = ["predict", "--scenario", str(head / "head.toml"), "--out", str(out), "--targets", str(csv)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("arfi: error: --targets: ") and expected in err and "\n" not in err, err
+    assert not out.exists()
+
+
+def test_targets_are_refused_with_a_single_target_or_a_report(head, tmp_path, capsys):
+    csv = tmp_path / "targets.csv"
+    csv.write_text("x_mm,y_mm,z_mm\n0,0,150\n")
+    base = ["predict", "--scenario", str(head / "head.toml"), "--out", str(tmp_path / "p.npy"), "--targets", str(csv)]
+    assert main([*base, "--target-mm", "0", "0", "150"]) == 2
+    assert "--targets: not with --target-mm" in capsys.readouterr().err
+    assert main([*base, "--report", str(tmp_path / "r")]) == 2
+    assert "--targets: not with --report" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="targets_mm: must be points"):
+        predict_targets_of(head, [[0.0, 0.0]])
+
+
+def predict_targets_of(head, targets):
+    import arfi
+
+    return arfi.predict_targets(Scenario.load(head / "head.toml"), targets)

@@ -68,6 +68,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scenario::CoreScenario>()?;
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
+    m.add_function(wrap_pyfunction!(prediction::predict_targets, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;
     m.add_function(wrap_pyfunction!(phase::wrap_phases, m)?)?;
     m.add_function(wrap_pyfunction!(arrays::connected_region, m)?)?;

@@ -1,13 +1,17 @@
 //! `predict`: the CT-based prediction of each element's aberration, as a typed result.
 
 use crate::error::{invalid, to_py};
+use crate::interrupt::run_with_progress;
 use crate::scenario::CoreScenario;
 use crate::simulation::CoreSimulation;
-use has_core::prediction::{predict_scenario_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
+use has_core::prediction::{predict_scenario_with, predict_targets_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+
+/// A prediction's kept skull simulation with the scenario it was built from.
+type Kept = (CoreSimulation, CoreScenario);
 
 /// Builds the scenario's simulation and predicts at `target_mm` (default: the focus), by
 /// reciprocity (see `has_core::prediction`): the prediction and, with `keep_simulation`, the
@@ -25,7 +29,7 @@ pub(crate) fn predict(
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
     pose_sensitivity: bool,
-) -> PyResult<(CorePrediction, Option<(CoreSimulation, CoreScenario)>)> {
+) -> PyResult<(CorePrediction, Option<Kept>)> {
     let scenario = &scenario.inner;
     let target = target_mm.map(|t| t.map(|v| v * 1e-3));
     let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
@@ -39,6 +43,42 @@ pub(crate) fn predict(
     // The kept simulation with the scenario it was built from.
     let kept = run.simulation.map(|sim| (CoreSimulation::from(sim), CoreScenario { inner: with_amplitude(scenario.clone()) }));
     Ok((prediction, kept))
+}
+
+/// `predict` at each of `targets_mm` (mm, transducer frame) from one plan of each head (see
+/// `has_core::prediction::predict_targets_with`): each prediction equals `predict`'s at its
+/// target, and each target beyond the first costs its transposed marches, not a plan. Targets
+/// outside the grid or the CT are refused by index before anything is built; `progress`, a
+/// callable, is called with `(done, total)` transposed marches (an exception it raises stops the
+/// run and is raised here).
+#[pyfunction]
+#[pyo3(signature = (scenario, targets_mm, bone_speed_sensitivity=false, keep_simulation=false, pose_sensitivity=false, progress=None))]
+pub(crate) fn predict_targets(
+    py: Python<'_>,
+    scenario: &CoreScenario,
+    targets_mm: Vec<[f64; 3]>,
+    bone_speed_sensitivity: bool,
+    keep_simulation: bool,
+    pose_sensitivity: bool,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(Vec<CorePrediction>, Option<Kept>)> {
+    let scenario = &scenario.inner;
+    let targets: Vec<[f64; 3]> = targets_mm.iter().map(|t| t.map(|v| v * 1e-3)).collect();
+    let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
+    let run =
+        run_with_progress(py, progress.as_ref(), |control| predict_targets_with(scenario, &targets, options, control))?.map_err(to_py)?;
+    let predictions = run
+        .runs
+        .into_iter()
+        .map(|r| CorePrediction {
+            prediction: r.prediction,
+            bone_speed_sensitivity: r.bone_speed_sensitivity,
+            pose: r.pose_sensitivity,
+            simulation: None,
+        })
+        .collect();
+    let kept = run.simulation.map(|sim| (CoreSimulation::from(sim), CoreScenario { inner: with_amplitude(scenario.clone()) }));
+    Ok((predictions, kept))
 }
 
 /// What the scenario's CT bone does to each element's wave at the target, by reciprocity.

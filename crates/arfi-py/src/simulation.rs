@@ -7,7 +7,7 @@ use crate::error::{invalid, to_py};
 use crate::estimate_options::EstimateOptions;
 use crate::field::{CoreField, CoreSection};
 use crate::focal::{CoreFocalMetrics, MetricsMm};
-use crate::interrupt::run_interruptible;
+use crate::interrupt::{run_interruptible, run_with_progress};
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::plan::{CoreGrid, CorePropagation};
 use crate::results::{CoreCalibration, CoreEstimate};
@@ -30,9 +30,8 @@ use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::sync::Mutex;
 
 /// Points (mm, shape (n, 3), finite) in metres.
 fn points_m(points_mm: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
@@ -539,21 +538,9 @@ impl CoreSimulation {
     ) -> PyResult<CoreEstimate> {
         let measurements = measurements(images, known)?;
         let request = &options.0;
-        let cancel = AtomicBool::new(false);
-        let failed: Mutex<Option<PyErr>> = Mutex::new(None);
-        let report = |done: usize, total: usize| {
-            if let Some(f) = &progress {
-                if let Err(e) = Python::attach(|py| f.call1(py, (done, total)).map(drop)) {
-                    failed.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
-                    cancel.store(true, Ordering::Relaxed);
-                }
-            }
-        };
-        let control = Control::default().with_cancel(&cancel).with_progress(&report);
-        let r = run_interruptible(py, &cancel, || estimate_aberration_with(&self.inner, &measurements, request, &self.basis, control))?;
-        if let Some(e) = failed.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e);
-        }
+        let r = run_with_progress(py, progress.as_ref(), |control| {
+            estimate_aberration_with(&self.inner, &measurements, request, &self.basis, control)
+        })?;
         Ok(CoreEstimate { report: r.map_err(to_py)?, method: request.method })
     }
 

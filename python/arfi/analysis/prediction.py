@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
-from arfi.checks import as_point_mm
+from arfi.checks import as_point_mm, as_points_mm
 from arfi.scenario import Scenario
 from arfi.simulation import Section, Simulation
 
@@ -65,6 +66,39 @@ def predict(
         return prediction
     core, built_from = kept
     return prediction.with_simulation(Simulation._wrap(Scenario._of(built_from), core))
+
+
+def predict_targets(
+    scenario: Scenario,
+    targets_mm: ArrayLike,
+    bone_speed_sensitivity: bool = False,
+    keep_simulation: bool = False,
+    pose_sensitivity: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Prediction]:
+    """:func:`predict` at each of ``targets_mm`` (shape (n, 3), transducer frame, mm), from one plan
+    of each head: the head without bone is built once and marched from every target, then the
+    skull likewise (a plan depends on the head, the grid and the scenario's steering, not on the
+    target), so each target beyond the first costs its transposed marches and projection, not a
+    plan. Each prediction equals :func:`predict`'s at its target to the last bit. The scenario's
+    grid must hold every target and each lies in the CT's box: one outside either is refused
+    (``ValueError`` naming it by index and position) before anything is built. ``progress(done,
+    total)`` is called per transposed march. With ``keep_simulation`` every prediction holds the
+    one skull simulation (:attr:`Prediction.simulation`)."""
+    targets = as_points_mm(targets_mm, "targets_mm")
+    predictions, kept = _core.predict_targets(
+        scenario.core,
+        targets,
+        bool(bone_speed_sensitivity),
+        bool(keep_simulation),
+        bool(pose_sensitivity),
+        progress,
+    )
+    if kept is None:
+        return predictions
+    core, built_from = kept
+    sim = Simulation._wrap(Scenario._of(built_from), core)
+    return [p.with_simulation(sim) for p in predictions]
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:

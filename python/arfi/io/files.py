@@ -332,3 +332,37 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, Any]) -> None:
     with atomic_path(npz_path(path)) as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
+
+
+#: The columns of a targets file, in mm in the transducer frame.
+TARGET_COLUMNS = ("x_mm", "y_mm", "z_mm")
+
+
+def read_targets(path: str | os.PathLike[str]) -> list[tuple[float, float, float]]:
+    """Points from a CSV file with a header naming the columns ``x_mm``, ``y_mm`` and ``z_mm``
+    (transducer frame; other columns ignored), one point per row; blank lines skipped.
+    ``ValueError`` naming the file (and the line) when it holds none or a value is not a finite
+    number."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as f:
+        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError(f"{path}: holds no targets (a header x_mm,y_mm,z_mm and one row per target)")
+    header = [c.strip() for c in rows[0]]
+    missing = [c for c in TARGET_COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{path}: the header must name the columns x_mm, y_mm, z_mm; it lacks {', '.join(missing)}")
+    index = [header.index(c) for c in TARGET_COLUMNS]
+    out = []
+    for line, row in enumerate(rows[1:], 2):
+        try:
+            point = tuple(float(row[i]) for i in index)
+        except (IndexError, ValueError):
+            raise ValueError(f"{path}: line {line}: needs a number in each of x_mm, y_mm, z_mm, got {row}") from None
+        if not all(np.isfinite(point)):
+            raise ValueError(f"{path}: line {line}: the target must be finite, got {row}")
+        out.append(point)
+    if not out:
+        raise ValueError(f"{path}: holds no targets below its header")
+    return out  # type: ignore[return-value]

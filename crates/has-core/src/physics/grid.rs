@@ -61,6 +61,15 @@ impl Grid {
         let n = ((z - self.z0) / self.dz).round();
         n.clamp(0.0, (self.nz - 1) as f64) as usize
     }
+    /// Whether a field can be read at `p` (m) by interpolation
+    /// ([`crate::physics::propagation::HasPlan::point_weights`]): between the first and last
+    /// planes (to a billionth of a spacing) and within half a spacing of the outermost columns
+    /// and rows.
+    pub fn holds_point(&self, p: [f64; 3]) -> bool {
+        const ON_GRID: f64 = 1e-9;
+        let t = (p[2] - self.z0) / self.dz;
+        self.nearest(p).is_some() && (-ON_GRID..=(self.nz - 1) as f64 + ON_GRID).contains(&t)
+    }
     /// Column, row and plane `[i, j, n]` of the grid point nearest `p` (m); `None` if `p` lies
     /// outside the grid (more than half a spacing beyond its outermost points) or is not finite.
     pub fn nearest(&self, p: [f64; 3]) -> Option<[usize; 3]> {

@@ -16,6 +16,7 @@
 //! The reference's plan is fixed by the same steered beam as the skull's (its mean wavenumbers
 //! are weighted by that beam's pressure; see [`crate::physics::propagation`]).
 
+use crate::control::Control;
 use crate::error::{HasError, Result};
 use crate::phase::wrap;
 use crate::physics::grid::Grid;
@@ -24,8 +25,10 @@ use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
 use crate::physics::steering::steering_phases;
 use crate::physics::transducer::Transducer;
 use crate::scenario::Scenario;
-use crate::simulation::{reciprocal_field, Simulation, Unbuilt};
+use crate::simulation::{outside_grid, reciprocal_field, Simulation, Unbuilt};
 use num_complex::Complex64 as C64;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 pub mod pose;
 pub use pose::{pose_sensitivity, PoseSensitivity};
@@ -123,25 +126,133 @@ pub struct PredictionRun {
 }
 
 /// [`predict_scenario`] with the bone speed and pose sensitivities and the skull's simulation on
-/// request.
+/// request: [`predict_targets_with`] for the one target.
+pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, options: PredictionOptions) -> Result<PredictionRun> {
+    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    let target = target.unwrap_or(unbuilt.focus());
+    let TargetsRun { mut runs, simulation } = predict_from(unbuilt, scenario, &[target], options, Control::default())?;
+    let TargetRun { prediction, bone_speed_sensitivity, pose_sensitivity } = runs.remove(0);
+    Ok(PredictionRun { prediction, bone_speed_sensitivity, pose_sensitivity, simulation })
+}
+
+/// What [`predict_targets_with`] gives for one target.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetRun {
+    /// The prediction.
+    pub prediction: Prediction,
+    /// Per element, rad per percent of bone sound speed (see [`bone_speed_sensitivity`]).
+    pub bone_speed_sensitivity: Option<Vec<f64>>,
+    /// The modes of the CT's registration (see [`pose_sensitivity`]).
+    pub pose_sensitivity: Option<PoseSensitivity>,
+}
+
+/// The predictions of [`predict_targets_with`], in the order of its targets, and the skull's
+/// simulation where asked for.
+pub struct TargetsRun {
+    /// One per target.
+    pub runs: Vec<TargetRun>,
+    /// The skull's simulation, built from [`with_amplitude`] of the scenario.
+    pub simulation: Option<Simulation>,
+}
+
+/// Predictions at many targets (m, transducer frame) from one plan of each head: the reference
+/// head's plan is built once and marched from every target, then dropped; then the skull's,
+/// likewise (and the faster bone's first, for the bone speed sensitivity). A plan depends on the
+/// head, the grid and the scenario's steering, not on the target, so each target beyond the
+/// first costs its transposed marches and projection, not a plan. Each target's values equal
+/// [`predict_scenario_with`]'s at that target to the last bit. The scenario's grid must hold
+/// every target, and a planning target lies in the head: a target outside the grid or outside the
+/// CT's box is refused, by its index and position, before anything is built. `control`'s
+/// progress counts the transposed marches; cancelling ends the run at the next march.
 /// The plans are built one after another, each dropped (and its memory handed back,
 /// [`crate::memory::release_freed`]) before the next unless kept: the faster bone's (on the
 /// skull's grid and source model, whose element projections it shares, where the faster bone
 /// resolves to the same grid), the reference head's, then the skull's; never two at once. The
-/// skull's marches (the target's and, for the pose modes, the six moved targets') run side by
-/// side, and every transposed march is projected onto the elements in one pass.
-/// The same values as [`predict`] and [`bone_speed_sensitivity`] to the last bit.
-pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, options: PredictionOptions) -> Result<PredictionRun> {
-    let mut unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
-    let target = target.unwrap_or(unbuilt.focus());
-    // Through the faster bone: a march to be projected with the others, or (another grid) the
+/// marches from the targets run two side by side, and each target's transposed marches are
+/// projected onto the elements in one pass.
+pub fn predict_targets_with(scenario: &Scenario, targets: &[[f64; 3]], options: PredictionOptions, control: Control) -> Result<TargetsRun> {
+    if targets.is_empty() {
+        return Err(HasError::invalid("targets", "none given"));
+    }
+    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    let ct = unbuilt.medium().ct.clone().ok_or_else(no_ct)?;
+    for (k, &target) in targets.iter().enumerate() {
+        let at = || format!("target {k} ({:.1}, {:.1}, {:.1}) mm", target[0] * 1e3, target[1] * 1e3, target[2] * 1e3);
+        crate::error::require_finite("targets", &target)?;
+        if !unbuilt.grid.holds_point(target) {
+            return Err(HasError::invalid("targets", format!("target {k} {}", outside_grid(&unbuilt.grid, target))));
+        }
+        if ct.hu_at(target).is_none() {
+            let [lo, hi] = ct.bounds();
+            let span = |a: usize| format!("{:.1} to {:.1}", lo[a] * 1e3, hi[a] * 1e3);
+            return Err(HasError::invalid(
+                "targets",
+                format!("{} lies outside the CT (its box spans x {}, y {}, z {} mm)", at(), span(0), span(1), span(2)),
+            ));
+        }
+    }
+    predict_from(unbuilt, scenario, targets, options, control)
+}
+
+/// Counts a prediction's transposed marches for its [`Control`], and runs them.
+struct Marches<'a> {
+    control: Control<'a>,
+    done: AtomicUsize,
+    total: usize,
+}
+
+impl Marches<'_> {
+    /// The transposed march from `target` through `plan` ([`reciprocal_field`]), counted.
+    fn one(&self, plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
+        self.control.check()?;
+        let field = reciprocal_field(plan, target, reflections)?;
+        self.control.report(self.done.fetch_add(1, Ordering::Relaxed) + 1, self.total);
+        Ok(field)
+    }
+
+    /// [`Marches::one`] from each of `targets`, two side by side whatever the cores (each
+    /// march in flight holds its own planes); the first error in target order.
+    fn each(&self, plan: &HasPlan, targets: &[[f64; 3]], reflections: bool) -> Result<Vec<Vec<C64>>> {
+        let mut fields = Vec::with_capacity(targets.len());
+        for pair in targets.chunks(pose::SIDE_BY_SIDE) {
+            let done: Vec<Result<Vec<C64>>> = pair.par_iter().map(|&t| self.one(plan, t, reflections)).collect();
+            for field in done {
+                fields.push(field?);
+            }
+        }
+        Ok(fields)
+    }
+}
+
+/// The predictions at `targets` from the scenario made ready to build ([`predict_targets_with`]).
+fn predict_from(
+    mut unbuilt: Unbuilt,
+    scenario: &Scenario,
+    targets: &[[f64; 3]],
+    options: PredictionOptions,
+    control: Control,
+) -> Result<TargetsRun> {
+    let n = targets.len();
+    let per_skull = if options.pose_sensitivity { 7 } else { 1 };
+    let marches = Marches { control, done: AtomicUsize::new(0), total: n * (1 + per_skull + usize::from(options.bone_speed_sensitivity)) };
+    // Through the faster bone: marches to be projected with the others, or (another grid) the
     // responses of a simulation of its own.
     let faster = if options.bone_speed_sensitivity {
         let faster = with_amplitude(faster_bone(scenario)?);
-        Some(match unbuilt.reciprocal_field_of(&faster, target)? {
-            Some(field) => Ok(field),
+        Some(match unbuilt.reciprocal_fields_of(&faster, |plan, reflections| marches.each(plan, targets, reflections))? {
+            Some(fields) => Ok(fields),
             None => {
-                let responses = Simulation::new(&faster)?.element_responses(target)?;
+                let sim = Simulation::new(&faster)?;
+                let responses = targets
+                    .iter()
+                    .map(|&t| {
+                        control.check()?;
+                        let r = sim.element_responses(t)?;
+                        control.report(marches.done.fetch_add(1, Ordering::Relaxed) + 1, marches.total);
+                        Ok(r)
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                drop(sim);
                 crate::memory::release_freed();
                 Err(responses)
             }
@@ -150,43 +261,55 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         None
     };
     let reference_medium = without_bone(unbuilt.medium())?;
-    let steered_source = unbuilt.steered_source()?.to_vec();
-    let through_reference = reference_field(
-        &unbuilt.grid,
-        &reference_medium,
-        unbuilt.frequency(),
-        &steered_source,
-        &unbuilt.options,
-        target,
-        unbuilt.reflections(),
-    )?;
-    drop(steered_source);
-    let sim = if options.keep_simulation { unbuilt.build_with_section(target[1])? } else { unbuilt.build()? };
-    let (through_skull, moved_fields) = pose::skull_marches(&sim, target, options.pose_sensitivity)?;
-    // The fields projected at once: the skull's, the reference's, the faster bone's and the
-    // moved targets' for the pose modes.
-    let mut fields = vec![through_skull, through_reference];
-    let mut faster_responses = None;
-    match faster {
-        Some(Ok(field)) => fields.push(field),
-        Some(Err(responses)) => faster_responses = Some(responses),
-        None => {}
+    let through_reference = {
+        let steered_source = unbuilt.steered_source()?.to_vec();
+        let (plan, _) = HasPlan::build(
+            &unbuilt.grid,
+            &reference_medium,
+            unbuilt.frequency(),
+            &steered_source,
+            &unbuilt.options,
+            &RecordSpec::default(),
+        )?;
+        drop(steered_source);
+        marches.each(&plan, targets, unbuilt.reflections())?
+    };
+    crate::memory::release_freed();
+    let sim = if options.keep_simulation { unbuilt.build_with_section(targets[0][1])? } else { unbuilt.build()? };
+    // The skull's marches: with the pose modes, each target's own and its six moved targets'.
+    let mut through_skull: Vec<(Vec<C64>, Vec<Vec<C64>>)> = if options.pose_sensitivity {
+        targets.iter().map(|&t| pose::skull_marches(&sim, t, &|q| marches.one(&sim.plan, q, sim.reflections))).collect::<Result<_>>()?
+    } else {
+        marches.each(&sim.plan, targets, sim.reflections)?.into_iter().map(|f| (f, Vec::new())).collect()
+    };
+    let (mut faster_fields, mut faster_responses) = match faster {
+        Some(Ok(fields)) => (fields.into_iter().map(Some).collect(), Vec::new()),
+        Some(Err(responses)) => (vec![None; n], responses.into_iter().map(Some).collect()),
+        None => (vec![None; n], Vec::new()),
+    };
+    let mut runs = Vec::with_capacity(n);
+    for (k, (&target, reference)) in targets.iter().zip(through_reference).enumerate() {
+        let (skull, moved_fields) = std::mem::take(&mut through_skull[k]);
+        // The fields projected at once: the skull's, the reference's, the faster bone's and the
+        // moved targets' for the pose modes.
+        let mut fields = vec![skull, reference];
+        fields.extend(faster_fields[k].take());
+        let moved_from = fields.len();
+        fields.extend(moved_fields);
+        let mut responses = sim.source.transposed_many(&fields)?;
+        let moved = responses.split_off(moved_from);
+        let faster = if responses.len() == 3 { responses.pop() } else { faster_responses.get_mut(k).and_then(Option::take) };
+        let reference = responses.remove(1);
+        let skull = responses.remove(0);
+        let prediction =
+            from_responses(&sim.transducer, &reference_medium, sim.frequency, target, skull, reference, sim.steering_toward(target)?)?;
+        let pose_sensitivity = options
+            .pose_sensitivity
+            .then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses, &moved))
+            .transpose()?;
+        let bone_speed_sensitivity = faster.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
+        runs.push(TargetRun { prediction, bone_speed_sensitivity, pose_sensitivity });
     }
-    let moved_from = fields.len();
-    fields.extend(moved_fields);
-    let mut responses = sim.source.transposed_many(&fields)?;
-    let moved = responses.split_off(moved_from);
-    if responses.len() == 3 {
-        faster_responses = responses.pop();
-    }
-    let reference = responses.remove(1);
-    let skull = responses.remove(0);
-    let prediction =
-        from_responses(&sim.transducer, &reference_medium, sim.frequency, target, skull, reference, sim.steering_toward(target)?)?;
-    let pose_sensitivity =
-        options.pose_sensitivity.then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses, &moved)).transpose()?;
-    drop(fields);
-    let bone_speed_sensitivity = faster_responses.map(|m| sensitivity(&m, &prediction.skull_responses)).transpose()?;
     let simulation = if options.keep_simulation {
         Some(sim)
     } else {
@@ -194,7 +317,7 @@ pub fn predict_scenario_with(scenario: &Scenario, target: Option<[f64; 3]>, opti
         crate::memory::release_freed();
         None
     };
-    Ok(PredictionRun { prediction, bone_speed_sensitivity, pose_sensitivity, simulation })
+    Ok(TargetsRun { runs, simulation })
 }
 
 /// `scenario` with the ARFI amplitude given (1 unless it sets one), so that its simulation is
@@ -207,9 +330,12 @@ pub fn with_amplitude(mut scenario: Scenario) -> Scenario {
 
 /// The head without its skull, or why a prediction cannot be made without a CT.
 fn without_bone(medium: &Medium) -> Result<Medium> {
-    medium.without_bone().ok_or_else(|| {
-        HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
-    })
+    medium.without_bone().ok_or_else(no_ct)
+}
+
+/// Why a prediction cannot be made without a CT.
+fn no_ct() -> HasError {
+    HasError::invalid("ct", "a prediction needs a CT of the head ([ct]): it predicts what the CT's bone does to each element's wave")
 }
 
 /// Predicts the aberration of the scenario's CT bone at `target` (m; `None`: the focus).

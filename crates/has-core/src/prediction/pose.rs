@@ -122,7 +122,7 @@ fn moved_array(sim: &Simulation, target: [f64; 3], pose: &Pose) -> Result<(Trans
 /// array in its source plane (a planar array: a turned element would leave the half-space behind
 /// the plane) and a single bowl.
 pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensitivity> {
-    let (through_skull, moved) = skull_marches(sim, target, true)?;
+    let (through_skull, moved) = skull_marches(sim, target, &|q| reciprocal_field(&sim.plan, q, sim.reflections))?;
     let mut fields = moved;
     fields.insert(0, through_skull);
     let mut responses = sim.source.transposed_many(&fields)?;
@@ -130,27 +130,30 @@ pub fn pose_sensitivity(sim: &Simulation, target: [f64; 3]) -> Result<PoseSensit
     pose_modes(sim, target, &fields[0], &h, &responses)
 }
 
-/// The transposed march from `target` through `sim`'s head and, with `moved`, the weights whose
+/// The transposed march from `target` through `sim`'s head and the weights whose
 /// projection onto the array as it is gives each element's response through the head shifted a
 /// cell either way along x, y and z (in that order: `+x, -x, +y, …`): the transposed march from
 /// each moved target, moved on the plane as the array moves ([`SourceModel::moved_weights`]).
 /// The marches share the plan and run two at a time (on two cores six moved marches take about
-/// two thirds of their time one after another). `(through the head, moved)`; the moved ones'
-/// projection is [`pose_modes`]' `moved`.
+/// two thirds of their time one after another). `march(q)` is the transposed march from `q`
+/// through `sim`'s plan (a caller's, to count them). `(through the head, moved)`; the moved
+/// ones' projection is [`pose_modes`]' `moved`.
 ///
 /// [`SourceModel::moved_weights`]: crate::physics::source::SourceModel::moved_weights
-pub(super) fn skull_marches(sim: &Simulation, target: [f64; 3], moved: bool) -> Result<(Vec<C64>, Vec<Vec<C64>>)> {
+pub(super) fn skull_marches(
+    sim: &Simulation,
+    target: [f64; 3],
+    march: &(dyn Fn([f64; 3]) -> Result<Vec<C64>> + Sync),
+) -> Result<(Vec<C64>, Vec<Vec<C64>>)> {
     let g = &sim.grid;
     let mut steps: Vec<Option<(usize, f64)>> = vec![None];
-    if moved {
-        steps.extend([g.dx, g.dy, g.dz].iter().enumerate().flat_map(|(axis, &cell)| [Some((axis, cell)), Some((axis, -cell))]));
-    }
+    steps.extend([g.dx, g.dy, g.dz].iter().enumerate().flat_map(|(axis, &cell)| [Some((axis, cell)), Some((axis, -cell))]));
     let march = |step: &Option<(usize, f64)>| match *step {
-        None => reciprocal_field(&sim.plan, target, sim.reflections),
+        None => march(target),
         Some((axis, step)) => {
             let (_, back) = moved_array(sim, target, &Pose::shift(axis, step))?;
             let moved_target = std::array::from_fn(|k| target[k] + back[k]);
-            sim.source.moved_weights(&reciprocal_field(&sim.plan, moved_target, sim.reflections)?, back)
+            sim.source.moved_weights(&march(moved_target)?, back)
         }
     };
     // Two at a time whatever the cores (each march in flight holds its own planes), and the
@@ -166,8 +169,8 @@ pub(super) fn skull_marches(sim: &Simulation, target: [f64; 3], moved: bool) -> 
     Ok((through_skull, fields))
 }
 
-/// How many of [`skull_marches`]' transposed marches run at once.
-const SIDE_BY_SIDE: usize = 2;
+/// How many of [`skull_marches`]' (and a prediction's) transposed marches run at once.
+pub(super) const SIDE_BY_SIDE: usize = 2;
 
 /// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`),
 /// the elements' responses `h` it gives (a prediction's `skull_responses`) and `moved`, the

@@ -4,7 +4,7 @@
 //! another plan from the same pieces first (the prediction's head without bone) and never hold
 //! two plans at once.
 
-use super::{choose_grid, reciprocal_field, section_spec, Simulation};
+use super::{choose_grid, section_spec, Simulation};
 use crate::error::{HasError, Result};
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
@@ -52,14 +52,15 @@ impl Unbuilt {
         Ok(Unbuilt { r, grid, steering, source, options, sampler, steered_source: None })
     }
 
-    /// The transposed march from `target` (m) through the head of `other`, a scenario that
-    /// differs from this one's in its medium only (e.g. the CT's bone faster): its plan built as
+    /// `march(plan, reflections)` (e.g. transposed marches from the targets) through the head of
+    /// `other`, a scenario that differs from this one's in its medium only (e.g. the CT's bone
+    /// faster): its plan built as
     /// [`Simulation::new`] builds it (its own steering's beam as reference) but on this
     /// simulation's grid and source model (their projections shared), then dropped and its memory
     /// handed back. `None` when `other` resolves to another grid, options, array, frequency,
     /// acoustic power, reflections or source-plane medium, whose simulation must be built on its
     /// own. Its medium is checked as [`Unbuilt::new`] checks one.
-    pub(crate) fn reciprocal_field_of(&self, other: &Scenario, target: [f64; 3]) -> Result<Option<Vec<C64>>> {
+    pub(crate) fn reciprocal_fields_of<T>(&self, other: &Scenario, march: impl FnOnce(&HasPlan, bool) -> Result<T>) -> Result<Option<T>> {
         let r = other.resolve()?;
         let same = choose_grid(&r)? == self.grid
             && options_of(&r)? == self.options
@@ -76,7 +77,7 @@ impl Unbuilt {
         let field = {
             let steered = steered_field(&self.source, &steering)?;
             let (plan, _) = HasPlan::build(&self.grid, &r.medium, r.frequency, &steered, &self.options, &RecordSpec::default())?;
-            reciprocal_field(&plan, target, self.reflections())?
+            march(&plan, self.reflections())?
         };
         crate::memory::release_freed();
         Ok(Some(field))

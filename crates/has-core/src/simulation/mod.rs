@@ -578,25 +578,26 @@ impl Simulation {
     }
 }
 
+/// Where `p` (m) lies against the grid's span, mm.
+pub(crate) fn outside_grid(g: &Grid, p: [f64; 3]) -> String {
+    format!(
+        "({:.1}, {:.1}, {:.1}) mm lies outside the grid (x, y within ±{:.1} mm, z {:.1} to {:.1} mm)",
+        p[0] * 1e3,
+        p[1] * 1e3,
+        p[2] * 1e3,
+        0.5 * g.nx as f64 * g.dx * 1e3,
+        g.z0 * 1e3,
+        g.z(g.nz - 1) * 1e3
+    )
+}
+
 /// The transposed march through `plan` from `target` (m; between grid points, the band-limited
 /// interpolation of [`HasPlan::point_weights`]): the source-plane field whose dot product with a
 /// source plane is that source's pressure there (`reflections` as the simulation marches).
 pub(crate) fn reciprocal_field(plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
-    let g = &plan.grid;
     crate::error::require_finite("target", &target)?;
     let Some((plane, weights)) = plan.point_weights(target) else {
-        return Err(HasError::invalid(
-            "target",
-            format!(
-                "({:.1}, {:.1}, {:.1}) mm lies outside the grid (x, y within ±{:.1} mm, z {:.1} to {:.1} mm)",
-                target[0] * 1e3,
-                target[1] * 1e3,
-                target[2] * 1e3,
-                0.5 * g.nx as f64 * g.dx * 1e3,
-                g.z0 * 1e3,
-                g.z(g.nz - 1) * 1e3
-            ),
-        ));
+        return Err(HasError::invalid("target", outside_grid(&plan.grid, target)));
     };
     plan.transposed(plane, &weights, reflections)
 }

@@ -590,3 +590,47 @@ fn turning_a_head_about_the_centre_of_its_spherical_shell_changes_no_phase() {
     assert!(turn < 0.25 * shift, "turn {turn}, shift {shift}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn many_targets_share_their_plans_and_each_equals_its_own_prediction() {
+    // One plan of each head for three targets (bone speed and pose modes too): each target's
+    // values equal a prediction made for it alone, to the last bit; the marches are counted for
+    // the progress; bad targets are refused by index before anything is built.
+    use has_core::control::Control;
+    use has_core::prediction::predict_targets_with;
+    let dir = scratch("targets");
+    std::fs::write(dir.join("shell.nii"), shell_ct(SHELL_HU, [4e-3, 0.0, 46e-3], 20e-3, [0.0, 0.0, 46e-3], 15e-3, f64::INFINITY, 0.5e-3))
+        .unwrap();
+    let scenario = bowl_scenario(&dir, "");
+    let targets = [[2e-3, -1e-3, 48e-3], [0.0, 0.0, 50e-3], [-3e-3, 2e-3, 44e-3]];
+    let options = PredictionOptions { bone_speed_sensitivity: true, pose_sensitivity: true, keep_simulation: true };
+    let reports = std::sync::Mutex::new(Vec::new());
+    let progress = |done: usize, total: usize| reports.lock().unwrap().push((done, total));
+    let run = predict_targets_with(&scenario, &targets, options, Control::default().with_progress(&progress)).unwrap();
+    assert_eq!(run.runs.len(), 3);
+    for (target, got) in targets.iter().zip(&run.runs) {
+        let alone = predict_scenario_with(&scenario, Some(*target), options).unwrap();
+        assert_eq!(got.prediction, alone.prediction);
+        assert_eq!(got.bone_speed_sensitivity, alone.bone_speed_sensitivity);
+        assert_eq!(got.pose_sensitivity, alone.pose_sensitivity);
+    }
+    // Per target: the faster bone's march, the reference head's, the skull's and six moved ones.
+    let reports = reports.into_inner().unwrap();
+    assert_eq!(reports.len(), 27);
+    assert_eq!(reports.last(), Some(&(27, 27)));
+    assert!(run.simulation.is_some());
+    let refused = |targets: &[[f64; 3]]| {
+        predict_targets_with(&scenario, targets, PredictionOptions::default(), Control::default()).err().map(|e| e.to_string()).unwrap()
+    };
+    assert!(refused(&[]).starts_with("targets: none given"));
+    let off_grid = refused(&[targets[0], [0.0, 0.0, 1e-3]]);
+    assert!(off_grid.starts_with("targets: target 1 (0.0, 0.0, 1.0) mm lies outside the grid"), "{off_grid}");
+    let off_ct = refused(&[[0.0, 0.0, 15e-3]]);
+    assert!(off_ct.starts_with("targets: target 0 (0.0, 0.0, 15.0) mm lies outside the CT (its box spans"), "{off_ct}");
+    assert!(refused(&[[f64::NAN, 0.0, 0.05]]).starts_with("targets"));
+    // Cancelled: ends at the next march.
+    let cancel = std::sync::atomic::AtomicBool::new(true);
+    let cancelled = predict_targets_with(&scenario, &targets[..1], PredictionOptions::default(), Control::default().with_cancel(&cancel));
+    assert!(matches!(cancelled, Err(has_core::HasError::Interrupted)));
+    std::fs::remove_dir_all(dir).ok();
+}

@@ -31,12 +31,10 @@ impl HasPlan {
     /// columns or rows.
     pub fn point_weights(&self, point: [f64; 3]) -> Option<(usize, Vec<C64>)> {
         let g = &self.grid;
-        g.nearest(point)?;
-        let t = (point[2] - g.z0) / g.dz;
-        let last = (g.nz - 1) as f64;
-        if !(-ON_GRID..=last + ON_GRID).contains(&t) {
+        if !g.holds_point(point) {
             return None;
         }
+        let t = (point[2] - g.z0) / g.dz;
         let across = |v: f64, n: usize, d: f64| dirichlet_weights(v / d + (n / 2) as f64, n);
         let (wx, wy) = (across(point[0], g.nx, g.dx), across(point[1], g.ny, g.dy));
         let mut w: Vec<C64> = wy.iter().flat_map(|y| wx.iter().map(move |x| C64::new(x * y, 0.0))).collect();
