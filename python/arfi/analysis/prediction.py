@@ -74,7 +74,7 @@ def predict_targets(
     bone_speed_sensitivity: bool = False,
     keep_simulation: bool = False,
     pose_sensitivity: bool = False,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[[int, int], object] | None = None,
 ) -> list[Prediction]:
     """:func:`predict` at each of ``targets_mm`` (shape (n, 3), transducer frame, mm), from one plan
     of each head: the head without bone is built once and marched from every target, then the

@@ -12,6 +12,7 @@ from arfi.analysis.focal import metrics_text
 from arfi.analysis.prediction import compared_section, drive_labels, focal_metrics, predict, predict_targets
 from arfi.cli.common import UsageError, add_common, add_report, finish, load_scenario, npy_path, save_npy
 from arfi.io.files import read_targets
+from arfi.progress import callback
 
 
 def register(sub: Any) -> None:
@@ -205,6 +206,7 @@ def run_targets(
             bone_speed_sensitivity=sensitivity,
             keep_simulation=metrics,
             pose_sensitivity=args.pose_sensitivity,
+            progress=callback(True, "predict: transposed marches", "marches"),
         )
         seconds = time.perf_counter() - t
     except ValueError as e:
