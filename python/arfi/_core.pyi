@@ -34,7 +34,7 @@ def predict(
 ) -> tuple[Prediction, tuple[CoreSimulation, CoreScenario] | None]: ...
 def predict_targets(
     scenario: CoreScenario,
-    targets_mm: Sequence[tuple[float, float, float]],
+    targets_mm: NDArray[np.float64],
     bone_speed_sensitivity: bool = False,
     keep_simulation: bool = False,
     pose_sensitivity: bool = False,

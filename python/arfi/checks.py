@@ -33,22 +33,6 @@ def as_point_mm(value: ArrayLike, name: str) -> tuple[float, float, float]:
     return float(a[0]), float(a[1]), float(a[2])
 
 
-def as_points_mm(value: ArrayLike, name: str) -> list[tuple[float, float, float]]:
-    """At least one point of three finite numbers (x, y, z in mm), shape (n, 3), as tuples;
-    ValueError naming ``name`` otherwise."""
-    a = real_array(value, name)
-    if a.ndim == 1 and a.shape == (3,):
-        a = a[None, :]
-    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0:
-        raise ValueError(
-            f"{name}: must be points of three numbers each (x, y, z in mm), shape (n, 3); got shape {a.shape}"
-        )
-    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
-    if bad.size:
-        raise ValueError(f"{name}: point {bad[0]} is not finite: {a[bad[0]].tolist()}")
-    return [(float(x), float(y), float(z)) for x, y, z in a]
-
-
 @overload
 def as_phases(phases: None, name: str = "phases") -> None: ...
 @overload

@@ -7,6 +7,18 @@ use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyString};
 
+/// Points `name` (mm, shape (n, 3), finite) in metres.
+pub(crate) fn points_m(points_mm: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<Vec<[f64; 3]>> {
+    let p = points_mm.as_array();
+    if p.ncols() != 3 || p.iter().any(|v| !v.is_finite()) {
+        return Err(invalid(
+            name,
+            format!("must be points of three finite numbers each (x, y, z in mm), shape (n, 3); got shape {:?}", p.shape()),
+        ));
+    }
+    Ok(p.rows().into_iter().map(|r| [r[0] * 1e-3, r[1] * 1e-3, r[2] * 1e-3]).collect())
+}
+
 pub(crate) fn phases_vec(phases: Option<PyReadonlyArray1<'_, f64>>) -> Vec<f64> {
     phases.map(|p| p.as_array().to_vec()).unwrap_or_default()
 }

@@ -1,12 +1,13 @@
 //! `predict`: the CT-based prediction of each element's aberration, as a typed result.
 
+use crate::convert::points_m;
 use crate::error::{invalid, to_py};
 use crate::interrupt::run_with_progress;
 use crate::scenario::CoreScenario;
 use crate::simulation::CoreSimulation;
 use has_core::prediction::{predict_scenario_with, predict_targets_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -56,14 +57,14 @@ pub(crate) fn predict(
 pub(crate) fn predict_targets(
     py: Python<'_>,
     scenario: &CoreScenario,
-    targets_mm: Vec<[f64; 3]>,
+    targets_mm: PyReadonlyArray2<'_, f64>,
     bone_speed_sensitivity: bool,
     keep_simulation: bool,
     pose_sensitivity: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(Vec<CorePrediction>, Option<Kept>)> {
     let scenario = &scenario.inner;
-    let targets: Vec<[f64; 3]> = targets_mm.iter().map(|t| t.map(|v| v * 1e-3)).collect();
+    let targets = points_m(&targets_mm, "targets_mm")?;
     let options = PredictionOptions { bone_speed_sensitivity, keep_simulation, pose_sensitivity };
     let run =
         run_with_progress(py, progress.as_ref(), |control| predict_targets_with(scenario, &targets, options, control))?.map_err(to_py)?;

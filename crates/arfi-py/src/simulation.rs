@@ -1,6 +1,6 @@
 //! `CoreSimulation`: a scenario made ready to simulate, and every computation on it.
 
-use crate::convert::{measurements, phases_vec};
+use crate::convert::{measurements, phases_vec, points_m};
 use crate::cost::CoreCostModel;
 use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
@@ -32,15 +32,6 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-
-/// Points (mm, shape (n, 3), finite) in metres.
-fn points_m(points_mm: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
-    let p = points_mm.as_array();
-    if p.ncols() != 3 || p.iter().any(|v| !v.is_finite()) {
-        return Err(invalid("points_mm", format!("must be finite points of shape (n, 3), got shape {:?}", p.shape())));
-    }
-    Ok(p.rows().into_iter().map(|r| [r[0] * 1e-3, r[1] * 1e-3, r[2] * 1e-3]).collect())
-}
 
 /// A scenario made ready to simulate (grid chosen, beam steered, HAS plan built).
 #[pyclass(module = "arfi._core", frozen)]
@@ -254,14 +245,14 @@ impl CoreSimulation {
     /// The name of the tissue at each point (mm, transducer frame, shape (n, 3)): "bone" or the
     /// soft tissue's material where a CT holds tissue, else the material's name.
     fn tissue_at(&self, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
-        Ok(points_m(&points_mm)?.into_iter().map(|[x, y, z]| self.inner.medium.tissue_at(x, y, z)).collect())
+        Ok(points_m(&points_mm, "points_mm")?.into_iter().map(|[x, y, z]| self.inner.medium.tissue_at(x, y, z)).collect())
     }
 
     /// The tissue class of each point (mm, transducer frame, shape (n, 3)) as the hottest places
     /// name it: "skull" for bone, "scalp" for the target's own tissue whose path to the target
     /// crosses bone, else the tissue's name (of the grid sample nearest the point).
     fn tissue_classes(&self, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
-        self.inner.tissue_classes(&points_m(&points_mm)?).map_err(to_py)
+        self.inner.tissue_classes(&points_m(&points_mm, "points_mm")?).map_err(to_py)
     }
 
     /// The medium at each point (mm, transducer frame, shape (n, 3)): `sound_speed_m_s` and
@@ -269,7 +260,7 @@ impl CoreSimulation {
     /// `attenuation_np_m` (amplitude, at the scenario's frequency), `shear_sound_speed_m_s` and
     /// `shear_attenuation_np_m` (0 in a fluid) and `hu`, the CT's value there (NaN outside the CT or without one).
     fn properties_at<'py>(&self, py: Python<'py>, points_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Bound<'py, PyDict>> {
-        let points = points_m(&points_mm)?;
+        let points = points_m(&points_mm, "points_mm")?;
         let m = &self.inner.medium;
         let props: Vec<_> = points.iter().map(|&[x, y, z]| m.properties_at(x, y, z, self.inner.frequency)).collect();
         let hu: Vec<f64> = points.iter().map(|&p| m.ct.as_ref().and_then(|ct| ct.hu_at(p)).unwrap_or(f64::NAN)).collect();

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from arfi import _core
-from arfi.checks import as_point_mm, as_points_mm
+from arfi.checks import as_point_mm, real_array
 from arfi.scenario import Scenario
 from arfi.simulation import Section, Simulation
 
@@ -62,10 +62,7 @@ def predict(
         bool(keep_simulation),
         bool(pose_sensitivity),
     )
-    if kept is None:
-        return prediction
-    core, built_from = kept
-    return prediction.with_simulation(Simulation._wrap(Scenario._of(built_from), core))
+    return prediction if kept is None else prediction.with_simulation(_kept_simulation(kept))
 
 
 def predict_targets(
@@ -85,7 +82,7 @@ def predict_targets(
     (``ValueError`` naming it by index and position) before anything is built. ``progress(done,
     total)`` is called per transposed march. With ``keep_simulation`` every prediction holds the
     one skull simulation (:attr:`Prediction.simulation`)."""
-    targets = as_points_mm(targets_mm, "targets_mm")
+    targets = np.ascontiguousarray(np.atleast_2d(real_array(targets_mm, "targets_mm")))
     predictions, kept = _core.predict_targets(
         scenario.core,
         targets,
@@ -96,9 +93,14 @@ def predict_targets(
     )
     if kept is None:
         return predictions
-    core, built_from = kept
-    sim = Simulation._wrap(Scenario._of(built_from), core)
+    sim = _kept_simulation(kept)
     return [p.with_simulation(sim) for p in predictions]
+
+
+def _kept_simulation(kept: tuple[_core.CoreSimulation, _core.CoreScenario]) -> Simulation:
+    """A prediction's kept skull simulation, with the scenario it was built from."""
+    core, built_from = kept
+    return Simulation._wrap(Scenario._of(built_from), core)
 
 
 def compared_drives(prediction: Prediction) -> dict[str, NDArray[np.float64]]:

@@ -45,8 +45,8 @@ def register(sub: Any) -> None:
         help="predict for every point of a CSV file (a header naming x_mm, y_mm, z_mm, transducer frame; one row "
         "per target) from one plan of each head: the plans are built once, each further target costs its marches. "
         "--out then holds one row of phases per target (targets x elements), the --json a list under targets, each "
-        "entry the keys of a single prediction; a target outside the grid or the CT is refused by its row before "
-        "anything is built. Not with --target-mm or --report",
+        "entry the keys of a single prediction; a target outside the grid or the CT is refused by its index (from 0, "
+        "header not counted) and position before anything is built. Not with --target-mm or --report",
     )
     p.add_argument(
         "--bone-speed-sensitivity",
@@ -210,10 +210,9 @@ def run_targets(
         )
         seconds = time.perf_counter() - t
     except ValueError as e:
-        # The core names its parameter targets; the user gave them as a file, rows counted from the header.
-        raise UsageError(
-            f"--targets: {str(e).split(': ', 1)[1]}" if str(e).startswith("targets:") else str(e)
-        ) from None
+        # The core names its parameter targets; the user gave them as --targets.
+        text = str(e)
+        raise UsageError(f"--targets: {text.split(': ', 1)[1]}" if text.startswith("targets:") else text) from None
     found = [focal_metrics(p) for p in predictions] if metrics else None
     metrics_seconds = time.perf_counter() - t - seconds
     save_npy(args.out, np.stack([p.phases_rad for p in predictions]))
@@ -223,6 +222,7 @@ def run_targets(
         f"{seconds:.1f} s -> {args.out} (a row of phases per target); focal |p| (MPa) uncorrected, "
         f"{labels['ray_steering']}, corrected, the most any phases give; mean transmission:"
     )
+    entries = []
     for k, p in enumerate(predictions):
         x, y, z = p.target_mm
         print(
@@ -230,12 +230,9 @@ def run_targets(
             f"{p.ray_steering_pa / 1e6:.3f}, {p.corrected_pa / 1e6:.3f}, {p.optimal_pa / 1e6:.3f}; "
             f"{p.transmission.mean():.2f}"
         )
-        if found is not None:
-            print(f"predict: target {k}: corrected: {metrics_text(found[k]['corrected'])}")
-    entries = []
-    for k, p in enumerate(predictions):
         entry = p.to_dict()
         if found is not None:
+            print(f"predict: target {k}: corrected: {metrics_text(found[k]['corrected'])}")
             entry["focal_metrics"] = {name: m.to_dict() for name, m in found[k].items()}
         entries.append(entry)
     result: dict[str, Any] = {"out": args.out, "targets": entries, "seconds": seconds}

@@ -357,12 +357,12 @@ def read_targets(path: str | os.PathLike[str]) -> list[tuple[float, float, float
     out = []
     for line, row in enumerate(rows[1:], 2):
         try:
-            point = tuple(float(row[i]) for i in index)
+            x, y, z = (float(row[i]) for i in index)
         except (IndexError, ValueError):
             raise ValueError(f"{path}: line {line}: needs a number in each of x_mm, y_mm, z_mm, got {row}") from None
-        if not all(np.isfinite(point)):
+        if not np.all(np.isfinite((x, y, z))):
             raise ValueError(f"{path}: line {line}: the target must be finite, got {row}")
-        out.append(point)
+        out.append((x, y, z))
     if not out:
         raise ValueError(f"{path}: holds no targets below its header")
-    return out  # type: ignore[return-value]
+    return out

@@ -25,6 +25,9 @@ pub struct Grid {
     pub z0: f64,
 }
 
+/// Offsets within this fraction of a spacing of a grid point (or plane) count as on it.
+pub(crate) const ON_GRID: f64 = 1e-9;
+
 impl Grid {
     /// Validates sizes and spacings.
     pub fn new(nx: usize, ny: usize, dx: f64, dy: f64, nz: usize, dz: f64, z0: f64) -> Result<Self> {
@@ -66,7 +69,6 @@ impl Grid {
     /// planes (to a billionth of a spacing) and within half a spacing of the outermost columns
     /// and rows.
     pub fn holds_point(&self, p: [f64; 3]) -> bool {
-        const ON_GRID: f64 = 1e-9;
         let t = (p[2] - self.z0) / self.dz;
         self.nearest(p).is_some() && (-ON_GRID..=(self.nz - 1) as f64 + ON_GRID).contains(&t)
     }

@@ -27,7 +27,6 @@ use crate::physics::transducer::Transducer;
 use crate::scenario::Scenario;
 use crate::simulation::{outside_grid, reciprocal_field, Simulation, Unbuilt};
 use num_complex::Complex64 as C64;
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 pub mod pose;
@@ -202,25 +201,22 @@ struct Marches<'a> {
 }
 
 impl Marches<'_> {
-    /// The transposed march from `target` through `plan` ([`reciprocal_field`]), counted.
-    fn one(&self, plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
+    /// `march()`, after the cancel check, then counted.
+    fn counted<T>(&self, march: impl FnOnce() -> Result<T>) -> Result<T> {
         self.control.check()?;
-        let field = reciprocal_field(plan, target, reflections)?;
+        let out = march()?;
         self.control.report(self.done.fetch_add(1, Ordering::Relaxed) + 1, self.total);
-        Ok(field)
+        Ok(out)
     }
 
-    /// [`Marches::one`] from each of `targets`, two side by side whatever the cores (each
-    /// march in flight holds its own planes); the first error in target order.
+    /// The transposed march from `target` through `plan` ([`reciprocal_field`]), counted.
+    fn one(&self, plan: &HasPlan, target: [f64; 3], reflections: bool) -> Result<Vec<C64>> {
+        self.counted(|| reciprocal_field(plan, target, reflections))
+    }
+
+    /// [`Marches::one`] from each of `targets`, side by side ([`pose::side_by_side`]).
     fn each(&self, plan: &HasPlan, targets: &[[f64; 3]], reflections: bool) -> Result<Vec<Vec<C64>>> {
-        let mut fields = Vec::with_capacity(targets.len());
-        for pair in targets.chunks(pose::SIDE_BY_SIDE) {
-            let done: Vec<Result<Vec<C64>>> = pair.par_iter().map(|&t| self.one(plan, t, reflections)).collect();
-            for field in done {
-                fields.push(field?);
-            }
-        }
-        Ok(fields)
+        pose::side_by_side(targets, |&t| self.one(plan, t, reflections))
     }
 }
 
@@ -243,15 +239,7 @@ fn predict_from(
             Some(fields) => Ok(fields),
             None => {
                 let sim = Simulation::new(&faster)?;
-                let responses = targets
-                    .iter()
-                    .map(|&t| {
-                        control.check()?;
-                        let r = sim.element_responses(t)?;
-                        control.report(marches.done.fetch_add(1, Ordering::Relaxed) + 1, marches.total);
-                        Ok(r)
-                    })
-                    .collect::<Result<Vec<_>>>()?;
+                let responses = targets.iter().map(|&t| marches.counted(|| sim.element_responses(t))).collect::<Result<Vec<_>>>()?;
                 drop(sim);
                 crate::memory::release_freed();
                 Err(responses)
@@ -261,20 +249,13 @@ fn predict_from(
         None
     };
     let reference_medium = without_bone(unbuilt.medium())?;
-    let through_reference = {
-        let steered_source = unbuilt.steered_source()?.to_vec();
-        let (plan, _) = HasPlan::build(
-            &unbuilt.grid,
-            &reference_medium,
-            unbuilt.frequency(),
-            &steered_source,
-            &unbuilt.options,
-            &RecordSpec::default(),
-        )?;
-        drop(steered_source);
-        marches.each(&plan, targets, unbuilt.reflections())?
-    };
-    crate::memory::release_freed();
+    let steered_source = unbuilt.steered_source()?.to_vec();
+    let reflections = unbuilt.reflections();
+    let through_reference =
+        through_reference(&unbuilt.grid, &reference_medium, unbuilt.frequency(), &steered_source, &unbuilt.options, |plan| {
+            marches.each(plan, targets, reflections)
+        })?;
+    drop(steered_source);
     let sim = if options.keep_simulation { unbuilt.build_with_section(targets[0][1])? } else { unbuilt.build()? };
     // The skull's marches: with the pose modes, each target's own and its six moved targets'.
     let mut through_skull: Vec<(Vec<C64>, Vec<Vec<C64>>)> = if options.pose_sensitivity {
@@ -354,29 +335,31 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     let options = plan.options.clone();
     drop(plan);
     crate::memory::release_freed();
-    let through_reference = reference_field(&grid, &reference_medium, frequency, &steered_source, &options, target, reflections)?;
+    let through_reference = through_reference(&grid, &reference_medium, frequency, &steered_source, &options, |plan| {
+        reciprocal_field(plan, target, reflections)
+    })?;
     let mut responses = source.transposed_many(&[through_skull, through_reference])?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));
     from_responses(&transducer, &reference_medium, frequency, target, skull, reference, ray_steering)
 }
 
-/// The transposed march from `target` through the head without bone (`medium`), its plan built
-/// with the skull's grid, steered source and options, then dropped and its memory handed back.
-fn reference_field(
+/// `march(plan)` (the transposed marches from the targets) through the head without bone
+/// (`medium`), its plan built with the skull's grid, steered source and options, then dropped and
+/// its memory handed back.
+fn through_reference<T>(
     grid: &Grid,
     medium: &Medium,
     frequency: f64,
     steered_source: &[C64],
     options: &HasOptions,
-    target: [f64; 3],
-    reflections: bool,
-) -> Result<Vec<C64>> {
-    let field = {
+    march: impl FnOnce(&HasPlan) -> Result<T>,
+) -> Result<T> {
+    let out = {
         let (plan, _) = HasPlan::build(grid, medium, frequency, steered_source, options, &RecordSpec::default())?;
-        reciprocal_field(&plan, target, reflections)?
+        march(&plan)?
     };
     crate::memory::release_freed();
-    Ok(field)
+    Ok(out)
 }
 
 /// The prediction at `target` from each element's response through the skull and through the

@@ -156,21 +156,26 @@ pub(super) fn skull_marches(
             sim.source.moved_weights(&march(moved_target)?, back)
         }
     };
-    // Two at a time whatever the cores (each march in flight holds its own planes), and the
-    // first error in step order.
-    let mut fields = Vec::with_capacity(steps.len());
-    for pair in steps.chunks(SIDE_BY_SIDE) {
-        let done: Vec<Result<Vec<C64>>> = pair.par_iter().map(march).collect();
-        for field in done {
-            fields.push(field?);
-        }
-    }
+    let mut fields = side_by_side(&steps, march)?;
     let through_skull = fields.remove(0);
     Ok((through_skull, fields))
 }
 
-/// How many of [`skull_marches`]' (and a prediction's) transposed marches run at once.
-pub(super) const SIDE_BY_SIDE: usize = 2;
+/// `march` of each of `items`, [`SIDE_BY_SIDE`] at a time whatever the cores (each transposed
+/// march in flight holds its own planes); the results in order, or the first error in order.
+pub(super) fn side_by_side<I: Sync, T: Send>(items: &[I], march: impl Fn(&I) -> Result<T> + Sync) -> Result<Vec<T>> {
+    let mut out = Vec::with_capacity(items.len());
+    for pair in items.chunks(SIDE_BY_SIDE) {
+        let done: Vec<Result<T>> = pair.par_iter().map(&march).collect();
+        for item in done {
+            out.push(item?);
+        }
+    }
+    Ok(out)
+}
+
+/// How many transposed marches [`side_by_side`] runs at once.
+const SIDE_BY_SIDE: usize = 2;
 
 /// The pose modes from the transposed march from `target` through `sim`'s head (`through_skull`),
 /// the elements' responses `h` it gives (a prediction's `skull_responses`) and `moved`, the

@@ -18,11 +18,9 @@
 use super::march::{pressure_scale, Operators};
 use super::operators::Refraction;
 use super::{propagator, sponge_map, step_screen, HasPlan};
+use crate::physics::grid::ON_GRID;
 use num_complex::Complex64 as C64;
 use std::f64::consts::PI;
-
-/// Offsets within this fraction of a spacing of a grid point count as on it.
-const ON_GRID: f64 = 1e-9;
 
 impl HasPlan {
     /// The plane `n` and weights `w` (row-major `(ny, nx)`) with `Σ w·p_n` the pressure at
