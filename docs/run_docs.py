@@ -148,6 +148,27 @@ SMALL = (
         "two of the library's effects, the one it names among them (the whole library: 2 minutes on 2 loaded cores)",
     ),
     (
+        "docs/tutorial.md",
+        "--voxel-mm 1",
+        "--voxel-mm 2",
+        1,
+        "the envelope's head CT in 2 mm voxels instead of 1 mm",
+    ),
+    (
+        "docs/tutorial.md",
+        "s/frequency_hz = 650000.0/frequency_hz = 220000.0/' env.toml",
+        "s/frequency_hz = 650000.0/frequency_hz = 220000.0/; s/elements = 1024/elements = 256/' env.toml",
+        1,
+        "the envelope's hemisphere with 256 elements instead of 1024",
+    ),
+    (
+        "docs/tutorial.md",
+        "--spacing-mm 15",
+        "--spacing-mm 30",
+        1,
+        "a box of 18 targets 30 mm apart instead of 100 targets 15 mm apart",
+    ),
+    (
         "docs/head.md",
         "arfi phantom --out",
         "arfi phantom --voxel-mm 2 --out",

@@ -310,6 +310,16 @@ class Simulation:
         target = None if target_mm is None else as_point_mm(target_mm, "target_mm")
         return self._core.focal_metrics(as_phases(phases), target)
 
+    def exposure_at(
+        self, phases: ArrayLike | None, target_mm: ArrayLike
+    ) -> tuple[FocalMetrics, dict[str, HottestPlace]]:
+        """The focal metrics around ``target_mm`` (mm, transducer frame; as :meth:`focal_metrics`) and
+        the hottest place of each tissue class over the whole grid (``{tissue: HottestPlace}``,
+        hottest first, as ``Field.hottest``) of the beam driven with ``phases`` (as for
+        :meth:`field`), from one march that keeps ``|p|`` on the whole grid (8 bytes a voxel while
+        marching): what a focus at the target costs the skull."""
+        return self._core.exposure_at(as_phases(phases), as_point_mm(target_mm, "target_mm"))
+
     def pressure_volume(
         self, phases: ArrayLike | None = None, box_mm: ArrayLike | None = None, in_ct: bool = False
     ) -> PressureVolume:

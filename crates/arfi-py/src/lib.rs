@@ -69,6 +69,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose::effect_library, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict, m)?)?;
     m.add_function(wrap_pyfunction!(prediction::predict_targets, m)?)?;
+    m.add_function(wrap_pyfunction!(prediction::target_tissues, m)?)?;
+    m.add_function(wrap_pyfunction!(prediction::ct_voxel_grid, m)?)?;
     m.add_function(wrap_pyfunction!(release_freed, m)?)?;
     m.add_function(wrap_pyfunction!(phase::wrap_phases, m)?)?;
     m.add_function(wrap_pyfunction!(arrays::connected_region, m)?)?;

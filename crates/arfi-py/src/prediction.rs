@@ -5,6 +5,7 @@ use crate::error::{invalid, to_py};
 use crate::interrupt::run_with_progress;
 use crate::scenario::CoreScenario;
 use crate::simulation::CoreSimulation;
+use crate::volume::affine_4x4;
 use has_core::prediction::{predict_scenario_with, predict_targets_with, with_amplitude, PoseSensitivity, Prediction, PredictionOptions};
 use num_complex::Complex64 as C64;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
@@ -80,6 +81,32 @@ pub(crate) fn predict_targets(
         .collect();
     let kept = run.simulation.map(|sim| (CoreSimulation::from(sim), CoreScenario { inner: with_amplitude(scenario.clone()) }));
     Ok((predictions, kept))
+}
+
+/// The tissue class at each of `targets_mm` (shape (n, 3), mm, transducer frame) as the skull's
+/// simulation names it (`skull`, `scalp`, the CT's soft tissue by name, the coupling medium's),
+/// without building a plan.
+#[pyfunction]
+pub(crate) fn target_tissues(py: Python<'_>, scenario: &CoreScenario, targets_mm: PyReadonlyArray2<'_, f64>) -> PyResult<Vec<String>> {
+    let scenario = &scenario.inner;
+    let targets = points_m(&targets_mm, "targets_mm")?;
+    py.detach(|| has_core::prediction::target_tissues(scenario, &targets)).map_err(to_py)
+}
+
+/// The voxel grid of the scenario's CT: its shape `(nk, nj, ni)`, the file's 4 x 4 affine from
+/// voxel (i, j, k) to RAS+ mm, and the 4 x 4 map from voxel (i, j, k) to the transducer frame
+/// (mm), as the core reads them: for volumes written on the CT's voxels.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub(crate) fn ct_voxel_grid<'py>(
+    py: Python<'py>,
+    scenario: &CoreScenario,
+) -> PyResult<((usize, usize, usize), Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+    let scenario = &scenario.inner;
+    let resolved = py.detach(|| scenario.resolve()).map_err(to_py)?;
+    let ct = resolved.medium.ct.as_ref().ok_or_else(|| invalid("scenario", "has no [ct]: the CT is the grid asked for"))?;
+    let ([nk, nj, ni], ras, to_frame) = ct.voxel_grid();
+    Ok(((nk, nj, ni), affine_4x4(&ras, 1.0).into_pyarray(py), affine_4x4(&to_frame, 1e3).into_pyarray(py)))
 }
 
 /// What the scenario's CT bone does to each element's wave at the target, by reciprocity.
@@ -171,6 +198,13 @@ impl CorePrediction {
     #[getter]
     fn optimal_pa(&self) -> f64 {
         self.prediction.optimal_pressure
+    }
+
+    /// The focus (Pa) the array gives at the target in water with every element in phase,
+    /// `sum |h_water|` (direct Rayleigh sums): what a focus through the head is measured against.
+    #[getter]
+    fn water_pa(&self) -> f64 {
+        self.prediction.water_pressure
     }
 
     /// Per element, `h_skull`: its complex pressure (Pa) at the target through the skull when it
@@ -278,6 +312,7 @@ impl CorePrediction {
             ("ray_steering", self.ray_steering_pa()),
             ("corrected", self.corrected_pa()),
             ("optimal", self.optimal_pa()),
+            ("water", self.water_pa()),
         ] {
             focal.set_item(name, value)?;
         }

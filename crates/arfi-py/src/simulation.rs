@@ -6,7 +6,7 @@ use crate::diagnose::{effects_from_dict, CoreDiagnosis};
 use crate::error::{invalid, to_py};
 use crate::estimate_options::EstimateOptions;
 use crate::field::{CoreField, CoreSection};
-use crate::focal::{CoreFocalMetrics, MetricsMm};
+use crate::focal::{hottest_dict, hottest_places, CoreFocalMetrics, MetricsMm};
 use crate::interrupt::{run_interruptible, run_with_progress};
 use crate::mode_fit::{CoreModeFit, CoreModesFit};
 use crate::plan::{CoreGrid, CorePropagation};
@@ -209,6 +209,22 @@ impl CoreSimulation {
         let target = target_mm.map_or(self.inner.focus, |t| t.map(|v| v * 1e-3));
         let metrics = py.detach(|| self.inner.focal_metrics(&phases, target)).map_err(to_py)?;
         Ok(CoreFocalMetrics::new(target, metrics.as_ref().map(MetricsMm::from)))
+    }
+
+    /// The focal metrics around `target_mm` (mm, transducer frame) and the hottest place of each
+    /// tissue class (`{tissue: HottestPlace}`, hottest first) of the beam driven with `phases`,
+    /// from one march that keeps |p| on the whole grid.
+    fn exposure_at<'py>(
+        &self,
+        py: Python<'py>,
+        phases: Option<PyReadonlyArray1<'_, f64>>,
+        target_mm: [f64; 3],
+    ) -> PyResult<(CoreFocalMetrics, Bound<'py, PyDict>)> {
+        let phases = phases_vec(phases);
+        let target = target_mm.map(|v| v * 1e-3);
+        let (metrics, hottest) = py.detach(|| self.inner.exposure_at(&phases, target)).map_err(to_py)?;
+        let places = hottest_places(&hottest, metrics.as_ref());
+        Ok((CoreFocalMetrics::new(target, metrics.as_ref().map(MetricsMm::from)), hottest_dict(py, &places)?))
     }
 
     /// `|p|` (Pa, float32, shape (nz, ny, nx): z, y, x) of the beam on the box `box_mm` (x0, x1,

@@ -13,7 +13,7 @@ use pyo3::prelude::*;
 pub(crate) type VolumeArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<f64>>);
 
 /// The 4 x 4 homogeneous matrix of an affine map's 3 x 4 rows, times `scale` (e.g. m -> mm).
-fn affine_4x4(rows: &[[f64; 4]; 3], scale: f64) -> Array2<f64> {
+pub(crate) fn affine_4x4(rows: &[[f64; 4]; 3], scale: f64) -> Array2<f64> {
     let mut a = Array2::<f64>::eye(4);
     for (r, row) in rows.iter().enumerate() {
         for (c, x) in row.iter().enumerate() {

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from arfi.analysis.cluster import client_on, distributed
 from arfi.analysis.reproduce import MAX_STUDY_SEED, study_aberration, study_images
 from arfi.checks import as_count
 from arfi.estimation import METHODS, gain, phase_error, recovered_fraction
@@ -142,52 +143,6 @@ def trials(
     ]
 
 
-def _distributed() -> Any:
-    """The ``dask.distributed`` module, or a ``ValueError`` naming the extra that installs it."""
-    try:
-        import dask.distributed
-    except ImportError:
-        raise ValueError(
-            'sweep: needs dask.distributed, which arfi installs as an extra: pip install "arfi[cluster]"'
-        ) from None
-    return dask.distributed
-
-
-def _refuse_unreachable(scheduler: str) -> None:
-    """A ``ValueError`` at once when nothing listens at a ``tcp://host:port`` scheduler (dask's
-    client would retry until its 10 s timeout); other addresses are left to dask."""
-    import socket
-    from urllib.parse import urlsplit
-
-    parts = urlsplit(scheduler)
-    if parts.scheme != "tcp" or parts.hostname is None or parts.port is None:
-        return
-    try:
-        socket.create_connection((parts.hostname, parts.port), timeout=10.0).close()
-    except OSError as e:
-        raise ValueError(f"scheduler: cannot connect to {scheduler} ({e})") from None
-
-
-def _client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
-    """A client on the cluster at ``scheduler``, or on a new local cluster of ``workers``
-    single-threaded worker processes (each runs arfi on one thread: trials are the parallelism)."""
-    distributed = _distributed()
-    Client, LocalCluster = distributed.Client, distributed.LocalCluster
-
-    if scheduler:
-        _refuse_unreachable(scheduler)
-        try:
-            return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError) as e:
-            raise ValueError(f"scheduler: cannot connect to {scheduler} ({e})") from None
-    if not 1 <= workers <= 256:
-        raise ValueError(f"workers: must be between 1 and 256, got {workers}")
-    cluster = LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, env={"RAYON_NUM_THREADS": "1"}
-    )
-    return Client(cluster), cluster
-
-
 def run_sweep(
     points: Sequence[Trial],
     scenario: Scenario | None = None,
@@ -197,9 +152,9 @@ def run_sweep(
 ) -> list[TrialResult]:
     """Runs the trials on dask.distributed (an existing cluster at ``scheduler``, or a local one)
     and returns their results in the order of ``points``."""
-    as_completed = _distributed().as_completed
+    as_completed = distributed("sweep").as_completed
     toml = None if scenario is None else scenario.to_toml()
-    client, cluster = _client(scheduler, workers or os.cpu_count() or 1)
+    client, cluster = client_on(scheduler, workers or os.cpu_count() or 1, "sweep")
     bar = Progress("sweep", len(points), "trials", enabled=progress)
     try:
         futures = client.map(run_trial, list(points), scenario_toml=toml, pure=False)

@@ -16,6 +16,7 @@ from arfi.cli import (
     calibrate,
     diagnose,
     dicom,
+    envelope,
     estimate,
     field,
     phantom,
@@ -29,7 +30,21 @@ from arfi.cli import (
 from arfi.cli.common import Parser, UsageError
 
 #: The verbs, in the order ``arfi --help`` lists them.
-VERBS = (scenario, phantom, field, predict, simulate, dicom, calibrate, estimate, diagnose, sweep, reproduce, validate)
+VERBS = (
+    scenario,
+    phantom,
+    field,
+    predict,
+    envelope,
+    simulate,
+    dicom,
+    calibrate,
+    estimate,
+    diagnose,
+    sweep,
+    reproduce,
+    validate,
+)
 
 __all__ = ["UsageError", "build_parser", "main"]
 

@@ -22,6 +22,7 @@ use crate::phase::wrap;
 use crate::physics::grid::Grid;
 use crate::physics::medium::Medium;
 use crate::physics::propagation::{HasOptions, HasPlan, RecordSpec};
+use crate::physics::source::SourceModel;
 use crate::physics::steering::steering_phases;
 use crate::physics::transducer::Transducer;
 use crate::scenario::Scenario;
@@ -64,6 +65,11 @@ pub struct Prediction {
     /// The most any phases can give through the skull at this drive amplitude, `Σ_e |h_e^skull|`
     /// (every element's wave arriving in phase).
     pub optimal_pressure: f64,
+    /// The focus the array gives at the target in water (the coupling medium everywhere, no head)
+    /// with every element in phase, `Σ_e |h_e^water|` (Pa; each `h_e` a direct Rayleigh sum,
+    /// [`crate::physics::source::SourceModel::free_field_responses`]): what a focus through the head is
+    /// measured against.
+    pub water_pressure: f64,
     /// Each element's complex pressure at the target through the skull for unit drive, Pa.
     pub skull_responses: Vec<C64>,
 }
@@ -170,10 +176,16 @@ pub struct TargetsRun {
 /// marches from the targets run two side by side, and each target's transposed marches are
 /// projected onto the elements in one pass.
 pub fn predict_targets_with(scenario: &Scenario, targets: &[[f64; 3]], options: PredictionOptions, control: Control) -> Result<TargetsRun> {
+    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    check_targets(&unbuilt, targets)?;
+    predict_from(unbuilt, scenario, targets, options, control)
+}
+
+/// Refuses an empty list of targets, or one off the grid or outside the CT's box, by its index.
+fn check_targets(unbuilt: &Unbuilt, targets: &[[f64; 3]]) -> Result<()> {
     if targets.is_empty() {
         return Err(HasError::invalid("targets", "none given"));
     }
-    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
     let ct = unbuilt.medium().ct.clone().ok_or_else(no_ct)?;
     for (k, &target) in targets.iter().enumerate() {
         let at = || format!("target {k} ({:.1}, {:.1}, {:.1}) mm", target[0] * 1e3, target[1] * 1e3, target[2] * 1e3);
@@ -190,7 +202,18 @@ pub fn predict_targets_with(scenario: &Scenario, targets: &[[f64; 3]], options: 
             ));
         }
     }
-    predict_from(unbuilt, scenario, targets, options, control)
+    Ok(())
+}
+
+/// The tissue class at each of `targets` (m, transducer frame) as the skull's simulation names
+/// it ([`Simulation::tissue_classes`]: `skull`, `scalp`, the CT's soft tissue by name, the
+/// coupling medium's), from the scenario's grid and head alone: no plan is built, so a planning
+/// grid can be kept to the brain before anything is predicted. Targets are refused as by
+/// [`predict_targets_with`].
+pub fn target_tissues(scenario: &Scenario, targets: &[[f64; 3]]) -> Result<Vec<String>> {
+    let unbuilt = Unbuilt::new(&with_amplitude(scenario.clone()))?;
+    check_targets(&unbuilt, targets)?;
+    crate::simulation::tissue_classes_on(&unbuilt.grid, unbuilt.medium(), unbuilt.focus(), targets)
 }
 
 /// Counts a prediction's transposed marches for its [`Control`], and runs them.
@@ -282,8 +305,16 @@ fn predict_from(
         let faster = if responses.len() == 3 { responses.pop() } else { faster_responses.get_mut(k).and_then(Option::take) };
         let reference = responses.remove(1);
         let skull = responses.remove(0);
-        let prediction =
-            from_responses(&sim.transducer, &reference_medium, sim.frequency, target, skull, reference, sim.steering_toward(target)?)?;
+        let water = water_pressure(&sim.source, target);
+        let prediction = from_responses(
+            &sim.transducer,
+            &reference_medium,
+            sim.frequency,
+            target,
+            [skull, reference],
+            sim.steering_toward(target)?,
+            water,
+        )?;
         let pose_sensitivity = options
             .pose_sensitivity
             .then(|| pose::pose_modes(&sim, target, &fields[0], &prediction.skull_responses, &moved))
@@ -340,7 +371,8 @@ pub fn predict(sim: Simulation, target: Option<[f64; 3]>) -> Result<Prediction> 
     })?;
     let mut responses = source.transposed_many(&[through_skull, through_reference])?;
     let (reference, skull) = (responses.remove(1), responses.remove(0));
-    from_responses(&transducer, &reference_medium, frequency, target, skull, reference, ray_steering)
+    let water = water_pressure(&source, target);
+    from_responses(&transducer, &reference_medium, frequency, target, [skull, reference], ray_steering, water)
 }
 
 /// `march(plan)` (the transposed marches from the targets) through the head without bone
@@ -362,17 +394,22 @@ fn through_reference<T>(
     Ok(out)
 }
 
+/// `Σ_e |h_e|` of the array's elements at `target` (m) in water ([`Prediction::water_pressure`]).
+fn water_pressure(source: &SourceModel, target: [f64; 3]) -> f64 {
+    source.free_field_responses(target).iter().map(|h| h.norm()).sum()
+}
+
 /// The prediction at `target` from each element's response through the skull and through the
-/// reference head, the reference steering through `reference_medium`, and the scenario's own
-/// steering `ray_steering` (rad).
+/// reference head (`[skull, reference]`), the reference steering through `reference_medium`, the
+/// scenario's own steering `ray_steering` (rad) and the focus in water `water` (Pa).
 fn from_responses(
     transducer: &Transducer,
     reference_medium: &Medium,
     frequency: f64,
     target: [f64; 3],
-    skull: Vec<C64>,
-    reference: Vec<C64>,
+    [skull, reference]: [Vec<C64>; 2],
     ray_steering: Vec<f64>,
+    water: f64,
 ) -> Result<Prediction> {
     let reference_steering = steering_phases(transducer, reference_medium, frequency, target)?;
     let common = skull.iter().zip(&reference).map(|(s, r)| s * r.conj()).sum::<C64>().arg();
@@ -386,6 +423,7 @@ fn from_responses(
         ray_steering_pressure: focal_pressure(&skull, |e| ray_steering[e]),
         corrected_pressure: focal_pressure(&skull, |e| reference_steering[e] - phases[e]),
         optimal_pressure: skull.iter().map(|h| h.norm()).sum(),
+        water_pressure: water,
         phases,
         transmission,
         reference_steering,

@@ -1,9 +1,10 @@
 //! What a field says at its target: the focal peaks on its plane and axis, and the focal metrics
 //! in 3-D from a box around the target recorded in the same march (see [`crate::focal`]).
 
-use super::{Field, Simulation};
+use super::{volume, Field, Simulation, TissueHottest};
 use crate::error::{HasError, Result};
 use crate::focal::{focal_window, nearest, FieldFocus, FocalBox, FocalMetrics, Peak, Shortfall};
+use crate::memory;
 use crate::numeric::unit;
 use crate::physics::grid::Grid;
 use crate::physics::propagation::{RecordSpec, Recording, Window};
@@ -25,6 +26,26 @@ impl Simulation {
         }
         let spec = RecordSpec { reflections: self.reflections, ..RecordSpec::default() };
         Ok(self.record_around(&self.source_field(added)?, spec, target)?.1)
+    }
+
+    /// [`Simulation::focal_metrics`] around `target` and the hottest place of each tissue class
+    /// ([`Simulation::hottest_by_tissue`]) of the same beam, from one march that keeps `|p|` on the
+    /// whole grid (the metrics' boxes are cut from it): what a focus at `target` costs the skull.
+    /// Refused before the march when the kept `|p|` would not fit in memory.
+    pub fn exposure_at(&self, added: &[f64], target: [f64; 3]) -> Result<(Option<FocalMetrics>, Vec<TissueHottest>)> {
+        if !target.iter().all(|v| v.is_finite()) || self.grid.nearest(target).is_none() {
+            return Err(HasError::invalid("target_mm", "must lie within the grid"));
+        }
+        let g = &self.grid;
+        let whole = Window::whole(g);
+        memory::check(
+            || format!("|p| on the whole {} x {} x {} grid (the hottest place of each tissue)", g.nx, g.ny, g.nz),
+            whole.len() as u64 * volume::BYTES_PER_VOXEL,
+            "use a coarser grid ([grid] spacing_mm)",
+        )?;
+        let spec = RecordSpec { magnitude: Some(whole), reflections: self.reflections, ..RecordSpec::default() };
+        let (rec, metrics) = self.record_around(&self.source_field(added)?, spec, target)?;
+        Ok((metrics, self.hottest_by_tissue(&rec.magnitude)))
     }
 
     /// The recording `spec` of the beam from `source` (the plane-0 field), with a box around the

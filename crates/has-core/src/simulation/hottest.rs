@@ -14,6 +14,7 @@ use super::Simulation;
 use crate::error::{HasError, Result};
 use crate::focal::{exposure, FocalMetrics};
 use crate::physics::grid::Grid;
+use crate::physics::medium::Medium;
 use rayon::prelude::*;
 
 /// What the medium calls bone (a CT's class, or a `[[material]]` named so).
@@ -78,32 +79,7 @@ impl Simulation {
     /// [`Simulation::hottest_by_tissue`] gives the grid sample nearest it (the module docs' path
     /// test, walked from that sample alone). Refused for a point off the grid.
     pub fn tissue_classes(&self, points: &[[f64; 3]]) -> Result<Vec<String>> {
-        let g = &self.grid;
-        let name = |s: usize| {
-            let [x, y, z] = sample_position(g, s);
-            self.medium.tissue_name_at(x, y, z)
-        };
-        let index = |[i, j, k]: [usize; 3]| (k * g.ny + j) * g.nx + i;
-        let target = g.nearest(self.focus).map(|t| name(index(t)));
-        let (shape, towards) = ([g.nx, g.ny, g.nz], g.fractional_index(self.focus));
-        let class = |p: [f64; 3]| -> Result<String> {
-            let s = g.nearest(p).map(index).ok_or_else(|| {
-                HasError::invalid("points_mm", format!("({:.1}, {:.1}, {:.1}) mm lies off the grid", p[0] * 1e3, p[1] * 1e3, p[2] * 1e3))
-            })?;
-            let own = name(s);
-            if own == BONE || Some(own) != target {
-                return Ok(class_name(own).to_string());
-            }
-            let mut at = s;
-            while let Some(next) = nearer(shape, towards, at) {
-                if name(next) == BONE {
-                    return Ok("scalp".to_string());
-                }
-                at = next;
-            }
-            Ok(own.to_string())
-        };
-        points.iter().map(|&p| class(p)).collect()
+        tissue_classes_on(&self.grid, &self.medium, self.focus, points)
     }
 
     /// The tissue class at the point `p` (m): the medium's tissue there by class (bone the
@@ -244,6 +220,36 @@ fn nearer(shape: [usize; 3], target: [f64; 3], s: usize) -> Option<usize> {
     let n = [nx, ny, nz];
     let q: [usize; 3] = std::array::from_fn(|a| (v[a] as f64 + d[a] / m).round().clamp(0.0, (n[a] - 1) as f64) as usize);
     Some((q[2] * ny + q[1]) * nx + q[0])
+}
+
+/// [`Simulation::tissue_classes`] of `points` (m) on `grid` through `medium`, the path test
+/// walked toward `focus` (m): what a simulation's would be, before its plan is built.
+pub fn tissue_classes_on(g: &Grid, medium: &Medium, focus: [f64; 3], points: &[[f64; 3]]) -> Result<Vec<String>> {
+    let name = |s: usize| {
+        let [x, y, z] = sample_position(g, s);
+        medium.tissue_name_at(x, y, z)
+    };
+    let index = |[i, j, k]: [usize; 3]| (k * g.ny + j) * g.nx + i;
+    let target = g.nearest(focus).map(|t| name(index(t)));
+    let (shape, towards) = ([g.nx, g.ny, g.nz], g.fractional_index(focus));
+    let class = |p: [f64; 3]| -> Result<String> {
+        let s = g.nearest(p).map(index).ok_or_else(|| {
+            HasError::invalid("points_mm", format!("({:.1}, {:.1}, {:.1}) mm lies off the grid", p[0] * 1e3, p[1] * 1e3, p[2] * 1e3))
+        })?;
+        let own = name(s);
+        if own == BONE || Some(own) != target {
+            return Ok(class_name(own).to_string());
+        }
+        let mut at = s;
+        while let Some(next) = nearer(shape, towards, at) {
+            if name(next) == BONE {
+                return Ok("scalp".to_string());
+            }
+            at = next;
+        }
+        Ok(own.to_string())
+    };
+    points.iter().map(|&p| class(p)).collect()
 }
 
 #[cfg(test)]

@@ -31,7 +31,7 @@ mod volume;
 pub(crate) use build::Unbuilt;
 pub use external::ExternalField;
 pub use grid::{choose_grid, coarser_grid, with_chosen_grid};
-pub use hottest::TissueHottest;
+pub use hottest::{tissue_classes_on, TissueHottest};
 pub use volume::{
     check_ct_volume, crop_volume, intensity_in_ct, intensity_on_window, resample_into_ct, window_affine, window_of_box, CtPressureVolume,
     PressureVolume,

@@ -184,6 +184,16 @@ fn element_responses_between_grid_points_match_the_direct_sum(sim: &Simulation) 
             target.map(|v| v * 1e3)
         );
         assert!((ratio - 1.0).abs() <= 0.03, "{target:?}: focus/direct {ratio:.4}");
+        // The source model's own direct sums in water (what a prediction's `water_pressure` adds
+        // up): the same integral at λ/8 against the test's quadrature and the march, each element
+        // to 1e-3 of the largest (two quadratures of one integral), the in-phase sum as the focus.
+        let free = sim.source.free_field_responses(target);
+        let largest = direct.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        let worst = free.iter().zip(&direct).map(|(f, d)| (f - d).norm()).fold(0.0, f64::max) / largest;
+        let in_phase = free.iter().map(|v| v.norm()).sum::<f64>() / h.iter().map(|v| v.norm()).sum::<f64>();
+        eprintln!("[hemisphere] free-field responses: {worst:.1e} of the largest from the direct sums; Σ|h| {in_phase:.4} of the march's");
+        assert!(worst <= 1e-3, "{target:?}: free-field responses {worst:.1e} of the largest from the direct sums");
+        assert!((in_phase - 1.0).abs() <= 0.03, "{target:?}: free-field Σ|h| {in_phase:.4} of the march's");
         assert!(phase_rms <= 0.05, "{target:?}: element phases {phase_rms:.3} rad RMS");
         assert!(gain >= 0.99, "{target:?}: the straight-ray steering gives {gain:.4} of Σ|h|");
     }

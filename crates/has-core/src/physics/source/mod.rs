@@ -203,6 +203,32 @@ impl SourceModel {
         Ok(self.fields(std::slice::from_ref(&phasors.to_vec()))?.remove(0))
     }
 
+    /// Each element's complex pressure (Pa) at `point` (m) for unit drive with the coupling medium
+    /// everywhere (no head): the Rayleigh integral of [`crate::physics::rayleigh`] summed directly,
+    /// in double precision, over the element's surface at λ/8 ([`Surface::quadrature`]), times the
+    /// face pressure. `Σ_e |h_e|` is the focus the array gives there in water with every element
+    /// in phase: the free field that a focus through a head is measured against.
+    pub fn free_field_responses(&self, point: [f64; 3]) -> Vec<C64> {
+        let spacing = 2.0 * std::f64::consts::PI / self.wavenumber / 8.0;
+        let (k, alpha) = (self.wavenumber, self.attenuation);
+        let pre = C64::new(0.0, -k / (2.0 * std::f64::consts::PI)) * self.face_pressure;
+        self.transducer
+            .elements
+            .par_iter()
+            .map(|e| {
+                let sum: C64 = e
+                    .quadrature(spacing)
+                    .iter()
+                    .map(|q| {
+                        let r = (0..3).map(|a| (point[a] - q.position[a]).powi(2)).sum::<f64>().sqrt();
+                        C64::from_polar(q.area * (-alpha * r).exp() / r, k * r)
+                    })
+                    .sum();
+                pre * sum
+            })
+            .collect()
+    }
+
     /// [`SourceModel::field`] of several drives at once (`phasors[drive][element]`, one plane
     /// each). An element costs nothing where every drive leaves it at zero.
     ///
