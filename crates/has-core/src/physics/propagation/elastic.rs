@@ -226,11 +226,22 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side, offset: f64) -> Filters<f64>
     };
     let in_index = |dir: usize, wave: usize| 2 * dir + wave;
     let side_of = |k: usize| sides[k / 2];
-    let values: Vec<Values> = (0..g.lateral_len())
+    // A sample's values depend on its wavenumbers through `ξ = |k|` alone: each distinct `ξ` (a
+    // quarter or an eighth of the samples, by the spectrum's symmetries) is solved once.
+    let xis: Vec<f64> = (0..g.lateral_len())
         .into_par_iter()
         .map(|at| {
             let (kx, ky) = (Grid::wavenumber(at / g.ny, g.nx, g.dx), Grid::wavenumber(at % g.ny, g.ny, g.dy));
-            let xi = (kx * kx + ky * ky).sqrt();
+            (kx * kx + ky * ky).sqrt()
+        })
+        .collect();
+    let mut distinct: Vec<u64> = xis.iter().map(|x| x.to_bits()).collect();
+    distinct.sort_unstable();
+    distinct.dedup();
+    let solved: Vec<Values> = distinct
+        .par_iter()
+        .map(|&bits| {
+            let xi = f64::from_bits(bits);
             let m = scattering(a, b, xi);
             std::array::from_fn(|dir| {
                 std::array::from_fn(|o| {
@@ -248,6 +259,10 @@ pub(super) fn filters(g: &Grid, a: &Side, b: &Side, offset: f64) -> Filters<f64>
                 })
             })
         })
+        .collect();
+    let values: Vec<Values> = xis
+        .par_iter()
+        .map(|x| solved[distinct.binary_search(&x.to_bits()).expect("every sample's ξ is among the distinct ones")])
         .collect();
     pack(&values)
 }
