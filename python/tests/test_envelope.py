@@ -82,9 +82,9 @@ def test_envelope_equals_single_predictions_and_its_volumes_overlay_the_ct(head,
     # The volumes on the CT's voxels: the CT's own affine, and the cube each target fills centred
     # on the target (the voxels' centres through the affine to RAS, to LPS, then by the scenario's
     # patient_to_transducer_mm: the documented chain, not the code's).
-    from arfi.analysis.envelope import write_volumes
+    from arfi.analysis.envelope import on_ct_voxels, write_volumes
 
-    names = write_volumes(scenario, points, 6.0, tmp_path / "env")
+    names = write_volumes(on_ct_voxels(scenario, points, 6.0), tmp_path / "env")
     assert names == [f"{v}.nii.gz" for v in VOLUMES]
     ct = nib.load(str(head / "head.nii.gz"))
     img = nib.load(str(tmp_path / "env" / "corrected_pa.nii.gz"))

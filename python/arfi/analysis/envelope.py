@@ -363,14 +363,23 @@ def cell_size_mm(targets_mm: NDArray[np.float64]) -> float:
     return float(np.median(d.min(axis=1)))
 
 
-def on_ct_voxels(
-    scenario: Scenario, points: Sequence[EnvelopePoint], cell_mm: float
-) -> tuple[dict[str, NDArray[np.float32]], NDArray[np.float64], tuple[int, int, int]]:
+@dataclass(frozen=True)
+class CtVolumes:
+    """The envelope's quantities on the CT's voxels (:func:`on_ct_voxels`)."""
+
+    volumes: dict[str, NDArray[np.float32]]
+    """One per :data:`VOLUMES`, indexed [k, j, i]."""
+    ras_affine: NDArray[np.float64]
+    """The CT file's 4 x 4 affine, voxel (i, j, k) to RAS+ mm."""
+    to_frame: NDArray[np.float64]
+    """The 4 x 4 map from voxel (i, j, k) to the transducer frame (mm)."""
+
+
+def on_ct_voxels(scenario: Scenario, points: Sequence[EnvelopePoint], cell_mm: float) -> CtVolumes:
     """Each of :data:`VOLUMES` on the CT's voxels (indexed [k, j, i]): every voxel whose centre lies
     in the cube of side ``cell_mm`` about a target (transducer frame; half-open, so that the cubes of
     a box's targets tile it without overlap) takes that target's value,
-    the others 0 (an absent value is 0 too). Returns the volumes, the CT's RAS affine and its
-    shape."""
+    the others 0 (an absent value is 0 too); with the CT's grid as the core reads it."""
     shape, ras, to_frame = _core.ct_voxel_grid(scenario.core)
     nk, nj, ni = shape
     volumes = {name: np.zeros(shape, dtype=np.float32) for name in VOLUMES}
@@ -400,35 +409,33 @@ def on_ct_voxels(
         for name in VOLUMES:
             v = row[name]
             volumes[name][kk, jj, ii] = 0.0 if v == "" or not np.isfinite(float(v)) else float(v)
-    return volumes, ras, shape
+    return CtVolumes(volumes, ras, to_frame)
 
 
-def write_volumes(scenario: Scenario, points: Sequence[EnvelopePoint], cell_mm: float, out: Path) -> list[str]:
-    """:func:`on_ct_voxels` written as ``<name>.nii.gz`` in ``out`` with the CT's own affine (they
-    open on top of the CT in 3D Slicer); returns the file names."""
-    volumes, ras, _ = on_ct_voxels(scenario, points, cell_mm)
+def write_volumes(ct: CtVolumes, out: Path) -> list[str]:
+    """The volumes of :func:`on_ct_voxels` written as ``<name>.nii.gz`` in ``out`` with the CT's own
+    affine (they open on top of the CT in 3D Slicer); returns the file names."""
     names = []
-    for name, values in volumes.items():
-        write_volume(out / f"{name}.nii.gz", values, ras, f"arfi envelope: {name}, on the CT's voxels, RAS")
+    for name, values in ct.volumes.items():
+        write_volume(out / f"{name}.nii.gz", values, ct.ras_affine, f"arfi envelope: {name}, on the CT's voxels, RAS")
         names.append(f"{name}.nii.gz")
     return names
 
 
-def plot(scenario: Scenario, points: Sequence[EnvelopePoint], cell_mm: float, path: Path) -> None:
+def plot(scenario: Scenario, points: Sequence[EnvelopePoint], on_ct: CtVolumes, path: Path) -> None:
     """Three orthogonal slices of the CT through the envelope's best target, with the corrected
-    focus over the focus in water drawn over them."""
+    focus over the focus in water (``on_ct``: :func:`on_ct_voxels` of ``points``) drawn over them."""
     import nibabel as nib
 
-    volumes, _, shape = on_ct_voxels(scenario, points, cell_mm)
+    ratio = on_ct.volumes["corrected_to_water"]
+    shape = ratio.shape
     ct = scenario.to_dict()["ct"]["file"]
     ct_path = Path(ct) if Path(ct).is_absolute() else Path(scenario.base_dir or ".") / ct
     img = nib.load(str(ct_path))
     assert isinstance(img, nib.spatialimages.SpatialImage), "the core has read it as a NIfTI image"
     hu = np.asarray(img.get_fdata(dtype=np.float32)).transpose(2, 1, 0)  # [k, j, i]
-    ratio = volumes["corrected_to_water"]
     best = max(points, key=lambda p: p.corrected_to_water)
-    _, _, to_frame = _core.ct_voxel_grid(scenario.core)
-    i, j, k = np.rint((np.linalg.inv(to_frame) @ [*best.target_mm, 1.0])[:3]).astype(int)
+    i, j, k = np.rint((np.linalg.inv(on_ct.to_frame) @ [*best.target_mm, 1.0])[:3]).astype(int)
     k, j, i = (int(np.clip(v, 0, n - 1)) for v, n in zip((k, j, i), shape))
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.4))

@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from arfi.analysis.envelope import (
         box_targets,
         cell_size_mm,
+        on_ct_voxels,
         plot,
         run_envelope,
         summary_line,
@@ -127,20 +128,24 @@ def run(args: argparse.Namespace) -> int:
             scenario, targets, out, args.task_size, args.scheduler, args.workers, progress=progress
         )
     except ValueError as e:
+        # The core and the library name their parameters; the user gave them as options.
         text = str(e)
-        for name, option in [("targets:", "--targets" if args.targets else "--box-mm"), ("out:", "--out")]:
-            if text.startswith(name):
-                text = f"{option}:{text[len(name) :]}"
-        for name, option in [("task_size:", "--task-size"), ("workers:", "--workers"), ("scheduler:", "--scheduler")]:
-            if text.startswith(name):
-                text = f"{option}:{text[len(name) :]}"
-        raise UsageError(text) from None
+        options = {
+            "targets:": "--targets" if args.targets else "--box-mm",
+            "out:": "--out",
+            "task_size:": "--task-size",
+            "workers:": "--workers",
+            "scheduler:": "--scheduler",
+        }
+        name = next((n for n in options if text.startswith(n)), None)
+        raise UsageError(text if name is None else f"{options[name]}:{text[len(name) :]}") from None
     seconds = time.perf_counter() - t
     cell = args.spacing_mm if args.spacing_mm is not None else cell_size_mm(targets)
     files = ["envelope.csv", "scenario.toml"]
     if points:
-        files += write_volumes(scenario, points, cell, out)
-        plot(scenario, points, cell, out / "envelope.png")
+        on_ct = on_ct_voxels(scenario, points, cell)
+        files += write_volumes(on_ct, out)
+        plot(scenario, points, on_ct, out / "envelope.png")
         files.append("envelope.png")
     threshold = None if args.reachable_mpa is None else args.reachable_mpa * 1e6
     line = summary_line(points, counts, threshold)
